@@ -1,0 +1,194 @@
+"""Frozen model parameters and controller gains (numpy only).
+
+Every number here is a *documented default*, configurable by the user.  The paper (shared/paper.md)
+fixes only the master link lengths (l = 0.6 m), the gains (39) and the trajectory (40); it takes the
+Octarm dynamic model from Tatlicioglu et al. whose numbers are not available to us, so every slave
+parameter below is **our proposal**, not the paper's.
+
+Frames and units: planar task space x = [X, Z] in metres, Z up, gravity along -Z.  Angles in rad,
+curvatures in 1/m, forces in N, moments in N m.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+GRAVITY = 9.81  # m/s^2, standard gravity (magnitude)
+
+
+class ParameterError(ValueError):
+    """A model parameter or gain is outside its allowed range.  Message names field, value and range."""
+
+
+def _tup(x) -> tuple[float, ...]:
+    return tuple(float(v) for v in np.asarray(x, dtype=float).ravel())
+
+
+def _check_positive(owner: str, name: str, values, allow_zero: bool = False) -> None:
+    arr = np.atleast_1d(np.asarray(values, dtype=float))
+    bad = ~np.isfinite(arr) | ((arr < 0) if allow_zero else (arr <= 0))
+    if np.any(bad):
+        rng = ">= 0" if allow_zero else "> 0"
+        raise ParameterError(f"{owner}.{name} = {values!r}: every entry must be finite and {rng}")
+
+
+@dataclass(frozen=True)
+class MasterParams:
+    """Planar 2-link revolute master in the x-z plane (paper Sec. II-C, VI).
+
+    Joint angles are measured from +Z towards +X (a right-handed rotation about +Y), so
+    x1 = [l1 sin q_a + l2 sin(q_a + q_b), l1 cos q_a + l2 cos(q_a + q_b)].
+    Links are uniform rods: centre of mass at l/2, inertia m l^2 / 12 about the centre (our default).
+    """
+
+    lengths: tuple[float, float] = (0.6, 0.6)  # m, paper Sec. VI
+    masses: tuple[float, float] = (1.0, 1.0)  # kg, our proposal
+    damping: tuple[float, float] = (0.0, 0.0)  # N m s/rad, viscous joint friction (optional)
+    gravity: float = GRAVITY  # m/s^2 along -Z
+
+    def __post_init__(self) -> None:
+        for f in ("lengths", "masses", "damping"):
+            object.__setattr__(self, f, _tup(getattr(self, f)))
+            if len(getattr(self, f)) != 2:
+                raise ParameterError(f"master.{f} must have 2 entries, got {getattr(self, f)!r}")
+        _check_positive("master", "lengths", self.lengths)
+        _check_positive("master", "masses", self.masses)
+        _check_positive("master", "damping", self.damping, allow_zero=True)
+        _check_positive("master", "gravity", self.gravity, allow_zero=True)
+
+    @property
+    def reach(self) -> float:
+        return self.lengths[0] + self.lengths[1]
+
+    @property
+    def inertias(self) -> tuple[float, float]:
+        """Link inertia about its centre of mass around the joint axis, kg m^2 (uniform rod)."""
+        return tuple(m * l * l / 12.0 for m, l in zip(self.masses, self.lengths, strict=True))
+
+
+@dataclass(frozen=True)
+class SlaveParams:
+    """Planar 3-section constant-curvature Octarm (our proposal; the paper's numbers are not public).
+
+    q2 = [d1, d2, d3, k1, k2, k3]: current arc length of each section (m) and its curvature (1/m).
+    Base at the origin, tangent +Z; k > 0 bends toward +X.
+
+    Each section carries a constant mass spread uniformly over its *material* coordinate; the
+    Lagrangian has gravity, bending energy 1/2 Kb_i d_i k_i^2 and extension energy
+    1/2 Ke_i (d_i - L0_i)^2, plus optional viscous damping on q2 rates.
+    """
+
+    rest_lengths: tuple[float, float, float] = (0.30, 0.30, 0.30)  # L0, m
+    masses: tuple[float, float, float] = (1.0, 0.7, 0.4)  # kg, base to tip
+    bending_stiffness: tuple[float, float, float] = (8.0, 3.0, 1.0)  # Kb, N m^2
+    extension_stiffness: tuple[float, float, float] = (1000.0, 700.0, 400.0)  # Ke, N/m
+    # viscous damping on [d-rates (N s/m), k-rates (N m^2 s)], optional
+    extension_damping: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    bending_damping: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # rotational inertia of the cross-section slices per unit material coordinate, kg m^2 (optional)
+    slice_inertia: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    gravity: tuple[float, float] = (0.0, -GRAVITY)  # gravity vector in (X, Z), m/s^2
+    max_extension: float = 1.5  # section length range [L0, max_extension * L0]
+    max_bend: float = float(np.pi / 2)  # |k_i d_i| <= max_bend, rad
+    n_quad: int = 8  # Gauss-Legendre points per section for the energy integrals
+
+    def __post_init__(self) -> None:
+        three = (
+            "rest_lengths", "masses", "bending_stiffness", "extension_stiffness",
+            "extension_damping", "bending_damping", "slice_inertia",
+        )
+        for f in three:
+            object.__setattr__(self, f, _tup(getattr(self, f)))
+            if len(getattr(self, f)) != 3:
+                raise ParameterError(f"slave.{f} must have 3 entries, got {getattr(self, f)!r}")
+        object.__setattr__(self, "gravity", _tup(self.gravity))
+        if len(self.gravity) != 2 or not np.all(np.isfinite(self.gravity)):
+            raise ParameterError(f"slave.gravity = {self.gravity!r}: must be 2 finite numbers (X, Z)")
+        for f in ("rest_lengths", "masses"):
+            _check_positive("slave", f, getattr(self, f))
+        for f in ("bending_stiffness", "extension_stiffness", "extension_damping",
+                  "bending_damping", "slice_inertia"):
+            _check_positive("slave", f, getattr(self, f), allow_zero=True)
+        if not (np.isfinite(self.max_extension) and self.max_extension > 1.0):
+            raise ParameterError(f"slave.max_extension = {self.max_extension!r}: must be > 1")
+        if not (0.0 < self.max_bend <= np.pi):
+            raise ParameterError(f"slave.max_bend = {self.max_bend!r}: must be in (0, pi]")
+        if not (isinstance(self.n_quad, int) and 2 <= self.n_quad <= 32):
+            raise ParameterError(f"slave.n_quad = {self.n_quad!r}: must be an integer in [2, 32]")
+
+    # --- ranges -------------------------------------------------------------------------------
+    @property
+    def length_range(self) -> tuple[np.ndarray, np.ndarray]:
+        L0 = np.asarray(self.rest_lengths)
+        return L0.copy(), self.max_extension * L0
+
+    def in_range(self, q2: np.ndarray, tol: float = 0.0) -> bool:
+        lo, hi = self.length_range
+        d, k = np.asarray(q2[:3]), np.asarray(q2[3:])
+        return bool(np.all(d >= lo - tol) and np.all(d <= hi + tol) and np.all(np.abs(k * d) <= self.max_bend + tol))
+
+    # --- packed arrays for the compiled kernels ------------------------------------------------
+    def packed(self) -> np.ndarray:
+        """All parameters as one float64 vector (layout in `controllers.slave.PACK`)."""
+        return np.concatenate([
+            self.rest_lengths, self.masses, self.bending_stiffness, self.extension_stiffness,
+            self.extension_damping, self.bending_damping, self.slice_inertia, self.gravity,
+        ]).astype(np.float64)
+
+
+@dataclass(frozen=True)
+class Gains:
+    """Controller gains, paper eq. (39)."""
+
+    k1: float = 3.0
+    k2: float = 10.0
+    k3: float = 10.0
+    k4: float = 15.0
+    ky: float = 1.0
+    ks: float = 1.0
+    kn: float = 100.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+                raise ParameterError(f"gains.{f.name} = {v!r}: must be a finite number > 0")
+            object.__setattr__(self, f.name, float(v))
+
+    def packed(self) -> np.ndarray:
+        return np.array([self.k1, self.k2, self.k3, self.k4, self.ky, self.ks, self.kn])
+
+
+@dataclass(frozen=True)
+class SubtaskSpec:
+    """Which sub-tasks (29)-(33) run in the null space and how they combine.
+
+    kinds: subset of {"manipulability", "limits"}; their beta functions are summed with `weights`,
+    beta = sum_j w_j beta_j(q2), so y_a = exp(-ky beta) = prod_j exp(-ky w_j beta_j).
+    `limit_margin_power` p shapes the limits term (see controllers.subtasks).
+    """
+
+    kinds: tuple[str, ...] = ("manipulability", "limits")
+    weights: tuple[float, ...] = (1.0, 0.05)
+    limit_power: int = 4
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kinds", tuple(self.kinds))
+        object.__setattr__(self, "weights", _tup(self.weights))
+        allowed = {"manipulability", "limits"}
+        for k in self.kinds:
+            if k not in allowed:
+                raise ParameterError(f"subtask.kinds: unknown sub-task {k!r}; allowed: {sorted(allowed)}")
+        if len(set(self.kinds)) != len(self.kinds):
+            raise ParameterError(f"subtask.kinds = {self.kinds!r}: duplicates are not allowed")
+        if len(self.weights) != len(self.kinds):
+            raise ParameterError(
+                f"subtask.weights = {self.weights!r}: need one weight per kind ({len(self.kinds)})")
+        _check_positive("subtask", "weights", self.weights) if self.weights else None
+        if not (isinstance(self.limit_power, int) and 1 <= self.limit_power <= 10):
+            raise ParameterError(f"subtask.limit_power = {self.limit_power!r}: must be an integer in [1, 10]")
+
+
+__all__ = ["GRAVITY", "Gains", "MasterParams", "ParameterError", "SlaveParams", "SubtaskSpec", "field"]

@@ -1,0 +1,96 @@
+"""Typed, frozen scenario configuration (the fully resolved form of a scenario TOML file).
+
+A scenario = controller side (nominal analytic models, gains, sub-tasks) + plant side (which plant,
+its own parameters, which may differ from the nominal ones: that difference is the *mismatch*) +
+trajectory, timing, noise and initial state.  Defaults reproduce the paper scenario (Sec. VI).
+
+Loading/validation from TOML lives in `harness.io_config`; this module only defines the types.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from controllers.params import Gains, MasterParams, SlaveParams, SubtaskSpec
+
+PLANTS = ("mujoco", "analytic")
+ACTUATIONS = ("servo", "torque")
+INTEGRATORS = ("implicitfast", "implicit", "euler", "rk4")
+
+
+@dataclass(frozen=True)
+class TrajectoryConfig:
+    """Desired master tip trajectory, paper eq. (40):
+    x_d(t) = [cx + ax sin(w t), cz + az cos(w t)] in metres, relative to the master base."""
+
+    center: tuple[float, float] = (0.0, 1.0)  # m
+    amplitude: tuple[float, float] = (0.01, 0.01)  # m
+    omega: float = 1.0  # rad/s
+
+
+@dataclass(frozen=True)
+class InitialState:
+    """Initial conditions.  `master_offset` is added to the IK solution for x_d(0) (task-space, m).
+    `slave_q2=None` picks equal straight-ish sections whose tip is at the master's initial tip."""
+
+    master_offset: tuple[float, float] = (0.0, 0.0)  # m, task-space offset of the master tip
+    master_elbow: int = -1  # sign of the elbow angle q_b of the IK solution (+1 or -1)
+    slave_q2: tuple[float, ...] | None = None  # [d1,d2,d3,k1,k2,k3]; None = automatic
+    slave_curvature: float = 1e-3  # 1/m, "curvatures near 0" used when slave_q2 is None
+
+
+@dataclass(frozen=True)
+class PlantConfig:
+    """The 'true' plant.  For `kind="mujoco"` the master/slave parameters below are what the MJCF is
+    built from; the controller keeps using `Scenario.master` / `Scenario.slave` (nominal)."""
+
+    kind: str = "mujoco"  # "mujoco" | "analytic"
+    master: MasterParams | None = None  # None = same as the nominal model (no mismatch)
+    slave: SlaveParams | None = None  # None = same as the nominal model (no mismatch)
+    actuation: str = "servo"  # "servo" | "torque"   (mujoco only)
+    segments: int = 8  # rigid segments per section N (mujoco only)
+    enforce_cc: bool = False  # joint-equality constraints holding each section at constant curvature
+    physics_dt: float = 0.001  # s, MuJoCo timestep (analytic: RK4 step)
+    integrator: str = "implicitfast"
+    servo_frequency: float = 20.0  # Hz, natural frequency of the segment-joint servos
+    servo_damping_ratio: float = 1.0  # servo damping ratio
+    servo_feedforward: bool = True  # add the analytic T2 (mapped to segment joints) in servo mode
+    actuation_delay: float = 0.0  # s, pure delay of the commands (multiple of control_dt)
+    armature_fraction: float = 0.01  # segment-joint armature as a fraction of the section inertia
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One fully resolved run."""
+
+    name: str = "paper"
+    duration: float = 20.0  # s
+    control_dt: float = 0.001  # s (1 kHz), must be a multiple of plant.physics_dt
+    snr_db: float | None = 40.0  # AWGN on fed-back states; None = no noise
+    seed: int = 0
+    transient: float = 5.0  # s, metrics (RMS/max) are taken after this time
+    gains: Gains = field(default_factory=Gains)
+    master: MasterParams = field(default_factory=MasterParams)  # nominal (controller) model
+    slave: SlaveParams = field(default_factory=SlaveParams)  # nominal (controller) model
+    subtask: SubtaskSpec = field(default_factory=SubtaskSpec)
+    trajectory: TrajectoryConfig = field(default_factory=TrajectoryConfig)
+    initial: InitialState = field(default_factory=InitialState)
+    plant: PlantConfig = field(default_factory=PlantConfig)
+    interaction_forces: tuple[tuple[float, float], tuple[float, float]] = ((0.0, 0.0), (0.0, 0.0))  # F1, F2 N
+    continuous_control: bool = False  # analytic plant only: evaluate the control law in every RK4 stage
+
+    @property
+    def plant_master(self) -> MasterParams:
+        return self.plant.master if self.plant.master is not None else self.master
+
+    @property
+    def plant_slave(self) -> SlaveParams:
+        return self.plant.slave if self.plant.slave is not None else self.slave
+
+    @property
+    def n_steps(self) -> int:
+        return int(round(self.duration / self.control_dt))
+
+    @property
+    def substeps(self) -> int:
+        return int(round(self.control_dt / self.plant.physics_dt))

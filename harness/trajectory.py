@@ -1,0 +1,86 @@
+"""In-memory result of one run: what loggers, plots, metrics and bounds checks consume.
+
+All arrays share the first axis (control steps, length n = number of steps actually completed;
+a run that stopped early has shorter arrays and `status != "ok"`).  Task-space vectors are [X, Z] in
+metres, each relative to its own robot base.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# Layout of the per-step record row written by the compiled control step (harness.sim).
+# name -> (start column, width)
+ROW_FIELDS: dict[str, int] = {
+    "t": 1,
+    "q1": 2, "dq1": 2, "q2": 6, "dq2": 6,  # true plant state (sensed, before noise)
+    "xd": 2, "x1": 2, "x2": 2,  # x2 = analytic tip of the sensed q2
+    "e1": 2, "e2": 2, "de1": 2, "de2": 2,
+    "beta": 1, "ya": 1, "deN": 6, "T1": 2, "T2": 6, "u2": 6,
+}
+ROW_SLICES: dict[str, slice] = {}
+_c = 0
+for _k, _w in ROW_FIELDS.items():
+    ROW_SLICES[_k] = slice(_c, _c + _w)
+    _c += _w
+ROW_WIDTH = _c
+
+
+@dataclass
+class Trajectory:
+    """Time histories of one run.
+
+    t: (n,) s | q1, dq1: (n, 2) rad, rad/s | q2, dq2: (n, 6) [d (m), k (1/m)] and rates
+    xd, x1, x2: (n, 2) m | e1 = xd - x1, e2 = x1 - x2: (n, 2) m (eq. 11, 16), x2 analytic of sensed q2
+    beta: (n,) manipulability (41) | ya: (n,) eq. (29) | deN: (n, 6) null-space velocity error (23)
+    T1: (n, 2) N m | T2: (n, 6) generalized forces [N, N m^2] | u2: (n, 6) slave auxiliary input (18)
+    x2_plant: (n, 2) m, MuJoCo tip site (None on the analytic plant)
+    body_pos/body_quat: (n, nb, 3) / (n, nb, 4 wxyz) world poses of the plant's slave segment bodies
+    master_pos: (n, 3, 3) world positions of master base, elbow, tip (None on the analytic plant)
+    """
+
+    t: np.ndarray
+    q1: np.ndarray
+    dq1: np.ndarray
+    q2: np.ndarray
+    dq2: np.ndarray
+    xd: np.ndarray
+    x1: np.ndarray
+    x2: np.ndarray
+    e1: np.ndarray
+    e2: np.ndarray
+    de1: np.ndarray
+    de2: np.ndarray
+    beta: np.ndarray
+    ya: np.ndarray
+    deN: np.ndarray
+    T1: np.ndarray
+    T2: np.ndarray
+    u2: np.ndarray
+    x2_plant: np.ndarray | None = None
+    body_pos: np.ndarray | None = None
+    body_quat: np.ndarray | None = None
+    master_pos: np.ndarray | None = None
+    status: str = "ok"  # "ok" | "diverged" | "interrupted" | "error"
+    message: str = ""
+    meta: dict = field(default_factory=dict)  # plant description for loggers (geometry, bases, ...)
+
+    @classmethod
+    def from_rows(cls, rows: np.ndarray, **extra) -> Trajectory:
+        """Build from the (n, ROW_WIDTH) record of the compiled loop (copies the data)."""
+        kw = {}
+        for k, s in ROW_SLICES.items():
+            v = np.array(rows[:, s], dtype=float)
+            kw[k] = v[:, 0] if ROW_FIELDS[k] == 1 else v
+        kw.update(extra)
+        return cls(**kw)
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def e2_plant(self) -> np.ndarray | None:
+        """Coordination error against the MuJoCo tip site: x1 - x2_plant, (n, 2) m."""
+        return None if self.x2_plant is None else self.x1 - self.x2_plant
