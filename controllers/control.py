@@ -1,0 +1,281 @@
+"""The paper's control laws on the analytic models.
+
+Master (12)-(13):  T1 = M1 u1 + N1 - J1^T F1,  u1 = J1^-1 (ddx_d + k1 de1 + k2 e1 - dJ1 dq1).
+Slave (17)-(18):   T2 = M2 u2 + N2 - J2^T F2,
+                   u2 = J2^+ (ddx_d + k1 de1 + k2 e1 + k3 de2 + k4 e2 - dJ2 dq2) + phi_N,
+with e1 = x_d - x1 (11), e2 = x1 - x2 (16), J2^+ = J2^T (J2 J2^T)^-1 (7) and the null-space terms
+de_N = P (g - dq2) (23), J_phi = dJ2^+ J2 + J2^+ dJ2 J2^+ J2 (26),
+phi_N = P (dg + kn de_N) - J_phi (g - dq2) (27), P = I - J2^+ J2, g and dg from the sub-task (33).
+
+Note on eq. (28): substituting (27) into (25) gives dde_N = -kn P de_N - J2^+ dJ2 de_N (the paper
+prints +kn, a sign typo: with +kn the null-space error would grow).
+
+dJ2^+ is exact: d/dt [J^T A^-1] = dJ^T A^-1 - J^T A^-1 dA A^-1, A = J J^T, dA = dJ J^T + J dJ^T.
+
+Kernels are numba-compatible (compiled by `harness.fast`); `master_control` / `slave_control` are
+the readable pure-numpy entry points returning dictionaries.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .cc import tip_kinematics
+from .master import master_kernel
+from .master import packed as master_packed
+from .params import Gains, MasterParams, SlaveParams, SubtaskSpec
+from .slave import gauss_legendre01, nle_kernel
+from .subtasks import pack_subtask, subtask_kernel
+
+# layout of the master info vector
+MI_X1, MI_E1, MI_DE1, MI_A1, MI_DX1 = 0, 2, 4, 6, 8
+MASTER_INFO = 10
+# layout of the slave info vector
+SI_X2, SI_E2, SI_DE2, SI_BETA, SI_YA, SI_DET, SI_BM, SI_BL = 0, 2, 4, 6, 7, 8, 9, 10
+SLAVE_INFO = 11
+DET_MIN = 1e-14  # det(J2 J2^T) below this is reported as a singular configuration
+
+
+def master_control_kernel(pk, gains, q, dq, xd, dxd, ddxd, F1, T1, info):
+    """Master feedback linearization (12)-(13).  Writes T1 (2,) and info (MASTER_INFO,):
+    x1, e1, de1, a1 = ddx_d + k1 de1 + k2 e1 (the commanded task acceleration), dx1.
+    Returns det(J1) (0 means singular: T1 is then not written)."""
+    x = np.empty(2)
+    J = np.empty((2, 2))
+    Jd = np.empty((2, 2))
+    M = np.empty((2, 2))
+    N = np.empty(2)
+    master_kernel(pk, q, dq, x, J, Jd, M, N)
+    k1 = gains[0]
+    k2 = gains[1]
+    v = np.empty(2)
+    for i in range(2):
+        dx = J[i, 0] * dq[0] + J[i, 1] * dq[1]
+        e = xd[i] - x[i]
+        de = dxd[i] - dx
+        a = ddxd[i] + k1 * de + k2 * e
+        info[MI_X1 + i] = x[i]
+        info[MI_E1 + i] = e
+        info[MI_DE1 + i] = de
+        info[MI_A1 + i] = a
+        info[MI_DX1 + i] = dx
+        v[i] = a - (Jd[i, 0] * dq[0] + Jd[i, 1] * dq[1])
+    det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
+    if det == 0.0:
+        return det
+    u0 = (J[1, 1] * v[0] - J[0, 1] * v[1]) / det
+    u1 = (-J[1, 0] * v[0] + J[0, 0] * v[1]) / det
+    for i in range(2):
+        T1[i] = M[i, 0] * u0 + M[i, 1] * u1 + N[i] - (J[0, i] * F1[0] + J[1, i] * F1[1])
+    return det
+
+
+def pinv_terms(J, Jd, Jp, Jpd):
+    """J^+ = J^T (J J^T)^-1 (6,2) and its exact time derivative (6,2).  Returns det(J J^T)."""
+    A00 = 0.0
+    A01 = 0.0
+    A11 = 0.0
+    D00 = 0.0
+    D01 = 0.0
+    D11 = 0.0
+    for a in range(6):
+        A00 += J[0, a] * J[0, a]
+        A01 += J[0, a] * J[1, a]
+        A11 += J[1, a] * J[1, a]
+        D00 += 2.0 * Jd[0, a] * J[0, a]
+        D01 += Jd[0, a] * J[1, a] + J[0, a] * Jd[1, a]
+        D11 += 2.0 * Jd[1, a] * J[1, a]
+    det = A00 * A11 - A01 * A01
+    if det <= DET_MIN:
+        return det
+    i00 = A11 / det
+    i01 = -A01 / det
+    i11 = A00 / det
+    # W = A^-1 dA A^-1 (symmetric)
+    t00 = D00 * i00 + D01 * i01
+    t01 = D00 * i01 + D01 * i11
+    t10 = D01 * i00 + D11 * i01
+    t11 = D01 * i01 + D11 * i11
+    W00 = i00 * t00 + i01 * t10
+    W01 = i00 * t01 + i01 * t11
+    W11 = i01 * t01 + i11 * t11
+    for a in range(6):
+        Jp[a, 0] = J[0, a] * i00 + J[1, a] * i01
+        Jp[a, 1] = J[0, a] * i01 + J[1, a] * i11
+        Jpd[a, 0] = Jd[0, a] * i00 + Jd[1, a] * i01 - (J[0, a] * W00 + J[1, a] * W01)
+        Jpd[a, 1] = Jd[0, a] * i01 + Jd[1, a] * i11 - (J[0, a] * W01 + J[1, a] * W11)
+    return det
+
+
+def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2, T2, u2, deN, info):
+    """Slave feedback linearization (17)-(18) with the null-space terms (23)-(33).
+
+    pk: packed SlaveParams; gains: [k1, k2, k3, k4, ky, ks, kn]; spec: packed sub-task;
+    q, dq (6,) sensed slave state; x1, dx1 (2,) sensed master tip and velocity; a1 (2,) the master's
+    commanded task acceleration ddx_d + k1 de1 + k2 e1; F2 (2,) interaction force.
+    Writes T2 (6,), u2 (6,), deN (6,) and info (SLAVE_INFO,): x2, e2, de2, beta, y_a, det, beta_m,
+    beta_l.  Returns det(J2 J2^T); if it is <= DET_MIN the configuration is singular and T2/u2 are
+    set to zero (the caller reports it).
+    """
+    k3 = gains[2]
+    k4 = gains[3]
+    ky = gains[4]
+    ks = gains[5]
+    kn = gains[6]
+    x = np.empty(2)
+    J = np.empty((2, 6))
+    H = np.empty((2, 6, 6))
+    Hd = np.empty((2, 6, 6))
+    tip_kinematics(q, dq, 3, x, J, H, Hd)
+    Jd = np.zeros((2, 6))
+    for i in range(2):
+        for a in range(6):
+            acc = 0.0
+            for b in range(6):
+                acc += H[i, a, b] * dq[b]
+            Jd[i, a] = acc
+    Jp = np.zeros((6, 2))
+    Jpd = np.zeros((6, 2))
+    det = pinv_terms(J, Jd, Jp, Jpd)
+    # task-space errors (16)
+    v = np.empty(2)
+    for i in range(2):
+        dx2 = 0.0
+        jdq = 0.0
+        for a in range(6):
+            dx2 += J[i, a] * dq[a]
+            jdq += Jd[i, a] * dq[a]
+        e = x1[i] - x[i]
+        de = dx1[i] - dx2
+        info[SI_X2 + i] = x[i]
+        info[SI_E2 + i] = e
+        info[SI_DE2 + i] = de
+        v[i] = a1[i] + k3 * de + k4 * e - jdq
+    info[SI_DET] = det
+    if det <= DET_MIN:
+        for a in range(6):
+            T2[a] = 0.0
+            u2[a] = 0.0
+            deN[a] = 0.0
+        info[SI_BETA] = 0.0
+        info[SI_YA] = 1.0
+        info[SI_BM] = 0.0
+        info[SI_BL] = 0.0
+        return det
+    # sub-task (29)-(33): g = ks ky y^2 grad beta, dg exact
+    grad = np.empty(6)
+    graddot = np.empty(6)
+    parts = np.empty(3)
+    beta = subtask_kernel(spec, J, H, Jd, Hd, q, dq, grad, graddot, parts)
+    ya = np.exp(-ky * beta)
+    betad = 0.0
+    for a in range(6):
+        betad += grad[a] * dq[a]
+    yad = -ky * ya * betad
+    g = np.empty(6)
+    gd = np.empty(6)
+    for a in range(6):
+        g[a] = ks * ky * ya * ya * grad[a]
+        gd[a] = ks * ky * (2.0 * ya * yad * grad[a] + ya * ya * graddot[a])
+    info[SI_BETA] = parts[0]
+    info[SI_YA] = ya
+    info[SI_BM] = parts[0]
+    info[SI_BL] = parts[1]
+    # projector P = I - J^+ J, J_phi (26)
+    P = np.empty((6, 6))
+    JpJ = np.empty((6, 6))
+    for a in range(6):
+        for b in range(6):
+            s = Jp[a, 0] * J[0, b] + Jp[a, 1] * J[1, b]
+            JpJ[a, b] = s
+            P[a, b] = (1.0 if a == b else 0.0) - s
+    # JdJpJ = dJ J^+ J (2,6)
+    JdJpJ = np.empty((2, 6))
+    for i in range(2):
+        for b in range(6):
+            acc = 0.0
+            for a in range(6):
+                acc += Jd[i, a] * JpJ[a, b]
+            JdJpJ[i, b] = acc
+    r = np.empty(6)  # g - dq
+    for a in range(6):
+        r[a] = g[a] - dq[a]
+    for a in range(6):
+        acc = 0.0
+        for b in range(6):
+            acc += P[a, b] * r[b]
+        deN[a] = acc
+    # J_phi r = dJ^+ (J r) + J^+ (dJ J^+ J r)
+    Jr0 = 0.0
+    Jr1 = 0.0
+    Kr0 = 0.0
+    Kr1 = 0.0
+    for b in range(6):
+        Jr0 += J[0, b] * r[b]
+        Jr1 += J[1, b] * r[b]
+        Kr0 += JdJpJ[0, b] * r[b]
+        Kr1 += JdJpJ[1, b] * r[b]
+    phi = np.empty(6)
+    for a in range(6):
+        acc = 0.0
+        for b in range(6):
+            acc += P[a, b] * (gd[b] + kn * deN[b])
+        phi[a] = acc - (Jpd[a, 0] * Jr0 + Jpd[a, 1] * Jr1 + Jp[a, 0] * Kr0 + Jp[a, 1] * Kr1)
+    for a in range(6):
+        u2[a] = Jp[a, 0] * v[0] + Jp[a, 1] * v[1] + phi[a]
+    # T2 = M u2 + N2 - J^T F2 (17)
+    M = np.empty((6, 6))
+    dM = np.empty((6, 6, 6))
+    C = np.empty((6, 6))
+    N = np.empty(6)
+    nle_kernel(pk, q, dq, nodes, weights, M, dM, C, N)
+    for a in range(6):
+        acc = N[a] - (J[0, a] * F2[0] + J[1, a] * F2[1])
+        for b in range(6):
+            acc += M[a, b] * u2[b]
+        T2[a] = acc
+    return det
+
+
+KERNELS = ("master_control_kernel", "pinv_terms", "slave_control_kernel")
+
+
+# --------------------------------------------------------------------------------------------- API
+def master_control(p: MasterParams, gains: Gains, q1, dq1, xd, dxd, ddxd, F1=(0.0, 0.0)) -> dict:
+    """Master law (12)-(13).  Returns dict with T1 (2,), x1, e1, de1, a1, dx1 (2,)."""
+    T1, info = np.zeros(2), np.empty(MASTER_INFO)
+    f = [np.ascontiguousarray(v, dtype=float) for v in (q1, dq1, xd, dxd, ddxd, F1)]
+    det = master_control_kernel(master_packed(p), gains.packed(), *f, T1, info)
+    if det == 0.0:
+        raise FloatingPointError("master Jacobian J1 is singular (elbow straight)")
+    return {"T1": T1, "x1": info[0:2], "e1": info[2:4], "de1": info[4:6], "a1": info[6:8], "dx1": info[8:10]}
+
+
+def slave_control(p: SlaveParams, gains: Gains, spec: SubtaskSpec, q2, dq2, x1, dx1, a1,
+                  F2=(0.0, 0.0)) -> dict:
+    """Slave law (17)-(18) with null-space terms.  Returns dict with T2, u2, deN (6,), x2, e2, de2
+    (2,), beta, ya, det."""
+    nodes, weights = gauss_legendre01(p.n_quad)
+    T2, u2, deN, info = np.zeros(6), np.zeros(6), np.zeros(6), np.empty(SLAVE_INFO)
+    f = [np.ascontiguousarray(v, dtype=float) for v in (q2, dq2, x1, dx1, a1, F2)]
+    det = slave_control_kernel(p.packed(), nodes, weights, gains.packed(), pack_subtask(spec, p), *f,
+                               T2, u2, deN, info)
+    if det <= DET_MIN:
+        raise FloatingPointError(f"slave J2 J2^T is singular (det = {det:.3e})")
+    return {"T2": T2, "u2": u2, "deN": deN, "x2": info[0:2], "e2": info[2:4], "de2": info[4:6],
+            "beta": info[SI_BETA], "ya": info[SI_YA], "det": det, "beta_limits": info[SI_BL]}
+
+
+def null_space_quantities(p: SlaveParams, q2, dq2, g, dg):
+    """(J2^+ (6,2), P (6,6), J_phi (6,6), de_N (6,), phi_N (6,)) for given g, dg; reference for tests."""
+    q2 = np.ascontiguousarray(q2, dtype=float)
+    dq2 = np.ascontiguousarray(dq2, dtype=float)
+    x, J, H, Hd = np.empty(2), np.empty((2, 6)), np.empty((2, 6, 6)), np.empty((2, 6, 6))
+    tip_kinematics(q2, dq2, 2, x, J, H, Hd)
+    Jd = np.einsum("iab,b->ia", H, dq2)
+    Jp, Jpd = np.zeros((6, 2)), np.zeros((6, 2))
+    pinv_terms(J, Jd, Jp, Jpd)
+    P = np.eye(6) - Jp @ J
+    Jphi = Jpd @ J + Jp @ Jd @ Jp @ J
+    deN = P @ (np.asarray(g) - dq2)
+    return Jp, Jpd, P, Jphi, deN

@@ -1,0 +1,121 @@
+"""Analytic model of the planar 2-link revolute master (paper Sec. II-C, VI).
+
+q1 = [q_a, q_b] (rad), measured from +Z toward +X (right-handed about +Y, as a MuJoCo hinge about
+y).  Task space x1 = [X, Z] (m), relative to the master base:
+
+    X = l1 sin q_a + l2 sin(q_a + q_b),   Z = l1 cos q_a + l2 cos(q_a + q_b).
+
+Uniform links (centre of mass at l/2, centroidal inertia m l^2/12), gravity along -Z, optional
+viscous joint friction.  Packed parameter layout (MasterParams -> `packed`): [l1, l2, m1, m2, I1, I2,
+b1, b2, g].
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .params import MasterParams
+
+
+def packed(p: MasterParams) -> np.ndarray:
+    """Packed parameters [l1, l2, m1, m2, I1, I2, b1, b2, g] for the kernels."""
+    return np.array([*p.lengths, *p.masses, *p.inertias, *p.damping, p.gravity], dtype=np.float64)
+
+
+def master_kernel(pk, q, dq, x, J, Jd, M, N):
+    """Everything the master controller needs, from q (2,), dq (2,):
+    x (2,) tip, J (2,2), Jd (2,2) = dJ/dt, M (2,2) inertia, N (2,) = C dq + G + B dq."""
+    l1, l2, m1, m2, I1, I2, b1, b2, g = pk[0], pk[1], pk[2], pk[3], pk[4], pk[5], pk[6], pk[7], pk[8]
+    s1 = np.sin(q[0])
+    c1 = np.cos(q[0])
+    s12 = np.sin(q[0] + q[1])
+    c12 = np.cos(q[0] + q[1])
+    s2 = np.sin(q[1])
+    c2 = np.cos(q[1])
+    w1 = dq[0]
+    w12 = dq[0] + dq[1]
+    x[0] = l1 * s1 + l2 * s12
+    x[1] = l1 * c1 + l2 * c12
+    J[0, 0] = l1 * c1 + l2 * c12
+    J[0, 1] = l2 * c12
+    J[1, 0] = -l1 * s1 - l2 * s12
+    J[1, 1] = -l2 * s12
+    Jd[0, 0] = -l1 * s1 * w1 - l2 * s12 * w12
+    Jd[0, 1] = -l2 * s12 * w12
+    Jd[1, 0] = -l1 * c1 * w1 - l2 * c12 * w12
+    Jd[1, 1] = -l2 * c12 * w12
+    lc1 = 0.5 * l1
+    lc2 = 0.5 * l2
+    M[0, 0] = I1 + I2 + m1 * lc1 * lc1 + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * c2)
+    M[0, 1] = I2 + m2 * (lc2 * lc2 + l1 * lc2 * c2)
+    M[1, 0] = M[0, 1]
+    M[1, 1] = I2 + m2 * lc2 * lc2
+    h = m2 * l1 * lc2 * s2
+    # Coriolis/centripetal (Christoffel), gravity (V = g [m1 lc1 c1 + m2 (l1 c1 + lc2 c12)]), friction
+    N[0] = -h * (2.0 * dq[0] * dq[1] + dq[1] * dq[1]) - g * ((m1 * lc1 + m2 * l1) * s1 + m2 * lc2 * s12) + b1 * dq[0]
+    N[1] = h * dq[0] * dq[0] - g * m2 * lc2 * s12 + b2 * dq[1]
+
+
+KERNELS = ("master_kernel",)
+
+
+def _eval(p: MasterParams, q, dq=None):
+    q = np.asarray(q, dtype=float)
+    dq = np.zeros(2) if dq is None else np.asarray(dq, dtype=float)
+    x, J, Jd, M, N = np.empty(2), np.empty((2, 2)), np.empty((2, 2)), np.empty((2, 2)), np.empty(2)
+    master_kernel(packed(p), q, dq, x, J, Jd, M, N)
+    return x, J, Jd, M, N
+
+
+def fk(p: MasterParams, q) -> np.ndarray:
+    """Tip x1 = [X, Z] (2,), m."""
+    return _eval(p, q)[0]
+
+
+def jacobian(p: MasterParams, q) -> np.ndarray:
+    """J1 = dx1/dq1 (2, 2)."""
+    return _eval(p, q)[1]
+
+
+def jacobian_dot(p: MasterParams, q, dq) -> np.ndarray:
+    """dJ1/dt (2, 2)."""
+    return _eval(p, q, dq)[2]
+
+
+def mass_matrix(p: MasterParams, q) -> np.ndarray:
+    """M1(q1) (2, 2), kg m^2."""
+    return _eval(p, q)[3]
+
+
+def nle(p: MasterParams, q, dq) -> np.ndarray:
+    """N1(q1, dq1) (2,) = Coriolis/centripetal + gravity + viscous friction, N m."""
+    return _eval(p, q, dq)[4]
+
+
+def gravity_force(p: MasterParams, q) -> np.ndarray:
+    """dV/dq1 (2,), N m (N1 at rest without friction)."""
+    return _eval(p, q)[4]
+
+
+def elbow_points(p: MasterParams, q) -> np.ndarray:
+    """Base, elbow, tip [X, Z] (3, 2) for drawing."""
+    q = np.asarray(q, dtype=float)
+    l1, l2 = p.lengths
+    e = np.array([l1 * np.sin(q[0]), l1 * np.cos(q[0])])
+    return np.array([[0.0, 0.0], e, fk(p, q)])
+
+
+def ik(p: MasterParams, x, elbow: int = -1) -> np.ndarray:
+    """Joint angles reaching x = [X, Z] (2,); elbow = sign of q_b.  Raises ValueError if unreachable."""
+    X, Z = float(x[0]), float(x[1])
+    l1, l2 = p.lengths
+    r2 = X * X + Z * Z
+    cb = (r2 - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)
+    if not -1.0 <= cb <= 1.0:
+        raise ValueError(
+            f"master target [{X:.4f}, {Z:.4f}] m is unreachable: distance {np.sqrt(r2):.4f} m outside "
+            f"[{abs(l1 - l2):.4f}, {l1 + l2:.4f}] m")
+    qb = float(np.sign(elbow) or 1.0) * np.arccos(cb)
+    # angle of the target from +Z toward +X, minus the elbow contribution
+    qa = np.arctan2(X, Z) - np.arctan2(l2 * np.sin(qb), l1 + l2 * np.cos(qb))
+    return np.array([qa, qb])

@@ -1,0 +1,272 @@
+"""Analytic model of the planar 3-section Octarm slave: kinematics and Lagrangian dynamics.
+
+q2 = [d1, d2, d3, k1, k2, k3] (section arc lengths in m, curvatures in 1/m).  Base at the origin,
+tangent +Z, k > 0 bends toward +X.  Task space x2 = [X, Z] (m) of the tip.
+
+Dynamics (paper eq. (1) with i = 2): M2(q) ddq + N2(q, dq) = T2 + J2^T F2, from the Lagrangian
+
+    T = sum_s int_0^1 [ m_s/2 |dp_s(u)/dt|^2 + I_s/2 (dtheta_s(u)/dt)^2 ] du        (kinetic)
+    V = -sum_s m_s int_0^1 g . p_s(u) du + sum_s [ Kb_s d_s k_s^2 / 2 + Ke_s (d_s - L0_s)^2 / 2 ]
+
+with each section's mass m_s spread uniformly over its material coordinate u (so over its current
+length), p_s(u) the backbone point, theta_s(u) the backbone angle and I_s an optional slice
+rotational inertia.  The integrals use Gauss-Legendre quadrature with `n_quad` points per section;
+the integrands are entire functions of u so 8 points are exact to rounding for |k d| <= pi/2.
+N2 = C(q, dq) dq + G(q) + K(q) + D dq with C from the Christoffel symbols of the exact dM/dq.
+
+Public functions take the frozen `SlaveParams` and return new arrays; the `*_kernel` functions take
+the packed parameter vector (`SlaveParams.packed()`, layout PACK) and output arrays and are
+compiled by `harness.fast`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .cc import backbone_points, chain_nz, chain_to_q, point_y_derivs, tip_kinematics, y_of_q
+from .params import SlaveParams
+
+# layout of SlaveParams.packed(): name -> offset (each 3 wide, gravity 2 wide)
+PACK = {"L0": 0, "m": 3, "Kb": 6, "Ke": 9, "cd": 12, "ck": 15, "Is": 18, "g": 21}
+PACK_SIZE = 23
+
+
+def gauss_legendre01(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss-Legendre nodes and weights on [0, 1]."""
+    x, w = np.polynomial.legendre.leggauss(n)
+    return 0.5 * (x + 1.0), 0.5 * w
+
+
+# ---------------------------------------------------------------------------------------------
+# kernels (numba-compatible)
+# ---------------------------------------------------------------------------------------------
+def dynamics_kernel(pk, q, nodes, weights, want_dM, M, dM, G):
+    """Mass matrix M (6,6), its derivative dM[a, b, c] = dM_ab/dq_c (6,6,6) if want_dM, and the
+    gravity generalized force G (6,) = dV_gravity/dq (all outputs overwritten)."""
+    d = np.empty(3)
+    th = np.empty(3)
+    ydot = np.zeros(6)
+    zero6 = np.zeros(6)
+    y_of_q(q, d, th, ydot, zero6)
+    nzu = np.empty((6, 2), dtype=np.int64)
+    nzb = np.empty((6, 2))
+    nzbd = np.empty((6, 2))
+    chain_nz(q, zero6, nzu, nzb, nzbd)
+    c = np.zeros(1, dtype=np.complex128)
+    Jy = np.zeros(6, dtype=np.complex128)
+    Hy = np.zeros((6, 6), dtype=np.complex128)
+    Ty = np.zeros((6, 6), dtype=np.complex128)
+    Jq = np.empty(6, dtype=np.complex128)
+    Hq = np.empty((6, 6), dtype=np.complex128)
+    alpha = np.empty(6)
+    for a in range(6):
+        G[a] = 0.0
+        for b in range(6):
+            M[a, b] = 0.0
+            if want_dM:
+                for e in range(6):
+                    dM[a, b, e] = 0.0
+    gc = complex(pk[PACK_G + 1], pk[PACK_G])  # gravity as Z + iX
+    order = 2 if want_dM else 1
+    for s in range(3):
+        ms = pk[PACK_M + s]
+        Is = pk[PACK_IS + s]
+        for g in range(nodes.shape[0]):
+            u = nodes[g]
+            w = weights[g]
+            point_y_derivs(s, u, d, th, order, ydot, c, Jy, Hy, Ty)
+            chain_to_q(order, Jy, Hy, Ty, nzu, nzb, nzbd, Jq, Hq, Hq)
+            mw = ms * w
+            for a in range(6):
+                G[a] -= mw * (gc.conjugate() * Jq[a]).real
+                for b in range(a, 6):
+                    v = mw * (Jq[a].conjugate() * Jq[b]).real
+                    M[a, b] += v
+                    if b != a:
+                        M[b, a] += v
+            if want_dM:
+                for a in range(6):
+                    for b in range(a, 6):
+                        for e in range(6):
+                            v = mw * (Hq[a, e].conjugate() * Jq[b] + Jq[a].conjugate() * Hq[b, e]).real
+                            dM[a, b, e] += v
+                            if b != a:
+                                dM[b, a, e] += v
+            if Is != 0.0:
+                # backbone angle theta = sum_{l<s} Theta_l + u Theta_s;  alpha = dtheta/dq
+                for a in range(6):
+                    alpha[a] = 0.0
+                for ll in range(s + 1):
+                    f = 1.0 if ll < s else u
+                    alpha[ll] = f * q[3 + ll]
+                    alpha[3 + ll] = f * q[ll]
+                iw = Is * w
+                for a in range(6):
+                    for b in range(6):
+                        M[a, b] += iw * alpha[a] * alpha[b]
+                if want_dM:
+                    # d alpha_a / dq_e is f when {a, e} = {l, 3+l}
+                    for ll in range(s + 1):
+                        f = 1.0 if ll < s else u
+                        for b in range(6):
+                            # e = 3+l differentiates alpha[l]; e = l differentiates alpha[3+l]
+                            dM[ll, b, 3 + ll] += iw * f * alpha[b]
+                            dM[b, ll, 3 + ll] += iw * f * alpha[b]
+                            dM[3 + ll, b, ll] += iw * f * alpha[b]
+                            dM[b, 3 + ll, ll] += iw * f * alpha[b]
+
+
+PACK_L0 = PACK["L0"]
+PACK_M = PACK["m"]
+PACK_KB = PACK["Kb"]
+PACK_KE = PACK["Ke"]
+PACK_CD = PACK["cd"]
+PACK_CK = PACK["ck"]
+PACK_IS = PACK["Is"]
+PACK_G = PACK["g"]
+
+
+def elastic_kernel(pk, q, out):
+    """dV_elastic/dq (6,): V = sum Kb d k^2 / 2 + Ke (d - L0)^2 / 2."""
+    for i in range(3):
+        d = q[i]
+        k = q[3 + i]
+        out[i] = 0.5 * pk[PACK_KB + i] * k * k + pk[PACK_KE + i] * (d - pk[PACK_L0 + i])
+        out[3 + i] = pk[PACK_KB + i] * d * k
+
+
+def christoffel_coriolis(dM, dq, C):
+    """C (6,6) with C_ij = sum_k Gamma_ijk dq_k, Gamma_ijk = (dM_ij/dq_k + dM_ik/dq_j - dM_jk/dq_i)/2."""
+    for i in range(6):
+        for j in range(6):
+            acc = 0.0
+            for k in range(6):
+                acc += (dM[i, j, k] + dM[i, k, j] - dM[j, k, i]) * dq[k]
+            C[i, j] = 0.5 * acc
+
+
+def nle_kernel(pk, q, dq, nodes, weights, M, dM, C, out):
+    """N2 (6,) = C dq + G + K + D dq; also fills M, dM and C (work arrays the caller may reuse)."""
+    G = np.empty(6)
+    dynamics_kernel(pk, q, nodes, weights, True, M, dM, G)
+    christoffel_coriolis(dM, dq, C)
+    elastic_kernel(pk, q, out)
+    for i in range(6):
+        acc = 0.0
+        for j in range(6):
+            acc += C[i, j] * dq[j]
+        out[i] += acc + G[i]
+    for i in range(3):
+        out[i] += pk[PACK_CD + i] * dq[i]
+        out[3 + i] += pk[PACK_CK + i] * dq[3 + i]
+
+
+KERNELS = ("dynamics_kernel", "elastic_kernel", "christoffel_coriolis", "nle_kernel")
+
+
+# ---------------------------------------------------------------------------------------------
+# public API: f(params, q, dq, ...) -> array
+# ---------------------------------------------------------------------------------------------
+def _q(q) -> np.ndarray:
+    q = np.ascontiguousarray(q, dtype=np.float64)
+    if q.shape != (6,):
+        raise ValueError(f"q2 must have shape (6,) [d1,d2,d3,k1,k2,k3], got {q.shape}")
+    return q
+
+
+def tip_position(p: SlaveParams, q) -> np.ndarray:
+    """Tip x2 = [X, Z] (2,), m."""
+    x = np.empty(2)
+    tip_kinematics(_q(q), np.zeros(6), 0, x, np.empty((2, 6)), np.empty((2, 6, 6)), np.empty((2, 6, 6)))
+    return x
+
+
+def jacobian(p: SlaveParams, q) -> np.ndarray:
+    """J2 = dx2/dq2 (2, 6)."""
+    J = np.empty((2, 6))
+    tip_kinematics(_q(q), np.zeros(6), 1, np.empty(2), J, np.empty((2, 6, 6)), np.empty((2, 6, 6)))
+    return J
+
+
+def tip_hessian(p: SlaveParams, q) -> np.ndarray:
+    """d^2 x2 / dq2^2, (2, 6, 6)."""
+    H = np.empty((2, 6, 6))
+    tip_kinematics(_q(q), np.zeros(6), 2, np.empty(2), np.empty((2, 6)), H, np.empty((2, 6, 6)))
+    return H
+
+
+def jacobian_dot(p: SlaveParams, q, dq) -> np.ndarray:
+    """dJ2/dt (2, 6) along dq."""
+    return np.einsum("iab,b->ia", tip_hessian(p, q), np.asarray(dq, dtype=float))
+
+
+def tip_derivatives(p: SlaveParams, q, dq) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(x2 (2,), J2 (2,6), H = d^2x2/dq^2 (2,6,6), dH/dt (2,6,6))."""
+    x, J, H, Hd = np.empty(2), np.empty((2, 6)), np.empty((2, 6, 6)), np.empty((2, 6, 6))
+    tip_kinematics(_q(q), _q(dq), 3, x, J, H, Hd)
+    return x, J, H, Hd
+
+
+def backbone(p: SlaveParams, q, n_per_section: int = 20) -> np.ndarray:
+    """Backbone points [X, Z] (3 n + 1, 2), m, base first, for drawing."""
+    out = np.empty((3 * n_per_section + 1, 2))
+    backbone_points(_q(q), int(n_per_section), out)
+    return out
+
+
+def _dyn(p: SlaveParams, q, want_dM: bool):
+    nodes, weights = gauss_legendre01(p.n_quad)
+    M, dM, G = np.empty((6, 6)), np.empty((6, 6, 6)), np.empty(6)
+    dynamics_kernel(p.packed(), _q(q), nodes, weights, want_dM, M, dM, G)
+    return M, dM, G
+
+
+def mass_matrix(p: SlaveParams, q) -> np.ndarray:
+    """M2(q2) (6, 6), symmetric positive definite (units mix kg, kg m, kg m^2)."""
+    return _dyn(p, q, False)[0]
+
+
+def mass_matrix_derivative(p: SlaveParams, q) -> np.ndarray:
+    """dM2/dq2 as (6, 6, 6) with [a, b, c] = d M_ab / d q_c (exact)."""
+    return _dyn(p, q, True)[1]
+
+
+def gravity_force(p: SlaveParams, q) -> np.ndarray:
+    """dV_gravity/dq2 (6,): the gravity part of N2."""
+    return _dyn(p, q, False)[2]
+
+
+def elastic_force(p: SlaveParams, q) -> np.ndarray:
+    """dV_elastic/dq2 (6,): [Kb k^2/2 + Ke (d - L0), Kb d k]."""
+    out = np.empty(6)
+    elastic_kernel(p.packed(), _q(q), out)
+    return out
+
+
+def damping_force(p: SlaveParams, dq) -> np.ndarray:
+    """Viscous damping force D dq2 (6,)."""
+    return np.concatenate([p.extension_damping, p.bending_damping]) * _q(dq)
+
+
+def coriolis_matrix(p: SlaveParams, q, dq) -> np.ndarray:
+    """C(q2, dq2) (6, 6) from the Christoffel symbols of dM2/dq2 (dM/dt - 2C is skew-symmetric)."""
+    C = np.empty((6, 6))
+    christoffel_coriolis(mass_matrix_derivative(p, q), _q(dq), C)
+    return C
+
+
+def nle(p: SlaveParams, q, dq) -> np.ndarray:
+    """N2(q2, dq2) (6,) = C dq + G + elastic + damping (paper eq. (1))."""
+    nodes, weights = gauss_legendre01(p.n_quad)
+    out = np.empty(6)
+    nle_kernel(p.packed(), _q(q), _q(dq), nodes, weights, np.empty((6, 6)), np.empty((6, 6, 6)),
+               np.empty((6, 6)), out)
+    return out
+
+
+def forward_dynamics(p: SlaveParams, q, dq, T, F=None) -> np.ndarray:
+    """ddq2 = M2^-1 (T2 + J2^T F2 - N2)."""
+    rhs = np.asarray(T, dtype=float) - nle(p, q, dq)
+    if F is not None:
+        rhs = rhs + jacobian(p, q).T @ np.asarray(F, dtype=float)
+    return np.linalg.solve(mass_matrix(p, q), rhs)

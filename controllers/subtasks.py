@@ -1,0 +1,182 @@
+"""Null-space sub-tasks, paper Sec. V, eqs. (29)-(33) and (41).
+
+A sub-task is a non-negative function beta(q2) that the null-space motion tries to *increase*:
+y_a = exp(-ky beta) (29), J_s = dy_a/dq2 (31), g = -ks J_s^T y_a (33), i.e. g = ks ky y_a^2 grad beta.
+
+Shipped sub-tasks (combined as beta = sum_j w_j beta_j):
+
+* ``manipulability`` (41): beta_m = sqrt(det(J2 J2^T)).
+* ``limits``: keeps section lengths and bending angles inside their ranges,
+  beta_l = sum_j (1 - s_j^(2p)) with normalised coordinates s_j in [-1, 1] on the allowed range:
+  s = (d_i - c_i)/h_i for lengths (range [L0, e L0], centre c, half-width h) and s = k_i d_i / bmax
+  for bending angles.  beta_l is largest at the centre of the box and its gradient grows like
+  2p s^(2p-1)/h toward the limits, where it dominates the manipulability gradient (which alone
+  drives the base section far past its range and shrinks the tip section).
+
+For the exact time derivative of g (needed by phi_N, eq. 27) every sub-task returns beta, its
+gradient and the time derivative of its gradient along dq2; all closed form (the manipulability
+terms use the exact tip Hessian and its time derivative from `controllers.cc`).
+
+Sub-task selection is packed for the kernels as `spec = [w_manip, w_limits, p, e, bmax, L0_1..3]`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .cc import tip_kinematics
+from .params import SlaveParams, SubtaskSpec
+
+SPEC_SIZE = 8
+
+
+def pack_subtask(spec: SubtaskSpec, slave: SlaveParams) -> np.ndarray:
+    """Packed sub-task description [w_manip, w_limits, p, max_extension, max_bend, L0 (3)]."""
+    w = dict(zip(spec.kinds, spec.weights, strict=True))
+    return np.array([w.get("manipulability", 0.0), w.get("limits", 0.0), float(spec.limit_power),
+                     slave.max_extension, slave.max_bend, *slave.rest_lengths], dtype=np.float64)
+
+
+def manipulability_kernel(J, H, Jd, Hd, dq, grad, graddot):
+    """beta_m = sqrt(det A), A = J J^T, with grad (6,) and d/dt grad (6,) (outputs overwritten).
+
+    J (2,6), H (2,6,6) = dJ/dq, Jd (2,6) = dJ/dt, Hd (2,6,6) = dH/dt.  Returns (beta, det A).
+    """
+    A00 = 0.0
+    A01 = 0.0
+    A11 = 0.0
+    Ad00 = 0.0
+    Ad01 = 0.0
+    Ad11 = 0.0
+    for a in range(6):
+        A00 += J[0, a] * J[0, a]
+        A01 += J[0, a] * J[1, a]
+        A11 += J[1, a] * J[1, a]
+        Ad00 += 2.0 * Jd[0, a] * J[0, a]
+        Ad01 += Jd[0, a] * J[1, a] + J[0, a] * Jd[1, a]
+        Ad11 += 2.0 * Jd[1, a] * J[1, a]
+    det = A00 * A11 - A01 * A01
+    if det <= 0.0:
+        for c in range(6):
+            grad[c] = 0.0
+            graddot[c] = 0.0
+        return 0.0, det
+    beta = np.sqrt(det)
+    detd = Ad00 * A11 + A00 * Ad11 - 2.0 * A01 * Ad01
+    betad = detd / (2.0 * beta)
+    for c in range(6):
+        # dA/dq_c = H_c J^T + J H_c^T and its time derivative
+        dA00 = 0.0
+        dA01 = 0.0
+        dA11 = 0.0
+        dAd00 = 0.0
+        dAd01 = 0.0
+        dAd11 = 0.0
+        for a in range(6):
+            h0 = H[0, a, c]
+            h1 = H[1, a, c]
+            hd0 = Hd[0, a, c]
+            hd1 = Hd[1, a, c]
+            dA00 += 2.0 * h0 * J[0, a]
+            dA01 += h0 * J[1, a] + J[0, a] * h1
+            dA11 += 2.0 * h1 * J[1, a]
+            dAd00 += 2.0 * (hd0 * J[0, a] + h0 * Jd[0, a])
+            dAd01 += hd0 * J[1, a] + h0 * Jd[1, a] + Jd[0, a] * h1 + J[0, a] * hd1
+            dAd11 += 2.0 * (hd1 * J[1, a] + h1 * Jd[1, a])
+        ddet = dA00 * A11 + A00 * dA11 - 2.0 * A01 * dA01
+        ddetd = (dAd00 * A11 + dA00 * Ad11 + Ad00 * dA11 + A00 * dAd11
+                 - 2.0 * (Ad01 * dA01 + A01 * dAd01))
+        grad[c] = ddet / (2.0 * beta)
+        graddot[c] = ddetd / (2.0 * beta) - ddet * betad / (2.0 * beta * beta)
+    return beta, det
+
+
+def limits_kernel(spec, q, dq, grad, graddot):
+    """beta_l = sum (1 - s^(2p)) over 3 lengths and 3 bending angles; grad and d/dt grad (6,)."""
+    p2 = 2.0 * spec[2]
+    ext = spec[3]
+    bmax = spec[4]
+    beta = 0.0
+    for c in range(6):
+        grad[c] = 0.0
+        graddot[c] = 0.0
+    for i in range(3):
+        L0 = spec[5 + i]
+        cen = 0.5 * L0 * (1.0 + ext)
+        hw = 0.5 * L0 * (ext - 1.0)
+        # length coordinate
+        s = (q[i] - cen) / hw
+        sd = dq[i] / hw
+        beta += 1.0 - s ** p2
+        grad[i] += -p2 * s ** (p2 - 1.0) / hw
+        graddot[i] += -p2 * (p2 - 1.0) * s ** (p2 - 2.0) * sd / hw
+        # bending angle coordinate s = k d / bmax
+        s = q[3 + i] * q[i] / bmax
+        sd = (dq[3 + i] * q[i] + q[3 + i] * dq[i]) / bmax
+        beta += 1.0 - s ** p2
+        f = -p2 * s ** (p2 - 1.0)
+        fd = -p2 * (p2 - 1.0) * s ** (p2 - 2.0) * sd
+        # ds/dd = k / bmax, ds/dk = d / bmax
+        grad[i] += f * q[3 + i] / bmax
+        grad[3 + i] += f * q[i] / bmax
+        graddot[i] += (fd * q[3 + i] + f * dq[3 + i]) / bmax
+        graddot[3 + i] += (fd * q[i] + f * dq[i]) / bmax
+    return beta
+
+
+def subtask_kernel(spec, J, H, Jd, Hd, q, dq, grad, graddot, parts):
+    """Combined beta = w_m beta_m + w_l beta_l with grad and d/dt grad (6,) (overwritten).
+    parts (3,) receives [beta_m, beta_l, det(J J^T)].  Returns beta."""
+    g1 = np.empty(6)
+    gd1 = np.empty(6)
+    beta_m, det = manipulability_kernel(J, H, Jd, Hd, dq, g1, gd1)
+    parts[0] = beta_m
+    parts[2] = det
+    beta = spec[0] * beta_m
+    for c in range(6):
+        grad[c] = spec[0] * g1[c]
+        graddot[c] = spec[0] * gd1[c]
+    parts[1] = 0.0
+    if spec[1] != 0.0:
+        beta_l = limits_kernel(spec, q, dq, g1, gd1)
+        parts[1] = beta_l
+        beta += spec[1] * beta_l
+        for c in range(6):
+            grad[c] += spec[1] * g1[c]
+            graddot[c] += spec[1] * gd1[c]
+    return beta
+
+
+KERNELS = ("manipulability_kernel", "limits_kernel", "subtask_kernel")
+
+
+# --------------------------------------------------------------------------------------------- API
+def beta(spec: SubtaskSpec, slave: SlaveParams, q, dq=None) -> tuple[float, np.ndarray, np.ndarray]:
+    """(beta, grad beta (6,), d/dt grad beta (6,)) of the combined sub-task at q2, dq2."""
+    q = np.ascontiguousarray(q, dtype=float)
+    dq = np.zeros(6) if dq is None else np.ascontiguousarray(dq, dtype=float)
+    x, J, H, Hd = np.empty(2), np.empty((2, 6)), np.empty((2, 6, 6)), np.empty((2, 6, 6))
+    tip_kinematics(q, dq, 3, x, J, H, Hd)
+    Jd = np.einsum("iab,b->ia", H, dq)
+    grad, graddot, parts = np.empty(6), np.empty(6), np.empty(3)
+    b = subtask_kernel(pack_subtask(spec, slave), J, H, Jd, Hd, q, dq, grad, graddot, parts)
+    return float(b), grad, graddot
+
+
+def manipulability(slave: SlaveParams, q) -> float:
+    """Paper eq. (41): sqrt(det(J2 J2^T))."""
+    x, J, H, Hd = np.empty(2), np.empty((2, 6)), np.empty((2, 6, 6)), np.empty((2, 6, 6))
+    tip_kinematics(np.ascontiguousarray(q, dtype=float), np.zeros(6), 1, x, J, H, Hd)
+    return float(np.sqrt(max(np.linalg.det(J @ J.T), 0.0)))
+
+
+def null_space_reference(spec: SubtaskSpec, slave: SlaveParams, ky: float, ks: float, q, dq):
+    """(y_a, J_s (6,), g (6,), dg/dt (6,)) of eqs. (29), (31), (33) and the exact time derivative."""
+    b, grad, graddot = beta(spec, slave, q, dq)
+    dq = np.asarray(dq, dtype=float)
+    ya = np.exp(-ky * b)
+    yad = -ky * ya * (grad @ dq)
+    Js = -ky * ya * grad
+    g = ks * ky * ya * ya * grad
+    gd = ks * ky * (2.0 * ya * yad * grad + ya * ya * graddot)
+    return ya, Js, g, gd

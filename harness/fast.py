@@ -1,0 +1,75 @@
+"""Compiled versions of the pure-numpy kernels of `controllers/` (and of the plant maps).
+
+`controllers/` imports numpy only; its kernels are written in the numba-compatible subset.  Here
+each kernel is cloned with a shared globals namespace in which every kernel name refers to its
+compiled counterpart, then wrapped in `numba.njit(cache=True)`, so calls between kernels stay in
+machine code.  The compiled functions give the same numbers as the interpreted ones (tested).
+
+Usage: `from harness.fast import K; K.slave_control_kernel(...)`.  `K` is built on first access.
+If numba is unavailable (or TELEOP_NO_JIT=1), K holds the interpreted functions (slow, same maths).
+"""
+
+from __future__ import annotations
+
+import os
+import types
+from functools import cache
+
+from controllers import cc, control, master, slave, subtasks
+
+MODULES = [cc, slave, master, subtasks, control]
+
+
+def _extra_modules():
+    mods = []
+    try:  # plant maps live in harness/ (mujoco-side), compiled the same way
+        from harness import plant_model
+
+        if hasattr(plant_model, "KERNELS"):
+            mods.append(plant_model)
+    except ImportError:
+        pass
+    try:
+        from harness import loop_kernels
+
+        mods.append(loop_kernels)
+    except ImportError:
+        pass
+    return mods
+
+
+@cache
+def kernels(jit: bool | None = None) -> types.SimpleNamespace:
+    """Namespace of kernels, compiled with numba unless jit is False (or TELEOP_NO_JIT=1)."""
+    if jit is None:
+        jit = os.environ.get("TELEOP_NO_JIT", "0") != "1"
+    mods = MODULES + _extra_modules()
+    names: dict[str, object] = {}
+    for mod in mods:
+        for name in mod.KERNELS:
+            if name in names:
+                raise RuntimeError(f"kernel name {name!r} defined twice")
+            names[name] = getattr(mod, name)
+    if not jit:
+        return types.SimpleNamespace(**names)
+    import numba
+
+    ns: dict[str, object] = {}
+    for mod in mods:
+        ns.update({k: v for k, v in vars(mod).items() if not k.startswith("__")})
+    compiled = {}
+    for name, f in names.items():
+        clone = types.FunctionType(f.__code__, ns, name, f.__defaults__, f.__closure__)
+        clone.__module__ = f.__module__
+        clone.__qualname__ = f.__qualname__
+        compiled[name] = numba.njit(cache=True, nogil=True)(clone)
+    ns.update(compiled)
+    return types.SimpleNamespace(**compiled)
+
+
+class _Lazy:
+    def __getattr__(self, item):
+        return getattr(kernels(), item)
+
+
+K = _Lazy()

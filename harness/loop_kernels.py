@@ -1,0 +1,288 @@
+"""Per-step loop kernels (numba-compatible; compiled by `harness.fast` together with controllers/).
+
+Everything that happens once per control step and is not MuJoCo's `mj_step` lives here, fused, so
+that the Python side of the loop is one kernel call plus `mj_step`:
+  sensing noise -> master law -> slave law -> record row (and, for the analytic plant, RK4).
+
+Status codes returned by the kernels (STATUS_TEXT in harness.sim):
+0 ok, 1 non-finite state or command, 2 master Jacobian singular, 3 slave J2 J2^T singular,
+4 runaway error (|e1| or |e2| above the limit), 5 slave section length <= 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from controllers.cc import tip_kinematics
+from controllers.control import (
+    DET_MIN,
+    MASTER_INFO,
+    SLAVE_INFO,
+    master_control_kernel,
+    slave_control_kernel,
+)
+from controllers.master import master_kernel
+from controllers.slave import dynamics_kernel, nle_kernel
+from controllers.subtasks import limits_kernel
+
+# record row layout (must match harness.trajectory.ROW_FIELDS)
+R_T, R_Q1, R_DQ1, R_Q2, R_DQ2, R_XD, R_X1, R_X2 = 0, 1, 3, 5, 11, 17, 19, 21
+R_E1, R_E2, R_DE1, R_DE2, R_BETA, R_YA, R_DEN, R_T1, R_T2, R_U2 = 23, 25, 27, 29, 31, 32, 33, 39, 41, 47
+ROW_W = 53
+RUNAWAY = 1.0  # m: |e1| or |e2| beyond this is a runaway (the workspace is ~1 m)
+
+
+def cholesky_solve(A, b, out):
+    """Solve A x = b for symmetric positive definite A (n,n) by Cholesky; returns False if not SPD."""
+    n = A.shape[0]
+    L = np.zeros((n, n))
+    for i in range(n):
+        for j in range(i + 1):
+            s = A[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            if i == j:
+                if s <= 0.0:
+                    return False
+                L[i, i] = np.sqrt(s)
+            else:
+                L[i, j] = s / L[j, j]
+    y = np.empty(n)
+    for i in range(n):
+        s = b[i]
+        for k in range(i):
+            s -= L[i, k] * y[k]
+        y[i] = s / L[i, i]
+    for i in range(n - 1, -1, -1):
+        s = y[i]
+        for k in range(i + 1, n):
+            s -= L[k, i] * out[k]
+        out[i] = s / L[i, i]
+    return True
+
+
+def add_noise(state, noise_row, scale, out):
+    """AWGN at a given SNR on each fed-back vector (q1, dq1, q2, dq2 = state[0:2], [2:4], [4:10],
+    [10:16]): std = rms(vector) * scale, scale = 10^(-SNR/20) (signal power measured per step)."""
+    bounds = (0, 2, 4, 10, 16)
+    for v in range(4):
+        a = bounds[v]
+        b = bounds[v + 1]
+        p = 0.0
+        for i in range(a, b):
+            p += state[i] * state[i]
+        std = np.sqrt(p / (b - a)) * scale
+        for i in range(a, b):
+            out[i] = state[i] + std * noise_row[i]
+
+
+def control_laws(mpk, spk, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F, T1, T2, u2, deN,
+                 minfo, sinfo):
+    """Both controllers on a sensed state (16,) = [q1, dq1, q2, dq2].  Returns a status code."""
+    q1 = sensed[0:2]
+    dq1 = sensed[2:4]
+    q2 = sensed[4:10]
+    dq2 = sensed[10:16]
+    det1 = master_control_kernel(mpk, gains, q1, dq1, xd, dxd, ddxd, F[0:2], T1, minfo)
+    if det1 == 0.0:
+        return 2
+    det2 = slave_control_kernel(spk, nodes, weights, gains, spec, q2, dq2, minfo[0:2], minfo[8:10],
+                                minfo[6:8], F[2:4], T2, u2, deN, sinfo)
+    if det2 <= DET_MIN:
+        return 3
+    return 0
+
+
+def record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row):
+    """Fill one record row from the noise-free state (16,) and the commands."""
+    row[R_T] = t
+    for i in range(16):
+        row[R_Q1 + i] = state[i]
+    x1 = np.empty(2)
+    J1 = np.empty((2, 2))
+    Jd1 = np.empty((2, 2))
+    M1 = np.empty((2, 2))
+    N1 = np.empty(2)
+    master_kernel(mpk, state[0:2], state[2:4], x1, J1, Jd1, M1, N1)
+    x2 = np.empty(2)
+    J2 = np.empty((2, 6))
+    H = np.empty((2, 6, 6))
+    q2 = state[4:10]
+    dq2 = state[10:16]
+    tip_kinematics(q2, dq2, 1, x2, J2, H, H)
+    for i in range(2):
+        dx1 = J1[i, 0] * state[2] + J1[i, 1] * state[3]
+        dx2 = 0.0
+        for a in range(6):
+            dx2 += J2[i, a] * dq2[a]
+        row[R_XD + i] = xd[i]
+        row[R_X1 + i] = x1[i]
+        row[R_X2 + i] = x2[i]
+        row[R_E1 + i] = xd[i] - x1[i]
+        row[R_E2 + i] = x1[i] - x2[i]
+        row[R_DE1 + i] = dxd[i] - dx1
+        row[R_DE2 + i] = dx1 - dx2
+        row[R_T1 + i] = T1[i]
+    A00 = 0.0
+    A01 = 0.0
+    A11 = 0.0
+    for a in range(6):
+        A00 += J2[0, a] * J2[0, a]
+        A01 += J2[0, a] * J2[1, a]
+        A11 += J2[1, a] * J2[1, a]
+    det = A00 * A11 - A01 * A01
+    bm = np.sqrt(det) if det > 0.0 else 0.0
+    beta = spec[0] * bm
+    if spec[1] != 0.0:
+        g = np.empty(6)
+        gd = np.empty(6)
+        beta += spec[1] * limits_kernel(spec, q2, np.zeros(6), g, gd)
+    row[R_BETA] = bm
+    row[R_YA] = np.exp(-gains[4] * beta)
+    for a in range(6):
+        row[R_DEN + a] = deN[a]
+        row[R_T2 + a] = T2[a]
+        row[R_U2 + a] = u2[a]
+
+
+def plant_accel(mpk, spk, nodes, weights, s, T1, T2, F, acc):
+    """Analytic plant forward dynamics: acc (16,) = d/dt [q1, dq1, q2, dq2].  False if not SPD."""
+    x = np.empty(2)
+    J1 = np.empty((2, 2))
+    Jd1 = np.empty((2, 2))
+    M1 = np.empty((2, 2))
+    N1 = np.empty(2)
+    master_kernel(mpk, s[0:2], s[2:4], x, J1, Jd1, M1, N1)
+    rhs1 = np.empty(2)
+    for i in range(2):
+        rhs1[i] = T1[i] - N1[i] + J1[0, i] * F[0] + J1[1, i] * F[1]
+    dd1 = np.empty(2)
+    ok1 = cholesky_solve(M1, rhs1, dd1)
+    M2 = np.empty((6, 6))
+    dM2 = np.empty((6, 6, 6))
+    C2 = np.empty((6, 6))
+    N2 = np.empty(6)
+    nle_kernel(spk, s[4:10], s[10:16], nodes, weights, M2, dM2, C2, N2)
+    rhs2 = np.empty(6)
+    if F[2] != 0.0 or F[3] != 0.0:
+        x2 = np.empty(2)
+        J2 = np.empty((2, 6))
+        H = np.empty((2, 6, 6))
+        tip_kinematics(s[4:10], s[10:16], 1, x2, J2, H, H)
+        for a in range(6):
+            rhs2[a] = T2[a] - N2[a] + J2[0, a] * F[2] + J2[1, a] * F[3]
+    else:
+        for a in range(6):
+            rhs2[a] = T2[a] - N2[a]
+    dd2 = np.empty(6)
+    ok2 = cholesky_solve(M2, rhs2, dd2)
+    acc[0] = s[2]
+    acc[1] = s[3]
+    acc[2] = dd1[0]
+    acc[3] = dd1[1]
+    for a in range(6):
+        acc[4 + a] = s[10 + a]
+        acc[10 + a] = dd2[a]
+    return ok1 and ok2
+
+
+def desired(traj, t, xd, dxd, ddxd):
+    """x_d(t), eq. (40) generalised: traj = [cx, cz, ax, az, w]."""
+    w = traj[4]
+    s = np.sin(w * t)
+    c = np.cos(w * t)
+    xd[0] = traj[0] + traj[2] * s
+    xd[1] = traj[1] + traj[3] * c
+    dxd[0] = traj[2] * w * c
+    dxd[1] = -traj[3] * w * s
+    ddxd[0] = -traj[2] * w * w * s
+    ddxd[1] = -traj[3] * w * w * c
+
+
+def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale, F,
+                   mpk_c, spk_c, mpk_p, spk_p, nodes, weights, gains, spec, rows):
+    """Run control steps k0..k1-1 of the closed loop on the analytic plant, in place on state (16,).
+
+    Controller uses the nominal packed params (mpk_c, spk_c), the plant its own (mpk_p, spk_p).
+    Zero-order hold of the commands over the control step (nsub RK4 steps of dt/nsub) unless
+    `continuous`, where both laws are evaluated in every RK4 stage on the true state (no noise).
+    Returns (status, number of completed steps)."""
+    T1 = np.zeros(2)
+    T2 = np.zeros(6)
+    u2 = np.zeros(6)
+    deN = np.zeros(6)
+    minfo = np.empty(MASTER_INFO)
+    sinfo = np.empty(SLAVE_INFO)
+    sensed = np.empty(16)
+    xd = np.empty(2)
+    dxd = np.empty(2)
+    ddxd = np.empty(2)
+    k1s = np.empty(16)
+    k2s = np.empty(16)
+    k3s = np.empty(16)
+    k4s = np.empty(16)
+    tmp = np.empty(16)
+    h = dt / nsub
+    for k in range(k0, k1):
+        t = k * dt
+        desired(traj, t, xd, dxd, ddxd)
+        if noise_scale > 0.0:
+            add_noise(state, noise[k], noise_scale, sensed)
+        else:
+            for i in range(16):
+                sensed[i] = state[i]
+        st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F,
+                          T1, T2, u2, deN, minfo, sinfo)
+        record_row(t, state, xd, dxd, mpk_c, gains, spec, T1, T2, u2, deN, rows[k - k0])
+        if st != 0:
+            return st, k - k0 + 1
+        for j in range(nsub):
+            ts = t + j * h
+            # RK4 stage 1
+            if continuous:
+                desired(traj, ts, xd, dxd, ddxd)
+                st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, state, xd, dxd, ddxd, F,
+                                  T1, T2, u2, deN, minfo, sinfo)
+                if st != 0:
+                    return st, k - k0 + 1
+            if not plant_accel(mpk_p, spk_p, nodes, weights, state, T1, T2, F, k1s):
+                return 1, k - k0 + 1
+            for i in range(16):
+                tmp[i] = state[i] + 0.5 * h * k1s[i]
+            if continuous:
+                desired(traj, ts + 0.5 * h, xd, dxd, ddxd)
+                control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
+                             T1, T2, u2, deN, minfo, sinfo)
+            if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, F, k2s):
+                return 1, k - k0 + 1
+            for i in range(16):
+                tmp[i] = state[i] + 0.5 * h * k2s[i]
+            if continuous:
+                control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
+                             T1, T2, u2, deN, minfo, sinfo)
+            if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, F, k3s):
+                return 1, k - k0 + 1
+            for i in range(16):
+                tmp[i] = state[i] + h * k3s[i]
+            if continuous:
+                desired(traj, ts + h, xd, dxd, ddxd)
+                control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
+                             T1, T2, u2, deN, minfo, sinfo)
+            if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, F, k4s):
+                return 1, k - k0 + 1
+            for i in range(16):
+                state[i] += h / 6.0 * (k1s[i] + 2.0 * k2s[i] + 2.0 * k3s[i] + k4s[i])
+        for i in range(16):
+            if not np.isfinite(state[i]):
+                return 1, k - k0 + 1
+        for i in range(3):
+            if state[4 + i] <= 0.0:
+                return 5, k - k0 + 1
+        r = rows[k - k0]
+        if (abs(r[R_E1]) + abs(r[R_E1 + 1]) > RUNAWAY) or (abs(r[R_E2]) + abs(r[R_E2 + 1]) > RUNAWAY):
+            return 4, k - k0 + 1
+    return 0, k1 - k0
+
+
+KERNELS = ("cholesky_solve", "add_noise", "control_laws", "record_row", "plant_accel", "desired",
+           "analytic_chunk")
