@@ -49,7 +49,7 @@ class PlantConfig:
     slave: SlaveParams | None = None  # None = same as the nominal model (no mismatch)
     actuation: str = "servo"  # "servo" | "torque"   (mujoco only)
     segments: int = 8  # rigid segments per section N (mujoco only)
-    enforce_cc: bool = False  # joint-equality constraints holding each section at constant curvature
+    enforce_cc: bool = True  # equality constraints holding each section at constant curvature (see README)
     physics_dt: float = 0.001  # s, MuJoCo timestep (analytic: RK4 step)
     integrator: str = "implicitfast"
     servo_frequency: float = 20.0  # Hz, natural frequency of the segment-joint servos

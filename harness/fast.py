@@ -57,12 +57,15 @@ def kernels(jit: bool | None = None) -> types.SimpleNamespace:
     ns: dict[str, object] = {}
     for mod in mods:
         ns.update({k: v for k, v in vars(mod).items() if not k.startswith("__")})
+    nocache = set()
+    for mod in mods:
+        nocache.update(getattr(mod, "NOCACHE", ()))
     compiled = {}
     for name, f in names.items():
         clone = types.FunctionType(f.__code__, ns, name, f.__defaults__, f.__closure__)
         clone.__module__ = f.__module__
         clone.__qualname__ = f.__qualname__
-        compiled[name] = numba.njit(cache=True, nogil=True)(clone)
+        compiled[name] = numba.njit(cache=name not in nocache, nogil=True)(clone)
     ns.update(compiled)
     return types.SimpleNamespace(**compiled)
 

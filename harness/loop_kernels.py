@@ -24,6 +24,14 @@ from controllers.control import (
 from controllers.master import master_kernel
 from controllers.slave import dynamics_kernel, nle_kernel
 from controllers.subtasks import limits_kernel
+from harness.plant_model import (
+    chain_dq2_from_joints,
+    chain_elastic_correction,
+    chain_force_from_T2,
+    chain_joints_from_q2,
+    chain_joints_jacobian,
+    chain_q2_from_joints,
+)
 
 # record row layout (must match harness.trajectory.ROW_FIELDS)
 R_T, R_Q1, R_DQ1, R_Q2, R_DQ2, R_XD, R_X1, R_X2 = 0, 1, 3, 5, 11, 17, 19, 21
@@ -286,3 +294,143 @@ def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale
 
 KERNELS = ("cholesky_solve", "add_noise", "control_laws", "record_row", "plant_accel", "desired",
            "analytic_chunk")
+
+
+# =============================================================================================
+# MuJoCo plant: the whole control loop compiled, calling MuJoCo's C mj_step through ctypes
+# =============================================================================================
+def _load_mj_step():
+    import ctypes
+    import glob
+    import os
+
+    import mujoco
+
+    libs = sorted(glob.glob(os.path.join(os.path.dirname(mujoco.__file__), "libmujoco.so*")))
+    if not libs:  # pragma: no cover - other platforms: the Python loop in harness.mujoco_sim is used
+        return None
+    fn = ctypes.CDLL(libs[0]).mj_step
+    fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
+    fn.restype = None
+    return fn
+
+
+MJ_STEP = _load_mj_step()
+
+
+def sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state):
+    """True (noise-free) state (16,) [q1, dq1, q2, dq2] from MuJoCo joints; qc, vc (n_chain,) work."""
+    for i in range(2):
+        state[i] = qpos[m_qadr[i]]
+        state[2 + i] = qvel[m_dadr[i]]
+    for c in range(c_qadr.shape[0]):
+        qc[c] = qpos[c_qadr[c]]
+        vc[c] = qvel[c_dadr[c]]
+    chain_q2_from_joints(qc, R, L0, state[4:10])
+    chain_dq2_from_joints(qc, vc, R, L0, state[10:16])
+
+
+def mujoco_commands(servo, feedforward, dt, q2s, T2, u2, ref, C, R, L0, kv_over_kp, cmd):
+    """Command vector cmd = [master torque (2), chain ctrl (n), chain feedforward force (n)].
+
+    Torque actuation: chain ctrl = virtual-work map of T2 at the sensed q2s (motors).
+    Servo actuation: integrate the reference q2 with u2 (semi-implicit Euler, ref = [q_ref, dq_ref]),
+    ctrl = joints(q_ref) + (kv/kp) A(q_ref) dq_ref (position servo with velocity feed-forward folded
+    into the target), feed-forward = virtual-work map of T2 at q_ref (if enabled)."""
+    n = C.shape[0]
+    if servo:
+        for a in range(6):
+            ref[6 + a] += u2[a] * dt
+            ref[a] += ref[6 + a] * dt
+        tgt = np.empty(n)
+        chain_joints_from_q2(ref[0:6], C, L0, tgt)
+        A = np.empty((n, 6))
+        chain_joints_jacobian(ref[0:6], C, A)
+        for c in range(n):
+            v = 0.0
+            for a in range(6):
+                v += A[c, a] * ref[6 + a]
+            cmd[2 + c] = tgt[c] + kv_over_kp[c] * v
+        if feedforward:
+            chain_force_from_T2(ref[0:6], T2, R, cmd[2 + n:2 + 2 * n])
+        else:
+            for c in range(n):
+                cmd[2 + n + c] = 0.0
+    else:
+        chain_force_from_T2(q2s, T2, R, cmd[2:2 + n])
+        for c in range(n):
+            cmd[2 + n + c] = 0.0
+
+
+def mujoco_chunk(mptr, dptr, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc, m_qadr, m_dadr, m_act,
+                 c_qadr, c_dadr, c_act, R, C, L0, eargs,
+                 servo, feedforward, kv_over_kp, traj, noise, noise_scale, F, mpk_c, spk_c, nodes,
+                 weights, gains, spec, ref, cmdbuf, delay, rows, qpos_hist):
+    """Control steps k0..k1-1 on the MuJoCo plant (model/data pointers mptr, dptr; qpos, qvel, ctrl,
+    qfrc are numpy views of the same MjData).  Per step: sense -> noise -> both laws -> record ->
+    commands (delayed by `delay` control steps through the ring buffer cmdbuf (delay+1, 2+2n)) ->
+    `substeps` x (elastic correction + mj_step).  eargs: ChainMap.elastic_args (constant tuple).  Returns (status, completed steps); status 6 =
+    non-finite or exploding MuJoCo state (instability)."""
+    n = C.shape[0]
+    state = np.empty(16)
+    sensed = np.empty(16)
+    qc = np.empty(n)
+    vc = np.empty(n)
+    corr = np.empty(n)
+    T1 = np.zeros(2)
+    T2 = np.zeros(6)
+    u2 = np.zeros(6)
+    deN = np.zeros(6)
+    minfo = np.empty(MASTER_INFO)
+    sinfo = np.empty(SLAVE_INFO)
+    xd = np.empty(2)
+    dxd = np.empty(2)
+    ddxd = np.empty(2)
+    nb = delay + 1
+    for k in range(k0, k1):
+        sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state)
+        for i in range(16):
+            if not np.isfinite(state[i]) or abs(state[i]) > 1e6:
+                return 6, k - k0
+        for i in range(3):
+            if state[4 + i] <= 0.0:
+                return 5, k - k0
+        t = k * dt
+        desired(traj, t, xd, dxd, ddxd)
+        if noise_scale > 0.0:
+            add_noise(state, noise[k], noise_scale, sensed)
+        else:
+            for i in range(16):
+                sensed[i] = state[i]
+        st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F,
+                          T1, T2, u2, deN, minfo, sinfo)
+        record_row(t, state, xd, dxd, mpk_c, gains, spec, T1, T2, u2, deN, rows[k - k0])
+        for i in range(qpos.shape[0]):
+            qpos_hist[k - k0, i] = qpos[i]
+        if st != 0:
+            return st, k - k0 + 1
+        r = rows[k - k0]
+        if (abs(r[R_E1]) + abs(r[R_E1 + 1]) > RUNAWAY) or (abs(r[R_E2]) + abs(r[R_E2 + 1]) > RUNAWAY):
+            return 4, k - k0 + 1
+        slot = k % nb
+        cmd = cmdbuf[slot]
+        cmd[0] = T1[0]
+        cmd[1] = T1[1]
+        mujoco_commands(servo, feedforward, dt, sensed[4:10], T2, u2, ref, C, R, L0, kv_over_kp, cmd)
+        use = cmdbuf[(k - delay) % nb] if k >= delay else cmdbuf[0]
+        for i in range(2):
+            ctrl[m_act[i]] = use[i]
+        for c in range(n):
+            ctrl[c_act[c]] = use[2 + c]
+        for s in range(substeps):
+            for c in range(n):
+                qc[c] = qpos[c_qadr[c]]
+            chain_elastic_correction(qc, *eargs, corr)
+            for c in range(n):
+                qfrc[c_dadr[c]] = use[2 + n + c] + corr[c]
+            MJ_STEP(mptr, dptr)
+    return 0, k1 - k0
+
+
+KERNELS = KERNELS + ("sense_mujoco", "mujoco_commands", "mujoco_chunk")
+NOCACHE = ("mujoco_chunk",)  # calls a ctypes function: numba cannot cache it (compiled per process)

@@ -1,0 +1,67 @@
+"""Summary metrics of a run (what bounds files, sweeps and `metrics.json` use).
+
+Errors are Euclidean norms of the task-space vectors, in metres, taken after `scn.transient`
+seconds: RMS = sqrt(mean |e|^2), max = max |e|.  beta_min is over the whole run.  A run that stopped
+before the transient ended reports NaN (JSON null) for the after-transient metrics.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .config import Scenario
+from .trajectory import Trajectory
+
+
+def _rms_max(e: np.ndarray | None, mask: np.ndarray) -> tuple[float, float]:
+    if e is None or not mask.any():
+        return math.nan, math.nan
+    n = np.linalg.norm(e[mask], axis=1)
+    return float(np.sqrt(np.mean(n * n))), float(n.max())
+
+
+def compute_metrics(traj: Trajectory, scn: Scenario) -> dict:
+    """Metrics dict: e1_rms, e1_max, e2_rms, e2_max, e2_plant_rms, e2_plant_max (MuJoCo tip; NaN on
+    the analytic plant), beta_min, ya_max, e1_final, e2_final, range_violation (max excursion
+    of section lengths / bending angles outside their allowed range, m or rad; 0 when inside),
+    mujoco_warnings, status, message, sim_time_reached, wall_time, realtime_factor."""
+    n = len(traj)
+    mask = traj.t >= scn.transient if n else np.zeros(0, bool)
+    e1_rms, e1_max = _rms_max(traj.e1, mask)
+    e2_rms, e2_max = _rms_max(traj.e2, mask)
+    e2p_rms, e2p_max = _rms_max(traj.e2_plant, mask)
+    if n:
+        lo, hi = scn.slave.length_range
+        d, th = traj.q2[:, :3], traj.q2[:, 3:] * traj.q2[:, :3]
+        viol = max(float(np.max(lo - d)), float(np.max(d - hi)),
+                   float(np.max(np.abs(th) - scn.slave.max_bend)), 0.0)
+    else:
+        viol = math.nan
+    t_end = float(traj.t[-1] + scn.control_dt) if n else 0.0
+    wall = float(traj.meta.get("wall_time", math.nan))
+    return {
+        "e1_rms": e1_rms, "e1_max": e1_max, "e2_rms": e2_rms, "e2_max": e2_max,
+        "e2_plant_rms": e2p_rms, "e2_plant_max": e2p_max,
+        "beta_min": float(traj.beta.min()) if n else math.nan,
+        "ya_max": float(traj.ya.max()) if n else math.nan,
+        "e1_final": float(np.linalg.norm(traj.e1[-1])) if n else math.nan,
+        "e2_final": float(np.linalg.norm(traj.e2[-1])) if n else math.nan,
+        "range_violation": viol,
+        "mujoco_warnings": int(traj.meta.get("mujoco_warnings", 0)),
+        "status": traj.status, "message": traj.message,
+        "sim_time_reached": t_end, "wall_time": wall,
+        "realtime_factor": (t_end / wall) if wall and wall > 0 and not math.isnan(wall) else math.nan,
+    }
+
+
+def to_json_safe(metrics: dict) -> dict:
+    """NaN/inf -> None so json.dump writes valid JSON."""
+    out = {}
+    for k, v in metrics.items():
+        if isinstance(v, float) and not math.isfinite(v):
+            out[k] = None
+        else:
+            out[k] = v
+    return out

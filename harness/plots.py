@@ -1,0 +1,264 @@
+"""Static PNG figures of one run, equivalent to the paper's Figs. 2-4 plus q2 and arm shapes.
+
+Uses `matplotlib.figure.Figure` with the Agg canvas directly (no pyplot, no global backend state),
+so it is safe in worker processes and headless machines.
+
+    fig2_e1.png    master tracking error e1 = x_d - x1 (eq. 11), X and Z vs time      (paper Fig. 2)
+    fig3_e2.png    coordination error e2 = x1 - x2 (eq. 16) (+ plant tip, dashed)    (paper Fig. 3)
+    fig4_beta.png  manipulability beta = sqrt(det J2 J2^T) (eq. 41)                  (paper Fig. 4)
+    q2.png         section lengths d_i (m) and curvatures k_i (1/m) with allowed ranges
+    shapes.png     master links and slave backbone at ~5 instants, world X-Z plane
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from matplotlib import colormaps
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from harness.record import cc_backbone
+from harness.trajectory import Trajectory
+
+DPI = 130
+_SEC_COLORS = ("tab:green", "tab:purple", "tab:brown")
+
+
+def _figure(nrows: int = 1, figsize=(7.0, 3.6)):
+    fig = Figure(figsize=figsize, layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(nrows, 1, sharex=True, squeeze=False)[:, 0]
+    return fig, axes
+
+
+def _status_note(fig: Figure, traj: Trajectory) -> None:
+    if traj.status != "ok":
+        end = f" at t = {traj.t[-1]:.4g} s" if len(traj) else " before the first step"
+        fig.suptitle(f"run ended with status {traj.status!r}{end}", color="tab:red", fontsize=9)
+
+
+def _finish_time_axis(ax, traj: Trajectory) -> None:
+    ax.set_xlabel("time t [s]")
+    ax.grid(True, alpha=0.3)
+    if len(traj) == 1:
+        ax.set_xlim(traj.t[0] - 0.5, traj.t[0] + 0.5)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="best", fontsize=8)
+
+
+def _save(fig: Figure, path: Path) -> Path:
+    fig.savefig(path, dpi=DPI)
+    return path
+
+
+def _marker(traj: Trajectory) -> str | None:
+    return "." if len(traj) <= 2 else None  # a single sample is invisible as a line
+
+
+def fig_e1(traj: Trajectory, path: Path) -> Path:
+    fig, (ax,) = _figure()
+    e1 = np.asarray(traj.e1, dtype=float).reshape(len(traj), 2)
+    m = _marker(traj)
+    ax.plot(traj.t, e1[:, 0], color="tab:blue", marker=m, label="e1 X")
+    ax.plot(traj.t, e1[:, 1], color="tab:orange", marker=m, label="e1 Z")
+    ax.set_title("Master tracking error e1 = x_d - x1 (eq. 11)")
+    ax.set_ylabel("e1 [m]")
+    _finish_time_axis(ax, traj)
+    _status_note(fig, traj)
+    return _save(fig, path)
+
+
+def fig_e2(traj: Trajectory, path: Path) -> Path:
+    fig, (ax,) = _figure()
+    e2 = np.asarray(traj.e2, dtype=float).reshape(len(traj), 2)
+    m = _marker(traj)
+    ax.plot(traj.t, e2[:, 0], color="tab:blue", marker=m, label="e2 X (analytic x2 of sensed q2)")
+    ax.plot(traj.t, e2[:, 1], color="tab:orange", marker=m, label="e2 Z (analytic x2 of sensed q2)")
+    if traj.x2_plant is not None:
+        ep = np.asarray(traj.e2_plant, dtype=float).reshape(len(traj), 2)
+        ax.plot(traj.t, ep[:, 0], "--", color="tab:cyan", marker=m, label="X, x1 - x2_plant (MuJoCo tip)")
+        ax.plot(traj.t, ep[:, 1], "--", color="tab:red", marker=m, label="Z, x1 - x2_plant (MuJoCo tip)")
+    ax.set_title("Master-slave coordination error e2 = x1 - x2 (eq. 16)")
+    ax.set_ylabel("e2 [m]")
+    _finish_time_axis(ax, traj)
+    _status_note(fig, traj)
+    return _save(fig, path)
+
+
+def fig_beta(traj: Trajectory, path: Path) -> Path:
+    fig, (ax,) = _figure()
+    ax.plot(traj.t, np.asarray(traj.beta, dtype=float).reshape(-1), color="tab:green",
+            marker=_marker(traj), label="beta(q2)")
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.set_title("Slave manipulability beta = sqrt(det(J2 J2^T)) (eq. 41)")
+    # J2 has dimensionless d-columns and m^2 k-columns, so beta carries no single physical unit
+    ax.set_ylabel("beta [mixed units]")
+    _finish_time_axis(ax, traj)
+    _status_note(fig, traj)
+    return _save(fig, path)
+
+
+def _length_range(meta: dict) -> tuple[np.ndarray, np.ndarray] | None:
+    lr = meta.get("length_range")
+    if lr is None:
+        return None
+    try:
+        a = np.asarray([np.broadcast_to(np.asarray(v, dtype=float), (3,)) for v in lr]) if len(lr) == 2 \
+            else np.asarray(lr, dtype=float)
+        if a.shape == (3, 2):
+            a = a.T
+        if a.shape != (2, 3):
+            raise ValueError(f"shape {a.shape}")
+    except (TypeError, ValueError) as exc:
+        warnings.warn(f"ignoring traj.meta['length_range'] ({exc}); expected (lo, hi) of 3 values each",
+                      stacklevel=3)
+        return None
+    return a[0], a[1]
+
+
+def fig_q2(traj: Trajectory, path: Path) -> Path:
+    fig, (ax_d, ax_k) = _figure(2, figsize=(8.0, 5.6))
+    q2 = np.asarray(traj.q2, dtype=float).reshape(len(traj), 6)
+    meta = traj.meta or {}
+    m = _marker(traj)
+    lr = _length_range(meta)
+    max_bend = meta.get("max_bend")
+    for i, c in enumerate(_SEC_COLORS):
+        ax_d.plot(traj.t, q2[:, i], color=c, marker=m, label=f"d{i + 1}")
+        ax_k.plot(traj.t, q2[:, 3 + i], color=c, marker=m, label=f"k{i + 1}")
+        if lr is not None:
+            ax_d.axhspan(lr[0][i], lr[1][i], color=c, alpha=0.07)
+            for v in (lr[0][i], lr[1][i]):
+                ax_d.axhline(v, color=c, ls="--", lw=0.8)
+        if max_bend is not None and len(traj):
+            with np.errstate(divide="ignore", invalid="ignore"):
+                kmax = float(max_bend) / q2[:, i]  # |k_i d_i| <= max_bend
+            ax_k.plot(traj.t, kmax, ls="--", lw=0.8, color=c)
+            ax_k.plot(traj.t, -kmax, ls="--", lw=0.8, color=c)
+    if lr is not None:
+        ax_d.plot([], [], "k--", lw=0.8, label="allowed range")
+    if max_bend is not None:
+        ax_k.plot([], [], "k--", lw=0.8, label="+-max_bend / d_i")
+    ax_d.set_title("Slave section lengths d_i (q2[0:3])")
+    ax_d.set_ylabel("d [m]")
+    ax_k.set_title("Slave section curvatures k_i (q2[3:6]), bend limit |k_i d_i| <= max_bend")
+    ax_k.set_ylabel("k [1/m]")
+    ax_d.grid(True, alpha=0.3)
+    ax_d.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    _finish_time_axis(ax_k, traj)
+    if ax_k.get_legend() is not None:  # outside the axes: the limit curves leave no free corner
+        ax_k.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    k = q2[:, 3:][np.isfinite(q2[:, 3:])]
+    if k.size:  # data first; the bend-limit curves shown unless they are far outside the data
+        span = max(float(np.abs(k).max()), 1e-3)
+        lim = span
+        if max_bend is not None:
+            d = q2[:, :3][np.isfinite(q2[:, :3]) & (q2[:, :3] > 0)]
+            if d.size:
+                lim = max(span, min(float(max_bend) / float(d.min()), 10.0 * span))
+        ax_k.set_ylim(-1.1 * lim, 1.1 * lim)
+    _status_note(fig, traj)
+    return _save(fig, path)
+
+
+def _master_xz(traj: Trajectory, i: int, lengths, base: np.ndarray) -> np.ndarray:
+    """(3, 2) world X-Z of master base, elbow, tip at step i."""
+    if traj.master_pos is not None:
+        return np.asarray(traj.master_pos[i], dtype=float)[:, [0, 2]]
+    qa, qb = (float(v) for v in np.asarray(traj.q1[i]).reshape(2))
+    l1, l2 = (float(v) for v in np.asarray(lengths, dtype=float).reshape(2))
+    elbow = np.array([l1 * np.sin(qa), l1 * np.cos(qa)])
+    tip = elbow + l2 * np.array([np.sin(qa + qb), np.cos(qa + qb)])
+    return np.stack([np.zeros(2), elbow, tip]) + base[[0, 2]]
+
+
+def _slave_xz(traj: Trajectory, i: int, fn: Callable | None, base: np.ndarray) -> np.ndarray | None:
+    """(P, 2) world X-Z of the slave backbone at step i (backbone_fn, else analytic CC of q2)."""
+    q2 = np.asarray(traj.q2[i], dtype=float)
+    if not np.all(np.isfinite(q2)):
+        return None
+    if fn is not None:
+        try:
+            pts = np.asarray(fn(q2), dtype=float)
+            if pts.ndim == 2 and pts.shape[1] == 2:
+                return pts + base[[0, 2]]
+            warnings.warn(f"backbone_fn returned shape {pts.shape}, expected (P, 2)", stacklevel=3)
+        except Exception as exc:  # plotting must not kill a run's post-processing
+            warnings.warn(f"backbone_fn failed ({exc!r}); using the analytic backbone", stacklevel=3)
+    return cc_backbone(q2[None])[0] + base[[0, 2]]
+
+
+def _base_xz(meta: dict, key: str) -> np.ndarray:
+    b = meta.get(key)
+    return np.zeros(3) if b is None else np.asarray(b, dtype=float).reshape(3)
+
+
+def fig_shapes(traj: Trajectory, path: Path, lengths=(0.6, 0.6), instants: int = 5) -> Path:
+    meta = traj.meta or {}
+    lengths = meta.get("master_lengths", lengths)
+    mb, sb = _base_xz(meta, "master_base"), _base_xz(meta, "slave_base")
+    fn = meta.get("backbone_fn")
+    fn = fn if callable(fn) else None
+    fig = Figure(figsize=(7.5, 5.0), layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    n = len(traj)
+    if n == 0:
+        ax.text(0.5, 0.5, "no steps recorded", ha="center", va="center", transform=ax.transAxes)
+    idx = np.unique(np.linspace(0, n - 1, min(instants, n)).round().astype(int)) if n else []
+    cmap = colormaps["viridis"]
+    for j, i in enumerate(idx):
+        c = cmap(j / max(1, len(idx) - 1))
+        lab = f"t = {traj.t[i]:.3g} s"
+        mxz = _master_xz(traj, i, lengths, mb)
+        ax.plot(mxz[:, 0], mxz[:, 1], "-o", color=c, lw=2.5, ms=4, label=lab)
+        sxz = _slave_xz(traj, i, fn, sb)
+        if sxz is not None:
+            ax.plot(sxz[:, 0], sxz[:, 1], "-", color=c, lw=2.0)
+        if traj.body_pos is not None:
+            bp = np.asarray(traj.body_pos[i], dtype=float)
+            ax.plot(bp[:, 0], bp[:, 2], "o", mfc="none", color=c, ms=3.5)
+        xd = np.asarray(traj.xd[i], dtype=float)
+        ax.plot(*(xd + mb[[0, 2]]), "x", color=c, ms=7)
+        ax.plot(*(xd + sb[[0, 2]]), "x", color=c, ms=7)
+    if n:
+        ax.plot([], [], "k-o", lw=2.5, ms=4, label="master links (base, elbow, tip)")
+        ax.plot([], [], "k-", lw=2.0, label="slave backbone (analytic, sensed q2)")
+        if traj.body_pos is not None:
+            ax.plot([], [], "ko", mfc="none", ms=3.5, label="plant bodies (MuJoCo)")
+        ax.plot([], [], "kx", ms=7, label="desired tip x_d (40)")
+        ax.plot(*mb[[0, 2]], "ks", ms=7)
+        ax.plot(*sb[[0, 2]], "ks", ms=7)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("world X [m]")
+    ax.set_ylabel("world Z [m]")
+    ax.set_title("Arm shapes: rigid master and continuum slave, world X-Z plane")
+    ax.grid(True, alpha=0.3)
+    if n:
+        ax.legend(loc="best", fontsize=7)
+    _status_note(fig, traj)
+    return _save(fig, path)
+
+
+def write_figures(traj: Trajectory, outdir: str | Path, *, lengths=(0.6, 0.6)) -> list[Path]:
+    """Write the PNG figures of `traj` into `outdir` (created) and return their paths.
+
+    lengths: master link lengths (m) used for the shapes figure when neither traj.master_pos nor
+    traj.meta["master_lengths"] is available.
+    """
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    return [
+        fig_e1(traj, outdir / "fig2_e1.png"),
+        fig_e2(traj, outdir / "fig3_e2.png"),
+        fig_beta(traj, outdir / "fig4_beta.png"),
+        fig_q2(traj, outdir / "q2.png"),
+        fig_shapes(traj, outdir / "shapes.png", lengths=lengths),
+    ]
+
+
+__all__ = ["fig_beta", "fig_e1", "fig_e2", "fig_q2", "fig_shapes", "write_figures"]
