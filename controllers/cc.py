@@ -38,10 +38,12 @@ def en_values(t, out):
         for n in range(4):
             out[n] = 0.0
         term = 1.0 + 0.0j  # (i t)^m / m!
-        for m in range(24):
+        for m in range(26):
             for n in range(4):
                 out[n] += term / (n + m + 1)
             term = term * (1j * t) / (m + 1)
+            if abs(term) < 1e-18:
+                break
     else:
         e = complex(np.cos(t), np.sin(t))
         it = 1j * t
@@ -73,34 +75,55 @@ def term_mono(fj, npre, nd, nt, u, dj, E):
     return val
 
 
+def term_table(fj, u, dj, E, tab):
+    """tab[npre, nd, nt] = term_mono(fj, npre, nd, nt, u, dj, E) for npre, nt in 0..3, nd in 0..1
+    (derivatives of order > 3 are never used)."""
+    up = 1.0
+    for nt in range(4):
+        up = up * u  # u^(1+nt)
+        base = up * E[nt]
+        for npre in range(4 - nt):
+            v = fj * IPOW[(npre + nt) % 4] * base
+            tab[npre, 0, nt] = v * dj
+            tab[npre, 1, nt] = v
+
+
 def term_y_derivs(j, u, d, th, phi_prev, order, ydot, c, Jy, Hy, Ty):
     """Accumulate T_j(u) and its y-derivatives into c (1,), Jy (6,), Hy (6,6), Ty (6,6) (complex).
 
     order 0: value; 1: + gradient; 2: + Hessian; 3: + third derivative contracted with ydot (6,).
-    phi_prev: angle at the start of section j (sum of earlier Theta).
+    phi_prev: angle at the start of section j (sum of earlier Theta).  Every derivative is a table
+    entry term_mono(npre, nd, nt) (see there), computed once per call.
     """
     E = np.empty(4, dtype=np.complex128)
     en_values(u * th[j], E)
     fj = complex(np.cos(phi_prev), np.sin(phi_prev))
-    dj = d[j]
-    c[0] += term_mono(fj, 0, 0, 0, u, dj, E)
+    tab = np.zeros((4, 2, 4), dtype=np.complex128)
+    term_table(fj, u, d[j], E, tab)
+    c[0] += tab[0, 0, 0]
     if order < 1:
         return
+    # relevant variables of term j: earlier angles 3..3+j-1 (type 1), d_j (2), Theta_j (3)
     for a in range(6):
         ta = vtype(j, a)
         if ta == 0:
             continue
-        Jy[a] += term_mono(fj, int(ta == 1), int(ta == 2), int(ta == 3), u, dj, E)
+        pa = int(ta == 1)
+        da = int(ta == 2)
+        na = int(ta == 3)
+        Jy[a] += tab[pa, da, na]
         if order < 2:
             continue
         for b in range(6):
             tb = vtype(j, b)
             if tb == 0:
                 continue
-            npre = int(ta == 1) + int(tb == 1)
-            nd = int(ta == 2) + int(tb == 2)
-            nt = int(ta == 3) + int(tb == 3)
-            Hy[a, b] += term_mono(fj, npre, nd, nt, u, dj, E)
+            npre = pa + int(tb == 1)
+            nd = da + int(tb == 2)
+            nt = na + int(tb == 3)
+            if nd >= 2:
+                continue
+            Hy[a, b] += tab[npre, nd, nt]
             if order < 3:
                 continue
             acc = 0.0j
@@ -108,8 +131,10 @@ def term_y_derivs(j, u, d, th, phi_prev, order, ydot, c, Jy, Hy, Ty):
                 tw = vtype(j, w)
                 if tw == 0 or ydot[w] == 0.0:
                     continue
-                acc += ydot[w] * term_mono(
-                    fj, npre + int(tw == 1), nd + int(tw == 2), nt + int(tw == 3), u, dj, E)
+                ndw = nd + int(tw == 2)
+                if ndw >= 2:
+                    continue
+                acc += ydot[w] * tab[npre + int(tw == 1), ndw, nt + int(tw == 3)]
             Ty[a, b] += acc
 
 
@@ -280,6 +305,6 @@ def backbone_points(q, n_per_section, out):
 
 
 KERNELS = (
-    "en_values", "vtype", "term_mono", "term_y_derivs", "chain_nz", "y_of_q", "chain_to_q",
+    "en_values", "vtype", "term_mono", "term_table", "term_y_derivs", "chain_nz", "y_of_q", "chain_to_q",
     "chain_to_q_dot", "point_y_derivs", "tip_kinematics", "backbone_points",
 )

@@ -24,7 +24,7 @@ from .cc import tip_kinematics
 from .master import master_kernel
 from .master import packed as master_packed
 from .params import Gains, MasterParams, SlaveParams, SubtaskSpec
-from .slave import gauss_legendre01, nle_kernel
+from .slave import gauss_legendre01, mass_nle_kernel
 from .subtasks import pack_subtask, subtask_kernel
 
 # layout of the master info vector
@@ -225,10 +225,8 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
         u2[a] = Jp[a, 0] * v[0] + Jp[a, 1] * v[1] + phi[a]
     # T2 = M u2 + N2 - J^T F2 (17)
     M = np.empty((6, 6))
-    dM = np.empty((6, 6, 6))
-    C = np.empty((6, 6))
     N = np.empty(6)
-    nle_kernel(pk, q, dq, nodes, weights, M, dM, C, N)
+    mass_nle_kernel(pk, q, dq, nodes, weights, M, N)
     for a in range(6):
         acc = N[a] - (J[0, a] * F2[0] + J[1, a] * F2[1])
         for b in range(6):

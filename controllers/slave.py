@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cc import backbone_points, chain_nz, chain_to_q, point_y_derivs, tip_kinematics, y_of_q
+from .cc import backbone_points, chain_nz, chain_to_q, point_y_derivs, term_y_derivs, tip_kinematics, y_of_q
 from .params import SlaveParams
 
 # layout of SlaveParams.packed(): name -> offset (each 3 wide, gravity 2 wide)
@@ -161,7 +161,110 @@ def nle_kernel(pk, q, dq, nodes, weights, M, dM, C, out):
         out[3 + i] += pk[PACK_CK + i] * dq[3 + i]
 
 
-KERNELS = ("dynamics_kernel", "elastic_kernel", "christoffel_coriolis", "nle_kernel")
+def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
+    """Fused M2 (6,6) and N2 (6,) for the control loop (outputs overwritten).
+
+    Same model as `dynamics_kernel` + `nle_kernel`, computed faster and exactly:
+    * the completed sections' end terms T_j(1), j < s, are summed once and shared by all quadrature
+      points of section s (prefix sums);
+    * the Coriolis/centripetal vector uses the Lagrange form for a continuum of particles,
+      C(q, dq) dq = sum_s int m_s J_p^T (d^2 p/dt^2 at ddq = 0) du  (+ the slice-rotation analogue),
+      with d^2 p/dt^2|_{ddq=0} = ydot^T H_y ydot + sum_i dp/dTheta_i * 2 dk_i dd_i.  It equals the
+      Christoffel form C dq of `nle_kernel` identically (tested to rounding), without building
+      the 6x6x6 tensor dM/dq.
+    """
+    d = np.empty(3)
+    th = np.empty(3)
+    ydot = np.empty(6)
+    y_of_q(q, d, th, ydot, dq)
+    nzu = np.empty((6, 2), dtype=np.int64)
+    nzb = np.empty((6, 2))
+    nzbd = np.empty((6, 2))
+    chain_nz(q, dq, nzu, nzb, nzbd)
+    # prefix sums of the completed sections (order 2)
+    Pc = np.zeros(3, dtype=np.complex128)
+    PJ = np.zeros((3, 6), dtype=np.complex128)
+    PH = np.zeros((3, 6, 6), dtype=np.complex128)
+    c = np.zeros(1, dtype=np.complex128)
+    Jy = np.zeros(6, dtype=np.complex128)
+    Hy = np.zeros((6, 6), dtype=np.complex128)
+    Ty = np.zeros((6, 6), dtype=np.complex128)
+    phi = np.zeros(3)
+    for s in range(1, 3):
+        c[0] = 0.0
+        for a in range(6):
+            Jy[a] = 0.0
+            for b in range(6):
+                Hy[a, b] = 0.0
+        term_y_derivs(s - 1, 1.0, d, th, phi[s - 1], 2, ydot, c, Jy, Hy, Ty)
+        phi[s] = phi[s - 1] + th[s - 1]
+        Pc[s] = Pc[s - 1] + c[0]
+        for a in range(6):
+            PJ[s, a] = PJ[s - 1, a] + Jy[a]
+            for b in range(6):
+                PH[s, a, b] = PH[s - 1, a, b] + Hy[a, b]
+    for a in range(6):
+        N[a] = 0.0
+        for b in range(6):
+            M[a, b] = 0.0
+    gc = complex(pk[PACK_G + 1], pk[PACK_G])  # gravity as Z + iX
+    Jq = np.empty(6, dtype=np.complex128)
+    alpha = np.empty(6)
+    for s in range(3):
+        ms = pk[PACK_M + s]
+        Is = pk[PACK_IS + s]
+        for g in range(nodes.shape[0]):
+            u = nodes[g]
+            w = weights[g]
+            c[0] = Pc[s]
+            for a in range(6):
+                Jy[a] = PJ[s, a]
+                for b in range(6):
+                    Hy[a, b] = PH[s, a, b]
+            term_y_derivs(s, u, d, th, phi[s], 2, ydot, c, Jy, Hy, Ty)
+            for a in range(6):
+                Jq[a] = Jy[nzu[a, 0]] * nzb[a, 0] + Jy[nzu[a, 1]] * nzb[a, 1]
+            # d^2 p / dt^2 at ddq = 0
+            acc = 0.0j
+            for a in range(6):
+                if ydot[a] != 0.0:
+                    row = 0.0j
+                    for b in range(6):
+                        row += Hy[a, b] * ydot[b]
+                    acc += row * ydot[a]
+            for i in range(3):
+                acc += Jy[3 + i] * (2.0 * dq[3 + i] * dq[i])
+            mw = ms * w
+            for a in range(6):
+                ja = Jq[a].conjugate()
+                N[a] += mw * ((ja * acc).real - (gc.conjugate() * Jq[a]).real)
+                for b in range(a, 6):
+                    v = mw * (ja * Jq[b]).real
+                    M[a, b] += v
+                    if b != a:
+                        M[b, a] += v
+            if Is != 0.0:
+                thdd = 0.0  # d^2 theta/dt^2 at ddq = 0
+                for a in range(6):
+                    alpha[a] = 0.0
+                for ll in range(s + 1):
+                    f = 1.0 if ll < s else u
+                    alpha[ll] = f * q[3 + ll]
+                    alpha[3 + ll] = f * q[ll]
+                    thdd += f * 2.0 * dq[3 + ll] * dq[ll]
+                iw = Is * w
+                for a in range(6):
+                    N[a] += iw * alpha[a] * thdd
+                    for b in range(6):
+                        M[a, b] += iw * alpha[a] * alpha[b]
+    for i in range(3):
+        dd = q[i]
+        k = q[3 + i]
+        N[i] += 0.5 * pk[PACK_KB + i] * k * k + pk[PACK_KE + i] * (dd - pk[PACK_L0 + i]) + pk[PACK_CD + i] * dq[i]
+        N[3 + i] += pk[PACK_KB + i] * dd * k + pk[PACK_CK + i] * dq[3 + i]
+
+
+KERNELS = ("dynamics_kernel", "elastic_kernel", "christoffel_coriolis", "nle_kernel", "mass_nle_kernel")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -262,6 +365,14 @@ def nle(p: SlaveParams, q, dq) -> np.ndarray:
     nle_kernel(p.packed(), _q(q), _q(dq), nodes, weights, np.empty((6, 6)), np.empty((6, 6, 6)),
                np.empty((6, 6)), out)
     return out
+
+
+def mass_and_nle(p: SlaveParams, q, dq) -> tuple[np.ndarray, np.ndarray]:
+    """(M2 (6,6), N2 (6,)) from the fused kernel used in the control loop (Lagrange-form Coriolis)."""
+    nodes, weights = gauss_legendre01(p.n_quad)
+    M, N = np.empty((6, 6)), np.empty(6)
+    mass_nle_kernel(p.packed(), _q(q), _q(dq), nodes, weights, M, N)
+    return M, N
 
 
 def forward_dynamics(p: SlaveParams, q, dq, T, F=None) -> np.ndarray:

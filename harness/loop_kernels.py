@@ -22,7 +22,7 @@ from controllers.control import (
     slave_control_kernel,
 )
 from controllers.master import master_kernel
-from controllers.slave import dynamics_kernel, nle_kernel
+from controllers.slave import mass_nle_kernel
 from controllers.subtasks import limits_kernel
 from harness.plant_model import (
     chain_dq2_from_joints,
@@ -167,10 +167,8 @@ def plant_accel(mpk, spk, nodes, weights, s, T1, T2, F, acc):
     dd1 = np.empty(2)
     ok1 = cholesky_solve(M1, rhs1, dd1)
     M2 = np.empty((6, 6))
-    dM2 = np.empty((6, 6, 6))
-    C2 = np.empty((6, 6))
     N2 = np.empty(6)
-    nle_kernel(spk, s[4:10], s[10:16], nodes, weights, M2, dM2, C2, N2)
+    mass_nle_kernel(spk, s[4:10], s[10:16], nodes, weights, M2, N2)
     rhs2 = np.empty(6)
     if F[2] != 0.0 or F[3] != 0.0:
         x2 = np.empty(2)

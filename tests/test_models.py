@@ -237,3 +237,13 @@ def test_compiled_kernels_equal_interpreted(rng):
                                     T2, u2, deN, info)
             outs.append(np.concatenate([T2, u2, deN, info]))
         np.testing.assert_allclose(outs[0], outs[1], rtol=1e-12, atol=1e-12)
+
+
+def test_fused_loop_dynamics_equal_christoffel_form(rng):
+    """The control loop's fused kernel (Lagrange-form Coriolis, prefix sums) equals M2 and the
+    Christoffel-symbol N2 of the reference implementation."""
+    for q in random_q2(rng, n=4):
+        dq = rng.normal(size=6)
+        M, N = slave.mass_and_nle(SP, q, dq)
+        np.testing.assert_allclose(M, slave.mass_matrix(SP, q), rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(N, slave.nle(SP, q, dq), rtol=1e-12, atol=1e-12)

@@ -1,0 +1,572 @@
+"""`teleop` command-line interface.
+
+    teleop run [SCENARIO.toml] [options]                    simulate one scenario, write outputs
+    teleop check [SCENARIO.toml] --bounds BOUNDS.toml ...    simulate and check acceptance bounds
+    teleop models [SCENARIO.toml] [--segments N] ...         export the generated MuJoCo model (MJCF)
+    teleop sweep STUDY.toml [--out DIR] [--workers N] ...    parameter sweep (local or Dask cluster)
+    teleop fidelity [--segments 4,8,16,32] [--out DIR]       plant-fidelity study over segment counts
+
+Exit status: 0 success; 1 the run failed (diverged, output not written) or a bound was violated;
+2 invalid input (scenario, bounds, option, output folder); 130 interrupted (SIGINT/SIGTERM).
+Invalid input is reported as a single ``error: ...`` line on stderr, never a traceback.
+
+The simulation back ends are imported lazily so that ``--help`` and input validation are fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import importlib
+import json
+import math
+import os
+import signal
+import sys
+import threading
+import traceback
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+from typing import Any, NoReturn
+
+from controllers.params import ParameterError
+from harness.config import ACTUATIONS, PLANTS
+from harness.errors import ConfigError
+
+EXIT_OK, EXIT_FAIL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+DEBUG_ENV = "TELEOP_DEBUG"  # set to 1 to print tracebacks of output-writing failures
+
+# (module, attribute) of exception types that mean "invalid input" (exit 2).  Looked up in
+# sys.modules only: if the module was never imported, its exception cannot have been raised.
+_USER_ERRORS = (
+    ("harness.plant_model", "PlantModelError"),
+    ("harness.errors", "PlantModelError"),
+    ("harness.sim", "SimulationError"),
+)
+
+
+def _user_error_types() -> tuple[type[BaseException], ...]:
+    out: list[type[BaseException]] = [ConfigError, ParameterError]
+    for mod_name, attr in _USER_ERRORS:
+        cls = getattr(sys.modules.get(mod_name), attr, None)
+        if isinstance(cls, type) and issubclass(cls, BaseException):
+            out.append(cls)
+    return tuple(out)
+
+
+def _one_line(text: Any) -> str:
+    return " ".join(str(text).split()) or "(no message)"
+
+
+def _err(msg: Any) -> None:
+    print(f"error: {_one_line(msg)}", file=sys.stderr)
+
+
+def _warn(msg: Any) -> None:
+    print(f"warning: {_one_line(msg)}", file=sys.stderr)
+
+
+# ---------------------------------------------------------------------------------------------
+# argument parsing
+# ---------------------------------------------------------------------------------------------
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser whose usage errors are one `error: ...` line (exit 2)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USAGE, f"error: {self.prog}: {_one_line(message)} (see '{self.prog} --help')\n")
+
+
+class _Formatter(argparse.HelpFormatter):
+    def __init__(self, prog: str) -> None:
+        super().__init__(prog, max_help_position=32, width=100)
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {v}")
+    return v
+
+
+def _add_scenario_options(p: argparse.ArgumentParser, *, sim: bool = True) -> None:
+    p.add_argument(
+        "scenario", nargs="?", metavar="SCENARIO.toml", default=None,
+        help="scenario file (layout: scenarios/paper.toml). Default: the built-in paper scenario "
+             "(identical to scenarios/paper.toml).")
+    if sim:
+        p.add_argument("--plant", choices=PLANTS, default=None,
+                       help="plant that is simulated: 'mujoco' (MuJoCo multibody model) or 'analytic' "
+                            "(RK4 on the analytic model). Shortcut for --set plant.kind=... "
+                            "Default: from the scenario (paper: mujoco).")
+    p.add_argument("--actuation", choices=ACTUATIONS, default=None,
+                   help="MuJoCo slave actuation: 'servo' (segment-joint position servos) or 'torque' "
+                        "(generalized forces mapped to joint torques). "
+                        "Shortcut for --set plant.actuation=... "
+                        "Default: from the scenario (paper: servo).")
+    p.add_argument("--segments", metavar="N", default=None,
+                   help="rigid segments per slave section in the MuJoCo model, integer in [1, 64]. "
+                        "Shortcut for --set plant.segments=N. Default: from the scenario (paper: 8).")
+    if sim:
+        p.add_argument("--duration", metavar="S", default=None,
+                       help="simulated time in seconds, in (0, 3600]; must exceed the scenario's transient "
+                            "(add --set transient=0 for short runs). Default: from the scenario (paper: 20).")
+        p.add_argument("--seed", metavar="N", default=None,
+                       help="noise seed, integer >= 0. Default: from the scenario (paper: 0).")
+        p.add_argument("--snr", metavar="DB|none", default=None,
+                       help="signal-to-noise ratio of the AWGN on the fed-back states in dB, in [0, 200], or "
+                            "'none' for no noise. Default: from the scenario (paper: 40).")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override any scenario field by its dotted key; VALUE is a TOML value "
+                        "(e.g. plant.segments=16, plant.slave.masses=[1.2,0.7,0.4], snr_db=30, "
+                        "plant.kind=analytic). Repeatable; applied in order after the shortcut options.")
+
+
+def _add_out_and_progress(p: argparse.ArgumentParser, out_help: str) -> None:
+    p.add_argument("--out", metavar="DIR", type=Path, default=None, help=out_help)
+    p.add_argument("--no-progress", action="store_true",
+                   help="do not show the progress bar (default: shown on stderr).")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="teleop", formatter_class=_Formatter,
+        description="Validation harness for teleoperating a continuum arm (Octarm) with a 2-link "
+                    "rigid master.",
+        epilog="exit status: 0 ok; 1 run failed (diverged, outputs not written) or bounds violated; "
+               "2 invalid input; 130 interrupted (SIGINT/SIGTERM). "
+               f"Set {DEBUG_ENV}=1 to print tracebacks of output-writing failures. "
+               "Run 'teleop COMMAND --help' for the options of each command.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}",
+                        help="print the package version and exit.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands")
+
+    run = sub.add_parser(
+        "run", formatter_class=_Formatter, help="simulate one scenario and write its outputs",
+        description="Load and validate a scenario, simulate it and write into the output folder: "
+                    "config.toml (fully resolved scenario, written before simulating), metrics.json, "
+                    "run.rrd (Rerun recording) and the PNG figures. Outputs are written even when the run "
+                    "diverges or is interrupted (Ctrl-C / SIGTERM stop the run cleanly; a second Ctrl-C "
+                    "aborts).",
+        epilog="exit status: 0 ok; 1 diverged / outputs not written; 2 invalid input; 130 interrupted.")
+    _add_scenario_options(run)
+    _add_out_and_progress(run, "output folder (created; must be writable). Default: runs/<scenario name>.")
+    run.set_defaults(func=cmd_run)
+
+    check = sub.add_parser(
+        "check", formatter_class=_Formatter, help="simulate a scenario and check acceptance bounds",
+        description="Like 'run', then compare the metrics with a bounds file and list every violated bound "
+                    "with its measured value and limit. Outputs are written only with --out.",
+        epilog="exit status: 0 all bounds satisfied; 1 a bound is violated (or the run failed); "
+               "2 invalid input; 130 interrupted.")
+    _add_scenario_options(check)
+    check.add_argument("--bounds", metavar="BOUNDS.toml", type=Path, required=True,
+                       help="bounds file (required; layout: bounds/paper_mujoco.toml).")
+    _add_out_and_progress(check, "also write the run outputs (as 'run' does) into this folder. "
+                                 "Default: no files are written.")
+    check.set_defaults(func=cmd_check)
+
+    models = sub.add_parser(
+        "models", formatter_class=_Formatter, help="export the generated MuJoCo model (MJCF)",
+        description="Write the MJCF of the plant (plant master and plant slave of the scenario, i.e. with "
+                    "any [plant.master]/[plant.slave] mismatch) via harness.plant_model.export_mjcf.")
+    _add_scenario_options(models, sim=False)
+    models.add_argument("--enforce-cc", action=argparse.BooleanOptionalAction, default=None,
+                        help="with / without the equality constraints holding each section at constant "
+                             "curvature (sets plant.enforce_cc). Default: from the scenario (paper: true).")
+    models.add_argument("--out", metavar="FILE.xml", type=Path, default=None,
+                        help="output MJCF file (parent folders are created). "
+                             "Default: mjcf/octarm_<actuation>_n<segments>[_cc].xml.")
+    models.set_defaults(func=cmd_models)
+
+    sweep = sub.add_parser(
+        "sweep", formatter_class=_Formatter, help="run a parameter sweep (study file)",
+        description="Run every scenario of a study file (harness.sweep) locally in worker processes or on a "
+                    "Dask cluster, and write one output folder per run plus a summary.")
+    sweep.add_argument("study", metavar="STUDY.toml", type=Path, help="study file describing the sweep.")
+    sweep.add_argument("--out", metavar="DIR", type=Path, default=None,
+                       help="output folder (created; must be writable; an existing sweep folder is "
+                            "resumed). Default: runs/sweeps/<study name>.")
+    sweep.add_argument("--workers", metavar="N", type=_positive_int, default=None,
+                       help="number of local worker processes, integer >= 1 (ignored with --scheduler). "
+                            f"Default: all cores ({os.cpu_count() or 1} here).")
+    sweep.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                       help="address of a running Dask scheduler (e.g. tcp://host:8786) to run on a "
+                            "cluster. Default: none (local processes).")
+    sweep.add_argument("--no-progress", action="store_true",
+                       help="do not show the progress bar (default: shown on stderr).")
+    sweep.set_defaults(func=cmd_sweep)
+
+    fid = sub.add_parser(
+        "fidelity", formatter_class=_Formatter, help="plant-fidelity study over MuJoCo segment counts",
+        description="Compare the generated MuJoCo Octarm with N rigid segments per section against the "
+                    "analytic constant-curvature model (tip position, Jacobian, inertia, gravity, elastic "
+                    "forces at seeded random configurations; plus the master) for several N, with the "
+                    "observed convergence order (harness.fidelity). Writes fidelity.md, fidelity.csv and "
+                    "fidelity.png.")
+    fid.add_argument("--segments", metavar="N,N,...", default="4,8,16,32",
+                     help="comma-separated segment counts per section, each an integer in [1, 64]. "
+                          "Default: 4,8,16,32.")
+    fid.add_argument("--out", metavar="DIR", type=Path, default=Path("runs/fidelity"),
+                     help="output folder (created; must be writable). Default: runs/fidelity.")
+    fid.add_argument("--no-progress", action="store_true",
+                     help="do not show progress output (default: shown on stderr when available).")
+    fid.set_defaults(func=cmd_fidelity)
+    return parser
+
+
+def _version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("octarm-teleop")
+    except Exception:  # noqa: BLE001 - not installed: version unknown
+        return "unknown"
+
+
+# ---------------------------------------------------------------------------------------------
+# helpers
+# ---------------------------------------------------------------------------------------------
+_SHORTCUTS = (  # (attribute, option, dotted key)
+    ("plant", "--plant", "plant.kind"),
+    ("actuation", "--actuation", "plant.actuation"),
+    ("segments", "--segments", "plant.segments"),
+    ("duration", "--duration", "duration"),
+    ("seed", "--seed", "seed"),
+    ("snr", "--snr", "snr_db"),
+)
+
+
+def load_from_args(args: argparse.Namespace, extra: Sequence[tuple[str, str]] = ()):
+    """Scenario from the positional file, the shortcut options, `extra` (key=value, label) and --set."""
+    from harness.io_config import load_scenario
+
+    overrides: list[str] = []
+    labels: list[str | None] = []
+    for attr, option, key in _SHORTCUTS:
+        value = getattr(args, attr, None)
+        if value is not None:
+            text = str(value).strip()
+            if key in ("plant.kind", "plant.actuation"):
+                text = json.dumps(text)  # always a TOML string
+            overrides.append(f"{key}={text}")
+            labels.append(f"{option} {value}")
+    for text, label in extra:
+        overrides.append(text)
+        labels.append(label)
+    for text in args.overrides:
+        overrides.append(text)
+        labels.append(f"--set {text}")
+    return load_scenario(args.scenario, overrides, labels=labels)
+
+
+def prepare_out_dir(path: Path, option: str = "--out") -> Path:
+    """Create `path` (and parents) and check that files can be written in it, else ConfigError."""
+    path = Path(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise ConfigError(f"{option} = '{path}': exists and is not a directory", path=option) from None
+    except OSError as e:
+        raise ConfigError(f"{option} = '{path}': cannot create the output folder ({e.strerror or e})",
+                          path=option) from None
+    probe = path / f".teleop-write-test-{os.getpid()}"
+    try:
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as e:
+        raise ConfigError(f"{option} = '{path}': output folder is not writable ({e.strerror or e})",
+                          path=option) from None
+    return path
+
+
+def _import(name: str):
+    """Import a harness back end lazily; a missing module is reported as one line (exit 1)."""
+    try:
+        return importlib.import_module(name)
+    except ModuleNotFoundError as e:
+        if e.name and (name == e.name or name.startswith(e.name + ".")):
+            raise _Unavailable(f"{name} is not available ({e})") from None
+        raise
+
+
+class _Unavailable(RuntimeError):
+    """A lazily imported back end (simulation, plotting, ...) is missing."""
+
+
+@contextlib.contextmanager
+def stop_on_signals(stop: threading.Event | None) -> Iterator[list[int]]:
+    """While active, SIGINT/SIGTERM set `stop` (the simulation then returns status "interrupted");
+    a second signal raises KeyboardInterrupt.  Yields the list of received signal numbers."""
+    received: list[int] = []
+    if stop is None or threading.current_thread() is not threading.main_thread():
+        yield received
+        return
+
+    def handler(signum, frame):  # noqa: ARG001
+        if stop.is_set():
+            raise KeyboardInterrupt
+        received.append(signum)
+        stop.set()
+        print(f"\n{signal.Signals(signum).name}: stopping the run, outputs will be written "
+              "(repeat to abort immediately)", file=sys.stderr)
+
+    stop.clear()
+    previous = {}
+    try:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, handler)
+        yield received
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+        stop.clear()
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if hasattr(v, "tolist") and callable(v.tolist):  # numpy arrays and scalars
+        return _jsonable(v.tolist())
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    if v is None or isinstance(v, (bool, int, float, str)):
+        return v
+    return str(v)
+
+
+def _fmt_value(v: Any) -> str:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return str(v)
+    if isinstance(v, int):
+        return str(v)
+    return f"{v:.4g}" if v == 0 or 1e-3 <= abs(v) < 1e4 else f"{v:.3e}"
+
+
+_SUMMARY_KEYS = (("e1_rms", "m"), ("e1_max", "m"), ("e2_rms", "m"), ("e2_max", "m"),
+                 ("e2_plant_rms", "m"), ("e2_plant_max", "m"), ("beta_min", ""), ("mujoco_warnings", ""))
+
+
+def _print_summary(scn, traj, metrics: dict | None, out: Path | None, written: list[Path]) -> None:
+    n = len(traj)
+    t_end = float(traj.t[-1]) if n else 0.0
+    plant = scn.plant.kind
+    if plant == "mujoco":
+        plant += f", {scn.plant.segments} segments/section, {scn.plant.actuation}"
+    print(f"run '{scn.name}': status {traj.status} - {n} of {scn.n_steps} steps, t = {t_end:.3f} s "
+          f"(plant {plant})")
+    if traj.message:
+        print(f"  message: {_one_line(traj.message)}")
+    if metrics:
+        items = [f"{k} = {_fmt_value(metrics[k])}{' ' + u if u else ''}"
+                 for k, u in _SUMMARY_KEYS if _jsonable(metrics.get(k)) is not None]  # skip None/NaN
+        for i in range(0, len(items), 3):
+            print("  " + "   ".join(items[i:i + 3]))
+    if out is not None:
+        names = ", ".join(p.name if p.parent == out else str(p) for p in written)
+        print(f"  outputs in {out}/: {names or '(none)'}")
+
+
+def _simulate_and_write(scn, out: Path | None, progress: bool):
+    """Simulate, compute metrics and (if out) write every output that can be written.
+
+    Returns (traj, metrics or None, list of output-writing failures, interrupted flag)."""
+    from harness.io_config import dump_scenario
+
+    written: list[Path] = []
+    failures: list[str] = []
+
+    def attempt(what: str, fn: Callable[[], Any]) -> Any:
+        try:
+            return fn()
+        except _Unavailable as e:
+            failures.append(f"{what}: {e}")
+        except Exception as e:  # noqa: BLE001 - write whatever else exists, report below
+            if os.environ.get(DEBUG_ENV):
+                traceback.print_exc()
+            failures.append(f"{what}: {type(e).__name__}: {e}")
+        return None
+
+    if out is not None:  # first, so the configuration is on disk whatever happens next
+        dump_scenario(scn, out / "config.toml")
+        written.append(out / "config.toml")
+    sim = _import("harness.sim")
+    with stop_on_signals(getattr(sim, "STOP", None)) as received:
+        traj = sim.simulate(scn, progress=progress)
+    interrupted = bool(received) or traj.status == "interrupted"
+
+    metrics = attempt("metrics", lambda: _import("harness.metrics").compute_metrics(traj, scn))
+    if metrics is not None:
+        metrics = dict(metrics)
+        metrics.setdefault("status", traj.status)
+        metrics.setdefault("message", traj.message)
+    if out is not None:
+        doc = metrics if metrics is not None else {"status": traj.status, "message": traj.message,
+                                                    "metrics_error": failures[-1] if failures else ""}
+
+        def write_metrics() -> Path:
+            p = out / "metrics.json"
+            p.write_text(json.dumps(_jsonable(doc), indent=2, allow_nan=False) + "\n", encoding="utf-8")
+            return p
+
+        for what, fn in (
+            ("metrics.json", write_metrics),
+            ("run.rrd", lambda: _import("harness.record").write_recording(traj, out / "run.rrd")),
+            ("figures", lambda: _import("harness.plots").write_figures(traj, out)),
+        ):
+            res = attempt(what, fn)
+            if isinstance(res, (str, Path)):
+                written.append(Path(res))
+            elif isinstance(res, (list, tuple)):
+                written += [Path(p) for p in res]
+    _print_summary(scn, traj, metrics, out, written)
+    for f in failures:
+        _warn(f"could not produce {f}")
+    return traj, metrics, failures, interrupted
+
+
+def _run_exit_code(traj, failures: list[str], interrupted: bool, wrote: bool = True) -> int:
+    if interrupted:
+        t_end = float(traj.t[-1]) if len(traj) else 0.0
+        note = "; outputs written for the completed part" if wrote else ""
+        _err(f"run interrupted at t = {t_end:.3f} s{note}")
+        return EXIT_INTERRUPTED
+    if traj.status != "ok":
+        _err(f"run {traj.status}: {traj.message or 'no message'}")
+        return EXIT_FAIL
+    if failures:
+        _err(f"{len(failures)} output(s) could not be produced (see warnings above)")
+        return EXIT_FAIL
+    return EXIT_OK
+
+
+# ---------------------------------------------------------------------------------------------
+# commands
+# ---------------------------------------------------------------------------------------------
+def cmd_run(args: argparse.Namespace) -> int:
+    scn = load_from_args(args)
+    out = prepare_out_dir(args.out if args.out is not None else Path("runs") / scn.name)
+    traj, _, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress)
+    return _run_exit_code(traj, failures, interrupted)
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    from harness.bounds import check_bounds, load_bounds
+
+    scn = load_from_args(args)
+    bounds = load_bounds(args.bounds)
+    out = prepare_out_dir(args.out) if args.out is not None else None
+    traj, metrics, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress)
+    if interrupted:
+        return _run_exit_code(traj, failures, interrupted, wrote=out is not None)
+    if metrics is None:
+        _err(f"no metrics could be computed, bounds not checked ({failures[0] if failures else 'unknown'})")
+        return EXIT_FAIL
+    violations = check_bounds(metrics, bounds)
+    if violations:
+        print(f"check against {args.bounds}: {len(violations)} bound(s) violated")
+        for v in violations:
+            print(f"  FAIL {v}")
+        return EXIT_FAIL
+    print(f"check against {args.bounds}: all bounds satisfied")
+    if out is not None and failures:
+        _err(f"{len(failures)} output(s) could not be produced (see warnings above)")
+        return EXIT_FAIL
+    return EXIT_OK
+
+
+def cmd_models(args: argparse.Namespace) -> int:
+    extra = []
+    if args.enforce_cc is not None:
+        flag = "true" if args.enforce_cc else "false"
+        extra.append((f"plant.enforce_cc={flag}", "--enforce-cc" if args.enforce_cc else "--no-enforce-cc"))
+    scn = load_from_args(args, extra)
+    p = scn.plant
+    path = args.out if args.out is not None else Path(
+        "mjcf") / f"octarm_{p.actuation}_n{p.segments}{'_cc' if p.enforce_cc else ''}.xml"
+    if path.is_dir():
+        raise ConfigError(f"--out = '{path}': is a directory, expected a file name", path="--out")
+    prepare_out_dir(path.parent if str(path.parent) else Path("."))
+    plant_model = _import("harness.plant_model")
+    result = plant_model.export_mjcf(scn.plant_master, scn.plant_slave, p, path)
+    print(f"wrote {result if isinstance(result, (str, Path)) else path} "
+          f"({p.segments} segments/section, {p.actuation} actuation, enforce_cc={str(p.enforce_cc).lower()})")
+    return EXIT_OK
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    study: Path = args.study
+    if not study.is_file():
+        raise ConfigError(f"study file not found: {study}", path=str(study))
+    out = prepare_out_dir(args.out) if args.out is not None else None  # None: harness.sweep's default
+    sweep = _import("harness.sweep")
+    rc = sweep.main_sweep(study, out, args.workers, args.scheduler, not args.no_progress)
+    return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
+
+
+def parse_segment_list(text: str) -> list[int]:
+    """'4,8,16,32' -> [4, 8, 16, 32]; each an integer in [1, 64], no duplicates."""
+    items = [s.strip() for s in str(text).split(",")]
+    out: list[int] = []
+    for s in items:
+        try:
+            v = int(s)
+        except ValueError:
+            v = None
+        if v is None or not 1 <= v <= 64 or v in out:
+            raise ConfigError(f"--segments = {text!r}: must be distinct integers in [1, 64] separated by "
+                              f"commas, e.g. 4,8,16,32 (bad entry {s!r})", path="--segments")
+        out.append(v)
+    return out
+
+
+def cmd_fidelity(args: argparse.Namespace) -> int:
+    segments = parse_segment_list(args.segments)
+    out = prepare_out_dir(args.out)
+    fidelity = _import("harness.fidelity")
+    entry = getattr(fidelity, "main_fidelity", None)
+    if callable(entry):  # a dedicated CLI entry point, if harness.fidelity grows one
+        rc = entry(segments, out, not args.no_progress)
+        return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
+    # TODO(cli): harness.fidelity has no CLI entry taking the segment list (its `main(out_dir)` uses
+    # fixed Ns), so the steps of `main` are composed here; switch to `main_fidelity(segments, out,
+    # progress)` once it exists.  The study has no progress bar (--no-progress is accepted anyway).
+    table = fidelity.fidelity_study(Ns=tuple(segments))
+    written = [table.write_markdown(out / "fidelity.md"), table.write_csv(out / "fidelity.csv"),
+               fidelity.plot_fidelity(table, out / "fidelity.png")]
+    print(table.to_markdown())
+    print(f"outputs in {out}/: " + ", ".join(Path(p).name for p in written))
+    return EXIT_OK
+
+
+# ---------------------------------------------------------------------------------------------
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # --help / --version (0) or a usage error (2, already printed)
+        return e.code if isinstance(e.code, int) else (EXIT_OK if e.code is None else EXIT_USAGE)
+    if not getattr(args, "command", None):
+        parser.print_help(sys.stderr)
+        return EXIT_USAGE
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        _err("interrupted")
+        return EXIT_INTERRUPTED
+    except _Unavailable as e:
+        _err(e)
+        return EXIT_FAIL
+    except Exception as e:
+        if isinstance(e, _user_error_types()):
+            _err(e)
+            return EXIT_USAGE
+        raise
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,794 @@
+"""Scenario TOML <-> `harness.config.Scenario`, with complete validation before any simulation.
+
+TOML layout mirrors the dataclasses (see `scenarios/paper.toml`, which spells out every default)::
+
+    name = "paper"            # also the default output folder runs/<name>
+    duration = 20.0           # s
+    control_dt = 0.001        # s
+    snr_db = 40.0             # dB, or "none" (or false) for no noise
+    seed = 0
+    transient = 5.0           # s
+    continuous_control = false
+    interaction_forces = [[0.0, 0.0], [0.0, 0.0]]
+    [gains] [master] [slave] [subtask] [trajectory] [initial] [plant] [plant.master] [plant.slave]
+
+Rules:
+
+* Every key is optional; a missing key takes the dataclass default.  Exception: missing keys of
+  ``[plant.master]`` / ``[plant.slave]`` take the value of the resolved *nominal* ``[master]`` /
+  ``[slave]``, so a mismatch is written as the difference only (``plant.slave.masses = [...]``).
+  ``plant.master = "none"`` (or no such table) means "the plant uses the nominal model".
+* Optional values (``snr_db``, ``initial.slave_q2``, ``plant.master``, ``plant.slave``) are written
+  as the string ``"none"`` when unset; `dump_scenario` writes them that way so that
+  ``load_scenario(dump(x)) == x`` exactly.
+* Integers are accepted where floats are expected, booleans never count as numbers, floats are
+  never accepted as integers, NaN/inf are rejected everywhere.
+* ``subtask.weights`` defaults to the default weight of each kind in ``subtask.kinds``.
+* ``name`` defaults to the file stem when loading from a file (``"paper"`` otherwise).
+
+Overrides are dotted ``key=value`` strings whose value is parsed as a TOML value
+(``plant.segments=16``, ``plant.slave.masses=[1.2,0.7,0.4]``, ``snr_db=30``); a bare word that
+is not valid TOML is taken as a string (``plant.kind=analytic``, ``snr_db=none``).
+
+Every error raises `harness.errors.ConfigError` with one line naming the dotted field, its value
+and the allowed range or type.
+"""
+
+from __future__ import annotations
+
+import copy
+import difflib
+import math
+import re
+import tomllib
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import fields, is_dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import tomli_w
+
+from controllers.params import Gains, MasterParams, ParameterError, SlaveParams, SubtaskSpec
+from harness.config import (
+    ACTUATIONS,
+    INTEGRATORS,
+    PLANTS,
+    InitialState,
+    PlantConfig,
+    Scenario,
+    TrajectoryConfig,
+)
+from harness.errors import ConfigError, short_repr
+
+REACH_MARGIN = 1e-3  # m, the desired trajectory must stay this far inside the master workspace annulus
+MULTIPLE_RTOL = 1e-9  # relative tolerance for "integer multiple of a time step"
+MAX_SUBSTEPS = 100_000  # control_dt / physics_dt
+MAX_STEPS = 100_000_000  # duration / control_dt
+NONE_WORDS = ("none",)
+_NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.+=,@-]{0,99}$")
+_KEY_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*$")
+_BARE_WORD_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.+-]*$")
+
+Checker = Callable[[str, Any], Any]
+
+
+# ---------------------------------------------------------------------------------------------
+# primitive checkers: (dotted path, raw value) -> converted value, or ConfigError
+# ---------------------------------------------------------------------------------------------
+def _type_name(v: Any) -> str:
+    if v is None:
+        return "nothing"
+    if isinstance(v, bool):
+        return "a boolean"
+    if isinstance(v, int):
+        return "an integer"
+    if isinstance(v, float):
+        return "a float"
+    if isinstance(v, str):
+        return "a string"
+    if isinstance(v, (list, tuple)):
+        return "an array"
+    if isinstance(v, Mapping):
+        return "a table"
+    return f"a {type(v).__name__}"
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _fmt(x: float) -> str:
+    if x == math.pi:
+        return "pi"
+    return f"{x:g}"
+
+
+class _Range:
+    """A real interval; `None` ends are unbounded."""
+
+    def __init__(self, lo: float | None = None, hi: float | None = None,
+                 lo_open: bool = False, hi_open: bool = False) -> None:
+        self.lo, self.hi, self.lo_open, self.hi_open = lo, hi, lo_open, hi_open
+
+    def __contains__(self, x: float) -> bool:
+        if self.lo is not None and (x <= self.lo if self.lo_open else x < self.lo):
+            return False
+        if self.hi is not None and (x >= self.hi if self.hi_open else x > self.hi):
+            return False
+        return True
+
+    def describe(self) -> str:
+        if self.lo is None and self.hi is None:
+            return "finite"
+        if self.hi is None:
+            return f"{'>' if self.lo_open else '>='} {_fmt(self.lo)}"
+        if self.lo is None:
+            return f"{'<' if self.hi_open else '<='} {_fmt(self.hi)}"
+        left, right = "(" if self.lo_open else "[", ")" if self.hi_open else "]"
+        return f"in {left}{_fmt(self.lo)}, {_fmt(self.hi)}{right}"
+
+
+POSITIVE = _Range(0.0, None, lo_open=True)
+NONNEG = _Range(0.0, None)
+FINITE = _Range()
+
+
+def _as_float(v: Any) -> float | None:
+    """float(v) for a finite real number (not bool), else None."""
+    if not _is_number(v):
+        return None
+    try:
+        f = float(v)
+    except OverflowError:
+        return None
+    return f if math.isfinite(f) else None
+
+
+def _num(rng: _Range = FINITE) -> Checker:
+    desc = "a finite number" if rng.describe() == "finite" else f"a number {rng.describe()}"
+
+    def check(path: str, v: Any) -> float:
+        f = _as_float(v)
+        if f is None:
+            got = "" if _is_number(v) else f" (got {_type_name(v)})"
+            raise ConfigError.field(path, v, f"must be {desc}{got}")
+        if f not in rng:
+            raise ConfigError.field(path, v, f"must be {desc}")
+        return f
+
+    check.desc = desc  # type: ignore[attr-defined]
+    return check
+
+
+def _int(lo: int, hi: int, allowed: tuple[int, ...] | None = None) -> Checker:
+    desc = (f"one of the integers {', '.join(map(str, allowed))}" if allowed
+            else f"an integer in [{lo}, {hi}]")
+
+    def check(path: str, v: Any) -> int:
+        if not isinstance(v, int) or isinstance(v, bool):
+            raise ConfigError.field(path, v, f"must be {desc} (got {_type_name(v)})")
+        if not lo <= v <= hi or (allowed and v not in allowed):
+            raise ConfigError.field(path, v, f"must be {desc}")
+        return int(v)
+
+    return check
+
+
+def _bool(path: str, v: Any) -> bool:
+    if not isinstance(v, bool):
+        raise ConfigError.field(path, v, f"must be true or false (got {_type_name(v)})")
+    return v
+
+
+def _choice(options: Iterable[str]) -> Checker:
+    options = tuple(options)
+    desc = "one of " + ", ".join(repr(o) for o in options)
+
+    def check(path: str, v: Any) -> str:
+        if not isinstance(v, str):
+            raise ConfigError.field(path, v, f"must be {desc} (got {_type_name(v)})")
+        if v not in options:
+            close = difflib.get_close_matches(v, options, n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            raise ConfigError.field(path, v, f"must be {desc}{hint}")
+        return v
+
+    return check
+
+
+def _name(path: str, v: Any) -> str:
+    if not isinstance(v, str) or not _NAME_RE.match(v):
+        raise ConfigError.field(
+            path, v, "must be a string of 1-100 letters, digits or _ . + = , @ - (usable as a folder "
+            "name; no spaces or slashes, not starting with '.' or '-')")
+    return v
+
+
+def _vec(n: int, rng: _Range = FINITE, unit: str = "numbers") -> Checker:
+    each = "" if rng.describe() == "finite" else f", each {rng.describe()}"
+    desc = f"an array of {n} finite {unit}{each}"
+
+    def check(path: str, v: Any) -> tuple[float, ...]:
+        if not isinstance(v, (list, tuple)):
+            raise ConfigError.field(path, v, f"must be {desc} (got {_type_name(v)})")
+        if len(v) != n:
+            raise ConfigError.field(path, v, f"must be {desc} (got {len(v)} entries)")
+        out = []
+        for i, x in enumerate(v):
+            f = _as_float(x)
+            if f is None or f not in rng:
+                raise ConfigError.field(path, v, f"must be {desc} (entry {i} is {short_repr(x, 30)})")
+            out.append(f)
+        return tuple(out)
+
+    check.desc = desc  # type: ignore[attr-defined]
+    return check
+
+
+def _matrix(rows: int, cols: int) -> Checker:
+    row = _vec(cols)
+    desc = f"an array of {rows} arrays of {cols} finite numbers"
+
+    def check(path: str, v: Any) -> tuple[tuple[float, ...], ...]:
+        if not isinstance(v, (list, tuple)) or len(v) != rows:
+            raise ConfigError.field(path, v, f"must be {desc}")
+        try:
+            return tuple(row(path, r) for r in v)
+        except ConfigError:
+            raise ConfigError.field(path, v, f"must be {desc}") from None
+
+    return check
+
+
+def _str_list(options: Iterable[str]) -> Checker:
+    options = tuple(options)
+    desc = "an array of distinct strings from " + ", ".join(repr(o) for o in options)
+
+    def check(path: str, v: Any) -> tuple[str, ...]:
+        if not isinstance(v, (list, tuple)) or not all(isinstance(x, str) for x in v):
+            raise ConfigError.field(path, v, f"must be {desc}")
+        bad = [x for x in v if x not in options]
+        if bad or len(set(v)) != len(v):
+            raise ConfigError.field(path, v, f"must be {desc}")
+        return tuple(v)
+
+    return check
+
+
+def _num_list(rng: _Range) -> Checker:
+    desc = f"an array of finite numbers, each {rng.describe()}"
+
+    def check(path: str, v: Any) -> tuple[float, ...]:
+        if not isinstance(v, (list, tuple)):
+            raise ConfigError.field(path, v, f"must be {desc} (got {_type_name(v)})")
+        return _vec(len(v), rng)(path, v)
+
+    return check
+
+
+def _is_none_word(v: Any) -> bool:
+    return isinstance(v, str) and v.strip().lower() in NONE_WORDS
+
+
+def _optional(inner: Checker, allow_false: bool = False) -> Checker:
+    def check(path: str, v: Any) -> Any:
+        if _is_none_word(v) or (allow_false and v is False):
+            return None
+        try:
+            return inner(path, v)
+        except ConfigError:
+            alt = ', "none" or false' if allow_false else ' or "none"'
+            raise ConfigError.field(path, v, f"must be {inner.desc}{alt} (got {_type_name(v)})") from None
+
+    return check
+
+
+# ---------------------------------------------------------------------------------------------
+# schema: section -> {field: checker}; every dataclass field must appear (tests check this)
+# ---------------------------------------------------------------------------------------------
+TOP: dict[str, Checker] = {
+    "name": _name,
+    "duration": _num(_Range(0.0, 3600.0, lo_open=True)),
+    "control_dt": _num(_Range(0.0, 1.0, lo_open=True)),
+    "snr_db": _optional(_num(_Range(0.0, 200.0)), allow_false=True),
+    "seed": _int(0, 2**63 - 1),
+    "transient": _num(_Range(0.0, 3600.0, hi_open=True)),
+    "continuous_control": _bool,
+    "interaction_forces": _matrix(2, 2),
+}
+
+GAINS: dict[str, Checker] = {f.name: _num(POSITIVE) for f in fields(Gains)}
+
+MASTER: dict[str, Checker] = {
+    "lengths": _vec(2, POSITIVE),
+    "masses": _vec(2, POSITIVE),
+    "damping": _vec(2, NONNEG),
+    "gravity": _num(NONNEG),
+}
+
+SLAVE: dict[str, Checker] = {
+    "rest_lengths": _vec(3, POSITIVE),
+    "masses": _vec(3, POSITIVE),
+    "bending_stiffness": _vec(3, NONNEG),
+    "extension_stiffness": _vec(3, NONNEG),
+    "extension_damping": _vec(3, NONNEG),
+    "bending_damping": _vec(3, NONNEG),
+    "slice_inertia": _vec(3, NONNEG),
+    "gravity": _vec(2),
+    "max_extension": _num(_Range(1.0, 100.0, lo_open=True)),
+    "max_bend": _num(_Range(0.0, math.pi, lo_open=True)),
+    "n_quad": _int(2, 32),
+}
+
+SUBTASK: dict[str, Checker] = {
+    "kinds": _str_list(("manipulability", "limits")),
+    "weights": _num_list(POSITIVE),
+    "limit_power": _int(1, 10),
+}
+
+TRAJECTORY: dict[str, Checker] = {
+    "center": _vec(2),
+    "amplitude": _vec(2),
+    "omega": _num(),
+}
+
+INITIAL: dict[str, Checker] = {
+    "master_offset": _vec(2),
+    "master_elbow": _int(-1, 1, allowed=(-1, 1)),
+    "slave_q2": _optional(_vec(6)),
+    "slave_curvature": _num(),
+}
+
+PLANT: dict[str, Checker] = {
+    "kind": _choice(PLANTS),
+    "actuation": _choice(ACTUATIONS),
+    "segments": _int(1, 64),
+    "enforce_cc": _bool,
+    "physics_dt": _num(_Range(0.0, 0.01, lo_open=True)),
+    "integrator": _choice(INTEGRATORS),
+    "servo_frequency": _num(_Range(0.0, 1000.0, lo_open=True)),
+    "servo_damping_ratio": _num(POSITIVE),
+    "servo_feedforward": _bool,
+    "actuation_delay": _num(NONNEG),
+    "armature_fraction": _num(NONNEG),
+}
+PLANT_MODELS = ("master", "slave")  # optional sub-tables of [plant]
+
+SECTIONS: dict[str, tuple[type, dict[str, Checker]]] = {
+    "gains": (Gains, GAINS),
+    "master": (MasterParams, MASTER),
+    "slave": (SlaveParams, SLAVE),
+    "subtask": (SubtaskSpec, SUBTASK),
+    "trajectory": (TrajectoryConfig, TRAJECTORY),
+    "initial": (InitialState, INITIAL),
+    "plant": (PlantConfig, PLANT),
+}
+
+
+def schema_paths() -> list[str]:
+    """Every settable dotted key (used for suggestions and tests)."""
+    out = list(TOP)
+    for sec, (_, spec) in SECTIONS.items():
+        out += [f"{sec}.{k}" for k in spec]
+    for sub, spec in (("master", MASTER), ("slave", SLAVE)):
+        out.append(f"plant.{sub}")
+        out += [f"plant.{sub}.{k}" for k in spec]
+    return out
+
+
+def _suggest(path: str, key: str, siblings: Iterable[str]) -> str:
+    siblings = list(siblings)
+    close = difflib.get_close_matches(key, siblings, n=3, cutoff=0.6)
+    prefix = path.rsplit(".", 1)[0] + "." if "." in path else ""
+    hints = [prefix + c for c in close]
+    # the key may belong to another section (e.g. top-level `segments` -> `plant.segments`)
+    hints += [p for p in schema_paths() if p.rsplit(".", 1)[-1] == key and p != path and p not in hints]
+    allowed = ", ".join(siblings)
+    did = f"did you mean {' or '.join(repr(h) for h in hints[:4])}? " if hints else ""
+    return f"unknown key {path!r}; {did}allowed keys here: {allowed}"
+
+
+def _check_keys(table: Mapping, prefix: str, allowed: Iterable[str]) -> None:
+    allowed = list(allowed)
+    for k in table:
+        if not isinstance(k, str):
+            raise ConfigError(f"{prefix or 'scenario'}: key {short_repr(k)} is not a string", path=prefix)
+        if k not in allowed:
+            path = f"{prefix}.{k}" if prefix else k
+            raise ConfigError(_suggest(path, k, allowed), path=path)
+
+
+def _table(path: str, v: Any) -> Mapping:
+    if not isinstance(v, Mapping):
+        raise ConfigError.field(path, v, f"must be a table [{path}] (got {_type_name(v)})")
+    return v
+
+
+def _read_fields(table: Mapping, prefix: str, spec: dict[str, Checker], defaults: Any) -> dict[str, Any]:
+    """Validate `table` against `spec`; missing keys take `getattr(defaults, key)`."""
+    _check_keys(table, prefix, spec)
+    out = {}
+    for key, check in spec.items():
+        out[key] = check(f"{prefix}.{key}" if prefix else key, table[key]) if key in table \
+            else getattr(defaults, key)
+    return out
+
+
+def _build(cls: type, kwargs: dict[str, Any], prefix: str) -> Any:
+    """Construct a params dataclass, turning its ParameterError into a ConfigError with the path."""
+    try:
+        return cls(**kwargs)
+    except ParameterError as e:
+        msg = str(e)
+        owner = msg.split(".", 1)[0]
+        # the dataclass messages start with their own short owner ("master.lengths = ...")
+        path_prefix = prefix.rsplit(".", 1)[0] + "." if "." in prefix else ""
+        msg = path_prefix + msg if owner and prefix.endswith(owner) else f"{prefix}: {msg}"
+        raise ConfigError(msg, path=prefix) from None
+    except (TypeError, ValueError) as e:  # defensive: should be caught by the checkers above
+        raise ConfigError(f"{prefix}: {e}", path=prefix) from None
+
+
+# ---------------------------------------------------------------------------------------------
+# cross-field checks
+# ---------------------------------------------------------------------------------------------
+def _is_multiple(x: float, step: float) -> tuple[bool, float]:
+    ratio = x / step
+    if not math.isfinite(ratio):
+        return False, ratio
+    n = round(ratio)
+    return abs(ratio - n) <= MULTIPLE_RTOL * max(abs(ratio), 1.0), ratio
+
+
+def trajectory_radius_range(traj: TrajectoryConfig, duration: float) -> tuple[float, float]:
+    """min and max of |x_d(t)| over t in [0, duration] (the whole ellipse if one period fits)."""
+    c, a, w = np.asarray(traj.center), np.asarray(traj.amplitude), traj.omega
+    span = abs(w) * duration
+    if span >= 2 * math.pi:
+        theta = np.linspace(0.0, 2 * math.pi, 6300)
+    else:
+        n = int(min(max(math.ceil(span / 1e-3) + 2, 2), 6300))
+        theta = np.linspace(0.0, span, n) * (1.0 if w >= 0 else -1.0)
+    with np.errstate(all="ignore"):
+        r = np.hypot(c[0] + a[0] * np.sin(theta), c[1] + a[1] * np.cos(theta))
+    if not np.all(np.isfinite(r)):
+        return 0.0, math.inf
+    return float(r.min()), float(r.max())
+
+
+def _check_reach(scn: Scenario) -> None:
+    tr = scn.trajectory
+    rmin, rmax = trajectory_radius_range(tr, scn.duration)
+    off = scn.initial.master_offset
+    x0 = (tr.center[0] + off[0], tr.center[1] + tr.amplitude[1] + off[1])  # x_d(0) + offset
+    r0 = math.hypot(*x0)
+    masters = [("nominal master (master.lengths)", scn.master)]
+    if scn.plant.master is not None:
+        masters.append(("plant master (plant.master.lengths)", scn.plant.master))
+    for label, m in masters:
+        l1, l2 = m.lengths
+        lo, hi = abs(l1 - l2) + REACH_MARGIN, l1 + l2 - REACH_MARGIN
+        if not (lo <= rmin and rmax <= hi):
+            raise ConfigError(
+                f"trajectory (center = {list(tr.center)}, amplitude = {list(tr.amplitude)}): "
+                f"x_d(t) = center + amplitude*(sin wt, cos wt) has |x_d| in [{rmin:.6g}, {rmax:.6g}] m, "
+                f"outside the reachable annulus [{lo:.6g}, {hi:.6g}] m of the {label} with lengths "
+                f"{list(m.lengths)} (|l1-l2| + {REACH_MARGIN:g} <= |x_d| <= l1 + l2 - {REACH_MARGIN:g})",
+                path="trajectory")
+        if not lo <= r0 <= hi:
+            raise ConfigError(
+                f"initial.master_offset = {list(scn.initial.master_offset)}: the initial master tip "
+                f"x_d(0) + offset = [{x0[0]:.6g}, {x0[1]:.6g}] (|x| = {r0:.6g} m) is outside the reachable "
+                f"annulus [{lo:.6g}, {hi:.6g}] m of the {label}", path="initial.master_offset")
+    slaves = [("nominal slave (slave)", scn.slave)]
+    if scn.plant.slave is not None:
+        slaves.append(("plant slave (plant.slave)", scn.plant.slave))
+    for label, s in slaves:
+        reach = s.max_extension * sum(s.rest_lengths)
+        if rmax > reach - REACH_MARGIN:
+            raise ConfigError(
+                f"trajectory (center = {list(tr.center)}, amplitude = {list(tr.amplitude)}): |x_d| reaches "
+                f"{rmax:.6g} m, beyond what the fully extended {label} can reach "
+                f"(max_extension * sum(rest_lengths) - {REACH_MARGIN:g} = {reach - REACH_MARGIN:.6g} m)",
+                path="trajectory")
+
+
+def _cross_checks(scn: Scenario) -> None:
+    p = scn.plant
+    if not scn.transient < scn.duration:
+        raise ConfigError.field("transient", scn.transient,
+                                f"must be in [0, duration) = [0, {scn.duration:g}) s "
+                                "(set transient = 0 for short runs)")
+    if scn.control_dt > scn.duration:
+        raise ConfigError.field("control_dt", scn.control_dt, f"must be <= duration = {scn.duration:g} s")
+    if scn.duration / scn.control_dt > MAX_STEPS:
+        raise ConfigError.field("control_dt", scn.control_dt,
+                                f"gives duration / control_dt > {MAX_STEPS:g} control steps")
+    ok, ratio = _is_multiple(scn.control_dt, p.physics_dt)
+    if not ok or round(ratio) < 1:
+        raise ConfigError.field(
+            "control_dt", scn.control_dt,
+            f"must be an integer multiple (>= 1) of plant.physics_dt = {p.physics_dt:g} s "
+            f"(ratio {ratio:.12g}, relative tolerance {MULTIPLE_RTOL:g})")
+    if round(ratio) > MAX_SUBSTEPS:
+        raise ConfigError.field("plant.physics_dt", p.physics_dt,
+                                f"gives control_dt / physics_dt = {ratio:.6g} > {MAX_SUBSTEPS} substeps")
+    ok, ratio = _is_multiple(p.actuation_delay, scn.control_dt)
+    if not ok:
+        raise ConfigError.field(
+            "plant.actuation_delay", p.actuation_delay,
+            f"must be >= 0 and an integer multiple of control_dt = {scn.control_dt:g} s (ratio {ratio:.12g})")
+    if not p.actuation_delay < scn.duration:
+        raise ConfigError.field("plant.actuation_delay", p.actuation_delay,
+                                f"must be < duration = {scn.duration:g} s")
+    if scn.continuous_control and p.kind != "analytic":
+        raise ConfigError.field("continuous_control", True,
+                                f"requires plant.kind = 'analytic' (got {p.kind!r})")
+    if abs(scn.trajectory.omega) * scn.control_dt >= math.pi:
+        nyquist = math.pi / scn.control_dt
+        raise ConfigError.field("trajectory.omega", scn.trajectory.omega,
+                                f"must satisfy |omega| < pi / control_dt = {nyquist:.6g} rad/s")
+
+    ps = scn.plant_slave
+    lo, hi = ps.length_range
+    q2 = scn.initial.slave_q2
+    if q2 is not None:
+        d, k = np.asarray(q2[:3]), np.asarray(q2[3:])
+        for i in range(3):
+            if not lo[i] <= d[i] <= hi[i]:
+                raise ConfigError.field(
+                    "initial.slave_q2", list(q2),
+                    f"section length d{i + 1} = {d[i]:g} m must be in [L0, max_extension*L0] = "
+                    f"[{lo[i]:g}, {hi[i]:g}] m of the plant slave")
+            if abs(k[i] * d[i]) > ps.max_bend:
+                raise ConfigError.field(
+                    "initial.slave_q2", list(q2),
+                    f"bend |k{i + 1} d{i + 1}| = {abs(k[i] * d[i]):g} rad exceeds the plant slave "
+                    f"max_bend = {ps.max_bend:g} rad")
+    _check_reach(scn)
+    if q2 is None:
+        _check_auto_slave_start(scn)
+
+
+def _check_auto_slave_start(scn: Scenario) -> None:
+    """`initial.slave_q2 = none`: harness.sim starts the slave with three equal sections of curvature
+    k = initial.slave_curvature whose tip height equals the master's initial tip height Z0.  Equal
+    sections of equal curvature form one arc of length 3d, tip height f(d) = sin(3 d k) / k (3d for
+    k = 0); Z0 must be in the range of f over the common section-length range [d_lo, d_hi]."""
+    ps, k = scn.plant_slave, scn.initial.slave_curvature
+    tr, off = scn.trajectory, scn.initial.master_offset
+    z0 = tr.center[1] + tr.amplitude[1] + off[1]
+    lo, hi = ps.length_range
+    d_lo, d_hi = float(lo.max()), float(hi.min())
+    if abs(k) * d_hi > ps.max_bend:
+        raise ConfigError.field(
+            "initial.slave_curvature", k,
+            f"|k| * max section length = {abs(k) * d_hi:g} rad exceeds the plant slave max_bend = "
+            f"{ps.max_bend:g} rad")
+    d = np.linspace(d_lo, d_hi, 2001) if d_hi >= d_lo else np.array([])
+    z = 3.0 * d if k == 0 else np.sin(3.0 * d * k) / k
+    if not (z.size and z.min() - 1e-9 <= z0 <= z.max() + 1e-9):
+        zr = f"[{z.min():.6g}, {z.max():.6g}]" if z.size else "empty (no common section length)"
+        raise ConfigError(
+            f"trajectory.center = {list(tr.center)}: with initial.slave_q2 = none the slave starts with "
+            f"three equal sections of curvature initial.slave_curvature under the master tip (Z0 = "
+            f"{z0:.6g} m), but their tip height range over the plant slave's section lengths "
+            f"[{d_lo:.6g}, {d_hi:.6g}] m is {zr} m; move the trajectory or give initial.slave_q2 explicitly",
+            path="trajectory.center")
+
+
+# ---------------------------------------------------------------------------------------------
+# public API
+# ---------------------------------------------------------------------------------------------
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """'a.b.c=value' -> (['a', 'b', 'c'], parsed TOML value).  Bare words become strings."""
+    if not isinstance(text, str) or "=" not in text:
+        raise ConfigError(f"override {short_repr(text)}: expected key=value (e.g. plant.segments=16)")
+    key, _, raw = text.partition("=")
+    key, raw = key.strip(), raw.strip()
+    parts = key.split(".")
+    if not key or not all(_KEY_RE.match(p) for p in parts):
+        raise ConfigError(f"override {text!r}: {key!r} is not a dotted key like plant.segments")
+    if not raw:
+        raise ConfigError(f"override {text!r}: missing value after '='")
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError as e:
+        if _BARE_WORD_RE.match(raw):
+            value = raw
+        else:
+            raise ConfigError(f"override {text!r}: invalid TOML value {raw!r} ({e})") from None
+    return parts, value
+
+
+def _apply_override(raw: dict, text: str) -> str:
+    parts, value = parse_override(text)
+    node = raw
+    for i, p in enumerate(parts[:-1]):
+        child = node.get(p)
+        if child is None or _is_none_word(child):
+            child = node[p] = {}
+        elif not isinstance(child, dict):
+            where = ".".join(parts[: i + 1])
+            raise ConfigError(f"override {text!r}: {where} is not a table (it is {short_repr(child)})",
+                              path=where)
+        node = child
+    node[parts[-1]] = value
+    return ".".join(parts)
+
+
+def _read_source(source: str | Path | Mapping | None) -> tuple[dict, str | None, str | None]:
+    """-> (raw dict, label for messages, default name)."""
+    if source is None:
+        return {}, None, None
+    if isinstance(source, Mapping):
+        return _plain_copy(source), None, None
+    if not isinstance(source, (str, Path)):
+        raise ConfigError(f"scenario source must be a path or a table, got {_type_name(source)}")
+    path = Path(source)
+    try:
+        with path.open("rb") as fh:
+            raw = tomllib.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"scenario file not found: {path}", path=str(path)) from None
+    except IsADirectoryError:
+        raise ConfigError(f"scenario file {path} is a directory", path=str(path)) from None
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{path}: invalid TOML: {e}", path=str(path)) from None
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{path}: not UTF-8 text ({e.reason})", path=str(path)) from None
+    except OSError as e:
+        raise ConfigError(f"cannot read scenario file {path}: {e.strerror or e}", path=str(path)) from None
+    stem = path.stem if _NAME_RE.match(path.stem) else None
+    return raw, str(path), stem
+
+
+def _plain_copy(obj: Any, depth: int = 0) -> Any:
+    """Deep copy of a user mapping (tuples -> lists); rejects absurd nesting."""
+    if depth > 50:
+        raise ConfigError("scenario table nested too deeply")
+    if isinstance(obj, Mapping):
+        return {k: _plain_copy(v, depth + 1) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain_copy(v, depth + 1) for v in obj]
+    return copy.copy(obj)
+
+
+def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterable[str] = (), *,
+                  labels: Iterable[str | None] | None = None) -> Scenario:
+    """Read (TOML file path or already-parsed table; None = all defaults), apply dotted `key=value`
+    overrides in order, validate everything and return the frozen `Scenario`.  Raises `ConfigError`.
+
+    labels: optional description of each override for error messages (e.g. "--segments 100");
+    by default an error caused by an override says "(from override 'key=value')".
+    """
+    raw, label, default_name = _read_source(source)
+    if isinstance(overrides, str):
+        overrides = [overrides]
+    overrides = list(overrides or ())
+    labels = list(labels) if labels is not None else []
+    labels += [None] * (len(overrides) - len(labels))
+    applied: list[tuple[str, str]] = []
+    for text, lab in zip(overrides, labels, strict=False):
+        where = lab or f"override {text!r}"
+        try:
+            key = _apply_override(raw, text)
+        except ConfigError as e:
+            raise (e.with_context(lab) if lab else e) from None
+        applied.append((key, where))
+    try:
+        return _scenario_from_dict(raw, default_name)
+    except ConfigError as e:
+        path = e.path or ""
+        for key, where in reversed(applied):
+            if path == key or path.startswith(key + ".") or (path and key.startswith(path + ".")):
+                raise e.with_context(f"(from {where})") from None
+        raise (e.with_context(label) if label else e) from None
+
+
+def _scenario_from_dict(raw: Mapping, default_name: str | None) -> Scenario:
+    defaults = Scenario()
+    _check_keys(raw, "", list(TOP) + list(SECTIONS))
+    top = _read_fields({k: v for k, v in raw.items() if k in TOP}, "", TOP, defaults)
+    if "name" not in raw and default_name:
+        top["name"] = default_name
+
+    def section(name: str) -> Mapping:
+        return _table(name, raw[name]) if name in raw else {}
+
+    parts: dict[str, Any] = {}
+    for sec in ("gains", "master", "slave", "trajectory", "initial"):
+        cls, spec = SECTIONS[sec]
+        parts[sec] = _build(cls, _read_fields(section(sec), sec, spec, getattr(defaults, sec)), sec)
+
+    sub_tbl = section("subtask")
+    sub = _read_fields(sub_tbl, "subtask", SUBTASK, defaults.subtask)
+    if "weights" not in sub_tbl:
+        default_w = dict(zip(defaults.subtask.kinds, defaults.subtask.weights, strict=True))
+        sub["weights"] = tuple(default_w.get(k, 1.0) for k in sub["kinds"])
+    if len(sub["weights"]) != len(sub["kinds"]):
+        raise ConfigError.field("subtask.weights", list(sub["weights"]),
+                                f"must have one weight per entry of subtask.kinds ({len(sub['kinds'])})")
+    parts["subtask"] = _build(SubtaskSpec, sub, "subtask")
+
+    plant_tbl = section("plant")
+    _check_keys(plant_tbl, "plant", list(PLANT) + list(PLANT_MODELS))
+    plant = _read_fields({k: v for k, v in plant_tbl.items() if k in PLANT}, "plant", PLANT, defaults.plant)
+    for sub_name, cls, spec in (("master", MasterParams, MASTER), ("slave", SlaveParams, SLAVE)):
+        path = f"plant.{sub_name}"
+        v = plant_tbl.get(sub_name)
+        if v is None or _is_none_word(v):
+            plant[sub_name] = None
+            continue
+        if not isinstance(v, Mapping):
+            raise ConfigError.field(path, v, f'must be a table [{path}] or "none" (got {_type_name(v)})')
+        plant[sub_name] = _build(cls, _read_fields(v, path, spec, parts[sub_name]), path)
+    parts["plant"] = _build(PlantConfig, plant, "plant")
+
+    scn = Scenario(**top, **parts)
+    _cross_checks(scn)
+    return scn
+
+
+def _to_toml_value(v: Any) -> Any:
+    if v is None:
+        return "none"
+    if is_dataclass(v) and not isinstance(v, type):
+        return {f.name: _to_toml_value(getattr(v, f.name)) for f in fields(v)}
+    if isinstance(v, (list, tuple)):
+        return [_to_toml_value(x) for x in v]
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
+
+
+def scenario_to_dict(scn: Scenario) -> dict[str, Any]:
+    """The fully resolved scenario as a TOML-ready dict (None -> "none", tuples -> lists)."""
+    return _to_toml_value(scn)
+
+
+def _literal(v: Any) -> str:
+    """One TOML value; arrays inline on one line (tomli_w would spread them over many lines)."""
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_literal(x) for x in v) + "]"
+    return tomli_w.dumps({"v": v})[len("v = "):].rstrip("\n")
+
+
+def _toml_lines(table: Mapping[str, Any], name: str = "") -> list[str]:
+    lines = [f"[{name}]"] if name else []
+    subtables = []
+    for k, v in table.items():
+        if isinstance(v, Mapping):
+            subtables.append((k, v))
+        else:
+            lines.append(f"{k} = {_literal(v)}")
+    for k, v in subtables:
+        lines += [""] + _toml_lines(v, f"{name}.{k}" if name else k)
+    return lines
+
+
+def dumps_scenario(scn: Scenario) -> str:
+    """The fully resolved scenario as TOML text (see `dump_scenario`)."""
+    header = [
+        "# Fully resolved scenario written by harness.io_config.dump_scenario.",
+        '# Every value is explicit; "none" = unset (no noise / automatic / same as the nominal model).',
+        "# Reproduce with: teleop run <this file>",
+        "",
+    ]
+    text = "\n".join(header + _toml_lines(scenario_to_dict(scn))) + "\n"
+    tomllib.loads(text)  # never write a file we could not read back
+    return text
+
+
+def dump_scenario(scn: Scenario, path: str | Path) -> Path:
+    """Write the fully resolved scenario as TOML; `load_scenario(path) == scn`."""
+    path = Path(path)
+    path.write_text(dumps_scenario(scn), encoding="utf-8")
+    return path
+
+
+__all__ = [
+    "REACH_MARGIN", "dump_scenario", "dumps_scenario", "load_scenario", "parse_override",
+    "scenario_to_dict", "schema_paths", "trajectory_radius_range",
+]

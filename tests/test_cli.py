@@ -1,0 +1,467 @@
+"""`teleop` command line (harness.cli).
+
+The simulation/metrics/recording/plotting back ends are replaced by stubs (monkeypatched onto the real
+modules when they import, else onto stand-in modules), so these tests are fast and independent of
+MuJoCo; `test_run_with_real_back_ends` runs the real ones end to end on a short analytic run.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from harness import cli
+from harness.cli import main
+from harness.config import Scenario
+from harness.io_config import load_scenario
+from harness.trajectory import ROW_WIDTH, Trajectory
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER_TOML = ROOT / "scenarios" / "paper.toml"
+PAPER_BOUNDS = ROOT / "bounds" / "paper_mujoco.toml"
+
+OPTIONS = {
+    "run": ["--plant", "--actuation", "--segments", "--duration", "--seed", "--snr", "--set", "--out",
+            "--no-progress", "SCENARIO.toml"],
+    "check": ["--plant", "--actuation", "--segments", "--duration", "--seed", "--snr", "--set", "--out",
+              "--no-progress", "--bounds", "SCENARIO.toml"],
+    "models": ["--segments", "--out", "--enforce-cc", "--no-enforce-cc", "--actuation", "--set",
+               "SCENARIO.toml"],
+    "sweep": ["--out", "--workers", "--scheduler", "--no-progress", "STUDY.toml"],
+    "fidelity": ["--segments", "--out", "--no-progress"],
+}
+
+
+def _module(monkeypatch, name: str) -> types.ModuleType:
+    """The real module if it imports, else an empty stand-in registered in sys.modules."""
+    try:
+        return importlib.import_module(name)
+    except ImportError:
+        mod = types.ModuleType(name)
+        monkeypatch.setitem(sys.modules, name, mod)
+        return mod
+
+
+def make_traj(n: int = 50, status: str = "ok", message: str = "", dt: float = 1e-3) -> Trajectory:
+    rows = np.zeros((n, ROW_WIDTH))
+    rows[:, 0] = np.arange(n) * dt
+    traj = Trajectory.from_rows(rows, status=status, message=message)
+    traj.beta[:] = 0.05
+    return traj
+
+
+class Stubs:
+    """Records calls; `status`, `metrics` and `simulate_hook` steer the stubbed simulation."""
+
+    def __init__(self) -> None:
+        self.status = "ok"
+        self.message = ""
+        self.metrics = {"e1_rms": 1e-4, "e1_max": 2e-4, "e2_rms": 1e-3, "e2_max": 2e-3,
+                        "e2_plant_rms": 1.5e-3, "e2_plant_max": 3e-3, "beta_min": 0.02,
+                        "mujoco_warnings": 0}
+        self.simulate_hook = None
+        self.calls: dict[str, list] = {}
+
+    def _log(self, name, *args, **kwargs):
+        self.calls.setdefault(name, []).append((args, kwargs))
+
+    def simulate(self, scn, progress=False):
+        self._log("simulate", scn, progress=progress)
+        if self.simulate_hook is not None:
+            return self.simulate_hook(scn)
+        return make_traj(status=self.status, message=self.message)
+
+    def compute_metrics(self, traj, scn):
+        self._log("compute_metrics", traj, scn)
+        return dict(self.metrics, status=traj.status, message=traj.message, e1_final=np.float64(np.nan))
+
+    def write_recording(self, traj, path):
+        self._log("write_recording", traj, path)
+        Path(path).write_bytes(b"rrd")
+        return Path(path)
+
+    def write_figures(self, traj, out):
+        self._log("write_figures", traj, out)
+        p = Path(out) / "fig2_e1.png"
+        p.write_bytes(b"png")
+        return [p]
+
+
+@pytest.fixture
+def stubs(monkeypatch):
+    s = Stubs()
+    sim = _module(monkeypatch, "harness.sim")
+    monkeypatch.setattr(sim, "simulate", s.simulate, raising=False)
+    if not isinstance(getattr(sim, "STOP", None), threading.Event):
+        monkeypatch.setattr(sim, "STOP", threading.Event(), raising=False)
+    monkeypatch.setattr(_module(monkeypatch, "harness.metrics"), "compute_metrics", s.compute_metrics,
+                        raising=False)
+    monkeypatch.setattr(_module(monkeypatch, "harness.record"), "write_recording", s.write_recording,
+                        raising=False)
+    monkeypatch.setattr(_module(monkeypatch, "harness.plots"), "write_figures", s.write_figures,
+                        raising=False)
+    return s
+
+
+def _one_error_line(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("error: "), err
+    assert "Traceback" not in err
+    return lines[0]
+
+
+# --------------------------------------------------------------------------------------------- help
+@pytest.mark.parametrize("command", list(OPTIONS))
+def test_help_for_each_command(command, capsys):
+    assert main([command, "--help"]) == 0
+    out = capsys.readouterr().out
+    for opt in OPTIONS[command]:
+        assert opt in out, (command, opt)
+    assert "Default" in out
+
+
+def test_every_option_has_a_help_text():
+    parser = cli.build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, type(parser._subparsers._group_actions[0])))
+    assert set(sub.choices) == set(OPTIONS)
+    for name, p in sub.choices.items():
+        for action in p._actions:
+            if action.dest == "help":
+                continue
+            assert action.help and len(action.help) > 20, (name, action.dest)
+            no_default = ("no_progress", "bounds", "overrides")
+            if action.option_strings and action.dest not in no_default:
+                assert "Default" in action.help, (name, action.dest)
+
+
+def test_top_level_help_and_no_command(capsys):
+    assert main(["--help"]) == 0
+    out = capsys.readouterr().out
+    for command in OPTIONS:
+        assert command in out
+    assert main([]) == 2
+
+
+# --------------------------------------------------------------------------------------------- input errors
+def test_missing_scenario_file(stubs, tmp_path, capsys):
+    assert main(["run", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "o")]) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert "nope.toml" in line
+    assert "simulate" not in stubs.calls
+
+
+@pytest.mark.parametrize(("argv", "needle"), [
+    (["--segments", "100"], "plant.segments"),
+    (["--segments", "2.5"], "plant.segments"),
+    (["--duration", "-1"], "duration"),
+    (["--duration", "2"], "transient"),
+    (["--snr", "loud"], "snr_db"),
+    (["--seed", "-3"], "seed"),
+    (["--set", "gains.k1=0"], "gains.k1"),
+    (["--set", "plant.segmnts=3"], "plant.segments"),
+    (["--set", "trajectory.center=[0.0, 1.3]"], "trajectory"),
+    (["--set", "nonsense"], "key=value"),
+    (["--plant", "bullet"], "--plant"),
+])
+def test_bad_values_exit_2_with_one_line(stubs, tmp_path, capsys, argv, needle):
+    assert main(["run", *argv, "--out", str(tmp_path / "o")]) == 2
+    assert needle in _one_error_line(capsys.readouterr().err)
+    assert "simulate" not in stubs.calls
+
+
+def test_bad_scenario_file_exit_2(stubs, tmp_path, capsys):
+    p = tmp_path / "bad.toml"
+    p.write_text("[gains]\nk1 = true\n")
+    assert main(["run", str(p), "--out", str(tmp_path / "o")]) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert "bad.toml" in line and "gains.k1" in line
+    p.write_text("[gains\n")
+    assert main(["run", str(p)]) == 2
+    assert "invalid TOML" in _one_error_line(capsys.readouterr().err)
+
+
+def test_unwritable_output_dir(stubs, tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert main(["run", "--out", str(blocker / "sub")]) == 2
+    assert "--out" in _one_error_line(capsys.readouterr().err)
+    assert main(["run", "--out", str(blocker)]) == 2
+    assert "not a directory" in _one_error_line(capsys.readouterr().err)
+    assert "simulate" not in stubs.calls
+
+
+def test_bad_bounds_file_exit_2(stubs, tmp_path, capsys):
+    b = tmp_path / "b.toml"
+    b.write_text("[bounds]\ne2_rms_max = -1\n")
+    assert main(["check", "--bounds", str(b)]) == 2
+    assert "bounds.e2_rms_max" in _one_error_line(capsys.readouterr().err)
+    assert main(["check", "--bounds", str(tmp_path / "missing.toml")]) == 2
+    assert "simulate" not in stubs.calls
+
+
+def test_check_requires_bounds(capsys):
+    assert main(["check"]) == 2
+    assert "--bounds" in _one_error_line(capsys.readouterr().err)
+
+
+# --------------------------------------------------------------------------------------------- run
+def test_run_writes_outputs(stubs, tmp_path, capsys):
+    out = tmp_path / "out"
+    rc = main(["run", str(PAPER_TOML), "--plant", "analytic", "--segments", "16", "--snr", "none",
+               "--seed", "7", "--duration", "3", "--set", "transient=1",
+               "--set", "plant.slave.masses=[1.2,0.7,0.4]", "--out", str(out), "--no-progress"])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    (args, kwargs), = stubs.calls["simulate"]
+    scn = args[0]
+    assert kwargs == {"progress": False}
+    assert (scn.plant.kind, scn.plant.segments, scn.snr_db, scn.seed, scn.duration, scn.transient) == (
+        "analytic", 16, None, 7, 3.0, 1.0)
+    assert scn.plant.slave.masses == (1.2, 0.7, 0.4)
+    assert load_scenario(out / "config.toml") == scn
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["e2_rms"] == 1e-3 and metrics["status"] == "ok"
+    assert metrics["e1_final"] is None  # NaN -> null (valid JSON)
+    assert (out / "run.rrd").exists() and (out / "fig2_e1.png").exists()
+    assert "status ok" in captured.out and "e2_rms" in captured.out
+    assert captured.err == ""
+
+
+def test_run_default_out_dir_and_progress(stubs, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "--set", 'name="quick"']) == 0
+    assert (tmp_path / "runs" / "quick" / "metrics.json").exists()
+    assert stubs.calls["simulate"][0][1] == {"progress": True}
+    assert stubs.calls["simulate"][0][0][0] == load_scenario({"name": "quick"})
+
+
+@pytest.mark.parametrize("status", ["diverged", "error"])
+def test_run_failure_still_writes_outputs(stubs, tmp_path, capsys, status):
+    stubs.status, stubs.message = status, "non-finite state at t = 0.05 s"
+    out = tmp_path / "o"
+    assert main(["run", "--out", str(out), "--no-progress"]) == 1
+    assert json.loads((out / "metrics.json").read_text())["status"] == status
+    assert (out / "config.toml").exists() and (out / "run.rrd").exists()
+    assert "non-finite state" in _one_error_line(capsys.readouterr().err)
+
+
+def test_run_output_failure_is_reported(stubs, tmp_path, capsys, monkeypatch):
+    def broken(traj, path):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(sys.modules["harness.record"], "write_recording", broken)
+    out = tmp_path / "o"
+    assert main(["run", "--out", str(out), "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert "disk full" in err and "Traceback" not in err
+    assert (out / "metrics.json").exists() and (out / "fig2_e1.png").exists()
+
+
+def test_run_metrics_failure_still_writes_status(stubs, tmp_path, monkeypatch):
+    def broken(traj, scn):
+        raise ValueError("empty trajectory")
+
+    monkeypatch.setattr(sys.modules["harness.metrics"], "compute_metrics", broken)
+    out = tmp_path / "o"
+    assert main(["run", "--out", str(out), "--no-progress"]) == 1
+    doc = json.loads((out / "metrics.json").read_text())
+    assert doc["status"] == "ok" and "empty trajectory" in doc["metrics_error"]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_signal_stops_the_run_and_writes_outputs(stubs, tmp_path, capsys, sig):
+    stop = sys.modules["harness.sim"].STOP
+
+    def hook(scn):
+        os.kill(os.getpid(), sig)
+        assert stop.wait(5.0), "the signal handler did not set harness.sim.STOP"
+        return make_traj(n=20, status="interrupted", message="interrupted at t = 0.019 s")
+
+    stubs.simulate_hook = hook
+    before = signal.getsignal(sig)
+    out = tmp_path / "o"
+    assert main(["run", "--out", str(out), "--no-progress"]) == 130
+    assert signal.getsignal(sig) == before  # handlers restored
+    assert not stop.is_set()
+    assert json.loads((out / "metrics.json").read_text())["status"] == "interrupted"
+    assert (out / "config.toml").exists()
+    assert "interrupted" in capsys.readouterr().err
+
+
+def test_simulation_error_is_an_input_error(stubs, tmp_path, capsys, monkeypatch):
+    sim = sys.modules["harness.sim"]
+    exc = getattr(sim, "SimulationError", None)
+    if exc is None:
+        exc = type("SimulationError", (RuntimeError,), {})
+        monkeypatch.setattr(sim, "SimulationError", exc, raising=False)
+
+    def hook(scn):
+        raise exc("initial.master_offset: unreachable")
+
+    stubs.simulate_hook = hook
+    assert main(["run", "--out", str(tmp_path / "o"), "--no-progress"]) == 2
+    assert "unreachable" in _one_error_line(capsys.readouterr().err)
+
+
+# --------------------------------------------------------------------------------------------- check
+def _bounds(tmp_path, text="[bounds]\ne1_rms_max = 1e-3\ne2_rms_max = 1e-2\nbeta_min_min = 1e-3\n"):
+    p = tmp_path / "b.toml"
+    p.write_text(text)
+    return p
+
+
+def test_check_passes(stubs, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["check", "--bounds", str(_bounds(tmp_path)), "--no-progress"]) == 0
+    assert "all bounds satisfied" in capsys.readouterr().out
+    assert not (tmp_path / "runs").exists()  # no --out: nothing written
+
+
+def test_check_lists_violations(stubs, tmp_path, capsys):
+    stubs.metrics.update(e2_rms=0.0123, beta_min=5e-4)
+    out = tmp_path / "o"
+    assert main(["check", "--bounds", str(_bounds(tmp_path)), "--out", str(out), "--no-progress"]) == 1
+    text = capsys.readouterr().out
+    assert "e2_rms = 0.0123 m exceeds limit 0.0100 m" in text
+    assert "beta_min = " in text and "is below limit" in text
+    assert "e1_rms" not in text.split("violated")[1]
+    assert (out / "metrics.json").exists()
+
+
+def test_check_missing_metric_and_failed_run(stubs, tmp_path, capsys):
+    del stubs.metrics["e2_plant_rms"]
+    stubs.status = "diverged"
+    b = _bounds(tmp_path, "[bounds]\ne2_plant_rms_max = 0.01\nstatus_ok = true\n")
+    assert main(["check", "--bounds", str(b), "--no-progress"]) == 1
+    text = capsys.readouterr().out
+    assert "e2_plant_rms not measured" in text and "status = 'diverged'" in text
+
+
+def test_check_with_shipped_bounds(stubs, capsys):
+    assert main(["check", str(PAPER_TOML), "--bounds", str(PAPER_BOUNDS), "--no-progress"]) == 0, \
+        capsys.readouterr()
+
+
+# --------------------------------------------------------------------------------------------- models
+@pytest.fixture
+def export_stub(monkeypatch):
+    calls = []
+
+    def export_mjcf(master, slave, plant, path):
+        calls.append((master, slave, plant, Path(path)))
+        Path(path).write_text("<mujoco/>")
+        return Path(path)
+
+    monkeypatch.setattr(_module(monkeypatch, "harness.plant_model"), "export_mjcf", export_mjcf,
+                        raising=False)
+    return calls
+
+
+def test_models_exports_the_plant(export_stub, tmp_path, capsys):
+    out = tmp_path / "m" / "model.xml"
+    rc = main(["models", "--segments", "16", "--enforce-cc", "--actuation", "torque", "--out", str(out),
+               "--set", "plant.slave.masses=[1.2,0.7,0.4]"])
+    assert rc == 0
+    (master, slave, plant, path), = export_stub
+    assert path == out and out.exists()
+    assert (plant.segments, plant.enforce_cc, plant.actuation) == (16, True, "torque")
+    assert slave.masses == (1.2, 0.7, 0.4)  # the plant slave, not the nominal one
+    assert master == Scenario().master
+    assert str(out) in capsys.readouterr().out
+
+
+def test_models_default_path_and_errors(export_stub, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["models", "--segments", "4", "--no-enforce-cc"]) == 0
+    assert export_stub[-1][3] == Path("mjcf") / "octarm_servo_n4.xml"
+    assert export_stub[-1][2].enforce_cc is False
+    assert main(["models", "--segments", "4", "--set", "plant.enforce_cc=true"]) == 0
+    assert export_stub[-1][3] == Path("mjcf") / "octarm_servo_n4_cc.xml"
+    assert main(["models"]) == 0
+    assert export_stub[-1][2] == Scenario().plant
+    assert main(["models", "--segments", "65"]) == 2
+    assert "plant.segments" in _one_error_line(capsys.readouterr().err)
+    assert main(["models", "--out", str(tmp_path)]) == 2  # a directory
+    assert "--out" in _one_error_line(capsys.readouterr().err)
+
+
+def test_models_plant_model_error_exit_2(monkeypatch, tmp_path, capsys):
+    mod = _module(monkeypatch, "harness.plant_model")
+    exc = getattr(mod, "PlantModelError", None)
+    if exc is None:
+        exc = type("PlantModelError", (ValueError,), {})
+        monkeypatch.setattr(mod, "PlantModelError", exc, raising=False)
+
+    def export_mjcf(master, slave, plant, path):
+        raise exc("bad MJCF scene.xml: line 3")
+
+    monkeypatch.setattr(mod, "export_mjcf", export_mjcf, raising=False)
+    assert main(["models", "--out", str(tmp_path / "x.xml")]) == 2
+    assert "bad MJCF" in _one_error_line(capsys.readouterr().err)
+
+
+# ----------------------------------------------------------------------------------------- sweep / fidelity
+def test_sweep_delegates(monkeypatch, tmp_path):
+    calls = []
+    monkeypatch.setattr(_module(monkeypatch, "harness.sweep"), "main_sweep",
+                        lambda *a: calls.append(a) or 0, raising=False)
+    study = tmp_path / "study.toml"
+    study.write_text("")
+    assert main(["sweep", str(study), "--out", str(tmp_path / "s"), "--workers", "3",
+                 "--scheduler", "tcp://h:8786", "--no-progress"]) == 0
+    assert calls == [(study, tmp_path / "s", 3, "tcp://h:8786", False)]
+    assert main(["sweep", str(study)]) == 0
+    assert calls[-1] == (study, None, None, None, True)
+
+
+def test_sweep_errors(monkeypatch, tmp_path, capsys):
+    monkeypatch.setattr(_module(monkeypatch, "harness.sweep"), "main_sweep", lambda *a: 0, raising=False)
+    assert main(["sweep", str(tmp_path / "missing.toml")]) == 2
+    assert "missing.toml" in _one_error_line(capsys.readouterr().err)
+    study = tmp_path / "study.toml"
+    study.write_text("")
+    assert main(["sweep", str(study), "--workers", "0"]) == 2
+    assert "--workers" in _one_error_line(capsys.readouterr().err)
+
+
+def test_fidelity_delegates(monkeypatch, tmp_path, capsys):
+    calls = []
+    monkeypatch.setattr(_module(monkeypatch, "harness.fidelity"), "main_fidelity",
+                        lambda *a: calls.append(a) or 0, raising=False)
+    assert main(["fidelity", "--segments", "2, 4,8", "--out", str(tmp_path / "f")]) == 0
+    assert calls == [([2, 4, 8], tmp_path / "f", True)]
+    for bad in ("4,x", "0,4", "4,4", "65", ""):
+        assert main(["fidelity", "--segments", bad, "--out", str(tmp_path / "f")]) == 2
+        assert "--segments" in _one_error_line(capsys.readouterr().err)
+
+
+# --------------------------------------------------------------------------------------------- processes
+def test_console_entry_point_error_is_one_line(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "harness.cli", "run", "--segments", "0",
+                          "--out", str(tmp_path / "o")], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert res.returncode == 2
+    assert _one_error_line(res.stderr).startswith("error: plant.segments = 0")
+
+
+@pytest.mark.slow
+def test_run_with_real_back_ends(tmp_path):
+    """Short analytic run through the real simulate/metrics/record/plots."""
+    out = tmp_path / "real"
+    rc = main(["run", "--plant", "analytic", "--duration", "0.05", "--set", "transient=0", "--out", str(out),
+               "--no-progress"])
+    assert rc == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["status"] == "ok" and metrics["e1_rms"] is not None
+    assert load_scenario(out / "config.toml").duration == 0.05
+    assert (out / "run.rrd").stat().st_size > 0
