@@ -110,7 +110,8 @@ def pinv_terms(J, Jd, Jp, Jpd):
 def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2, T2, u2, deN, info):
     """Slave feedback linearization (17)-(18) with the null-space terms (23)-(33).
 
-    pk: packed SlaveParams; gains: [k1, k2, k3, k4, ky, ks, kn]; spec: packed sub-task;
+    pk: packed SlaveParams; gains: [k1, k2, k3, k4, ky, ks, kn] (optionally followed by two fault
+    factors [e2_sign, null_space_scale] used to test bounds files); spec: packed sub-task;
     q, dq (6,) sensed slave state; x1, dx1 (2,) sensed master tip and velocity; a1 (2,) the master's
     commanded task acceleration ddx_d + k1 de1 + k2 e1; F2 (2,) interaction force.
     Writes T2 (6,), u2 (6,), deN (6,) and info (SLAVE_INFO,): x2, e2, de2, beta, y_a, det, beta_m,
@@ -122,6 +123,11 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
     ky = gains[4]
     ks = gains[5]
     kn = gains[6]
+    sgn = 1.0
+    nss = 1.0
+    if gains.shape[0] > 8:
+        sgn = gains[7]
+        nss = gains[8]
     x = np.empty(2)
     J = np.empty((2, 6))
     H = np.empty((2, 6, 6))
@@ -150,7 +156,7 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
         info[SI_X2 + i] = x[i]
         info[SI_E2 + i] = e
         info[SI_DE2 + i] = de
-        v[i] = a1[i] + k3 * de + k4 * e - jdq
+        v[i] = a1[i] + sgn * (k3 * de + k4 * e) - jdq
     info[SI_DET] = det
     if det <= DET_MIN:
         for a in range(6):
@@ -222,7 +228,7 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
             acc += P[a, b] * (gd[b] + kn * deN[b])
         phi[a] = acc - (Jpd[a, 0] * Jr0 + Jpd[a, 1] * Jr1 + Jp[a, 0] * Kr0 + Jp[a, 1] * Kr1)
     for a in range(6):
-        u2[a] = Jp[a, 0] * v[0] + Jp[a, 1] * v[1] + phi[a]
+        u2[a] = Jp[a, 0] * v[0] + Jp[a, 1] * v[1] + nss * phi[a]
     # T2 = M u2 + N2 - J^T F2 (17)
     M = np.empty((6, 6))
     N = np.empty(6)

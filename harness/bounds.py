@@ -44,6 +44,9 @@ NUMERIC_BOUNDS: dict[str, tuple[str, str, str, str]] = {
     "e2_plant_rms_max": ("e2_plant_rms", "max", "m", "RMS of |x1 - MuJoCo tip site| after the transient"),
     "e2_plant_max_max": ("e2_plant_max", "max", "m", "max of |x1 - MuJoCo tip site| after the transient"),
     "beta_min_min": ("beta_min", "min", "", "minimum manipulability beta (41) must stay above"),
+    "deN_rms_max": ("deN_rms", "max", "", "RMS of the null-space velocity error |de_N| (23) after the transient"),
+    "range_violation_max": ("range_violation", "max", "",
+                            "largest excursion of section lengths (m) / bend angles (rad) outside their range"),
 }
 FLAG_BOUNDS: dict[str, str] = {
     "no_mujoco_warnings": "mujoco_warnings must be 0",
@@ -62,6 +65,8 @@ class Bounds:
     e2_plant_rms_max: float | None = None
     e2_plant_max_max: float | None = None
     beta_min_min: float | None = None
+    deN_rms_max: float | None = None
+    range_violation_max: float | None = None
     no_mujoco_warnings: bool = False
     status_ok: bool = True
     description: str = ""

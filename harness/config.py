@@ -60,6 +60,17 @@ class PlantConfig:
 
 
 @dataclass(frozen=True)
+class FaultConfig:
+    """Deliberate controller faults, for checking that a bounds file catches broken controllers
+    (mutation testing of your CI bounds).  Defaults = no fault.
+    e2_sign = -1 flips the sign of the coordination-error feedback in (18) (a sign error);
+    null_space_scale multiplies phi_N (27) (0 = null-space term dropped, 1 = intact)."""
+
+    e2_sign: int = 1
+    null_space_scale: float = 1.0
+
+
+@dataclass(frozen=True)
 class Scenario:
     """One fully resolved run."""
 
@@ -78,6 +89,7 @@ class Scenario:
     plant: PlantConfig = field(default_factory=PlantConfig)
     interaction_forces: tuple[tuple[float, float], tuple[float, float]] = ((0.0, 0.0), (0.0, 0.0))  # F1, F2 N
     continuous_control: bool = False  # analytic plant only: evaluate the control law in every RK4 stage
+    faults: FaultConfig = field(default_factory=FaultConfig)  # deliberate faults (testing bounds)
 
     @property
     def plant_master(self) -> MasterParams:

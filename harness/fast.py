@@ -7,13 +7,21 @@ machine code.  The compiled functions give the same numbers as the interpreted o
 
 Usage: `from harness.fast import K; K.slave_control_kernel(...)`.  `K` is built on first access.
 If numba is unavailable (or TELEOP_NO_JIT=1), K holds the interpreted functions (slow, same maths).
+
+On-disk cache: numba's own cache does not notice when a kernel in *another* file changes (a cached
+caller keeps the old callee), so the cache directory is keyed by a hash of every kernel module's
+source and the numba/numpy versions: any code change compiles afresh, never runs stale code.
+Location: $TELEOP_CACHE_DIR, else $XDG_CACHE_HOME/octarm-teleop, else ~/.cache/octarm-teleop.
 """
 
 from __future__ import annotations
 
+import hashlib
+import inspect
 import os
 import types
 from functools import cache
+from pathlib import Path
 
 from controllers import cc, control, master, slave, subtasks
 
@@ -53,6 +61,14 @@ def kernels(jit: bool | None = None) -> types.SimpleNamespace:
     if not jit:
         return types.SimpleNamespace(**names)
     import numba
+    import numpy
+
+    h = hashlib.sha256(f"{numba.__version__} {numpy.__version__}".encode())
+    for mod in mods:
+        h.update(inspect.getsource(mod).encode())
+    root = os.environ.get("TELEOP_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.join(Path.home(), ".cache"), "octarm-teleop")
+    numba.config.CACHE_DIR = os.path.join(root, "numba-" + h.hexdigest()[:16])
 
     ns: dict[str, object] = {}
     for mod in mods:

@@ -54,6 +54,7 @@ from harness.config import (
     ACTUATIONS,
     INTEGRATORS,
     PLANTS,
+    FaultConfig,
     InitialState,
     PlantConfig,
     Scenario,
@@ -353,6 +354,10 @@ PLANT: dict[str, Checker] = {
     "actuation_delay": _num(NONNEG),
     "armature_fraction": _num(NONNEG),
 }
+FAULTS: dict[str, Checker] = {
+    "e2_sign": _int(-1, 1, allowed=(-1, 1)),
+    "null_space_scale": _num(_Range(0.0, 10.0)),
+}
 PLANT_MODELS = ("master", "slave")  # optional sub-tables of [plant]
 
 SECTIONS: dict[str, tuple[type, dict[str, Checker]]] = {
@@ -363,6 +368,7 @@ SECTIONS: dict[str, tuple[type, dict[str, Checker]]] = {
     "trajectory": (TrajectoryConfig, TRAJECTORY),
     "initial": (InitialState, INITIAL),
     "plant": (PlantConfig, PLANT),
+    "faults": (FaultConfig, FAULTS),
 }
 
 
@@ -698,7 +704,7 @@ def _scenario_from_dict(raw: Mapping, default_name: str | None) -> Scenario:
         return _table(name, raw[name]) if name in raw else {}
 
     parts: dict[str, Any] = {}
-    for sec in ("gains", "master", "slave", "trajectory", "initial"):
+    for sec in ("gains", "master", "slave", "trajectory", "initial", "faults"):
         cls, spec = SECTIONS[sec]
         parts[sec] = _build(cls, _read_fields(section(sec), sec, spec, getattr(defaults, sec)), sec)
 

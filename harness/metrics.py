@@ -24,7 +24,7 @@ def _rms_max(e: np.ndarray | None, mask: np.ndarray) -> tuple[float, float]:
 
 def compute_metrics(traj: Trajectory, scn: Scenario) -> dict:
     """Metrics dict: e1_rms, e1_max, e2_rms, e2_max, e2_plant_rms, e2_plant_max (MuJoCo tip; NaN on
-    the analytic plant), beta_min, ya_max, e1_final, e2_final, range_violation (max excursion
+    the analytic plant), deN_rms (null-space velocity error (23), mixed units), beta_min, ya_max, e1_final, e2_final, range_violation (max excursion
     of section lengths / bending angles outside their allowed range, m or rad; 0 when inside),
     mujoco_warnings, status, message, sim_time_reached, wall_time, realtime_factor."""
     n = len(traj)
@@ -32,6 +32,7 @@ def compute_metrics(traj: Trajectory, scn: Scenario) -> dict:
     e1_rms, e1_max = _rms_max(traj.e1, mask)
     e2_rms, e2_max = _rms_max(traj.e2, mask)
     e2p_rms, e2p_max = _rms_max(traj.e2_plant, mask)
+    deN_rms, _ = _rms_max(traj.deN, mask)
     if n:
         lo, hi = scn.slave.length_range
         d, th = traj.q2[:, :3], traj.q2[:, 3:] * traj.q2[:, :3]
@@ -43,7 +44,7 @@ def compute_metrics(traj: Trajectory, scn: Scenario) -> dict:
     wall = float(traj.meta.get("wall_time", math.nan))
     return {
         "e1_rms": e1_rms, "e1_max": e1_max, "e2_rms": e2_rms, "e2_max": e2_max,
-        "e2_plant_rms": e2p_rms, "e2_plant_max": e2p_max,
+        "e2_plant_rms": e2p_rms, "e2_plant_max": e2p_max, "deN_rms": deN_rms,
         "beta_min": float(traj.beta.min()) if n else math.nan,
         "ya_max": float(traj.ya.max()) if n else math.nan,
         "e1_final": float(np.linalg.norm(traj.e1[-1])) if n else math.nan,

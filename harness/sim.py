@@ -122,7 +122,8 @@ def common_arrays(scn: Scenario):
     F = np.array([*scn.interaction_forces[0], *scn.interaction_forces[1]], dtype=float)
     return dict(
         mpk_c=master_model.packed(scn.master), spk_c=scn.slave.packed(), nodes=nodes, weights=weights,
-        gains=scn.gains.packed(), spec=pack_subtask(scn.subtask, scn.slave), F=F,
+        gains=np.concatenate([scn.gains.packed(), [float(scn.faults.e2_sign), scn.faults.null_space_scale]]),
+        spec=pack_subtask(scn.subtask, scn.slave), F=F,
         traj=trajectory_params(scn))
 
 

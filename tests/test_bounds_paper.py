@@ -1,0 +1,45 @@
+"""The shipped bounds hold for the paper scenario on the MuJoCo plant (default N, both actuation
+modes) and catch deliberately broken controllers (sign error, dropped null-space term)."""
+
+from pathlib import Path
+
+import pytest
+
+from harness.bounds import check_bounds, load_bounds
+from harness.io_config import load_scenario
+from harness.metrics import compute_metrics
+from harness.sim import simulate
+
+ROOT = Path(__file__).resolve().parents[1]
+BOUNDS = {"servo": ROOT / "bounds" / "paper_mujoco.toml", "torque": ROOT / "bounds" / "paper_mujoco_torque.toml"}
+
+
+def run(actuation: str, *overrides: str) -> dict:
+    scn = load_scenario(ROOT / "scenarios" / "paper.toml", [f"plant.actuation='{actuation}'", *overrides])
+    assert scn.plant.kind == "mujoco" and scn.plant.segments == 8
+    return compute_metrics(simulate(scn), scn)
+
+
+@pytest.mark.parametrize("actuation", ["servo", "torque"])
+def test_paper_scenario_meets_shipped_bounds(actuation):
+    metrics = run(actuation)
+    violations = check_bounds(metrics, load_bounds(BOUNDS[actuation]))
+    assert not violations, "\n".join(map(str, violations))
+    assert metrics["mujoco_warnings"] == 0
+
+
+@pytest.mark.parametrize("actuation", ["servo", "torque"])
+def test_bounds_catch_a_sign_error(actuation):
+    metrics = run(actuation, "faults.e2_sign=-1", "duration=3.0", "transient=0.5")
+    bounds = {v.bound for v in check_bounds(metrics, load_bounds(BOUNDS[actuation]))}
+    assert metrics["status"] == "diverged"
+    assert "status_ok" in bounds
+
+
+def test_bounds_catch_a_dropped_null_space_term():
+    """Servo mode stays stable without phi_N and e2 is unaffected (phi_N lives in the null space), so
+    only the null-space and range bounds can see it."""
+    metrics = run("servo", "faults.null_space_scale=0")
+    violations = {v.bound for v in check_bounds(metrics, load_bounds(BOUNDS["servo"]))}
+    assert {"deN_rms_max", "range_violation_max"} <= violations
+    assert "e2_rms_max" not in violations
