@@ -398,6 +398,37 @@ def _joint_stiffness(slave: SlaveParams, N: int, layout: dict) -> np.ndarray:
     return k
 
 
+def _joint_damping(slave: SlaveParams, N: int, layout: dict) -> np.ndarray:
+    """MuJoCo joint damping per chain joint (N m s/rad, N s/m), integrated implicitly by MuJoCo.
+
+    The analytic model's viscous damping on q2 rates, dissipating De_i dd_i^2 + Dk_i dk_i^2, mapped
+    like the springs: slides get the extension damping De in the stiffness pattern of
+    `_joint_stiffness` (N De inside a section, 2N De for half rods, series at boundaries); hinges
+    get N Dk_i / L0_i^2 (at k = 0 and d = L0 a hinge rate is dk d / N, so N hinges dissipate
+    Dk dk^2).  Exact at rest length on the CC manifold; length dependence is a modelled mismatch.
+    (Applying -D dq2 as an explicit force instead is unstable on the light distal joints at 1 ms.)
+    """
+    De = np.asarray(slave.extension_damping)
+    Dk = np.asarray(slave.bending_damping)
+    L0 = np.asarray(slave.rest_lengths)
+    n = layout["C"].shape[0]
+    c_ = np.zeros(n)
+    for c in range(n):
+        i, j = int(layout["section"][c]), int(layout["segment"][c])
+        if layout["is_hinge"][c]:
+            c_[c] = N * Dk[i] / L0[i] ** 2
+        elif j == N:  # tip
+            c_[c] = 2.0 * N * De[2]
+        elif j >= 1:
+            c_[c] = N * De[i]
+        elif i == 0:
+            c_[c] = 2.0 * N * De[0]
+        else:
+            a, b = De[i - 1], De[i]
+            c_[c] = 2.0 * N * a * b / (a + b) if a + b > 0 else 0.0
+    return c_
+
+
 def _joint_armature(slave: SlaveParams, N: int, layout: dict, fraction: float) -> np.ndarray:
     """Joint armature per chain joint: ``fraction`` times the section's own inertia scale.
 
@@ -643,6 +674,7 @@ def _add_octarm(spec: mujoco.MjSpec, slave: SlaveParams, plant: PlantConfig, N: 
     mass, iyy, tip_mass = _segment_inertias(slave, N)
     stiff = _joint_stiffness(slave, N, layout)
     arm = _joint_armature(slave, N, layout, plant.armature_fraction)
+    damp = _joint_damping(slave, N, layout)
     joint_names = []
     parent = base
     c = 0
@@ -664,6 +696,7 @@ def _add_octarm(spec: mujoco.MjSpec, slave: SlaveParams, plant: PlantConfig, N: 
             for kind, dflt in (("slide", d_slide), ("hinge", d_hinge)):
                 jn = body.add_joint(dflt, name=f"{name}_{kind}")
                 jn.stiffness[0] = float(stiff[c])
+                jn.damping[0] = float(damp[c])
                 jn.armature = float(arm[c])
                 joint_names.append(jn.name)
                 c += 1
@@ -678,6 +711,7 @@ def _add_octarm(spec: mujoco.MjSpec, slave: SlaveParams, plant: PlantConfig, N: 
     tip.explicitinertial = True
     jn = tip.add_joint(d_slide, name="octarm_tip_slide")
     jn.stiffness[0] = float(stiff[c])
+    jn.damping[0] = float(damp[c])
     jn.armature = float(arm[c])
     joint_names.append(jn.name)
     tip.add_site(name="octarm_tip_site")
