@@ -699,6 +699,9 @@ def _scenario_from_dict(raw: Mapping, default_name: str | None) -> Scenario:
     top = _read_fields({k: v for k, v in raw.items() if k in TOP}, "", TOP, defaults)
     if "name" not in raw and default_name:
         top["name"] = default_name
+    if "transient" not in raw and top["duration"] <= defaults.transient:
+        # short runs: the default 5 s transient would leave nothing to measure; use a quarter
+        top["transient"] = top["duration"] / 4.0
 
     def section(name: str) -> Mapping:
         return _table(name, raw[name]) if name in raw else {}

@@ -141,30 +141,41 @@ def simulate_analytic(scn: Scenario, progress: bool = False) -> Trajectory:
     status, done, k = 0, 0, 0
     t0 = time.perf_counter()
     interrupted = False
-    while k < n:
-        k1 = min(n, k + CHUNK)
-        status, m = K.analytic_chunk(state, k, k1, scn.control_dt, nsub, scn.continuous_control,
-                                     a["traj"], noise, scale, a["F"], a["mpk_c"], a["spk_c"], mpk_p,
-                                     spk_p, a["nodes"], a["weights"], a["gains"], a["spec"], rows[k:k1])
-        done = k + m
+    error = ""
+    try:
+        while k < n:
+            k1 = min(n, k + CHUNK)
+            status, m = K.analytic_chunk(state, k, k1, scn.control_dt, nsub, scn.continuous_control,
+                                         a["traj"], noise, scale, a["F"], a["mpk_c"], a["spk_c"], mpk_p,
+                                         spk_p, a["nodes"], a["weights"], a["gains"], a["spec"], rows[k:k1])
+            done = k + m
+            if bar is not None:
+                bar.update(m)
+            if status != 0:
+                break
+            k = k1
+            if STOP.is_set():
+                interrupted = True
+                break
+    except KeyboardInterrupt:
+        interrupted = True
+    except Exception as exc:  # keep what was computed; report the cause
+        error = f"{type(exc).__name__}: {exc}"
+    finally:
         if bar is not None:
-            bar.update(m)
-        if status != 0:
-            break
-        k = k1
-        if STOP.is_set():
-            interrupted = True
-            break
-    if bar is not None:
-        bar.close()
+            bar.close()
     traj = Trajectory.from_rows(rows[:done])
     traj.meta.update(_meta(scn, time.perf_counter() - t0))
-    if status != 0:
+    t_end = traj.t[-1] if done else 0.0
+    if error:
+        traj.status = "error"
+        traj.message = f"{error} at t = {t_end:.4f} s"
+    elif status != 0:
         traj.status = "diverged"
-        traj.message = f"{STATUS_TEXT.get(status, 'unknown')} at t = {traj.t[-1]:.4f} s"
+        traj.message = f"{STATUS_TEXT.get(status, 'unknown')} at t = {t_end:.4f} s"
     elif interrupted:
         traj.status = "interrupted"
-        traj.message = f"interrupted at t = {traj.t[-1]:.4f} s"
+        traj.message = f"interrupted at t = {t_end:.4f} s"
     return traj
 
 

@@ -67,8 +67,8 @@ class Stubs:
         self.status = "ok"
         self.message = ""
         self.metrics = {"e1_rms": 1e-4, "e1_max": 2e-4, "e2_rms": 1e-3, "e2_max": 2e-3,
-                        "e2_plant_rms": 1.5e-3, "e2_plant_max": 3e-3, "beta_min": 0.02,
-                        "mujoco_warnings": 0}
+                        "e2_plant_rms": 1.5e-3, "e2_plant_max": 3e-3, "beta_min": 0.55,
+                        "deN_rms": 0.08, "range_violation": 0.0, "mujoco_warnings": 0}
         self.simulate_hook = None
         self.calls: dict[str, list] = {}
 
@@ -165,7 +165,7 @@ def test_missing_scenario_file(stubs, tmp_path, capsys):
     (["--segments", "100"], "plant.segments"),
     (["--segments", "2.5"], "plant.segments"),
     (["--duration", "-1"], "duration"),
-    (["--duration", "2"], "transient"),
+    (["--duration", "2", "--set", "transient=3"], "transient"),
     (["--snr", "loud"], "snr_db"),
     (["--seed", "-3"], "seed"),
     (["--set", "gains.k1=0"], "gains.k1"),

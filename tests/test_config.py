@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from controllers.params import Gains, MasterParams, SlaveParams, SubtaskSpec
 from harness import io_config
-from harness.config import InitialState, PlantConfig, Scenario, TrajectoryConfig
+from harness.config import FaultConfig, InitialState, PlantConfig, Scenario, TrajectoryConfig
 from harness.errors import ConfigError
 from harness.io_config import dump_scenario, load_scenario, parse_override, scenario_to_dict
 
@@ -54,7 +54,8 @@ def test_schema_covers_every_dataclass_field():
             expected -= set(io_config.PLANT_MODELS)
         assert set(spec) == expected, sec
     assert {c for c, _ in io_config.SECTIONS.values()} == {
-        Gains, MasterParams, SlaveParams, SubtaskSpec, TrajectoryConfig, InitialState, PlantConfig}
+        Gains, MasterParams, SlaveParams, SubtaskSpec, TrajectoryConfig, InitialState, PlantConfig,
+        FaultConfig}
 
 
 # --------------------------------------------------------------------------------------------- bad inputs
@@ -95,7 +96,7 @@ BAD = [
      "plant.actuation_delay"),
     ("zero-duration", {"duration": 0}, [], "duration"),
     ("too-long-duration", {"duration": 3601}, [], "duration"),
-    ("transient-ge-duration", {"duration": 2.0}, [], "transient"),
+    ("transient-ge-duration", {"duration": 2.0, "transient": 2.0}, [], "transient"),
     ("negative-transient", {"transient": -1.0}, [], "transient"),
     ("snr-too-high", {"snr_db": 201}, [], "snr_db"),
     ("snr-negative", {}, ["snr_db=-1"], "snr_db"),
@@ -416,3 +417,9 @@ def test_fuzz_overrides(overrides):
     except ConfigError:
         return
     assert isinstance(scn, Scenario)
+
+
+def test_short_run_gets_a_quarter_transient_unless_set():
+    assert load_scenario({"duration": 2.0}).transient == 0.5
+    assert load_scenario({"duration": 2.0, "transient": 0.1}).transient == 0.1
+    assert load_scenario({"duration": 30.0}).transient == 5.0
