@@ -20,7 +20,9 @@ import pytest
 from controllers.params import MasterParams, SlaveParams
 from harness.errors import ConfigError
 from harness.sweep import (
+    METRIC_NAMES,
     RESULTS,
+    SweepError,
     SweepInterrupted,
     expand_cases,
     load_study,
@@ -168,6 +170,19 @@ def test_scale_applies_to_the_plant_only():
     assert case.params == {"m0": 2.0, "kb": 0.5, "l2": 0.7, "snr": 0.5, "wn": 2.0, "cc": True}
 
 
+def test_scale_is_relative_to_the_controller_model():
+    # inline base: a custom nominal slave, and a plant that already differs in bending stiffness
+    doc = study([{"name": "m", "param": "plant.slave.masses", "scale": [0.5]}])
+    doc["scenario"] = {"slave": {"masses": [2.0, 1.0, 0.5]},
+                       "plant": {"slave": {"bending_stiffness": [9.0, 4.0, 2.0]}}}
+    (case,) = expand_cases(load_study(doc))
+    assert case.overrides == ("plant.slave.masses=[1.0, 0.5, 0.25]",)
+    scn = case.scenario
+    assert scn.slave.masses == (2.0, 1.0, 0.5)  # controller model untouched
+    assert scn.plant_slave.masses == (1.0, 0.5, 0.25)  # 0.5 x the controller's masses
+    assert scn.plant_slave.bending_stiffness == (9.0, 4.0, 2.0)  # the base plant's own value is kept
+
+
 @pytest.mark.parametrize("factor, words", [
     ({"name": "typo", "param": "plant.slave.mass", "scale": [1.0]}, ["typo", "mass"]),
     ({"name": "ctrl", "param": "slave.masses", "scale": [1.0]}, ["ctrl", "plant.slave.masses"]),
@@ -252,6 +267,13 @@ def test_dead_worker_is_isolated(tmp_path, calls):
     status = {r["params"]["seed"]: r for r in table_lines(tmp_path)}
     assert status[3]["status"] == "error" and "died" in status[3]["message"]
     assert all(status[s]["status"] == "ok" for s in (0, 4, 5, 6))
+
+
+def test_executor_failure_stops_the_sweep(tmp_path):
+    # a case function the workers cannot unpickle: an executor problem, not a case result
+    with pytest.raises(SweepError, match="executor failed"):
+        run_sweep(study([MASS]), out=tmp_path, workers=1, progress=False, case_fn=lambda case: {})
+    assert read_results(tmp_path / RESULTS) == {}  # nothing recorded: a re-run runs every case
 
 
 def test_run_case_never_raises(monkeypatch):
@@ -356,13 +378,14 @@ def test_summary_plots_recordings_and_provenance(tmp_path):
                  "heatmap_bending__extension.png"):
         assert (tmp_path / name).stat().st_size > 0, name
     csv_lines = (tmp_path / "summary.csv").read_text().splitlines()
-    assert csv_lines[0] == "case_id,bending,extension,status,e2_rms,e2_max,beta_min,wall_time,message"
+    assert csv_lines[0] == "case_id,bending,extension,status,e2_rms,e2_max,beta_min,case_wall_time,message"
     assert len(csv_lines) == 10
     # worst 2 by e2_rms: the stiffest extension/bending combinations in the stub
     worst = sorted(res.rows.values(), key=lambda r: r["metrics"]["e2_rms"])[-2:]
     assert sorted(p.name for p in res.recordings) == sorted(f"{r['case_id']}.rrd" for r in worst)
     for r in worst:
-        assert (tmp_path / "recordings" / f"{r['case_id']}.rrd").read_bytes() == f"fake rrd {r['case_id']}".encode()
+        data = (tmp_path / "recordings" / f"{r['case_id']}.rrd").read_bytes()
+        assert data == f"fake rrd {r['case_id']}".encode()
     # the written study.toml is itself a study with the same cases
     again = expand_cases(load_study(tmp_path / "study.toml"))
     assert [c.case_id for c in again] == [c.case_id for c in res.cases]
@@ -378,6 +401,13 @@ def test_random_study_plots(tmp_path):
 
 
 # --- the real simulation ---------------------------------------------------------------------------
+def test_metric_names_match_compute_metrics(synthetic_trajectory):
+    from harness.config import Scenario
+    from harness.metrics import compute_metrics
+
+    produced = compute_metrics(synthetic_trajectory(), Scenario(transient=0.0))
+    assert set(METRIC_NAMES) == set(produced) - {"status", "message"}
+
 def test_end_to_end_analytic_plant(tmp_path):
     """Two real 0.5 s cases on the analytic plant through the default worker (`run_case`).
     Fails (does not skip) while harness.sim / harness.metrics are missing."""
