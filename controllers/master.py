@@ -52,7 +52,8 @@ def master_kernel(pk, q, dq, x, J, Jd, M, N):
     M[1, 1] = I2 + m2 * lc2 * lc2
     h = m2 * l1 * lc2 * s2
     # Coriolis/centripetal (Christoffel), gravity (V = g [m1 lc1 c1 + m2 (l1 c1 + lc2 c12)]), friction
-    N[0] = -h * (2.0 * dq[0] * dq[1] + dq[1] * dq[1]) - g * ((m1 * lc1 + m2 * l1) * s1 + m2 * lc2 * s12) + b1 * dq[0]
+    N[0] = (-h * (2.0 * dq[0] * dq[1] + dq[1] * dq[1]) - g * ((m1 * lc1 + m2 * l1) * s1 + m2 * lc2 * s12)
+            + b1 * dq[0])
     N[1] = h * dq[0] * dq[0] - g * m2 * lc2 * s12 + b2 * dq[1]
 
 

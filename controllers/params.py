@@ -127,7 +127,8 @@ class SlaveParams:
     def in_range(self, q2: np.ndarray, tol: float = 0.0) -> bool:
         lo, hi = self.length_range
         d, k = np.asarray(q2[:3]), np.asarray(q2[3:])
-        return bool(np.all(d >= lo - tol) and np.all(d <= hi + tol) and np.all(np.abs(k * d) <= self.max_bend + tol))
+        return bool(np.all(d >= lo - tol) and np.all(d <= hi + tol)
+                    and np.all(np.abs(k * d) <= self.max_bend + tol))
 
     # --- packed arrays for the compiled kernels ------------------------------------------------
     def packed(self) -> np.ndarray:

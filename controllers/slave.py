@@ -260,7 +260,8 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
     for i in range(3):
         dd = q[i]
         k = q[3 + i]
-        N[i] += 0.5 * pk[PACK_KB + i] * k * k + pk[PACK_KE + i] * (dd - pk[PACK_L0 + i]) + pk[PACK_CD + i] * dq[i]
+        N[i] += (0.5 * pk[PACK_KB + i] * k * k + pk[PACK_KE + i] * (dd - pk[PACK_L0 + i])
+                 + pk[PACK_CD + i] * dq[i])
         N[3 + i] += pk[PACK_KB + i] * dd * k + pk[PACK_CK + i] * dq[3 + i]
 
 

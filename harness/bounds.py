@@ -27,13 +27,13 @@ from __future__ import annotations
 
 import difflib
 import math
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
 from harness.errors import ConfigError, short_repr
+from harness.textio import read_toml
 
 # bound key -> (metric, relation, unit, description)
 NUMERIC_BOUNDS: dict[str, tuple[str, str, str, str]] = {
@@ -44,9 +44,11 @@ NUMERIC_BOUNDS: dict[str, tuple[str, str, str, str]] = {
     "e2_plant_rms_max": ("e2_plant_rms", "max", "m", "RMS of |x1 - MuJoCo tip site| after the transient"),
     "e2_plant_max_max": ("e2_plant_max", "max", "m", "max of |x1 - MuJoCo tip site| after the transient"),
     "beta_min_min": ("beta_min", "min", "", "minimum manipulability beta (41) must stay above"),
-    "deN_rms_max": ("deN_rms", "max", "", "RMS of the null-space velocity error |de_N| (23) after the transient"),
+    "deN_rms_max": ("deN_rms", "max", "",
+                    "RMS of the null-space velocity error |de_N| (23) after the transient"),
     "range_violation_max": ("range_violation", "max", "",
-                            "largest excursion of section lengths (m) / bend angles (rad) outside their range"),
+                            "largest excursion of section lengths (m) / bend angles (rad) "
+                            "outside their range"),
 }
 FLAG_BOUNDS: dict[str, str] = {
     "no_mujoco_warnings": "mujoco_warnings must be 0",
@@ -171,17 +173,7 @@ def load_bounds(source: str | Path | Mapping) -> Bounds:
     if isinstance(source, Mapping):
         return bounds_from_dict(source)
     path = Path(source)
-    try:
-        with path.open("rb") as fh:
-            raw = tomllib.load(fh)
-    except FileNotFoundError:
-        raise ConfigError(f"bounds file not found: {path}", path=str(path)) from None
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{path}: invalid TOML: {e}", path=str(path)) from None
-    except UnicodeDecodeError as e:
-        raise ConfigError(f"{path}: not UTF-8 text ({e.reason})", path=str(path)) from None
-    except OSError as e:
-        raise ConfigError(f"cannot read bounds file {path}: {e.strerror or e}", path=str(path)) from None
+    raw = read_toml(path, "bounds file")
     return bounds_from_dict(raw, label=str(path))
 
 

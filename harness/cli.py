@@ -19,7 +19,6 @@ import argparse
 import contextlib
 import importlib
 import json
-import math
 import os
 import signal
 import sys
@@ -32,6 +31,7 @@ from typing import Any, NoReturn
 from controllers.params import ParameterError
 from harness.config import ACTUATIONS, PLANTS
 from harness.errors import ConfigError
+from harness.textio import jsonable
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 DEBUG_ENV = "TELEOP_DEBUG"  # set to 1 to print tracebacks of output-writing failures
@@ -325,20 +325,6 @@ def stop_on_signals(stop: threading.Event | None) -> Iterator[list[int]]:
         stop.clear()
 
 
-def _jsonable(v: Any) -> Any:
-    if isinstance(v, dict):
-        return {str(k): _jsonable(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
-    if hasattr(v, "tolist") and callable(v.tolist):  # numpy arrays and scalars
-        return _jsonable(v.tolist())
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    if v is None or isinstance(v, (bool, int, float, str)):
-        return v
-    return str(v)
-
-
 def _fmt_value(v: Any) -> str:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         return str(v)
@@ -363,7 +349,7 @@ def _print_summary(scn, traj, metrics: dict | None, out: Path | None, written: l
         print(f"  message: {_one_line(traj.message)}")
     if metrics:
         items = [f"{k} = {_fmt_value(metrics[k])}{' ' + u if u else ''}"
-                 for k, u in _SUMMARY_KEYS if _jsonable(metrics.get(k)) is not None]  # skip None/NaN
+                 for k, u in _SUMMARY_KEYS if jsonable(metrics.get(k)) is not None]  # skip None/NaN
         for i in range(0, len(items), 3):
             print("  " + "   ".join(items[i:i + 3]))
     if out is not None:
@@ -410,7 +396,7 @@ def _simulate_and_write(scn, out: Path | None, progress: bool):
 
         def write_metrics() -> Path:
             p = out / "metrics.json"
-            p.write_text(json.dumps(_jsonable(doc), indent=2, allow_nan=False) + "\n", encoding="utf-8")
+            p.write_text(json.dumps(jsonable(doc), indent=2, allow_nan=False) + "\n", encoding="utf-8")
             return p
 
         for what, fn in (

@@ -51,16 +51,4 @@ class ConfigError(ValueError):
         return err
 
 
-class SimulationDiverged(RuntimeError):
-    """The simulated state left its valid domain (non-finite values, section lengths out of range).
-
-    Placeholder for `harness.sim`: the simulation normally reports divergence through
-    `Trajectory.status == "diverged"` rather than raising.
-    """
-
-    def __init__(self, message: str, t: float | None = None) -> None:
-        super().__init__(message)
-        self.t = t
-
-
-__all__ = ["ConfigError", "SimulationDiverged", "short_repr"]
+__all__ = ["ConfigError", "short_repr"]

@@ -47,7 +47,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tomli_w
 
 from controllers.params import Gains, MasterParams, ParameterError, SlaveParams, SubtaskSpec
 from harness.config import (
@@ -61,6 +60,7 @@ from harness.config import (
     TrajectoryConfig,
 )
 from harness.errors import ConfigError, short_repr
+from harness.textio import read_toml, toml_literal
 
 REACH_MARGIN = 1e-3  # m, the desired trajectory must stay this far inside the master workspace annulus
 MULTIPLE_RTOL = 1e-9  # relative tolerance for "integer multiple of a time step"
@@ -633,19 +633,7 @@ def _read_source(source: str | Path | Mapping | None) -> tuple[dict, str | None,
     if not isinstance(source, (str, Path)):
         raise ConfigError(f"scenario source must be a path or a table, got {_type_name(source)}")
     path = Path(source)
-    try:
-        with path.open("rb") as fh:
-            raw = tomllib.load(fh)
-    except FileNotFoundError:
-        raise ConfigError(f"scenario file not found: {path}", path=str(path)) from None
-    except IsADirectoryError:
-        raise ConfigError(f"scenario file {path} is a directory", path=str(path)) from None
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{path}: invalid TOML: {e}", path=str(path)) from None
-    except UnicodeDecodeError as e:
-        raise ConfigError(f"{path}: not UTF-8 text ({e.reason})", path=str(path)) from None
-    except OSError as e:
-        raise ConfigError(f"cannot read scenario file {path}: {e.strerror or e}", path=str(path)) from None
+    raw = read_toml(path, "scenario file")
     stem = path.stem if _NAME_RE.match(path.stem) else None
     return raw, str(path), stem
 
@@ -757,13 +745,6 @@ def scenario_to_dict(scn: Scenario) -> dict[str, Any]:
     return _to_toml_value(scn)
 
 
-def _literal(v: Any) -> str:
-    """One TOML value; arrays inline on one line (tomli_w would spread them over many lines)."""
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_literal(x) for x in v) + "]"
-    return tomli_w.dumps({"v": v})[len("v = "):].rstrip("\n")
-
-
 def _toml_lines(table: Mapping[str, Any], name: str = "") -> list[str]:
     lines = [f"[{name}]"] if name else []
     subtables = []
@@ -771,7 +752,7 @@ def _toml_lines(table: Mapping[str, Any], name: str = "") -> list[str]:
         if isinstance(v, Mapping):
             subtables.append((k, v))
         else:
-            lines.append(f"{k} = {_literal(v)}")
+            lines.append(f"{k} = {toml_literal(v)}")
     for k, v in subtables:
         lines += [""] + _toml_lines(v, f"{name}.{k}" if name else k)
     return lines

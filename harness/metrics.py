@@ -24,9 +24,10 @@ def _rms_max(e: np.ndarray | None, mask: np.ndarray) -> tuple[float, float]:
 
 def compute_metrics(traj: Trajectory, scn: Scenario) -> dict:
     """Metrics dict: e1_rms, e1_max, e2_rms, e2_max, e2_plant_rms, e2_plant_max (MuJoCo tip; NaN on
-    the analytic plant), deN_rms (null-space velocity error (23), mixed units), beta_min, ya_max, e1_final, e2_final, range_violation (max excursion
-    of section lengths / bending angles outside their allowed range, m or rad; 0 when inside),
-    mujoco_warnings, status, message, sim_time_reached, wall_time, realtime_factor."""
+    the analytic plant), deN_rms (null-space velocity error (23), mixed units), beta_min, ya_max,
+    e1_final, e2_final, range_violation (max excursion of section lengths / bending angles outside
+    their allowed range, m or rad; 0 when inside), mujoco_warnings, status, message,
+    sim_time_reached, wall_time, realtime_factor."""
     n = len(traj)
     mask = traj.t >= scn.transient if n else np.zeros(0, bool)
     e1_rms, e1_max = _rms_max(traj.e1, mask)

@@ -367,66 +367,62 @@ def _segment_inertias(slave: SlaveParams, N: int) -> tuple[np.ndarray, np.ndarra
     return mass, iyy, tip_mass
 
 
+def _slide_pattern(per_section, N: int, layout: dict) -> np.ndarray:
+    """Per-chain-joint values of a rod property that adds like a spring (stiffness, damping) for the
+    slides, from its per-section value v_i: N v_i inside a section (a rod of rest length L0_i / N),
+    2N v for the first half rod and the tip half rod, and the two half rods of sections i-1 and i in
+    series at a boundary, 2N v_{i-1} v_i / (v_{i-1} + v_i).  Hinge entries are 0."""
+    v = np.asarray(per_section, dtype=float)
+    n = layout["C"].shape[0]
+    out = np.zeros(n)
+    for c in range(n):
+        if layout["is_hinge"][c]:
+            continue
+        i, j = int(layout["section"][c]), int(layout["segment"][c])
+        if j == N:  # tip
+            out[c] = 2.0 * N * v[2]
+        elif j >= 1:
+            out[c] = N * v[i]
+        elif i == 0:
+            out[c] = 2.0 * N * v[0]
+        else:
+            a, b = v[i - 1], v[i]
+            out[c] = 2.0 * N * a * b / (a + b) if a + b > 0 else 0.0
+    return out
+
+
+def _hinge_values(per_section, layout: dict) -> np.ndarray:
+    """Per-chain-joint values for the hinges from a per-section value (0 on slides)."""
+    v = np.asarray(per_section, dtype=float)
+    return np.where(layout["is_hinge"] == 1, v[layout["section"]], 0.0)
+
+
 def _joint_stiffness(slave: SlaveParams, N: int, layout: dict) -> np.ndarray:
     """MuJoCo joint stiffness per chain joint (N m/rad for hinges, N/m for slides).
 
     Hinge: N Kb_i / L0_i (a segment of rest length L0_i / N with bending stiffness Kb_i), reproducing
-    1/2 Kb_i Theta_i^2 / L0_i per section at rest length.  Slide (i, j >= 1): N Ke_i (a rod of rest
-    length L0_i / N).  Boundary rod (i >= 1, 0): the two half rods of sections i-1 and i in series,
-    2N Ke_{i-1} Ke_i / (Ke_{i-1} + Ke_i).  First rod (0, 0) and tip slide: a half rod, 2N Ke.
-    For uniform section extensions this already gives sum_i 1/2 Ke_i (d_i - L0_i)^2; the elastic
-    correction handles the length dependence and unequal neighbours exactly.
+    1/2 Kb_i Theta_i^2 / L0_i per section at rest length.  Slides: `_slide_pattern` of Ke (N Ke_i
+    inside a section, half rods 2N Ke, boundary rods in series).  For uniform section extensions this
+    already gives sum_i 1/2 Ke_i (d_i - L0_i)^2; the elastic correction handles the length dependence
+    and unequal neighbours exactly.
     """
-    Kb = np.asarray(slave.bending_stiffness)
-    Ke = np.asarray(slave.extension_stiffness)
     L0 = np.asarray(slave.rest_lengths)
-    n = layout["C"].shape[0]
-    k = np.zeros(n)
-    for c in range(n):
-        i, j = int(layout["section"][c]), int(layout["segment"][c])
-        if layout["is_hinge"][c]:
-            k[c] = N * Kb[i] / L0[i]
-        elif j == N:  # tip
-            k[c] = 2.0 * N * Ke[2]
-        elif j >= 1:
-            k[c] = N * Ke[i]
-        elif i == 0:
-            k[c] = 2.0 * N * Ke[0]
-        else:
-            a, b = Ke[i - 1], Ke[i]
-            k[c] = 2.0 * N * a * b / (a + b) if a + b > 0 else 0.0
-    return k
+    return (_hinge_values(N * np.asarray(slave.bending_stiffness) / L0, layout)
+            + _slide_pattern(slave.extension_stiffness, N, layout))
 
 
 def _joint_damping(slave: SlaveParams, N: int, layout: dict) -> np.ndarray:
     """MuJoCo joint damping per chain joint (N m s/rad, N s/m), integrated implicitly by MuJoCo.
 
     The analytic model's viscous damping on q2 rates, dissipating De_i dd_i^2 + Dk_i dk_i^2, mapped
-    like the springs: slides get the extension damping De in the stiffness pattern of
-    `_joint_stiffness` (N De inside a section, 2N De for half rods, series at boundaries); hinges
-    get N Dk_i / L0_i^2 (at k = 0 and d = L0 a hinge rate is dk d / N, so N hinges dissipate
-    Dk dk^2).  Exact at rest length on the CC manifold; length dependence is a modelled mismatch.
-    (Applying -D dq2 as an explicit force instead is unstable on the light distal joints at 1 ms.)
+    like the springs: slides get `_slide_pattern` of De; hinges get N Dk_i / L0_i^2 (at k = 0 and
+    d = L0 a hinge rate is dk d / N, so N hinges dissipate Dk dk^2).  Exact at rest length on the CC
+    manifold; the length dependence is a modelled mismatch.  (Applying -D dq2 as an explicit force
+    instead is unstable on the light distal joints at 1 ms.)
     """
-    De = np.asarray(slave.extension_damping)
-    Dk = np.asarray(slave.bending_damping)
     L0 = np.asarray(slave.rest_lengths)
-    n = layout["C"].shape[0]
-    c_ = np.zeros(n)
-    for c in range(n):
-        i, j = int(layout["section"][c]), int(layout["segment"][c])
-        if layout["is_hinge"][c]:
-            c_[c] = N * Dk[i] / L0[i] ** 2
-        elif j == N:  # tip
-            c_[c] = 2.0 * N * De[2]
-        elif j >= 1:
-            c_[c] = N * De[i]
-        elif i == 0:
-            c_[c] = 2.0 * N * De[0]
-        else:
-            a, b = De[i - 1], De[i]
-            c_[c] = 2.0 * N * a * b / (a + b) if a + b > 0 else 0.0
-    return c_
+    return (_hinge_values(N * np.asarray(slave.bending_damping) / L0**2, layout)
+            + _slide_pattern(slave.extension_damping, N, layout))
 
 
 def _joint_armature(slave: SlaveParams, N: int, layout: dict, fraction: float) -> np.ndarray:

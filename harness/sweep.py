@@ -107,7 +107,6 @@ import sys
 import tempfile
 import threading
 import time
-import tomllib
 import traceback
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -122,6 +121,7 @@ from tqdm import tqdm
 from harness.config import Scenario
 from harness.errors import ConfigError
 from harness.io_config import load_scenario, scenario_to_dict
+from harness.textio import jsonable, read_toml, toml_literal
 
 log = logging.getLogger(__name__)
 
@@ -275,12 +275,7 @@ def load_study(source: str | os.PathLike | dict, base_dir: str | os.PathLike | N
         base = Path(base_dir) if base_dir is not None else Path.cwd()
     else:
         path = Path(source)
-        try:
-            doc = tomllib.loads(path.read_text(encoding="utf-8"))
-        except OSError as e:
-            raise ConfigError(f"study file {path}: {e.strerror or e}") from None
-        except tomllib.TOMLDecodeError as e:
-            raise ConfigError(f"study file {path}: invalid TOML: {e}") from None
+        doc = read_toml(path, "study file")
         stem = path.stem
         base = Path(base_dir) if base_dir is not None else path.resolve().parent
     _check_keys(doc, ("study", "factor", "sampling", "scenario"), "study file")
@@ -432,23 +427,6 @@ def _scaled(nominal: Any, s: float, where: str) -> Any:
     return _clean(float(x))
 
 
-def _toml_value(v: Any) -> str:
-    """A TOML value literal (one line) for an override string."""
-    if isinstance(v, np.generic):
-        v = v.item()
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, float):
-        return repr(v) if math.isfinite(v) else ("nan" if math.isnan(v) else ("inf" if v > 0 else "-inf"))
-    if isinstance(v, str):
-        return json.dumps(v)
-    if isinstance(v, tuple | list):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    raise ConfigError(f"cannot write {v!r} as a TOML value")
-
-
 def _case_overrides(base: Scenario, factors: Sequence[Factor], levels: Sequence) -> list[str]:
     leaves: dict[tuple[str, ...], Any] = {}
     for f, level in zip(factors, levels, strict=True):
@@ -468,7 +446,7 @@ def _case_overrides(base: Scenario, factors: Sequence[Factor], levels: Sequence)
         elif isinstance(current, tuple) and _is_real(value) and all(_is_real(c) for c in current):
             value = [value] * len(current)  # a scalar for a vector field: every entry
         leaves[f.path] = value
-    return [f"{'.'.join(path)}={_toml_value(value)}" for path, value in leaves.items()]
+    return [f"{'.'.join(path)}={toml_literal(value)}" for path, value in leaves.items()]
 
 
 def scenario_id(scn: Scenario) -> str:
@@ -494,7 +472,7 @@ def expand_cases(study: Study, base: Scenario | None = None) -> list[Case]:
     base = load_base(study) if base is None else base
     cases: dict[str, Case] = {}
     for levels in _level_combinations(study):
-        params = {f.name: _plain(v) for f, v in zip(study.factors, levels, strict=True)}
+        params = {f.name: jsonable(v) for f, v in zip(study.factors, levels, strict=True)}
         ovr = _case_overrides(base, study.factors, levels)
         try:
             scn = load_scenario(study.scenario_source, [*study.set, *ovr])
@@ -511,23 +489,6 @@ def expand_cases(study: Study, base: Scenario | None = None) -> list[Case]:
 
 
 # --- worker -----------------------------------------------------------------------------------------
-def _plain(v: Any) -> Any:
-    """JSON-able copy: numpy -> Python, tuples -> lists, non-finite floats -> None."""
-    if isinstance(v, np.ndarray):
-        v = v.tolist()
-    if isinstance(v, np.generic):
-        v = v.item()
-    if isinstance(v, float):
-        return v if math.isfinite(v) else None
-    if isinstance(v, tuple | list):
-        return [_plain(x) for x in v]
-    if isinstance(v, dict):
-        return {str(k): _plain(x) for k, x in v.items()}
-    if v is None or isinstance(v, bool | int | str):
-        return v
-    return str(v)
-
-
 def _error_result(e: BaseException) -> dict:
     return {"status": "error", "message": f"{type(e).__name__}: {e}",
             "traceback": "".join(traceback.format_exception(e))}
@@ -550,7 +511,7 @@ def run_case(case: dict) -> dict:
         traj = simulate(scn, progress=False)
         metrics = compute_metrics(traj, scn)
         out.update(status=traj.status, message=traj.message,
-                   metrics={k: _plain(metrics.get(k)) for k in case["metrics"]})
+                   metrics={k: jsonable(metrics.get(k)) for k in case["metrics"]})
         if case.get("record"):
             from harness.record import write_recording
 
@@ -630,8 +591,8 @@ def _make_row(case: Case, result: dict) -> dict:
         "params": case.params,
         "status": str(result.get("status", "error")),
         "message": str(result.get("message", "")),
-        "metrics": _plain(result.get("metrics") or {}),
-        "wall_time": _plain(result.get("wall_time")),
+        "metrics": jsonable(result.get("metrics") or {}),
+        "wall_time": jsonable(result.get("wall_time")),
         "traceback": str(result.get("traceback", "")),
     }
 

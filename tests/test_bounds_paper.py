@@ -11,7 +11,8 @@ from harness.metrics import compute_metrics
 from harness.sim import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
-BOUNDS = {"servo": ROOT / "bounds" / "paper_mujoco.toml", "torque": ROOT / "bounds" / "paper_mujoco_torque.toml"}
+BOUNDS = {"servo": ROOT / "bounds" / "paper_mujoco.toml",
+          "torque": ROOT / "bounds" / "paper_mujoco_torque.toml"}
 
 
 def run(actuation: str, *overrides: str) -> dict:

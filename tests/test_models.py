@@ -214,7 +214,8 @@ def test_master_model_against_finite_differences_and_energy(rng):
         m1, m2 = MP.masses
 
         def V(z):
-            return MP.gravity * (m1 * l1 / 2 * np.cos(z[0]) + m2 * (l1 * np.cos(z[0]) + l2 / 2 * np.cos(z[0] + z[1])))
+            return MP.gravity * (m1 * l1 / 2 * np.cos(z[0])
+                                 + m2 * (l1 * np.cos(z[0]) + l2 / 2 * np.cos(z[0] + z[1])))
 
         expected = Md @ dq - dTdq + fd(lambda z: np.array(V(z)), q) + np.array(MP.damping) * dq
         np.testing.assert_allclose(master.nle(MP, q, dq), expected, atol=1e-7)

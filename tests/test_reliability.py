@@ -142,7 +142,8 @@ def test_same_seed_bit_identical_across_processes(tmp_path):
     outs = []
     for name, seed in (("a", 3), ("b", 3), ("c", 4)):
         out = tmp_path / name
-        res = subprocess.run([*TELEOP, "run", "--duration", "1", "--seed", str(seed), "--set", "transient=0.2",
+        res = subprocess.run([*TELEOP, "run", "--duration", "1", "--seed", str(seed),
+                              "--set", "transient=0.2",
                               "--no-progress", "--out", str(out)], capture_output=True, text=True, cwd=ROOT,
                              timeout=600, env=env)
         assert res.returncode == 0, res.stderr
