@@ -304,7 +304,20 @@ def backbone_points(q, n_per_section, out):
         phi += th[s]
 
 
+def gram_terms(J, Jd, out):
+    """A = J J^T and dA/dt = dJ J^T + J dJ^T for a 2x6 J: out = [A00, A01, A11, dA00, dA01, dA11]."""
+    for r in range(6):
+        out[r] = 0.0
+    for a in range(6):
+        out[0] += J[0, a] * J[0, a]
+        out[1] += J[0, a] * J[1, a]
+        out[2] += J[1, a] * J[1, a]
+        out[3] += 2.0 * Jd[0, a] * J[0, a]
+        out[4] += Jd[0, a] * J[1, a] + J[0, a] * Jd[1, a]
+        out[5] += 2.0 * Jd[1, a] * J[1, a]
+
+
 KERNELS = (
-    "en_values", "vtype", "term_mono", "term_table", "term_y_derivs", "chain_nz", "y_of_q", "chain_to_q",
-    "chain_to_q_dot", "point_y_derivs", "tip_kinematics", "backbone_points",
+    "gram_terms", "en_values", "vtype", "term_mono", "term_table", "term_y_derivs", "chain_nz", "y_of_q",
+    "chain_to_q", "chain_to_q_dot", "point_y_derivs", "tip_kinematics", "backbone_points",
 )

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cc import tip_kinematics
+from .cc import gram_terms, tip_kinematics
 from .master import master_kernel
 from .master import packed as master_packed
 from .params import Gains, MasterParams, SlaveParams, SubtaskSpec
@@ -72,19 +72,9 @@ def master_control_kernel(pk, gains, q, dq, xd, dxd, ddxd, F1, T1, info):
 
 def pinv_terms(J, Jd, Jp, Jpd):
     """J^+ = J^T (J J^T)^-1 (6,2) and its exact time derivative (6,2).  Returns det(J J^T)."""
-    A00 = 0.0
-    A01 = 0.0
-    A11 = 0.0
-    D00 = 0.0
-    D01 = 0.0
-    D11 = 0.0
-    for a in range(6):
-        A00 += J[0, a] * J[0, a]
-        A01 += J[0, a] * J[1, a]
-        A11 += J[1, a] * J[1, a]
-        D00 += 2.0 * Jd[0, a] * J[0, a]
-        D01 += Jd[0, a] * J[1, a] + J[0, a] * Jd[1, a]
-        D11 += 2.0 * Jd[1, a] * J[1, a]
+    g = np.empty(6)
+    gram_terms(J, Jd, g)
+    A00, A01, A11, D00, D01, D11 = g[0], g[1], g[2], g[3], g[4], g[5]
     det = A00 * A11 - A01 * A01
     if det <= DET_MIN:
         return det

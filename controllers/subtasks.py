@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cc import tip_kinematics
+from .cc import gram_terms, tip_kinematics
 from .params import SlaveParams, SubtaskSpec
 
 SPEC_SIZE = 8
@@ -42,19 +42,9 @@ def manipulability_kernel(J, H, Jd, Hd, dq, grad, graddot):
 
     J (2,6), H (2,6,6) = dJ/dq, Jd (2,6) = dJ/dt, Hd (2,6,6) = dH/dt.  Returns (beta, det A).
     """
-    A00 = 0.0
-    A01 = 0.0
-    A11 = 0.0
-    Ad00 = 0.0
-    Ad01 = 0.0
-    Ad11 = 0.0
-    for a in range(6):
-        A00 += J[0, a] * J[0, a]
-        A01 += J[0, a] * J[1, a]
-        A11 += J[1, a] * J[1, a]
-        Ad00 += 2.0 * Jd[0, a] * J[0, a]
-        Ad01 += Jd[0, a] * J[1, a] + J[0, a] * Jd[1, a]
-        Ad11 += 2.0 * Jd[1, a] * J[1, a]
+    gt = np.empty(6)
+    gram_terms(J, Jd, gt)
+    A00, A01, A11, Ad00, Ad01, Ad11 = gt[0], gt[1], gt[2], gt[3], gt[4], gt[5]
     det = A00 * A11 - A01 * A01
     if det <= 0.0:
         for c in range(6):
