@@ -57,6 +57,7 @@ class PlantConfig:
     servo_feedforward: bool = True  # add the analytic T2 (mapped to segment joints) in servo mode
     actuation_delay: float = 0.0  # s, pure delay of the commands (multiple of control_dt)
     armature_fraction: float = 0.01  # segment-joint armature as a fraction of the section inertia
+    scene_xml: str | None = None  # alternative scene MJCF (must include master + octarm base); None = mjcf/
 
 
 @dataclass(frozen=True)

@@ -206,6 +206,20 @@ def _name(path: str, v: Any) -> str:
     return v
 
 
+def _mjcf_path(path: str, v: Any) -> str:
+    """An existing MJCF file (checked for parsing by the plant builder in the cross checks)."""
+    if not isinstance(v, str) or not v.strip():
+        raise ConfigError.field(path, v, "must be the path of an MJCF scene file (string)")
+    if not Path(v).is_file():
+        raise ConfigError.field(path, v, "must be an existing MJCF file (relative paths: from the "
+                                "current directory); file not found")
+    return v
+
+
+_mjcf_path.desc = "the path of an MJCF scene file"  # type: ignore[attr-defined]
+_mjcf_path.keep_message = True  # type: ignore[attr-defined]
+
+
 def _vec(n: int, rng: _Range = FINITE, unit: str = "numbers") -> Checker:
     each = "" if rng.describe() == "finite" else f", each {rng.describe()}"
     desc = f"an array of {n} finite {unit}{each}"
@@ -279,6 +293,8 @@ def _optional(inner: Checker, allow_false: bool = False) -> Checker:
         try:
             return inner(path, v)
         except ConfigError:
+            if getattr(inner, "keep_message", False):
+                raise
             alt = ', "none" or false' if allow_false else ' or "none"'
             raise ConfigError.field(path, v, f"must be {inner.desc}{alt} (got {_type_name(v)})") from None
 
@@ -353,6 +369,7 @@ PLANT: dict[str, Checker] = {
     "servo_feedforward": _bool,
     "actuation_delay": _num(NONNEG),
     "armature_fraction": _num(NONNEG),
+    "scene_xml": _optional(_mjcf_path),
 }
 FAULTS: dict[str, Checker] = {
     "e2_sign": _int(-1, 1, allowed=(-1, 1)),
@@ -498,6 +515,18 @@ def _check_reach(scn: Scenario) -> None:
                 f"{rmax:.6g} m, beyond what the fully extended {label} can reach "
                 f"(max_extension * sum(rest_lengths) - {REACH_MARGIN:g} = {reach - REACH_MARGIN:.6g} m)",
                 path="trajectory")
+
+
+def _check_scene_xml(scn: Scenario) -> None:
+    """A user scene file must parse and carry the master and Octarm base (built once, not stepped)."""
+    if scn.plant.scene_xml is None or scn.plant.kind != "mujoco":
+        return
+    from harness.plant_model import PlantModelError, build_spec
+
+    try:
+        build_spec(scn.plant_master, scn.plant_slave, scn.plant, scene_xml=scn.plant.scene_xml)
+    except PlantModelError as exc:
+        raise ConfigError.field("plant.scene_xml", scn.plant.scene_xml, f"unusable MJCF: {exc}") from None
 
 
 def _cross_checks(scn: Scenario) -> None:
@@ -725,6 +754,7 @@ def _scenario_from_dict(raw: Mapping, default_name: str | None) -> Scenario:
 
     scn = Scenario(**top, **parts)
     _cross_checks(scn)
+    _check_scene_xml(scn)
     return scn
 
 

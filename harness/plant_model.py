@@ -784,6 +784,8 @@ def _validate_plant(plant: PlantConfig) -> int:
 
 def _build(master: MasterParams, slave: SlaveParams, plant: PlantConfig, scene=None):
     N = _validate_plant(plant)
+    if scene is None:
+        scene = getattr(plant, "scene_xml", None)
     scene = SCENE_XML if scene is None else Path(scene)
     spec = _load_spec(scene)
     spec.modelname = f"teleop_scene_n{N}"

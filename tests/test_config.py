@@ -423,3 +423,48 @@ def test_short_run_gets_a_quarter_transient_unless_set():
     assert load_scenario({"duration": 2.0}).transient == 0.5
     assert load_scenario({"duration": 2.0, "transient": 0.1}).transient == 0.1
     assert load_scenario({"duration": 30.0}).transient == 5.0
+
+
+def test_scene_xml_missing_malformed_or_incomplete(tmp_path):
+    with pytest.raises(ConfigError, match=r"plant\.scene_xml.*not found"):
+        load_scenario({"plant": {"scene_xml": str(tmp_path / "nope.xml")}})
+    bad = tmp_path / "bad.xml"
+    bad.write_text("<mujoco><worldbody><body name='x'><geom size='oops'/></body></worldbody></mujoco>")
+    with pytest.raises(ConfigError, match=r"plant\.scene_xml.*unusable MJCF"):
+        load_scenario({"plant": {"scene_xml": str(bad)}})
+    empty = tmp_path / "empty.xml"
+    empty.write_text("<mujoco><worldbody/></mujoco>")
+    with pytest.raises(ConfigError, match=r"plant\.scene_xml.*unusable MJCF"):
+        load_scenario({"plant": {"scene_xml": str(empty)}})
+    with pytest.raises(ConfigError, match=r"plant\.scene_xml"):
+        load_scenario({"plant": {"scene_xml": 3}})
+
+
+def test_scene_xml_custom_scene_is_accepted(tmp_path):
+    """A user scene that includes the shipped robots (e.g. a different floor) loads and round-trips."""
+    mjcf = Path(__file__).resolve().parents[1] / "mjcf"
+    scene = tmp_path / "my_scene.xml"
+    scene.write_text(f"""<mujoco model="my_scene">
+  <include file="{mjcf / 'master.xml'}"/>
+  <include file="{mjcf / 'octarm_base.xml'}"/>
+  <option timestep="0.001" integrator="implicitfast"><flag contact="disable"/></option>
+  <worldbody><light name="my_light" pos="0 0 3"/></worldbody>
+</mujoco>""")
+    scn = load_scenario({"plant": {"scene_xml": str(scene)}})
+    assert scn.plant.scene_xml == str(scene)
+
+
+def test_scene_xml_is_used_by_the_plant(tmp_path):
+    from harness.plant_model import build_model
+
+    mjcf = Path(__file__).resolve().parents[1] / "mjcf"
+    scene = tmp_path / "my_scene.xml"
+    scene.write_text(f"""<mujoco model="my_scene">
+  <include file="{mjcf / 'master.xml'}"/>
+  <include file="{mjcf / 'octarm_base.xml'}"/>
+  <option timestep="0.001" integrator="implicitfast"><flag contact="disable"/></option>
+  <worldbody><light name="my_special_light" pos="0 0 3"/></worldbody>
+</mujoco>""")
+    scn = load_scenario({"plant": {"scene_xml": str(scene), "segments": 2}})
+    m, _ = build_model(scn.plant_master, scn.plant_slave, scn.plant)
+    assert m.light("my_special_light").id >= 0
