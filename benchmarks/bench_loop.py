@@ -1,24 +1,39 @@
 """Per-step cost of the harness against raw MuJoCo, in one run on one machine (issue: speed).
 
-    .venv/bin/python benchmarks/bench_loop.py            # default: paper scenario pieces, N in 4..32
-    .venv/bin/python benchmarks/bench_loop.py --quick    # fewer steps
+    .venv/bin/python benchmarks/bench_loop.py            # paper scenario (20 s), N in 4..32 (2 s runs)
+    .venv/bin/python benchmarks/bench_loop.py --quick    # 2 s runs
+    .venv/bin/python benchmarks/bench_loop.py --cpu -1   # do not pin to one core
 
-Measures (single core, numba kernels warmed up first):
-  raw      mj_step of the plant model alone (default N), stepped from compiled code via ctypes (the
-           limit) and from a Python loop, with the chain servos holding a fixed reference
+The process is pinned to one core (default: the last CPU), so that Rerun's background file-writer
+thread and everything else share it: "one core" wall time.  Every timing is the best of --reps
+interleaved repetitions (the machine is noisy).  Measures:
+  raw      MuJoCo alone for the same physics steps: the harness run logs [ctrl, qfrc_applied] before
+           every mj_step (`mujoco_chunk`'s cmd_log); a compiled loop replays exactly those commands
+           from the same initial state, calling the C mj_step through ctypes (nothing else)
   harness  the full control loop per control step (sensing, noise, both laws with the null-space
-           terms, actuation, record row) = simulate_mujoco's loop time / steps
-  +rrd     the same run plus kinematics replay, Rerun recording and nothing else
-  analytic the closed loop on the analytic plant (RK4, 1 step per control step)
-  parts    the controller's pieces called one by one (compiled)
-  N        raw and harness per step for N in 4, 8, 16, 32, CC constraints on and off
-This is a benchmark, not a test: it prints numbers and asserts nothing.
+           terms, actuation, elastic correction, record row) = simulate_mujoco's loop time / steps
+  + rec    + the recording geometry (compiled mj_kinematics replay, analytic backbone) and the
+           Trajectory, i.e. simulate_mujoco's wall time without the model build
+  + .rrd   + write_recording (the Rerun file, fully flushed)
+  one-time imports, first-call kernel load from numba's on-disk cache (every kernel, the MuJoCo loop
+           included, is cached), the compile into an empty cache (skip with --no-cold), model build
+  parts    the controller's pieces, each timed in a compiled loop over the recorded states of the
+           servo run (no Python call overhead), and the remainder of the loop
+  N        raw and harness per control step vs segments per section (CC on; CC off diverges with
+           the paper's gains for N >= 4: raw mj_step only, servos holding the initial shape)
+Prints markdown tables and writes them to benchmarks/RESULTS.md (unless --no-write).
+This is a benchmark, not a test: it asserts nothing.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import datetime
+import os
+import platform
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -27,136 +42,400 @@ import mujoco
 import numba
 import numpy as np
 
-from controllers import slave
-from controllers.params import Gains, SlaveParams, SubtaskSpec
-from controllers.subtasks import pack_subtask
+from controllers.control import MASTER_INFO, SLAVE_INFO
 from harness.config import PlantConfig, Scenario
 from harness.fast import K
-from harness.loop_kernels import MJ_STEP
-from harness.mujoco_sim import make_plant
-from harness.sim import simulate
+from harness.loop_kernels import MJ_FUNCS
+from harness.mujoco_sim import make_plant, simulate_mujoco
+from harness.record import write_recording
+from harness.sim import common_arrays, initial_state, noise_table, simulate_analytic
+from harness.trajectory import ROW_WIDTH
+
+ROOT = Path(__file__).resolve().parent.parent
 
 
-@numba.njit
-def _raw_loop(mptr, dptr, n):  # pragma: no cover - benchmark helper
-    for _ in range(n):
-        MJ_STEP(mptr, dptr)
+# ---------------------------------------------------------------------------------------------
+# raw MuJoCo
+# ---------------------------------------------------------------------------------------------
+def logged_run(scn: Scenario):
+    """Harness run with the command log: (trajectory, cmd_log (steps * substeps, nu + nv))."""
+    m, _, _ = make_plant(scn)
+    log = np.zeros((scn.n_steps * scn.substeps, m.nu + m.nv))
+    tr = simulate_mujoco(scn, cmd_log=log)
+    return tr, log[:len(tr) * scn.substeps]
 
 
-def raw_step_us(scn: Scenario, steps: int) -> tuple[float, float]:
-    """(compiled-loop us/step, python-loop us/step) for mj_step of the plant, servos holding q2(0)."""
+def raw_replay_s(scn: Scenario, log: np.ndarray) -> float:
+    """Seconds for the compiled replay of the logged commands (raw mj_step) from the initial state."""
+    m, d, _ = make_plant(scn)
+    t = time.perf_counter()
+    K.replay_commands(m._address, d._address, MJ_FUNCS, d.ctrl, d.qfrc_applied, log)
+    return time.perf_counter() - t
+
+
+def raw_hold_s(scn: Scenario, steps: int) -> float:
+    """Seconds for `steps` raw mj_step with the chain servos holding the initial q2 (no controller):
+    the only raw baseline where the harness itself diverges (free chain, CC off)."""
     m, d, cmap = make_plant(scn)
-    q2, _ = cmap.sense(d)
+    log = np.zeros((steps, m.nu + m.nv))
     if scn.plant.actuation == "servo":
-        d.ctrl[cmap.chain_actuator_ids] = cmap.joints_from_q2(q2)
-    d.ctrl[cmap.master_actuator_ids] = 0.0
-    mujoco.mj_forward(m, d)
-    state = mujoco.MjData(m)
-    mujoco.mj_copyData(state, m, d)
-    _raw_loop(m._address, d._address, 10)
-    mujoco.mj_copyData(d, m, state)
+        q2, _ = cmap.sense(d)
+        log[:, cmap.chain_actuator_ids] = cmap.joints_from_q2(q2)
     t = time.perf_counter()
-    _raw_loop(m._address, d._address, steps)
-    c = (time.perf_counter() - t) / steps * 1e6
-    mujoco.mj_copyData(d, m, state)
-    t = time.perf_counter()
-    for _ in range(steps):
-        mujoco.mj_step(m, d)
-    p = (time.perf_counter() - t) / steps * 1e6
-    return c, p
+    K.replay_commands(m._address, d._address, MJ_FUNCS, d.ctrl, d.qfrc_applied, log)
+    return time.perf_counter() - t
 
 
-def harness_step_us(scn: Scenario) -> tuple[float, object]:
-    tr = simulate(scn)
-    if tr.status != "ok":
-        return float("nan"), tr
-    return tr.meta["wall_time"] / len(tr) * 1e6, tr
+# ---------------------------------------------------------------------------------------------
+# controller parts, timed in compiled loops over recorded states
+# ---------------------------------------------------------------------------------------------
+def _part_timers() -> dict:
+    sense, add_noise, desired = K.sense_mujoco, K.add_noise, K.desired
+    mlaw, slaw, rec, cmds = K.master_control_kernel, K.slave_control_kernel, K.record_row, K.mujoco_commands
+    elastic, tipk, massnle = K.chain_elastic_correction, K.tip_kinematics, K.mass_nle_kernel
+    sub = K.subtask_kernel
+
+    @numba.njit
+    def t_sense(QP, QV, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, S):
+        n = c_qadr.shape[0]
+        qc = np.empty(n)
+        vc = np.empty(n)
+        for k in range(QP.shape[0]):
+            sense(QP[k], QV[k], m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, S[k])
+
+    @numba.njit
+    def t_desired(traj, dt, XD):
+        for k in range(XD.shape[0]):
+            desired(traj, k * dt, XD[k, 0], XD[k, 1], XD[k, 2])
+
+    @numba.njit
+    def t_noise(S, noise, scale, SN):
+        for k in range(S.shape[0]):
+            add_noise(S[k], noise[k], scale, SN[k])
+
+    @numba.njit
+    def t_master(mpk, gains, SN, XD, F, MI, T1s):
+        for k in range(SN.shape[0]):
+            mlaw(mpk, gains, SN[k, 0:2], SN[k, 2:4], XD[k, 0], XD[k, 1], XD[k, 2], F[0:2], T1s[k], MI[k])
+
+    @numba.njit
+    def t_slave(spk, nodes, weights, gains, spec, SN, MI, F, T2s, U2s, DEN, SI):
+        for k in range(SN.shape[0]):
+            slaw(spk, nodes, weights, gains, spec, SN[k, 4:10], SN[k, 10:16], MI[k, 0:2], MI[k, 8:10],
+                 MI[k, 6:8], F[2:4], T2s[k], U2s[k], DEN[k], SI[k])
+
+    @numba.njit
+    def t_tip(SN, order):
+        x = np.empty(2)
+        J = np.empty((2, 6))
+        H = np.empty((2, 6, 6))
+        Hd = np.empty((2, 6, 6))
+        for k in range(SN.shape[0]):
+            tipk(SN[k, 4:10], SN[k, 10:16], order, x, J, H, Hd)
+
+    @numba.njit
+    def t_mass(spk, nodes, weights, SN):
+        M = np.empty((6, 6))
+        N = np.empty(6)
+        for k in range(SN.shape[0]):
+            massnle(spk, SN[k, 4:10], SN[k, 10:16], nodes, weights, M, N)
+
+    @numba.njit
+    def t_sub(spec, SN):
+        x = np.empty(2)
+        J = np.empty((2, 6))
+        H = np.empty((2, 6, 6))
+        Hd = np.empty((2, 6, 6))
+        Jd = np.zeros((2, 6))
+        g = np.empty(6)
+        gd = np.empty(6)
+        parts = np.empty(3)
+        tipk(SN[0, 4:10], SN[0, 10:16], 3, x, J, H, Hd)
+        for k in range(SN.shape[0]):
+            sub(spec, J, H, Jd, Hd, SN[k, 4:10], SN[k, 10:16], g, gd, parts)
+
+    @numba.njit
+    def t_record(dt, S, XD, mpk, gains, spec, T1s, T2s, U2s, DEN, rows):
+        for k in range(S.shape[0]):
+            rec(k * dt, S[k], XD[k, 0], XD[k, 1], mpk, gains, spec, T1s[k], T2s[k], U2s[k], DEN[k], rows[k])
+
+    @numba.njit
+    def t_cmds(servo, ff, dt, SN, T2s, U2s, ref, C, R, L0, kvkp, CMD):
+        for k in range(SN.shape[0]):
+            cmds(servo, ff, dt, SN[k, 4:10], T2s[k], U2s[k], ref, C, R, L0, kvkp, CMD[k])
+
+    @numba.njit
+    def t_elastic(QP, c_qadr, R, C, L0, section, is_hinge, seg_kb, ke, kj, ks, OUT):
+        n = c_qadr.shape[0]
+        qc = np.empty(n)
+        for k in range(QP.shape[0]):
+            for c in range(n):
+                qc[c] = QP[k, c_qadr[c]]
+            elastic(qc, R, C, L0, section, is_hinge, seg_kb, ke, kj, ks, OUT[k])
+
+    return dict(sense=t_sense, desired=t_desired, noise=t_noise, master=t_master, slave=t_slave, tip=t_tip,
+                mass=t_mass, sub=t_sub, record=t_record, cmds=t_cmds, elastic=t_elastic)
 
 
-def parts_us(reps: int = 5000) -> dict[str, float]:
-    p = SlaveParams()
-    nodes, w = slave.gauss_legendre01(p.n_quad)
-    pk = p.packed()
-    q = np.array([0.33, 0.35, 0.4, 1.0, -2.0, 3.0])
-    dq = np.random.default_rng(0).normal(size=6)
-    x, J, H, Hd = np.empty(2), np.empty((2, 6)), np.empty((2, 6, 6)), np.empty((2, 6, 6))
-    M, N = np.empty((6, 6)), np.empty(6)
-    gk, sp = Gains().packed(), pack_subtask(SubtaskSpec(), p)
-    Jd = np.einsum("iab,b->ia", slave.tip_hessian(p, q), dq)
-    grad, graddot, parts = np.empty(6), np.empty(6), np.empty(3)
-    outs = (np.zeros(6), np.zeros(6), np.zeros(6), np.zeros(11))
-    mpk = np.array([0.6, 0.6, 1, 1, 0.03, 0.03, 0, 0, 9.81])
-    q1, dq1 = np.array([0.5, 1.1]), np.array([0.1, -0.2])
-    T1, minfo = np.zeros(2), np.zeros(10)
-    xd = np.array([0.0, 1.0])
-    calls = {
-        "master law (12)-(13)": lambda: K.master_control_kernel(mpk, gk, q1, dq1, xd, xd, xd, xd, T1, minfo),
-        "tip x2, J2, H, dH/dt": lambda: K.tip_kinematics(q, dq, 3, x, J, H, Hd),
-        "M2 and N2 (fused)": lambda: K.mass_nle_kernel(pk, q, dq, nodes, w, M, N),
-        "sub-task beta, grad, d/dt": lambda: K.subtask_kernel(sp, J, H, Jd, Hd, q, dq, grad, graddot, parts),
-        "slave law (17)-(18) total": lambda: K.slave_control_kernel(pk, nodes, w, gk, sp, q, dq, xd, xd, xd,
-                                                                      np.zeros(2), *outs),
-    }
-    out = {}
-    for name, f in calls.items():
-        f()
+def _best(reps: int, f, *args) -> float:
+    f(*args)  # compile / warm
+    best = np.inf
+    for _ in range(reps):
         t = time.perf_counter()
-        for _ in range(reps):
-            f()
-        out[name] = (time.perf_counter() - t) / reps * 1e6
+        f(*args)
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+def parts_us(scn: Scenario, log: np.ndarray, reps: int) -> dict[str, float]:
+    """us per control step of each piece of the harness loop, on the states of a logged run."""
+    m, d, cmap = make_plant(scn)
+    n, sub = len(log) // scn.substeps, scn.substeps
+    QP, QV = np.zeros((n, m.nq)), np.zeros((n, m.nv))
+    for k in range(n):  # states at the start of each control step (replayed)
+        QP[k], QV[k] = d.qpos, d.qvel
+        K.replay_commands(m._address, d._address, MJ_FUNCS, d.ctrl, d.qfrc_applied,
+                          log[k * sub:(k + 1) * sub])
+    T = _part_timers()
+    a = common_arrays(scn)
+    noise, scale = noise_table(scn, n)
+    if scale == 0.0:
+        noise = np.zeros((n, 16))
+    S, SN, XD = np.zeros((n, 16)), np.zeros((n, 16)), np.zeros((n, 3, 2))
+    MI, SI = np.zeros((n, MASTER_INFO)), np.zeros((n, SLAVE_INFO))
+    T1s, T2s, U2s, DEN = np.zeros((n, 2)), np.zeros((n, 6)), np.zeros((n, 6)), np.zeros((n, 6))
+    rows = np.zeros((n, ROW_WIDTH))
+    nc = cmap.n_chain
+    CMD, OUT = np.zeros((n, 2 + 2 * nc)), np.zeros((n, nc))
+    s0 = initial_state(scn)
+    ref = np.concatenate([s0[4:10], s0[10:16]])
+    servo = scn.plant.actuation == "servo"
+    kvkp = (np.divide(cmap.servo_kv, cmap.servo_kp, out=np.zeros(nc), where=cmap.servo_kp > 0)
+            if servo else np.zeros(nc))
+    r: dict[str, float] = {}
+    r["sense (joints -> q2, dq2)"] = _best(reps, T["sense"], QP, QV, cmap.master_qpos_adr,
+                                           cmap.master_dof_adr, cmap.chain_qpos_adr, cmap.chain_dof_adr,
+                                           cmap.R, cmap.L0, S)
+    r["desired x_d(t)"] = _best(reps, T["desired"], a["traj"], scn.control_dt, XD)
+    r["noise (AWGN)"] = _best(reps, T["noise"], S, noise, scale, SN)
+    r["master law (12)-(13)"] = _best(reps, T["master"], a["mpk_c"], a["gains"], SN, XD, a["F"], MI, T1s)
+    r["slave law (17)-(18) + null space"] = _best(reps, T["slave"], a["spk_c"], a["nodes"], a["weights"],
+                                                  a["gains"], a["spec"], SN, MI, a["F"], T2s, U2s, DEN, SI)
+    r["  of which tip x2, J2, H, dH/dt"] = _best(reps, T["tip"], SN, 3)
+    r["  of which M2, N2 (8 GL points/section)"] = _best(reps, T["mass"], a["spk_c"], a["nodes"],
+                                                         a["weights"], SN)
+    r["  of which sub-task beta, grad, rate"] = _best(reps, T["sub"], a["spec"], SN)
+    r["record row (true state)"] = _best(reps, T["record"], scn.control_dt, S, XD, a["mpk_c"], a["gains"],
+                                         a["spec"], T1s, T2s, U2s, DEN, rows)
+    r["commands (servo ref / torque map)"] = _best(reps, T["cmds"], servo, scn.plant.servo_feedforward,
+                                                   scn.control_dt, SN, T2s, U2s, ref, cmap.C, cmap.R, cmap.L0,
+                                                   kvkp, CMD)
+    r[f"elastic correction (x{sub} substeps)"] = sub * _best(reps, T["elastic"], QP, cmap.chain_qpos_adr,
+                                                            *cmap.elastic_args, OUT)
+    return {k: v / n * 1e6 for k, v in r.items()}
+
+
+# ---------------------------------------------------------------------------------------------
+# harness runs
+# ---------------------------------------------------------------------------------------------
+def harness_vs_raw(scn: Scenario, reps: int, rrd: bool) -> dict:
+    """Seconds per repetition (raw replay and harness interleaved): raw, loop, sim (= loop + recording
+    geometry + Trajectory, without the model build), rrd_write, total = sim + rrd_write."""
+    tr, log = logged_run(scn)
+    keys = ("raw", "loop", "sim", "rrd_write", "total", "build", "geometry")
+    out = {"steps": len(tr), "status": tr.status, "message": tr.message, "log": log, **{k: [] for k in keys}}
+    with tempfile.TemporaryDirectory() as tmp:
+        for rep in range(reps):
+            out["raw"].append(raw_replay_s(scn, log))
+            t = time.perf_counter()
+            tr = simulate_mujoco(scn)
+            sim = time.perf_counter() - t - tr.meta["build_time"]
+            out["loop"].append(tr.meta["wall_time"])
+            out["geometry"].append(tr.meta["geometry_time"])
+            out["build"].append(tr.meta["build_time"])
+            out["sim"].append(sim)
+            if rrd:
+                t = time.perf_counter()
+                write_recording(tr, Path(tmp) / f"run{rep}.rrd")
+                w = time.perf_counter() - t
+                out["rrd_write"].append(w)
+                out["total"].append(sim + w)
+    for k in keys:
+        out[k] = np.array(out[k]) if out[k] else np.full(reps, np.nan)
     return out
+
+
+def best_us(r: dict, key: str) -> float:
+    return float(np.min(r[key])) / r["steps"] * 1e6
+
+
+def paired_ratio(r: dict, key: str) -> float:
+    """Median over repetitions of key / raw measured back to back (robust to slow phases)."""
+    return float(np.median(r[key] / r["raw"]))
+
+
+_COLD = """
+import time
+t0 = time.perf_counter()
+from harness.config import Scenario
+from harness.mujoco_sim import simulate_mujoco
+t1 = time.perf_counter()
+scn = Scenario(duration=0.01)
+tr = simulate_mujoco(scn); t2 = time.perf_counter()
+tr = simulate_mujoco(scn); t3 = time.perf_counter()
+print(t1 - t0, (t2 - t1) - (t3 - t2), tr.meta["build_time"])
+"""
+
+
+def one_time_costs(cold: bool) -> dict[str, float]:
+    """Fresh processes: imports, first-call kernel load from the numba on-disk cache (and, if cold,
+    the compile of every kernel into an empty cache), model build."""
+    def run(env):
+        res = subprocess.run([sys.executable, "-c", _COLD], capture_output=True, text=True, cwd=ROOT,
+                             check=True, env=env)
+        return [float(v) for v in res.stdout.split()[-3:]]
+
+    run(None)  # make sure the regular cache is populated
+    imports, first, build = run(None)
+    out = {"imports": imports, "first_call_cached": first, "build": build}
+    if cold:
+        with tempfile.TemporaryDirectory() as tmp:
+            out["first_call_cold"] = run({**os.environ, "TELEOP_CACHE_DIR": tmp})[1]
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+def _pin(cpu: int) -> str:
+    if cpu < 0 or not hasattr(os, "sched_setaffinity"):
+        return "not pinned"
+    cpus = sorted(os.sched_getaffinity(0))
+    c = cpus[cpu] if cpu < len(cpus) else cpus[-1]
+    os.sched_setaffinity(0, {c})
+    return f"pinned to CPU {c}"
+
+
+def _machine() -> str:
+    model = "unknown CPU"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return (f"{os.cpu_count()} CPUs (nproc), {model}; Python {platform.python_version()}, MuJoCo "
+            f"{mujoco.__version__}, numba {numba.__version__}")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="2 s runs instead of the 20 s paper scenario")
     ap.add_argument("--segments", default="4,8,16,32", help="N values for the scaling table")
+    ap.add_argument("--reps", type=int, default=3, help="repetitions (best of)")
+    ap.add_argument("--cpu", type=int, default=-1 if os.cpu_count() == 1 else 1,
+                    help="index of the CPU to pin to (-1: no pinning)")
+    ap.add_argument("--no-write", action="store_true", help="do not write benchmarks/RESULTS.md")
+    ap.add_argument("--no-cold", action="store_true", help="skip the empty-cache compile timing (~1 min)")
     args = ap.parse_args()
+    pinned = _pin(args.cpu)
     dur = 2.0 if args.quick else 20.0
     base = Scenario(duration=dur)
-    # warm up every compiled kernel (numba cache or first compile)
-    simulate(dataclasses.replace(base, duration=0.05))
-    simulate(dataclasses.replace(base, duration=0.05, plant=PlantConfig(kind="analytic")))
+    lines: list[str] = []
 
-    print(f"# Harness speed (one core; {numba.config.NUMBA_NUM_THREADS} numba threads unused), "
-          f"paper scenario {dur:g} s at 1 kHz\n")
-    steps = int(dur / base.control_dt)
-    rows = []
+    def out(s: str = "") -> None:
+        print(s, flush=True)
+        lines.append(s)
+
+    cold = one_time_costs(not args.no_cold)
+    # warm up every compiled kernel (numba cache or first compile) in this process
+    for act in ("servo", "torque"):
+        simulate_mujoco(dataclasses.replace(base, duration=0.05, plant=PlantConfig(actuation=act)))
+    simulate_analytic(dataclasses.replace(base, duration=0.05, plant=PlantConfig(kind="analytic")))
+
+    out(f"# Harness speed vs raw MuJoCo ({datetime.date.today().isoformat()})\n")
+    out(f"Machine: {_machine()}; benchmark process {pinned} (one core for everything, including Rerun's "
+        f"writer thread); {args.reps} interleaved repetitions.\n")
+    out(f"Paper scenario: {dur:g} s at 1 kHz (1 ms physics = control step), N = {base.plant.segments} "
+        f"segments/section, CC equality constraints on, SNR {base.snr_db} dB noise, both controllers with "
+        "the null-space terms, record row every step.  'raw' = the same physics steps (logged commands "
+        "replayed from the same initial state, compiled loop calling the C mj_step).  Times are the best "
+        "of the repetitions, per control step; ratios are best / best and, in brackets, the median of "
+        "the ratios of back-to-back pairs (the machine's speed drifts by up to ~40 % between runs).\n")
+    out("| actuation | raw mj_step | harness loop | loop / raw | + recording geometry | + .rrd written | "
+        "total / raw | .rrd write alone |")
+    out("|---|---|---|---|---|---|---|---|")
+    results = {}
     for act in ("servo", "torque"):
         scn = dataclasses.replace(base, plant=dataclasses.replace(base.plant, actuation=act))
-        rc, rp = raw_step_us(scn, steps)
-        hs, tr = harness_step_us(scn)
-        with tempfile.TemporaryDirectory() as tmp:
-            from harness.record import write_recording
+        r = harness_vs_raw(scn, args.reps, rrd=True)
+        results[act] = r
+        us = {k: best_us(r, k) for k in ("raw", "loop", "sim", "total", "rrd_write")}
+        note = "" if r["status"] == "ok" else f" ({r['status']})"
+        out(f"| {act}{note} | {us['raw']:.1f} us | {us['loop']:.1f} us | **{us['loop'] / us['raw']:.2f}x** "
+            f"({paired_ratio(r, 'loop'):.2f}x) | {us['sim']:.1f} us | {us['total']:.1f} us | "
+            f"**{us['total'] / us['raw']:.2f}x** ({paired_ratio(r, 'total'):.2f}x) | "
+            f"{us['rrd_write']:.1f} us |")
+    out("\n'recording geometry' = loop + MuJoCo body/site poses (copied in the loop from the kinematics "
+        "mj_step computed) + analytic backbone + Trajectory, i.e. simulate_mujoco's wall time without the "
+        "model build; '.rrd written' adds write_recording (every step logged, file flushed).\n")
+    r = results["servo"]
+    text = (f"One-time costs (fresh process): imports {cold['imports']:.2f} s; first simulate call (numba "
+            f"loads every kernel from its on-disk cache) {cold['first_call_cached']:.2f} s")
+    if "first_call_cold" in cold:
+        text += f"; with an empty cache (compiles everything once) {cold['first_call_cold']:.1f} s"
+    text += (f"; model build {np.min(r['build']) * 1e3:.0f} ms per run; recording geometry after the loop "
+             f"{best_us(r, 'geometry'):.1f} us per step (backbone; included above).\n")
+    out(text)
 
-            t = time.perf_counter()
-            tr2 = simulate(scn)
-            write_recording(tr2, Path(tmp) / "run.rrd")
-            full = (time.perf_counter() - t) / steps * 1e6
-        rows.append((act, rc, rp, hs, full, tr.status))
-    print("| actuation | raw mj_step (compiled loop) | raw mj_step (Python loop) | harness loop | "
-          "harness/raw | run + replay + .rrd | real-time factor (harness loop) |")
-    print("|---|---|---|---|---|---|---|")
-    for act, rc, rp, hs, full, st in rows:
-        print(f"| {act} | {rc:.1f} us | {rp:.1f} us | {hs:.1f} us | {hs / rc:.2f}x | {full:.1f} us | "
-              f"{1e3 / hs:.1f}x |")
-    tr = simulate(dataclasses.replace(base, plant=PlantConfig(kind="analytic")))
-    print(f"\nanalytic plant (RK4, controller at 1 kHz): {tr.meta['wall_time'] / len(tr) * 1e6:.1f} us/step, "
-          f"{dur / tr.meta['wall_time']:.0f}x real time\n")
-    print("| controller part (compiled) | us/call |\n|---|---|")
-    for name, v in parts_us().items():
-        print(f"| {name} | {v:.2f} |")
-    print("\n| N | CC constraints | nv | raw mj_step | harness loop | harness/raw |\n|---|---|---|---|---|---|")
+    an = dataclasses.replace(base, plant=PlantConfig(kind="analytic"))
+    best = min(simulate_analytic(an).meta["wall_time"] for _ in range(args.reps))
+    out(f"Analytic plant (both laws + RK4 of the analytic models, 1 RK4 step per control step): "
+        f"{best / an.n_steps * 1e6:.1f} us per control step, {dur / best:.0f}x real time.\n")
+
+    scn = dataclasses.replace(base, duration=min(dur, 2.0))
+    parts = parts_us(scn, results["servo"]["log"][:scn.n_steps * scn.substeps], max(args.reps, 5))
+    r = results["servo"]
+    loop_us, raw_us = best_us(r, "loop"), best_us(r, "raw")
+    top = sum(v for k, v in parts.items() if not k.startswith(" "))
+    out("Where the harness loop's time goes beyond mj_step (servo, each piece in a compiled loop over the "
+        f"recorded states of the first {scn.duration:g} s, us per control step):\n")
+    out("| piece | us/step |\n|---|---|")
+    for k, v in parts.items():
+        out(f"| {k.strip() if not k.startswith(' ') else '&nbsp;&nbsp;' + k.strip()} | {v:.2f} |")
+    out(f"| **sum of the pieces** | **{top:.2f}** |")
+    out(f"| harness loop - raw mj_step (measured above) | {loop_us - raw_us:.2f} |")
+    out(f"| rest: loop bookkeeping, per-chunk Python and numba dispatch, interleaving with mj_step (caches), "
+        f"machine drift | {loop_us - raw_us - top:.2f} |")
+
+    out("\nCost vs segments per section N (2 s runs, CC constraints on unless stated; us per control "
+        "step):\n")
+    out("| N | CC | actuation | nv | raw mj_step | harness loop | loop / raw | + rec. geometry | note |")
+    out("|---|---|---|---|---|---|---|---|---|")
     for n_seg in [int(v) for v in args.segments.split(",")]:
         for cc in (True, False):
-            scn = dataclasses.replace(base, duration=min(dur, 2.0),
-                                      plant=dataclasses.replace(base.plant, segments=n_seg, enforce_cc=cc))
-            m, _, _ = make_plant(scn)
-            rc, _ = raw_step_us(scn, 2000)
-            hs, tr = harness_step_us(scn)
-            note = "" if tr.status == "ok" else f" ({tr.status}: {tr.message[:40]})"
-            print(f"| {n_seg} | {'on' if cc else 'off'} | {m.nv} | {rc:.1f} us | {hs:.1f} us{note} | "
-                  f"{hs / rc:.2f}x |")
+            for act in ("servo", "torque"):
+                scn = dataclasses.replace(base, duration=min(dur, 2.0),
+                                          plant=dataclasses.replace(base.plant, segments=n_seg, enforce_cc=cc,
+                                                                    actuation=act))
+                m, _, _ = make_plant(scn)
+                if cc:
+                    r = harness_vs_raw(scn, args.reps, rrd=False)
+                    raw, loop, sim = (best_us(r, k) for k in ("raw", "loop", "sim"))
+                    note = "" if r["status"] == "ok" else f"{r['status']}: {r['message'][:50]}"
+                    out(f"| {n_seg} | on | {act} | {m.nv} | {raw:.1f} us | {loop:.1f} us | "
+                        f"{loop / raw:.2f}x ({paired_ratio(r, 'loop'):.2f}x) | {sim:.1f} us | {note} |")
+                else:
+                    tr = simulate_mujoco(scn)
+                    steps = 2000
+                    raw = min(raw_hold_s(scn, steps) for _ in range(args.reps)) / steps * 1e6
+                    note = (f"harness {tr.status} at t = {tr.t[-1]:.3f} s; raw = servos holding q2(0)"
+                            if tr.status != "ok" else "raw = servos holding q2(0)")
+                    if act == "torque":
+                        note += " (torque: zero commands, chain falls under gravity)"
+                    out(f"| {n_seg} | off | {act} | {m.nv} | {raw:.1f} us | - | - | - | {note} |")
+    if not args.no_write:
+        (ROOT / "benchmarks" / "RESULTS.md").write_text("\n".join(lines) + "\n")
+        print(f"\nwritten to {ROOT / 'benchmarks' / 'RESULTS.md'}")
 
 
 if __name__ == "__main__":

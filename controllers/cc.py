@@ -30,26 +30,116 @@ import numpy as np
 
 IPOW = np.array([1.0 + 0.0j, 0.0 + 1.0j, -1.0 + 0.0j, 0.0 - 1.0j])  # i**n for n mod 4
 SERIES_RADIUS = 2.0  # |t| below which E_n uses the power series (24 terms: error < 1e-16)
+INV = 1.0 / np.arange(1.0, 33.0)  # INV[k] = 1 / (k + 1)
+
+
+def en_tuple(t):
+    """(E_0, E_1, E_2, E_3)(t), E_n(t) = int_0^1 v^n exp(i t v) dv, as a tuple of complex.
+
+    Real arithmetic, no allocation: the series term (i t)^m / m! is i^m a_m with a_m = t^m / m!
+    real (divisions replaced by the reciprocal table INV), and dividing by i t is a swap and a sign."""
+    if abs(t) < SERIES_RADIUS:
+        r0 = 0.0
+        r1 = 0.0
+        r2 = 0.0
+        r3 = 0.0
+        i0 = 0.0
+        i1 = 0.0
+        i2 = 0.0
+        i3 = 0.0
+        a = 1.0  # t^m / m!
+        for m in range(26):
+            v0 = a * INV[m]
+            v1 = a * INV[m + 1]
+            v2 = a * INV[m + 2]
+            v3 = a * INV[m + 3]
+            q = m & 3
+            if q == 0:
+                r0 += v0
+                r1 += v1
+                r2 += v2
+                r3 += v3
+            elif q == 1:
+                i0 += v0
+                i1 += v1
+                i2 += v2
+                i3 += v3
+            elif q == 2:
+                r0 -= v0
+                r1 -= v1
+                r2 -= v2
+                r3 -= v3
+            else:
+                i0 -= v0
+                i1 -= v1
+                i2 -= v2
+                i3 -= v3
+            a = a * t * INV[m]
+            if abs(a) < 1e-18:
+                break
+        return complex(r0, i0), complex(r1, i1), complex(r2, i2), complex(r3, i3)
+    c = np.cos(t)
+    s = np.sin(t)
+    # E_0 = (e - 1) / (i t);  E_n = (e - n E_{n-1}) / (i t);  z / (i t) = (Im z - i Re z) / t
+    r0 = s / t
+    i0 = -(c - 1.0) / t
+    r1 = (s - i0) / t
+    i1 = -(c - r0) / t
+    r2 = (s - 2.0 * i1) / t
+    i2 = -(c - 2.0 * r1) / t
+    r3 = (s - 3.0 * i2) / t
+    i3 = -(c - 3.0 * r2) / t
+    return complex(r0, i0), complex(r1, i1), complex(r2, i2), complex(r3, i3)
 
 
 def en_values(t, out):
     """E_n(t) = int_0^1 v^n exp(i t v) dv for n = 0..3 into out, complex (4,)."""
-    if abs(t) < SERIES_RADIUS:
-        for n in range(4):
-            out[n] = 0.0
-        term = 1.0 + 0.0j  # (i t)^m / m!
-        for m in range(26):
-            for n in range(4):
-                out[n] += term / (n + m + 1)
-            term = term * (1j * t) / (m + 1)
-            if abs(term) < 1e-18:
-                break
+    e0, e1, e2, e3 = en_tuple(t)
+    out[0] = e0
+    out[1] = e1
+    out[2] = e2
+    out[3] = e3
+
+
+def ipow_mul(k, z):
+    """i^k z (exact: a swap and signs)."""
+    k = k & 3
+    if k == 0:
+        return z
+    if k == 1:
+        return complex(-z.imag, z.real)
+    if k == 2:
+        return complex(-z.real, -z.imag)
+    return complex(z.imag, -z.real)
+
+
+def term_bases(u, thj, f):
+    """b_n = f u^(1+n) E_n(u Theta_j), n = 0..3, f = exp(i phi_prev) (phi_prev: angle at the start of
+    section j): every derivative of T_j(u) is i^(npre+nt) b_nt, times d_j if it is not
+    differentiated in d_j (see term_mono)."""
+    e0, e1, e2, e3 = en_tuple(u * thj)
+    u2 = u * u
+    u3 = u2 * u
+    u4 = u3 * u
+    return f * (u * e0), f * (u2 * e1), f * (u3 * e2), f * (u4 * e3)
+
+
+def tval(npre, nd, nt, dj, b0, b1, b2, b3):
+    """term_mono(npre, nd, nt) from the bases b_n of term_bases (0 for nd >= 2)."""
+    if nd >= 2:
+        return 0.0j
+    if nt == 0:
+        b = b0
+    elif nt == 1:
+        b = b1
+    elif nt == 2:
+        b = b2
     else:
-        e = complex(np.cos(t), np.sin(t))
-        it = 1j * t
-        out[0] = (e - 1.0) / it
-        for n in range(1, 4):
-            out[n] = (e - n * out[n - 1]) / it
+        b = b3
+    v = ipow_mul(npre + nt, b)
+    if nd == 0:
+        v = v * dj
+    return v
 
 
 def vtype(j, v):
@@ -88,54 +178,101 @@ def term_table(fj, u, dj, E, tab):
             tab[npre, 1, nt] = v
 
 
+def ty_acc(j, npre, nd, nt, ydot, dj, b0, b1, b2, b3):
+    """sum_w ydot_w term_mono(derivative (npre, nd, nt) of T_j, once more in y_w), w in order."""
+    acc = 0.0j
+    if nd == 0 and ydot[j] != 0.0:
+        acc += ydot[j] * tval(npre, 1, nt, dj, b0, b1, b2, b3)
+    tp = tval(npre + 1, nd, nt, dj, b0, b1, b2, b3)
+    for ll in range(j):
+        if ydot[3 + ll] != 0.0:
+            acc += ydot[3 + ll] * tp
+    if ydot[3 + j] != 0.0:
+        acc += ydot[3 + j] * tval(npre, nd, nt + 1, dj, b0, b1, b2, b3)
+    return acc
+
+
+def term_grad_add(j, dj, b0, b1, Jy):
+    """Add the y-gradient of T_j (bases b0, b1 from term_bases) to Jy (6,) complex."""
+    v = complex(-b0.imag, b0.real) * dj  # i b0 d_j: each earlier angle
+    for ll in range(j):
+        Jy[3 + ll] += v
+    Jy[j] += b0
+    Jy[3 + j] += complex(-b1.imag, b1.real) * dj  # i b1 d_j
+
+
+def term_ydd(j, dj, ydot, b0, b1, b2):
+    """ydot^T (d^2 T_j / dy^2) ydot (complex): with P = sum of the earlier angle rates, D = ydot[d_j],
+    W = ydot[Theta_j]:  -P^2 b0 d_j + 2 P D i b0 - 2 P W b1 d_j + 2 D W i b1 - W^2 b2 d_j."""
+    P = 0.0
+    for ll in range(j):
+        P += ydot[3 + ll]
+    D = ydot[j]
+    W = ydot[3 + j]
+    ib0 = complex(-b0.imag, b0.real)
+    ib1 = complex(-b1.imag, b1.real)
+    return -(P * P * dj) * b0 + (2.0 * P * D) * ib0 - (2.0 * P * W * dj) * b1 + (2.0 * D * W) * ib1 \
+        - (W * W * dj) * b2
+
+
 def term_y_derivs(j, u, d, th, phi_prev, order, ydot, c, Jy, Hy, Ty):
     """Accumulate T_j(u) and its y-derivatives into c (1,), Jy (6,), Hy (6,6), Ty (6,6) (complex).
 
     order 0: value; 1: + gradient; 2: + Hessian; 3: + third derivative contracted with ydot (6,).
-    phi_prev: angle at the start of section j (sum of earlier Theta).  Every derivative is a table
-    entry term_mono(npre, nd, nt) (see there), computed once per call.
+    phi_prev: angle at the start of section j (sum of earlier Theta).  Every derivative is
+    term_mono(npre, nd, nt) (see there): the variables of T_j play three roles, earlier angles
+    y[3 + l], l < j (npre), d_j (nd) and Theta_j (nt), so each block of Hy and Ty is one value.
     """
-    E = np.empty(4, dtype=np.complex128)
-    en_values(u * th[j], E)
-    fj = complex(np.cos(phi_prev), np.sin(phi_prev))
-    tab = np.zeros((4, 2, 4), dtype=np.complex128)
-    term_table(fj, u, d[j], E, tab)
-    c[0] += tab[0, 0, 0]
+    b0, b1, b2, b3 = term_bases(u, th[j], complex(np.cos(phi_prev), np.sin(phi_prev)))
+    dj = d[j]
+    c[0] += b0 * dj
     if order < 1:
         return
-    # relevant variables of term j: earlier angles 3..3+j-1 (type 1), d_j (2), Theta_j (3)
-    for a in range(6):
-        ta = vtype(j, a)
-        if ta == 0:
-            continue
-        pa = int(ta == 1)
-        da = int(ta == 2)
-        na = int(ta == 3)
-        Jy[a] += tab[pa, da, na]
-        if order < 2:
-            continue
-        for b in range(6):
-            tb = vtype(j, b)
-            if tb == 0:
-                continue
-            npre = pa + int(tb == 1)
-            nd = da + int(tb == 2)
-            nt = na + int(tb == 3)
-            if nd >= 2:
-                continue
-            Hy[a, b] += tab[npre, nd, nt]
-            if order < 3:
-                continue
-            acc = 0.0j
-            for w in range(6):
-                tw = vtype(j, w)
-                if tw == 0 or ydot[w] == 0.0:
-                    continue
-                ndw = nd + int(tw == 2)
-                if ndw >= 2:
-                    continue
-                acc += ydot[w] * tab[npre + int(tw == 1), ndw, nt + int(tw == 3)]
-            Ty[a, b] += acc
+    # gradient: earlier angles (1,0,0), d_j (0,1,0), Theta_j (0,0,1)
+    v = tval(1, 0, 0, dj, b0, b1, b2, b3)
+    for ll in range(j):
+        Jy[3 + ll] += v
+    Jy[j] += tval(0, 1, 0, dj, b0, b1, b2, b3)
+    Jy[3 + j] += tval(0, 0, 1, dj, b0, b1, b2, b3)
+    if order < 2:
+        return
+    dd = j
+    tt = 3 + j
+    h200 = tval(2, 0, 0, dj, b0, b1, b2, b3)
+    h110 = tval(1, 1, 0, dj, b0, b1, b2, b3)
+    h101 = tval(1, 0, 1, dj, b0, b1, b2, b3)
+    h011 = tval(0, 1, 1, dj, b0, b1, b2, b3)
+    h002 = tval(0, 0, 2, dj, b0, b1, b2, b3)
+    for la in range(j):
+        a = 3 + la
+        for lb in range(j):
+            Hy[a, 3 + lb] += h200
+        Hy[a, dd] += h110
+        Hy[dd, a] += h110
+        Hy[a, tt] += h101
+        Hy[tt, a] += h101
+    Hy[dd, tt] += h011
+    Hy[tt, dd] += h011
+    Hy[tt, tt] += h002
+    if order < 3:
+        return
+    # Ty = sum_w ydot_w d^3 T / dy_a dy_b dy_w: one more derivative in one of the roles
+    t200 = ty_acc(j, 2, 0, 0, ydot, dj, b0, b1, b2, b3)
+    t110 = ty_acc(j, 1, 1, 0, ydot, dj, b0, b1, b2, b3)
+    t101 = ty_acc(j, 1, 0, 1, ydot, dj, b0, b1, b2, b3)
+    t011 = ty_acc(j, 0, 1, 1, ydot, dj, b0, b1, b2, b3)
+    t002 = ty_acc(j, 0, 0, 2, ydot, dj, b0, b1, b2, b3)
+    for la in range(j):
+        a = 3 + la
+        for lb in range(j):
+            Ty[a, 3 + lb] += t200
+        Ty[a, dd] += t110
+        Ty[dd, a] += t110
+        Ty[a, tt] += t101
+        Ty[tt, a] += t101
+    Ty[dd, tt] += t011
+    Ty[tt, dd] += t011
+    Ty[tt, tt] += t002
 
 
 def chain_nz(q, dq, nzu, nzb, nzbd):
@@ -231,12 +368,42 @@ def point_y_derivs(s, u, d, th, order, ydot, c, Jy, Hy, Ty):
         phi += th[j]
 
 
+def tip_point_jacobian(q, order, x, J):
+    """Tip x (2,) and, if order >= 1, J (2, 6) (the order <= 1 path of tip_kinematics: the same
+    numbers, without the Hessian work arrays)."""
+    Jy = np.zeros(6, dtype=np.complex128)
+    c = 0.0j
+    phi = 0.0
+    for j in range(3):
+        dj = q[j]
+        thj = q[3 + j] * dj
+        b0, b1, b2, b3 = term_bases(1.0, thj, complex(np.cos(phi), np.sin(phi)))
+        c += b0 * dj
+        if order >= 1:
+            term_grad_add(j, dj, b0, b1, Jy)
+        phi += thj
+    x[0] = c.imag
+    x[1] = c.real
+    if order < 1:
+        return
+    for i in range(3):
+        jd = Jy[i] + Jy[3 + i] * q[3 + i]
+        jk = Jy[3 + i] * q[i]
+        J[0, i] = jd.imag
+        J[1, i] = jd.real
+        J[0, 3 + i] = jk.imag
+        J[1, 3 + i] = jk.real
+
+
 def tip_kinematics(q, dq, order, x, J, H, Hd):
     """Tip of the 3-section arm and its q-derivatives, as real arrays in [X, Z] rows.
 
     q, dq: (6,) [d (m), k (1/m)] and rates.  x (2,) m; J (2,6) = dx/dq; H (2,6,6) = d^2x/dq^2
     (order >= 2); Hd (2,6,6) = dH/dt along dq (order >= 3).  J2dot = H . dq.
     """
+    if order <= 1:
+        tip_point_jacobian(q, order, x, J)
+        return
     d = np.empty(3)
     th = np.empty(3)
     ydot = np.empty(6)
@@ -245,63 +412,121 @@ def tip_kinematics(q, dq, order, x, J, H, Hd):
     Jy = np.zeros(6, dtype=np.complex128)
     Hy = np.zeros((6, 6), dtype=np.complex128)
     Ty = np.zeros((6, 6), dtype=np.complex128)
-    point_y_derivs(2, 1.0, d, th, order, ydot, c, Jy, Hy, Ty)
+    phi = 0.0
+    for j in range(3):
+        term_y_derivs(j, 1.0, d, th, phi, order, ydot, c, Jy, Hy, Ty)
+        phi += th[j]
     x[0] = c[0].imag
     x[1] = c[0].real
-    if order < 1:
-        return
-    nzu = np.empty((6, 2), dtype=np.int64)
-    nzb = np.empty((6, 2))
-    nzbd = np.empty((6, 2))
-    chain_nz(q, dq, nzu, nzb, nzbd)
-    Jq = np.empty(6, dtype=np.complex128)
-    Hq = np.empty((6, 6), dtype=np.complex128)
-    Hqd = np.empty((6, 6), dtype=np.complex128)
-    chain_to_q(order, Jy, Hy, Ty, nzu, nzb, nzbd, Jq, Hq, Hqd)
+    # Exact chain rule y -> q with the sparse B = dy/dq (see chain_nz / chain_to_q / chain_to_q_dot),
+    # written out: column a = d_i of B has rows (i: 1, 3+i: k_i), column a = k_i has (3+i: d_i), and
+    # dB/dt the rates of those weights.  H and dH/dt are symmetric: the upper triangle is formed and
+    # mirrored.
     for a in range(6):
-        J[0, a] = Jq[a].imag
-        J[1, a] = Jq[a].real
-    if order < 2:
-        return
+        i = a if a < 3 else a - 3
+        if a < 3:
+            ja = Jy[i] + Jy[3 + i] * q[3 + i]
+        else:
+            ja = Jy[3 + i] * q[i]
+        J[0, a] = ja.imag
+        J[1, a] = ja.real
     for a in range(6):
-        for b in range(6):
-            H[0, a, b] = Hq[a, b].imag
-            H[1, a, b] = Hq[a, b].real
-    if order < 3:
-        return
-    chain_to_q_dot(Jy, Hy, Ty, ydot, nzu, nzb, nzbd, Hqd)
-    for a in range(6):
-        for b in range(6):
-            Hd[0, a, b] = Hqd[a, b].imag
-            Hd[1, a, b] = Hqd[a, b].real
+        ia = a if a < 3 else a - 3
+        ra0 = a  # rows of column a of B and their weights (w) and rates (v)
+        wa0 = 1.0
+        va0 = 0.0
+        ra1 = 3 + ia
+        wa1 = q[3 + ia]
+        va1 = dq[3 + ia]
+        if a >= 3:
+            ra0 = 3 + ia
+            wa0 = q[ia]
+            va0 = dq[ia]
+            wa1 = 0.0
+            va1 = 0.0
+        for b in range(a, 6):
+            ib = b if b < 3 else b - 3
+            rb0 = b
+            wb0 = 1.0
+            vb0 = 0.0
+            rb1 = 3 + ib
+            wb1 = q[3 + ib]
+            vb1 = dq[3 + ib]
+            if b >= 3:
+                rb0 = 3 + ib
+                wb0 = q[ib]
+                vb0 = dq[ib]
+                wb1 = 0.0
+                vb1 = 0.0
+            h = (Hy[ra0, rb0] * (wa0 * wb0) + Hy[ra0, rb1] * (wa0 * wb1)
+                 + Hy[ra1, rb0] * (wa1 * wb0) + Hy[ra1, rb1] * (wa1 * wb1))
+            if b == a + 3 and a < 3:  # d^2 Theta_i / (dd_i dk_i) = 1
+                h += Jy[3 + a]
+            H[0, a, b] = h.imag
+            H[1, a, b] = h.real
+            H[0, b, a] = h.imag
+            H[1, b, a] = h.real
+            if order < 3:
+                continue
+            hd = (Ty[ra0, rb0] * (wa0 * wb0) + Ty[ra0, rb1] * (wa0 * wb1)
+                  + Ty[ra1, rb0] * (wa1 * wb0) + Ty[ra1, rb1] * (wa1 * wb1)
+                  + Hy[ra0, rb0] * (va0 * wb0 + wa0 * vb0) + Hy[ra0, rb1] * (va0 * wb1 + wa0 * vb1)
+                  + Hy[ra1, rb0] * (va1 * wb0 + wa1 * vb0) + Hy[ra1, rb1] * (va1 * wb1 + wa1 * vb1))
+            if b == a + 3 and a < 3:  # + (Hy ydot)[Theta_i]
+                jd = 0.0j
+                for w in range(6):
+                    jd += Hy[3 + a, w] * ydot[w]
+                hd += jd
+            Hd[0, a, b] = hd.imag
+            Hd[1, a, b] = hd.real
+            Hd[0, b, a] = hd.imag
+            Hd[1, b, a] = hd.real
 
 
 def backbone_points(q, n_per_section, out):
     """Backbone points [X, Z] at n_per_section + 1 evenly spaced material points per section
     (shared section ends counted once): out (3 n + 1, 2), m."""
-    d = np.empty(3)
-    th = np.empty(3)
-    for i in range(3):
-        d[i] = q[i]
-        th[i] = q[3 + i] * q[i]
-    E = np.empty(4, dtype=np.complex128)
     base = 0.0j
     phi = 0.0
     out[0, 0] = 0.0
     out[0, 1] = 0.0
     r = 1
     for s in range(3):
+        ds = q[s]
+        ths = q[3 + s] * ds
         f = complex(np.cos(phi), np.sin(phi))
         for m in range(1, n_per_section + 1):
             u = m / n_per_section
-            en_values(u * th[s], E)
-            p = base + f * u * d[s] * E[0]
+            p = base + f * u * ds * en0(u * ths)
             out[r, 0] = p.imag
             out[r, 1] = p.real
             r += 1
-        en_values(th[s], E)
-        base = base + f * d[s] * E[0]
-        phi += th[s]
+        base = base + f * ds * en0(ths)
+        phi += ths
+
+
+def en0(t):
+    """E_0(t) alone (the first value of en_tuple, computed by the same operations)."""
+    if abs(t) < SERIES_RADIUS:
+        r0 = 0.0
+        i0 = 0.0
+        a = 1.0
+        for m in range(26):
+            v0 = a * INV[m]
+            q = m & 3
+            if q == 0:
+                r0 += v0
+            elif q == 1:
+                i0 += v0
+            elif q == 2:
+                r0 -= v0
+            else:
+                i0 -= v0
+            a = a * t * INV[m]
+            if abs(a) < 1e-18:
+                break
+        return complex(r0, i0)
+    return complex(np.sin(t) / t, -(np.cos(t) - 1.0) / t)
 
 
 def gram_terms(J, Jd, out):
@@ -318,6 +543,7 @@ def gram_terms(J, Jd, out):
 
 
 KERNELS = (
-    "gram_terms", "en_values", "vtype", "term_mono", "term_table", "term_y_derivs", "chain_nz", "y_of_q",
-    "chain_to_q", "chain_to_q_dot", "point_y_derivs", "tip_kinematics", "backbone_points",
+    "gram_terms", "en_tuple", "en_values", "ipow_mul", "term_bases", "tval", "ty_acc", "term_grad_add",
+    "term_ydd", "vtype", "term_mono", "term_table", "term_y_derivs", "chain_nz", "y_of_q", "chain_to_q",
+    "chain_to_q_dot", "point_y_derivs", "tip_point_jacobian", "tip_kinematics", "backbone_points", "en0",
 )

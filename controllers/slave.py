@@ -23,7 +23,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cc import backbone_points, chain_nz, chain_to_q, point_y_derivs, term_y_derivs, tip_kinematics, y_of_q
+from .cc import (
+    backbone_points,
+    chain_nz,
+    chain_to_q,
+    point_y_derivs,
+    term_bases,
+    term_grad_add,
+    term_ydd,
+    tip_kinematics,
+    y_of_q,
+)
 from .params import SlaveParams
 
 # layout of SlaveParams.packed(): name -> offset (each 3 wide, gravity 2 wide)
@@ -165,84 +175,103 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
     """Fused M2 (6,6) and N2 (6,) for the control loop (outputs overwritten).
 
     Same model as `dynamics_kernel` + `nle_kernel`, computed faster and exactly:
-    * the completed sections' end terms T_j(1), j < s, are summed once and shared by all quadrature
-      points of section s (prefix sums);
     * the Coriolis/centripetal vector uses the Lagrange form for a continuum of particles,
       C(q, dq) dq = sum_s int m_s J_p^T (d^2 p/dt^2 at ddq = 0) du  (+ the slice-rotation analogue),
       with d^2 p/dt^2|_{ddq=0} = ydot^T H_y ydot + sum_i dp/dTheta_i * 2 dk_i dd_i.  It equals the
       Christoffel form C dq of `nle_kernel` identically (tested to rounding), without building
-      the 6x6x6 tensor dM/dq.
+      the 6x6x6 tensor dM/dq;
+    * along section s the point's q-gradient is affine in two scalar functions of u,
+      J_p(u) = V0 + b0(u) V1 + b1(u) V2 (b_n = exp(i phi_s) u^(1+n) E_n(u Theta_s), controllers.cc
+      `term_bases`; V0 = the completed sections' end terms, V1, V2 constant), and d^2 p/dt^2 is
+      affine in b0, b1, b2 (`term_ydd`).  So the quadrature only accumulates the weighted moments
+      sum_g w_g conj(phi_k) psi_m of (1, b0, b1, b2) (the same Gauss-Legendre points and weights),
+      and M and N are assembled once per section from them: the same sums, regrouped.
     """
     d = np.empty(3)
     th = np.empty(3)
     ydot = np.empty(6)
     y_of_q(q, d, th, ydot, dq)
-    nzu = np.empty((6, 2), dtype=np.int64)
-    nzb = np.empty((6, 2))
-    nzbd = np.empty((6, 2))
-    chain_nz(q, dq, nzu, nzb, nzbd)
-    # prefix sums of the completed sections (order 2)
-    Pc = np.zeros(3, dtype=np.complex128)
+    # prefix sums over the completed sections: y-gradient and ydot^T H_y ydot of their end terms
     PJ = np.zeros((3, 6), dtype=np.complex128)
-    PH = np.zeros((3, 6, 6), dtype=np.complex128)
-    c = np.zeros(1, dtype=np.complex128)
-    Jy = np.zeros(6, dtype=np.complex128)
-    Hy = np.zeros((6, 6), dtype=np.complex128)
-    Ty = np.zeros((6, 6), dtype=np.complex128)
-    phi = np.zeros(3)
+    Pcor = np.zeros(3, dtype=np.complex128)
+    fs = np.empty(3, dtype=np.complex128)  # exp(i phi) at the start of each section
+    fs[0] = 1.0
+    phi = 0.0
     for s in range(1, 3):
-        c[0] = 0.0
+        j = s - 1
+        b0, b1, b2, b3 = term_bases(1.0, th[j], fs[j])
+        phi += th[j]
+        fs[s] = complex(np.cos(phi), np.sin(phi))
         for a in range(6):
-            Jy[a] = 0.0
-            for b in range(6):
-                Hy[a, b] = 0.0
-        term_y_derivs(s - 1, 1.0, d, th, phi[s - 1], 2, ydot, c, Jy, Hy, Ty)
-        phi[s] = phi[s - 1] + th[s - 1]
-        Pc[s] = Pc[s - 1] + c[0]
-        for a in range(6):
-            PJ[s, a] = PJ[s - 1, a] + Jy[a]
-            for b in range(6):
-                PH[s, a, b] = PH[s - 1, a, b] + Hy[a, b]
+            PJ[s, a] = PJ[j, a]
+        term_grad_add(j, d[j], b0, b1, PJ[s])
+        Pcor[s] = Pcor[j] + term_ydd(j, d[j], ydot, b0, b1, b2)
     for a in range(6):
         N[a] = 0.0
         for b in range(6):
             M[a, b] = 0.0
-    gc = complex(pk[PACK_G + 1], pk[PACK_G])  # gravity as Z + iX
-    Jq = np.empty(6, dtype=np.complex128)
+    gcc = complex(pk[PACK_G + 1], -pk[PACK_G])  # conj(gravity as Z + iX)
+    cen = np.empty(3)  # 2 dk_i dd_i
+    for i in range(3):
+        cen[i] = 2.0 * dq[3 + i] * dq[i]
+    Y = np.empty((3, 6), dtype=np.complex128)  # y-space V0, V1, V2
+    V = np.empty((3, 6), dtype=np.complex128)  # q-space (B^T Y)
+    Z = np.empty((3, 6), dtype=np.complex128)
+    Q = np.empty((3, 4), dtype=np.complex128)  # Q[k, m] = sum_g w conj(phi_k) psi_m
+    A = np.empty(4, dtype=np.complex128)  # d^2p/dt^2 = sum_m A_m psi_m, psi = (1, b0, b1, b2)
     alpha = np.empty(6)
     for s in range(3):
         ms = pk[PACK_M + s]
         Is = pk[PACK_IS + s]
+        ds = d[s]
+        ids = complex(0.0, ds)
+        # J_p(u) = V0 + b0 V1 + b1 V2 in y-space (term_grad_add: i b0 d_s on earlier angles, b0 on
+        # d_s, i b1 d_s on Theta_s)
+        for a in range(6):
+            Y[0, a] = PJ[s, a]
+            Y[1, a] = 0.0
+            Y[2, a] = 0.0
+        for ll in range(s):
+            Y[1, 3 + ll] = ids
+        Y[1, s] = 1.0
+        Y[2, 3 + s] = ids
+        for k in range(3):
+            for i in range(3):
+                V[k, i] = Y[k, i] + Y[k, 3 + i] * q[3 + i]
+                V[k, 3 + i] = Y[k, 3 + i] * q[i]
+        # d^2 p/dt^2 (ddq = 0) = Pcor + term_ydd + sum_i J_p[Theta_i] cen_i, affine in (b0, b1, b2)
+        P = 0.0
+        for ll in range(s):
+            P += ydot[3 + ll]
+        D = ydot[s]
+        W = ydot[3 + s]
+        A[0] = Pcor[s]
+        A[1] = complex(-(P * P * ds), 2.0 * P * D)
+        A[2] = complex(-(2.0 * P * W * ds), 2.0 * D * W)
+        A[3] = -(W * W * ds)
+        for i in range(3):
+            A[0] += Y[0, 3 + i] * cen[i]
+            A[1] += Y[1, 3 + i] * cen[i]
+            A[2] += Y[2, 3 + i] * cen[i]
+        # weighted moments over the Gauss-Legendre points of the section
+        for k in range(3):
+            for m in range(4):
+                Q[k, m] = 0.0
         for g in range(nodes.shape[0]):
             u = nodes[g]
             w = weights[g]
-            c[0] = Pc[s]
-            for a in range(6):
-                Jy[a] = PJ[s, a]
-                for b in range(6):
-                    Hy[a, b] = PH[s, a, b]
-            term_y_derivs(s, u, d, th, phi[s], 2, ydot, c, Jy, Hy, Ty)
-            for a in range(6):
-                Jq[a] = Jy[nzu[a, 0]] * nzb[a, 0] + Jy[nzu[a, 1]] * nzb[a, 1]
-            # d^2 p / dt^2 at ddq = 0
-            acc = 0.0j
-            for a in range(6):
-                if ydot[a] != 0.0:
-                    row = 0.0j
-                    for b in range(6):
-                        row += Hy[a, b] * ydot[b]
-                    acc += row * ydot[a]
-            for i in range(3):
-                acc += Jy[3 + i] * (2.0 * dq[3 + i] * dq[i])
-            mw = ms * w
-            for a in range(6):
-                ja = Jq[a].conjugate()
-                N[a] += mw * ((ja * acc).real - (gc.conjugate() * Jq[a]).real)
-                for b in range(a, 6):
-                    v = mw * (ja * Jq[b]).real
-                    M[a, b] += v
-                    if b != a:
-                        M[b, a] += v
+            b0, b1, b2, b3 = term_bases(u, th[s], fs[s])
+            wb0 = w * b0.conjugate()
+            wb1 = w * b1.conjugate()
+            Q[0, 0] += w
+            Q[0, 1] += w * b0
+            Q[0, 2] += w * b1
+            Q[0, 3] += w * b2
+            Q[1, 1] += wb0 * b0
+            Q[1, 2] += wb0 * b1
+            Q[1, 3] += wb0 * b2
+            Q[2, 2] += wb1 * b1
+            Q[2, 3] += wb1 * b2
             if Is != 0.0:
                 thdd = 0.0  # d^2 theta/dt^2 at ddq = 0
                 for a in range(6):
@@ -257,6 +286,33 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
                     N[a] += iw * alpha[a] * thdd
                     for b in range(6):
                         M[a, b] += iw * alpha[a] * alpha[b]
+        Q[1, 0] = Q[0, 1].conjugate()
+        Q[2, 0] = Q[0, 2].conjugate()
+        Q[2, 1] = Q[1, 2].conjugate()
+        # M_ab += m_s Re sum_kl Q_kl conj(V_ka) V_lb;  N_a += m_s Re sum_k conj(V_ka) (sum_m Q_km A_m)
+        #                                                  - m_s Re(conj(g) sum_k V_ka Q_0k)
+        for a in range(6):
+            for ll in range(3):
+                z = 0.0j
+                for k in range(3):
+                    z += Q[k, ll] * V[k, a].conjugate()
+                Z[ll, a] = z
+        for a in range(6):
+            for b in range(a, 6):
+                v = 0.0
+                for ll in range(3):
+                    v += (Z[ll, a] * V[ll, b]).real
+                v *= ms
+                M[a, b] += v
+                if b != a:
+                    M[b, a] += v
+        for k in range(3):
+            uk = 0.0j
+            for m in range(4):
+                uk += Q[k, m] * A[m]
+            gk = gcc * Q[0, k]
+            for a in range(6):
+                N[a] += ms * ((V[k, a].conjugate() * uk).real - (gk * V[k, a]).real)
     for i in range(3):
         dd = q[i]
         k = q[3 + i]

@@ -81,6 +81,24 @@ def manipulability_kernel(J, H, Jd, Hd, dq, grad, graddot):
     return beta, det
 
 
+def limit_powers(s, p2):
+    """(s^(p2-2), s^(p2-1), s^p2); an integer p2 >= 2 (the usual case) by multiplications
+    (binary powering, exact to rounding) instead of three pow() calls."""
+    n = int(p2)
+    if n == p2 and n >= 2:
+        a = 1.0
+        b = s
+        e = n - 2
+        while e > 0:
+            if e & 1:
+                a *= b
+            b *= b
+            e >>= 1
+        a1 = a * s
+        return a, a1, a1 * s
+    return s ** (p2 - 2.0), s ** (p2 - 1.0), s ** p2
+
+
 def limits_kernel(spec, q, dq, grad, graddot):
     """beta_l = sum (1 - s^(2p)) over 3 lengths and 3 bending angles; grad and d/dt grad (6,)."""
     p2 = 2.0 * spec[2]
@@ -97,15 +115,17 @@ def limits_kernel(spec, q, dq, grad, graddot):
         # length coordinate
         s = (q[i] - cen) / hw
         sd = dq[i] / hw
-        beta += 1.0 - s ** p2
-        grad[i] += -p2 * s ** (p2 - 1.0) / hw
-        graddot[i] += -p2 * (p2 - 1.0) * s ** (p2 - 2.0) * sd / hw
+        sm2, sm1, sp = limit_powers(s, p2)
+        beta += 1.0 - sp
+        grad[i] += -p2 * sm1 / hw
+        graddot[i] += -p2 * (p2 - 1.0) * sm2 * sd / hw
         # bending angle coordinate s = k d / bmax
         s = q[3 + i] * q[i] / bmax
         sd = (dq[3 + i] * q[i] + q[3 + i] * dq[i]) / bmax
-        beta += 1.0 - s ** p2
-        f = -p2 * s ** (p2 - 1.0)
-        fd = -p2 * (p2 - 1.0) * s ** (p2 - 2.0) * sd
+        sm2, sm1, sp = limit_powers(s, p2)
+        beta += 1.0 - sp
+        f = -p2 * sm1
+        fd = -p2 * (p2 - 1.0) * sm2 * sd
         # ds/dd = k / bmax, ds/dk = d / bmax
         grad[i] += f * q[3 + i] / bmax
         grad[3 + i] += f * q[i] / bmax
@@ -137,7 +157,7 @@ def subtask_kernel(spec, J, H, Jd, Hd, q, dq, grad, graddot, parts):
     return beta
 
 
-KERNELS = ("manipulability_kernel", "limits_kernel", "subtask_kernel")
+KERNELS = ("manipulability_kernel", "limit_powers", "limits_kernel", "subtask_kernel")
 
 
 # --------------------------------------------------------------------------------------------- API

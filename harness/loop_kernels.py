@@ -13,10 +13,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from controllers.cc import tip_kinematics
+from controllers.cc import backbone_points, tip_kinematics
 from controllers.control import (
     DET_MIN,
     MASTER_INFO,
+    MI_DE1,
+    MI_E1,
+    MI_X1,
+    SI_BM,
+    SI_DE2,
+    SI_E2,
+    SI_X2,
+    SI_YA,
     SLAVE_INFO,
     master_control_kernel,
     slave_control_kernel,
@@ -25,12 +33,8 @@ from controllers.master import master_kernel
 from controllers.slave import mass_nle_kernel
 from controllers.subtasks import limits_kernel
 from harness.plant_model import (
-    chain_dq2_from_joints,
     chain_elastic_correction,
     chain_force_from_T2,
-    chain_joints_from_q2,
-    chain_joints_jacobian,
-    chain_q2_from_joints,
 )
 
 # record row layout (must match harness.trajectory.ROW_FIELDS)
@@ -153,6 +157,30 @@ def record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row):
         row[R_U2 + a] = u2[a]
 
 
+def record_row_info(t, state, xd, dxd, minfo, sinfo, T1, T2, u2, deN, row):
+    """record_row when both laws ran on the noise-free state with status 0: x1, e1, de1 from the
+    master info, x2, e2, de2, beta_m, y_a from the slave info (the same operations on the same
+    numbers as record_row: identical rows, without a second master_kernel / tip_kinematics)."""
+    row[R_T] = t
+    for i in range(16):
+        row[R_Q1 + i] = state[i]
+    for i in range(2):
+        row[R_XD + i] = xd[i]
+        row[R_X1 + i] = minfo[MI_X1 + i]
+        row[R_X2 + i] = sinfo[SI_X2 + i]
+        row[R_E1 + i] = minfo[MI_E1 + i]
+        row[R_E2 + i] = sinfo[SI_E2 + i]
+        row[R_DE1 + i] = minfo[MI_DE1 + i]
+        row[R_DE2 + i] = sinfo[SI_DE2 + i]
+        row[R_T1 + i] = T1[i]
+    row[R_BETA] = sinfo[SI_BM]
+    row[R_YA] = sinfo[SI_YA]
+    for a in range(6):
+        row[R_DEN + a] = deN[a]
+        row[R_T2 + a] = T2[a]
+        row[R_U2 + a] = u2[a]
+
+
 def plant_accel(mpk, spk, nodes, weights, s, T1, T2, F, acc):
     """Analytic plant forward dynamics: acc (16,) = d/dt [q1, dq1, q2, dq2].  False if not SPD."""
     x = np.empty(2)
@@ -239,7 +267,10 @@ def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale
                 sensed[i] = state[i]
         st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F,
                           T1, T2, u2, deN, minfo, sinfo)
-        record_row(t, state, xd, dxd, mpk_c, gains, spec, T1, T2, u2, deN, rows[k - k0])
+        if noise_scale == 0.0 and st == 0:  # laws ran on the true state: reuse their kinematics
+            record_row_info(t, state, xd, dxd, minfo, sinfo, T1, T2, u2, deN, rows[k - k0])
+        else:
+            record_row(t, state, xd, dxd, mpk_c, gains, spec, T1, T2, u2, deN, rows[k - k0])
         if st != 0:
             return st, k - k0 + 1
         for j in range(nsub):
@@ -290,14 +321,21 @@ def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale
     return 0, k1 - k0
 
 
-KERNELS = ("cholesky_solve", "add_noise", "control_laws", "record_row", "plant_accel", "desired",
-           "analytic_chunk")
+KERNELS = ("cholesky_solve", "add_noise", "control_laws", "record_row", "record_row_info", "plant_accel",
+           "desired", "analytic_chunk")
 
 
 # =============================================================================================
-# MuJoCo plant: the whole control loop compiled, calling MuJoCo's C mj_step through ctypes
+# MuJoCo plant: the whole control loop compiled, calling MuJoCo's C functions by address
 # =============================================================================================
-def _load_mj_step():
+# The C functions `void f(const mjModel*, mjData*)` are called through a function pointer passed as
+# an argument (`mjfn` = MJ_FUNCS: [mj_step, mj_kinematics] addresses of this process), not through a
+# ctypes object, so that numba can cache the compiled loop on disk (a ctypes global would bake this
+# process' addresses into the code and make it uncacheable: ~3 s of compilation in every process).
+MJ_STEP_FN, MJ_KINEMATICS_FN = 0, 1
+
+
+def _mj_addresses():
     import ctypes
     import glob
     import os
@@ -305,27 +343,83 @@ def _load_mj_step():
     import mujoco
 
     libs = sorted(glob.glob(os.path.join(os.path.dirname(mujoco.__file__), "libmujoco.so*")))
-    if not libs:  # pragma: no cover - other platforms: the Python loop in harness.mujoco_sim is used
-        return None
-    fn = ctypes.CDLL(libs[0]).mj_step
-    fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
-    fn.restype = None
-    return fn
+    if not libs:  # pragma: no cover - other platforms
+        return np.zeros(2, dtype=np.int64)
+    lib = ctypes.CDLL(libs[0])
+    names = ("mj_step", "mj_kinematics")
+    return np.array([ctypes.cast(getattr(lib, f), ctypes.c_void_p).value for f in names], dtype=np.int64)
 
 
-MJ_STEP = _load_mj_step()
+MJ_FUNCS = _mj_addresses()  # pass to the kernels below; never use as a global inside them
+
+
+def mj_call(fn, mptr, dptr):
+    """Call the MuJoCo C function at address fn with (mjModel*, mjData*) (interpreted: ctypes;
+    compiled: a direct indirect call, see the numba overload below)."""
+    import ctypes
+
+    if fn == 0:  # pragma: no cover
+        raise RuntimeError("MuJoCo's shared library was not found (libmujoco.so*)")
+    ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p)(int(fn))(mptr, dptr)
+
+
+try:  # compiled form of mj_call (numba is optional: without it the kernels run interpreted)
+    from llvmlite import ir as _ir
+    from numba import types as _nbt
+    from numba.extending import intrinsic as _intrinsic
+    from numba.extending import overload as _overload
+
+    @_intrinsic
+    def _mj_call_ptr(typingctx, fn, mptr, dptr):
+        sig = _nbt.void(fn, mptr, dptr)
+
+        def codegen(context, builder, signature, args):
+            vp = _ir.IntType(8).as_pointer()
+            fnty = _ir.FunctionType(_ir.VoidType(), [vp, vp])
+            f = builder.inttoptr(args[0], fnty.as_pointer())
+            builder.call(f, [builder.inttoptr(args[1], vp), builder.inttoptr(args[2], vp)])
+            return context.get_dummy_value()
+
+        return sig, codegen
+
+    @_overload(mj_call)
+    def _mj_call_overload(fn, mptr, dptr):
+        def impl(fn, mptr, dptr):
+            _mj_call_ptr(fn, mptr, dptr)
+
+        return impl
+except ImportError:  # pragma: no cover
+    pass
 
 
 def sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state):
-    """True (noise-free) state (16,) [q1, dq1, q2, dq2] from MuJoCo joints; qc, vc (n_chain,) work."""
+    """True (noise-free) state (16,) [q1, dq1, q2, dq2] from MuJoCo joints; qc, vc (n_chain,) work.
+
+    chain_q2_from_joints and chain_dq2_from_joints fused into one pass over R (the same sums in the
+    same order: identical numbers)."""
     for i in range(2):
         state[i] = qpos[m_qadr[i]]
         state[2 + i] = qvel[m_dadr[i]]
-    for c in range(c_qadr.shape[0]):
+    n = c_qadr.shape[0]
+    for c in range(n):
         qc[c] = qpos[c_qadr[c]]
         vc[c] = qvel[c_dadr[c]]
-    chain_q2_from_joints(qc, R, L0, state[4:10])
-    chain_dq2_from_joints(qc, vc, R, L0, state[10:16])
+    for i in range(3):
+        e = 0.0
+        th = 0.0
+        de = 0.0
+        dth = 0.0
+        for c in range(n):
+            e += R[i, c] * qc[c]
+            th += R[3 + i, c] * qc[c]
+            de += R[i, c] * vc[c]
+            dth += R[3 + i, c] * vc[c]
+        d = L0[i] + e
+        k = th / d
+        state[4 + i] = d
+        state[7 + i] = k
+        state[10 + i] = de
+        state[13 + i] = (dth - k * de) / d
 
 
 def mujoco_commands(servo, feedforward, dt, q2s, T2, u2, ref, C, R, L0, kv_over_kp, cmd):
@@ -334,21 +428,28 @@ def mujoco_commands(servo, feedforward, dt, q2s, T2, u2, ref, C, R, L0, kv_over_
     Torque actuation: chain ctrl = virtual-work map of T2 at the sensed q2s (motors).
     Servo actuation: integrate the reference q2 with u2 (semi-implicit Euler, ref = [q_ref, dq_ref]),
     ctrl = joints(q_ref) + (kv/kp) A(q_ref) dq_ref (position servo with velocity feed-forward folded
-    into the target), feed-forward = virtual-work map of T2 at q_ref (if enabled)."""
+    into the target), feed-forward = virtual-work map of T2 at q_ref (if enabled).  joints(q) = C u,
+    u = [d - L0, k d], and the rows of A = d joints / d q2 (chain_joints_from_q2 / _jacobian) are
+    formed on the fly, in the same order (identical numbers, no (n, 6) work array)."""
     n = C.shape[0]
     if servo:
         for a in range(6):
             ref[6 + a] += u2[a] * dt
             ref[a] += ref[6 + a] * dt
-        tgt = np.empty(n)
-        chain_joints_from_q2(ref[0:6], C, L0, tgt)
-        A = np.empty((n, 6))
-        chain_joints_jacobian(ref[0:6], C, A)
+        u = np.empty(6)
+        for i in range(3):
+            u[i] = ref[i] - L0[i]
+            u[3 + i] = ref[3 + i] * ref[i]
         for c in range(n):
-            v = 0.0
+            tgt = 0.0
             for a in range(6):
-                v += A[c, a] * ref[6 + a]
-            cmd[2 + c] = tgt[c] + kv_over_kp[c] * v
+                tgt += C[c, a] * u[a]
+            v = 0.0
+            for i in range(3):
+                v += (C[c, i] + ref[3 + i] * C[c, 3 + i]) * ref[6 + i]
+            for i in range(3):
+                v += (ref[i] * C[c, 3 + i]) * ref[9 + i]
+            cmd[2 + c] = tgt + kv_over_kp[c] * v
         if feedforward:
             chain_force_from_T2(ref[0:6], T2, R, cmd[2 + n:2 + 2 * n])
         else:
@@ -360,15 +461,21 @@ def mujoco_commands(servo, feedforward, dt, q2s, T2, u2, ref, C, R, L0, kv_over_
             cmd[2 + n + c] = 0.0
 
 
-def mujoco_chunk(mptr, dptr, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc, m_qadr, m_dadr, m_act,
+def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc, m_qadr, m_dadr, m_act,
                  c_qadr, c_dadr, c_act, R, C, L0, eargs,
                  servo, feedforward, kv_over_kp, traj, noise, noise_scale, F, mpk_c, spk_c, nodes,
-                 weights, gains, spec, ref, cmdbuf, delay, rows, qpos_hist):
-    """Control steps k0..k1-1 on the MuJoCo plant (model/data pointers mptr, dptr; qpos, qvel, ctrl,
-    qfrc are numpy views of the same MjData).  Per step: sense -> noise -> both laws -> record ->
-    commands (delayed by `delay` control steps through the ring buffer cmdbuf (delay+1, 2+2n)) ->
-    `substeps` x (elastic correction + mj_step).  eargs: ChainMap.elastic_args (constant tuple).  Returns (status, completed steps); status 6 =
-    non-finite or exploding MuJoCo state (instability)."""
+                 weights, gains, spec, ref, cmdbuf, delay, rows, qpos_hist, cmd_log, geo_in, geo_out):
+    """Control steps k0..k1-1 on the MuJoCo plant (model/data pointers mptr, dptr; mjfn = MJ_FUNCS;
+    qpos, qvel, ctrl, qfrc are numpy views of the same MjData).  Per step: sense -> noise -> both laws
+    -> record -> commands (delayed by `delay` control steps through the ring buffer cmdbuf (delay+1, 2+2n)) ->
+    `substeps` x (elastic correction + mj_step).  eargs: ChainMap.elastic_args (constant tuple).
+    cmd_log (rows, nu + nv): if it has rows ((k1 - k0) * substeps), row (k - k0) * substeps + s receives
+    [ctrl, qfrc] exactly as applied before that mj_step (for a raw-MuJoCo replay); 0 rows = off.
+    Recording geometry: qpos_hist (k1 - k0, nq) receives qpos at the start of each step (0 rows = off),
+    or, if geo_out = (body_pos, body_quat, master_pos, tip) has rows, `copy_geometry` fills them from the
+    kinematics MuJoCo computed inside the first mj_step of the step (the start state: valid for the
+    single-stage integrators, not RK4), geo_in = (xpos, xquat, site_xpos, xanchor, bodies, gids).
+    Returns (status, completed steps); status 6 = non-finite or exploding MuJoCo state (instability)."""
     n = C.shape[0]
     state = np.empty(16)
     sensed = np.empty(16)
@@ -385,6 +492,11 @@ def mujoco_chunk(mptr, dptr, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc, m_qad
     dxd = np.empty(2)
     ddxd = np.empty(2)
     nb = delay + 1
+    log = cmd_log.shape[0] > 0
+    hist = qpos_hist.shape[0] > 0
+    live = geo_out[0].shape[0] > 0
+    nu = ctrl.shape[0]
+    nv = qfrc.shape[0]
     for k in range(k0, k1):
         sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state)
         for i in range(16):
@@ -402,14 +514,22 @@ def mujoco_chunk(mptr, dptr, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc, m_qad
                 sensed[i] = state[i]
         st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F,
                           T1, T2, u2, deN, minfo, sinfo)
-        record_row(t, state, xd, dxd, mpk_c, gains, spec, T1, T2, u2, deN, rows[k - k0])
-        for i in range(qpos.shape[0]):
-            qpos_hist[k - k0, i] = qpos[i]
-        if st != 0:
-            return st, k - k0 + 1
+        if noise_scale == 0.0 and st == 0:  # laws ran on the true state: reuse their kinematics
+            record_row_info(t, state, xd, dxd, minfo, sinfo, T1, T2, u2, deN, rows[k - k0])
+        else:
+            record_row(t, state, xd, dxd, mpk_c, gains, spec, T1, T2, u2, deN, rows[k - k0])
+        if hist:
+            for i in range(qpos.shape[0]):
+                qpos_hist[k - k0, i] = qpos[i]
         r = rows[k - k0]
-        if (abs(r[R_E1]) + abs(r[R_E1 + 1]) > RUNAWAY) or (abs(r[R_E2]) + abs(r[R_E2 + 1]) > RUNAWAY):
-            return 4, k - k0 + 1
+        if st == 0 and ((abs(r[R_E1]) + abs(r[R_E1 + 1]) > RUNAWAY)
+                        or (abs(r[R_E2]) + abs(r[R_E2 + 1]) > RUNAWAY)):
+            st = 4
+        if st != 0:
+            if live:  # the last recorded step is not stepped: its kinematics explicitly
+                mj_call(mjfn[MJ_KINEMATICS_FN], mptr, dptr)
+                copy_geometry(geo_in, k - k0, geo_out)
+            return st, k - k0 + 1
         slot = k % nb
         cmd = cmdbuf[slot]
         cmd[0] = T1[0]
@@ -426,9 +546,80 @@ def mujoco_chunk(mptr, dptr, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc, m_qad
             chain_elastic_correction(qc, *eargs, corr)
             for c in range(n):
                 qfrc[c_dadr[c]] = use[2 + n + c] + corr[c]
-            MJ_STEP(mptr, dptr)
+            if log:
+                lr = cmd_log[(k - k0) * substeps + s]
+                for i in range(nu):
+                    lr[i] = ctrl[i]
+                for i in range(nv):
+                    lr[nu + i] = qfrc[i]
+            mj_call(mjfn[MJ_STEP_FN], mptr, dptr)
+            if live and s == 0:
+                copy_geometry(geo_in, k - k0, geo_out)
     return 0, k1 - k0
 
 
-KERNELS = KERNELS + ("sense_mujoco", "mujoco_commands", "mujoco_chunk")
-NOCACHE = ("mujoco_chunk",)  # calls a ctypes function: numba cannot cache it (compiled per process)
+def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):
+    """Raw MuJoCo: for each row of cmd_log (rows, nu + nv) copy [ctrl, qfrc_applied] in and mj_step
+    (the same physics steps as a logged `mujoco_chunk` run, without the harness)."""
+    nu = ctrl.shape[0]
+    nv = qfrc.shape[0]
+    for r in range(cmd_log.shape[0]):
+        for i in range(nu):
+            ctrl[i] = cmd_log[r, i]
+        for i in range(nv):
+            qfrc[i] = cmd_log[r, nu + i]
+        mj_call(mjfn[MJ_STEP_FN], mptr, dptr)
+
+
+KERNELS = KERNELS + ("sense_mujoco", "mujoco_commands", "mujoco_chunk", "replay_commands")
+
+
+
+# =============================================================================================
+# Recording geometry, after the loop: MuJoCo kinematics replay and analytic backbone, compiled
+# =============================================================================================
+def copy_geometry(geo_in, row, geo_out):
+    """Row `row` of the recording geometry from MuJoCo's current kinematics: geo_in = (xpos, xquat,
+    site_xpos, xanchor (views of the MjData), bodies (nb,) chain body ids, gids = [elbow body, shoulder
+    joint, master tip site, slave tip site]); geo_out = (body_pos (n, nb, 3), body_quat (n, nb, 4) wxyz,
+    master_pos (n, 3, 3) = shoulder anchor, elbow, master tip; tip (n, 3) slave tip site)."""
+    xpos, xquat, site_xpos, xanchor, bodies, gids = geo_in
+    body_pos, body_quat, master_pos, tip = geo_out
+    for b in range(bodies.shape[0]):
+        src = bodies[b]
+        for j in range(3):
+            body_pos[row, b, j] = xpos[src, j]
+        for j in range(4):
+            body_quat[row, b, j] = xquat[src, j]
+    for j in range(3):
+        master_pos[row, 0, j] = xanchor[gids[1], j]
+        master_pos[row, 1, j] = xpos[gids[0], j]
+        master_pos[row, 2, j] = site_xpos[gids[2], j]
+        tip[row, j] = site_xpos[gids[3], j]
+
+
+def kinematics_replay(mptr, dptr, mjfn, qpos, qpos_hist, geo_in, geo_out):
+    """For each row of qpos_hist (n, nq): qpos <- row, MuJoCo's C mj_kinematics, `copy_geometry`
+    (qpos and geo_in views of the MjData at dptr)."""
+    nq = qpos.shape[0]
+    for k in range(qpos_hist.shape[0]):
+        for i in range(nq):
+            qpos[i] = qpos_hist[k, i]
+        mj_call(mjfn[MJ_KINEMATICS_FN], mptr, dptr)
+        copy_geometry(geo_in, k, geo_out)
+
+
+def backbone_world(q2, n_per_section, base, out):
+    """Analytic backbone (controllers.cc.backbone_points) of every row of q2 (n, 6) in world
+    coordinates: out (n, 3 P + 1, 3) = (base_x + X, base_y, base_z + Z)."""
+    npts = 3 * n_per_section + 1
+    pts = np.empty((npts, 2))
+    for k in range(q2.shape[0]):
+        backbone_points(q2[k], n_per_section, pts)
+        for r in range(npts):
+            out[k, r, 0] = base[0] + pts[r, 0]
+            out[k, r, 1] = base[1]
+            out[k, r, 2] = base[2] + pts[r, 1]
+
+
+KERNELS = KERNELS + ("copy_geometry", "kinematics_replay", "backbone_world")

@@ -6,9 +6,16 @@ one compiled kernel (`harness.loop_kernels.mujoco_chunk`) that also calls MuJoCo
 Python runs per step.  MuJoCo's auto-reset on instability is disabled: bad accelerations leave NaN or
 exploding states that the kernel detects, and every MuJoCo warning is counted and reported.
 
-After the loop, the recorded joint positions are replayed through `mj_kinematics` to obtain the
-MuJoCo tip site (x2_plant), the slave segment body poses and the master joint positions for the
-recording (this keeps geometry bookkeeping out of the control loop).
+Recording geometry (MuJoCo tip site x2_plant, slave segment body poses, master base/elbow/tip): with
+the single-stage integrators, mj_step leaves the kinematics of the step's start state in MjData, so the
+loop copies those rows after the first mj_step of each control step (no extra work); with RK4 the loop
+keeps the qpos history and MuJoCo's C `mj_kinematics` is replayed afterwards from compiled code
+(`harness.loop_kernels.kinematics_replay`).  The analytic backbone of the sensed q2 is computed after
+the loop by a compiled loop.  Both give the numbers of a per-step Python `mujoco.mj_kinematics` replay
+bit for bit (tests/test_speed_paths.py).
+
+Timings in traj.meta: "build_time" (plant model build + initial state), "wall_time" (the control
+loop), "geometry_time" (the geometry/backbone work after the loop).
 """
 
 from __future__ import annotations
@@ -18,13 +25,11 @@ import time
 import mujoco
 import numpy as np
 
-from controllers import slave as slave_model
-
 from .config import Scenario
 from .fast import K
+from .loop_kernels import MJ_FUNCS
 from .plant_model import ChainMap, build_model
 from .sim import (
-    CHUNK,
     STATUS_TEXT,
     STOP,
     _meta,
@@ -35,6 +40,9 @@ from .sim import (
 )
 from .trajectory import ROW_WIDTH, Trajectory
 
+# control steps per compiled call between progress/interrupt/warning checks (each call costs ~50 us of
+# numba dispatch; 1000 steps are 50-100 ms at N = 8)
+MUJOCO_CHUNK = 1000
 WARNINGS = [w for name, w in mujoco.mjtWarning.__members__.items() if name != "mjNWARNING"]
 
 
@@ -64,14 +72,25 @@ def make_plant(scn: Scenario) -> tuple[mujoco.MjModel, mujoco.MjData, ChainMap]:
     return m, d, cmap
 
 
-def simulate_mujoco(scn: Scenario, progress: bool = False) -> Trajectory:
-    """Run the scenario on the MuJoCo plant; returns the Trajectory (possibly cut short)."""
+def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray | None = None) -> Trajectory:
+    """Run the scenario on the MuJoCo plant; returns the Trajectory (possibly cut short).
+
+    cmd_log: optional (n_steps * substeps, nu + nv) array that receives, for every mj_step, the
+    [ctrl, qfrc_applied] applied before it (to replay the same physics with raw mj_step)."""
+    tb = time.perf_counter()
     m, d, cmap = make_plant(scn)
+    build_time = time.perf_counter() - tb
     n = scn.n_steps
+    sub = scn.substeps
+    if cmd_log is None:
+        cmd_log = np.zeros((0, m.nu + m.nv))
+    elif cmd_log.shape != (n * sub, m.nu + m.nv):
+        raise ValueError(f"cmd_log must have shape {(n * sub, m.nu + m.nv)}, got {cmd_log.shape}")
+    log = cmd_log.shape[0] > 0
     a = common_arrays(scn)
     noise, scale = noise_table(scn, n)
     rows = np.zeros((n, ROW_WIDTH))
-    qpos_hist = np.zeros((n, m.nq))
+    geo = _Geometry(m, d, cmap, n, live=scn.plant.integrator in LIVE_GEOMETRY_INTEGRATORS)
     servo = scn.plant.actuation == "servo"
     nchain = cmap.n_chain
     kv_over_kp = (np.divide(cmap.servo_kv, cmap.servo_kp, out=np.zeros(nchain), where=cmap.servo_kp > 0)
@@ -86,21 +105,24 @@ def simulate_mujoco(scn: Scenario, progress: bool = False) -> Trajectory:
     status, done, k = 0, 0, 0
     interrupted = False
     warned: dict[str, int] = {}
+    wnum = d.warning.number  # view of MuJoCo's warning counters (the dict is built only if one is set)
     t0 = time.perf_counter()
     try:
         while k < n:
-            k1 = min(n, k + CHUNK)
+            k1 = min(n, k + MUJOCO_CHUNK)
             status, mdone = K.mujoco_chunk(
-                m._address, d._address, k, k1, scn.substeps, scn.control_dt, d.qpos, d.qvel, d.ctrl,
+                m._address, d._address, MJ_FUNCS, k, k1, sub, scn.control_dt, d.qpos, d.qvel, d.ctrl,
                 d.qfrc_applied, cmap.master_qpos_adr, cmap.master_dof_adr, cmap.master_actuator_ids,
                 cmap.chain_qpos_adr, cmap.chain_dof_adr, cmap.chain_actuator_ids, cmap.R, cmap.C, cmap.L0,
                 cmap.elastic_args, servo, scn.plant.servo_feedforward, kv_over_kp, a["traj"], noise,
                 scale, a["F"], a["mpk_c"], a["spk_c"], a["nodes"], a["weights"], a["gains"], a["spec"],
-                ref, cmdbuf, delay, rows[k:k1], qpos_hist[k:k1])
+                ref, cmdbuf, delay, rows[k:k1], geo.qpos_hist[k:k1],
+                cmd_log[k * sub:k1 * sub] if log else cmd_log, geo.inputs, geo.outputs(k, k1))
             done = k + mdone
             if bar is not None:
                 bar.update(mdone)
-            warned = warning_counts(d)
+            if wnum.any():
+                warned = warning_counts(d)
             if status != 0:
                 break
             if warned:  # any MuJoCo warning stops the run: it must never pass silently
@@ -118,7 +140,10 @@ def simulate_mujoco(scn: Scenario, progress: bool = False) -> Trajectory:
     traj = Trajectory.from_rows(rows[:done])
     meta = _meta(scn, wall)
     traj.meta.update(meta)
-    traj.meta.update(_plant_geometry(scn, m, cmap, qpos_hist[:done], traj))
+    tg = time.perf_counter()
+    traj.meta.update(_plant_geometry(m, cmap, geo, done, traj))
+    traj.meta["geometry_time"] = time.perf_counter() - tg
+    traj.meta["build_time"] = build_time
     traj.meta["mujoco_warnings"] = int(sum(warned.values()))
     traj.meta["mujoco_warning_counts"] = warned
     traj.meta["mujoco_warning_text"] = captured[:20]
@@ -137,45 +162,68 @@ def simulate_mujoco(scn: Scenario, progress: bool = False) -> Trajectory:
     return traj
 
 
-def _plant_geometry(scn: Scenario, m: mujoco.MjModel, cmap: ChainMap, qpos_hist: np.ndarray,
-                    traj: Trajectory) -> dict:
-    """Replay kinematics: MuJoCo tip site (x2_plant), slave body poses, master joint positions."""
-    n = qpos_hist.shape[0]
-    d = mujoco.MjData(m)
-    chain_bodies = list(dict.fromkeys(int(m.jnt_bodyid[j]) for j in
-                                      [i for i in range(m.njnt) if m.jnt_qposadr[i] in set(cmap.chain_qpos_adr)]))
-    shoulder = int(m.jnt_bodyid[m.joint("master_shoulder_joint").id])
-    elbow = int(m.jnt_bodyid[m.joint("master_elbow_joint").id])
-    body_pos = np.zeros((n, len(chain_bodies), 3))
-    body_quat = np.zeros((n, len(chain_bodies), 4))
-    master_pos = np.zeros((n, 3, 3))
-    tip = np.zeros((n, 3))
-    for k in range(n):
-        d.qpos[:] = qpos_hist[k]
-        mujoco.mj_kinematics(m, d)
-        body_pos[k] = d.xpos[chain_bodies]
-        body_quat[k] = d.xquat[chain_bodies]
-        master_pos[k, 0] = d.xanchor[m.joint("master_shoulder_joint").id] if k == 0 else master_pos[0, 0]
-        master_pos[k, 1] = d.xpos[elbow]
-        master_pos[k, 2] = d.site_xpos[cmap.master_site_id]
-        tip[k] = d.site_xpos[cmap.tip_site_id]
-    del shoulder
-    base = np.asarray(cmap.octarm_base_pos)
+BACKBONE_POINTS = 8  # analytic backbone points per section in the recording
+# Integrators whose mj_step leaves the kinematics of the step's start state in MjData (one stage):
+# the loop copies the recording geometry from there; others (RK4) replay mj_kinematics afterwards.
+LIVE_GEOMETRY_INTEGRATORS = ("euler", "implicit", "implicitfast")
+
+
+def chain_body_ids(m: mujoco.MjModel, cmap: ChainMap) -> list[int]:
+    """Bodies carrying the chain joints, in chain order (each once)."""
+    chain = set(int(a) for a in cmap.chain_qpos_adr)
+    return list(dict.fromkeys(int(m.jnt_bodyid[j]) for j in range(m.njnt) if int(m.jnt_qposadr[j]) in chain))
+
+
+class _Geometry:
+    """Recording geometry of the plant per control step: chain body poses, master base/elbow/tip,
+    slave tip site.  `live`: filled by the loop from the kinematics inside mj_step; else the loop
+    keeps the qpos history and `finish` replays MuJoCo's C mj_kinematics (compiled)."""
+
+    def __init__(self, m: mujoco.MjModel, d: mujoco.MjData, cmap: ChainMap, n: int, live: bool):
+        self.live = live
+        self.bodies = np.asarray(chain_body_ids(m, cmap), dtype=np.int64)
+        gids = np.array([m.jnt_bodyid[m.joint("master_elbow_joint").id], m.joint("master_shoulder_joint").id,
+                         cmap.master_site_id, cmap.tip_site_id], dtype=np.int64)
+        self.d = d if live else mujoco.MjData(m)
+        self.inputs = (self.d.xpos, self.d.xquat, self.d.site_xpos, self.d.xanchor, self.bodies, gids)
+        nb = len(self.bodies)
+        self.body_pos = np.zeros((n, nb, 3))
+        self.body_quat = np.zeros((n, nb, 4))
+        self.master_pos = np.zeros((n, 3, 3))
+        self.tip = np.zeros((n, 3))
+        self.qpos_hist = np.zeros((0 if live else n, m.nq))
+        self._none = (np.zeros((0, nb, 3)), np.zeros((0, nb, 4)), np.zeros((0, 3, 3)), np.zeros((0, 3)))
+
+    def outputs(self, k0: int, k1: int) -> tuple:
+        if not self.live:
+            return self._none
+        return self.body_pos[k0:k1], self.body_quat[k0:k1], self.master_pos[k0:k1], self.tip[k0:k1]
+
+    def finish(self, m: mujoco.MjModel, done: int) -> None:
+        if not self.live:
+            K.kinematics_replay(m._address, self.d._address, MJ_FUNCS, self.d.qpos, self.qpos_hist[:done],
+                                self.inputs, self.outputs_all(done))
+
+    def outputs_all(self, done: int) -> tuple:
+        return self.body_pos[:done], self.body_quat[:done], self.master_pos[:done], self.tip[:done]
+
+
+def _plant_geometry(m: mujoco.MjModel, cmap: ChainMap, geo: _Geometry, done: int, traj: Trajectory) -> dict:
+    """MuJoCo tip site (x2_plant), slave body poses, master joint positions (from the loop or a compiled
+    mj_kinematics replay) and the analytic backbone of the sensed q2 (compiled loop)."""
+    geo.finish(m, done)
+    body_pos, body_quat, master_pos, tip = geo.outputs_all(done)
+    base = np.asarray(cmap.octarm_base_pos, dtype=float)
     traj.x2_plant = np.stack([tip[:, 0] - base[0], tip[:, 2] - base[2]], axis=1)
     traj.body_pos = body_pos
     traj.body_quat = body_quat
     traj.master_pos = master_pos
     # analytic backbone of the sensed q2, in world coordinates (for the overlay)
-    P = 8
-    bb = np.zeros((n, 3 * P + 1, 3))
-    for k in range(n):
-        pts = slave_model.backbone(scn.slave, traj.q2[k], P)
-        bb[k, :, 0] = base[0] + pts[:, 0]
-        bb[k, :, 1] = base[1]
-        bb[k, :, 2] = base[2] + pts[:, 1]
+    bb = np.zeros((done, 3 * BACKBONE_POINTS + 1, 3))
+    K.backbone_world(np.ascontiguousarray(traj.q2, dtype=float), BACKBONE_POINTS, base, bb)
     return {
         "master_base": tuple(float(v) for v in cmap.master_base_pos),
         "slave_base": tuple(float(v) for v in base),
         "segments": cmap.n_segments, "actuation": cmap.actuation, "enforce_cc": cmap.enforce_cc,
-        "body_names": [m.body(b).name for b in chain_bodies], "backbone": bb,
+        "body_names": [m.body(int(b)).name for b in geo.bodies], "backbone": bb,
     }

@@ -1,0 +1,249 @@
+"""The compiled fast paths give the same numbers as the plain Python ones (no timing assertions).
+
+* recording geometry: `harness.loop_kernels.kinematics_replay` (MuJoCo's C mj_kinematics called from
+  numba) and `backbone_world` against a Python loop over `mujoco.mj_kinematics` / `slave.backbone`;
+* the command log of `mujoco_chunk`: replaying the logged [ctrl, qfrc_applied] with raw mj_step from
+  the same initial state reproduces the harness run's MuJoCo state bit for bit.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import mujoco
+import numpy as np
+import pytest
+
+from controllers import slave as slave_model
+from harness.config import PlantConfig, Scenario
+from harness.fast import K
+from harness.loop_kernels import MJ_FUNCS
+from harness.mujoco_sim import BACKBONE_POINTS, chain_body_ids, make_plant, simulate_mujoco
+
+
+def _python_geometry(scn, m, cmap, qpos_hist, q2):
+    """The former per-step Python replay (reference)."""
+    n = qpos_hist.shape[0]
+    d = mujoco.MjData(m)
+    bodies = chain_body_ids(m, cmap)
+    elbow = int(m.jnt_bodyid[m.joint("master_elbow_joint").id])
+    body_pos = np.zeros((n, len(bodies), 3))
+    body_quat = np.zeros((n, len(bodies), 4))
+    master_pos = np.zeros((n, 3, 3))
+    tip = np.zeros((n, 3))
+    for k in range(n):
+        d.qpos[:] = qpos_hist[k]
+        mujoco.mj_kinematics(m, d)
+        body_pos[k] = d.xpos[bodies]
+        body_quat[k] = d.xquat[bodies]
+        master_pos[k, 0] = d.xanchor[m.joint("master_shoulder_joint").id] if k == 0 else master_pos[0, 0]
+        master_pos[k, 1] = d.xpos[elbow]
+        master_pos[k, 2] = d.site_xpos[cmap.master_site_id]
+        tip[k] = d.site_xpos[cmap.tip_site_id]
+    base = np.asarray(cmap.octarm_base_pos)
+    P = BACKBONE_POINTS
+    bb = np.zeros((n, 3 * P + 1, 3))
+    for k in range(n):
+        pts = slave_model.backbone(scn.slave, q2[k], P)
+        bb[k, :, 0] = base[0] + pts[:, 0]
+        bb[k, :, 1] = base[1]
+        bb[k, :, 2] = base[2] + pts[:, 1]
+    x2 = np.stack([tip[:, 0] - base[0], tip[:, 2] - base[2]], axis=1)
+    return body_pos, body_quat, master_pos, x2, bb
+
+
+def _qpos_history(scn, cmd_log, n):
+    """qpos at the start of each control step, rebuilt by replaying the command log in Python."""
+    m, d, _ = make_plant(scn)
+    qpos_hist = np.zeros((n, m.nq))
+    for k in range(n):
+        qpos_hist[k] = d.qpos
+        for s in range(scn.substeps):
+            row = cmd_log[k * scn.substeps + s]
+            d.ctrl[:] = row[:m.nu]
+            d.qfrc_applied[:] = row[m.nu:]
+            mujoco.mj_step(m, d)
+    return qpos_hist
+
+
+@pytest.mark.parametrize("segments, integrator", [(2, "implicitfast"), (8, "implicitfast"), (2, "rk4"),
+                                                  (4, "euler")])
+def test_compiled_geometry_matches_python_replay(segments, integrator):
+    """Geometry copied inside the loop (single-stage integrators) or replayed by the compiled
+    mj_kinematics loop (RK4) = the former Python mj_kinematics replay, bit for bit."""
+    scn = Scenario(duration=0.05, plant=PlantConfig(segments=segments, integrator=integrator))
+    m, _, cmap = make_plant(scn)
+    n = scn.n_steps
+    cmd_log = np.zeros((n * scn.substeps, m.nu + m.nv))
+    tr = simulate_mujoco(scn, cmd_log=cmd_log)
+    assert tr.status == "ok" and len(tr) == n
+    qpos_hist = _qpos_history(scn, cmd_log, n)
+    body_pos, body_quat, master_pos, x2, bb = _python_geometry(scn, m, cmap, qpos_hist, tr.q2)
+    np.testing.assert_array_equal(tr.body_pos, body_pos)
+    np.testing.assert_array_equal(tr.body_quat, body_quat)
+    np.testing.assert_array_equal(tr.master_pos, master_pos)
+    np.testing.assert_array_equal(tr.x2_plant, x2)
+    np.testing.assert_allclose(tr.meta["backbone"], bb, rtol=0, atol=1e-14)
+    assert {"build_time", "wall_time", "geometry_time"} <= set(tr.meta)
+
+
+def test_geometry_of_a_run_that_stops_early():
+    """A run cut short by the controller (status != 0 after the record row, before stepping) still
+    has the geometry of its last recorded step."""
+    scn = Scenario(duration=1.0, plant=PlantConfig(segments=8, enforce_cc=False, actuation="torque"))
+    m, _, cmap = make_plant(scn)
+    cmd_log = np.zeros((scn.n_steps * scn.substeps, m.nu + m.nv))
+    tr = simulate_mujoco(scn, cmd_log=cmd_log)
+    assert tr.status == "diverged" and 1 < len(tr) < scn.n_steps
+    n = len(tr)
+    qpos_hist = _qpos_history(scn, cmd_log, n)
+    body_pos, body_quat, master_pos, x2, _ = _python_geometry(scn, m, cmap, qpos_hist, tr.q2)
+    np.testing.assert_array_equal(tr.body_pos, body_pos)
+    np.testing.assert_array_equal(tr.body_quat, body_quat)
+    np.testing.assert_array_equal(tr.master_pos, master_pos)
+    np.testing.assert_array_equal(tr.x2_plant, x2)
+
+
+@pytest.mark.parametrize("actuation", ["servo", "torque"])
+def test_command_log_replay_reproduces_the_run(actuation):
+    """Raw mj_step with the logged commands from the same initial state = the harness's physics."""
+    scn = Scenario(duration=0.1, plant=PlantConfig(actuation=actuation, segments=4))
+    m, d, _ = make_plant(scn)
+    n = scn.n_steps * scn.substeps
+    log = np.zeros((n, m.nu + m.nv))
+    tr = simulate_mujoco(scn, cmd_log=log)
+    assert tr.status == "ok"
+    assert np.any(log[:, m.nu:] != 0.0) and np.all(np.isfinite(log))
+    qpos_end = np.zeros(m.nq)
+    K.replay_commands(m._address, d._address, MJ_FUNCS, d.ctrl, d.qfrc_applied, log)
+    qpos_end[:] = d.qpos
+    # the harness loop recorded q2 at the start of each control step: compare the last one
+    m2, d2, cmap2 = make_plant(scn)
+    for row in log[:-scn.substeps]:
+        d2.ctrl[:] = row[:m2.nu]
+        d2.qfrc_applied[:] = row[m2.nu:]
+        mujoco.mj_step(m2, d2)
+    np.testing.assert_array_equal(cmap2.sense(d2)[0], tr.q2[-1])
+    for row in log[-scn.substeps:]:
+        d2.ctrl[:] = row[:m2.nu]
+        d2.qfrc_applied[:] = row[m2.nu:]
+        mujoco.mj_step(m2, d2)
+    np.testing.assert_array_equal(d2.qpos, qpos_end)
+
+
+def test_command_log_off_by_default_and_checked():
+    scn = Scenario(duration=0.01, plant=PlantConfig(segments=2))
+    a = simulate_mujoco(scn)
+    m, _, _ = make_plant(scn)
+    b = simulate_mujoco(scn, cmd_log=np.zeros((scn.n_steps * scn.substeps, m.nu + m.nv)))
+    np.testing.assert_array_equal(a.q2, b.q2)
+    with pytest.raises(ValueError, match="cmd_log"):
+        simulate_mujoco(dataclasses.replace(scn), cmd_log=np.zeros((3, 3)))
+
+
+# ---------------------------------------------------------------------------------------------
+# optimized controller kernels against their reference forms (tolerance 1e-12 relative)
+# ---------------------------------------------------------------------------------------------
+def _random_states(rng, n=25):
+    q = np.column_stack([rng.uniform(0.3, 0.45, (n, 3)), rng.uniform(-4.0, 4.0, (n, 3))])
+    q[0, 3:] = 0.0  # straight
+    q[1, 3:] = 1e-9
+    return q, rng.normal(size=(n, 6))
+
+
+@pytest.mark.parametrize("slice_inertia", [(0.0, 0.0, 0.0), (2e-3, 1e-3, 5e-4)])
+def test_fused_mass_nle_equals_reference(slice_inertia):
+    """mass_nle_kernel (moments of the quadrature, Lagrange-form Coriolis) = dynamics_kernel M2 and
+    the Christoffel-form nle_kernel N2 (compiled and interpreted)."""
+    from controllers.params import SlaveParams
+    from harness.fast import kernels
+
+    p = SlaveParams(slice_inertia=slice_inertia)
+    pk = p.packed()
+    nodes, weights = slave_model.gauss_legendre01(p.n_quad)
+    q, dq = _random_states(np.random.default_rng(3))
+    for Kx in (kernels(True), kernels(False)):
+        for a in range(len(q)):
+            M, N = np.empty((6, 6)), np.empty(6)
+            Kx.mass_nle_kernel(pk, q[a], dq[a], nodes, weights, M, N)
+            Mr, dM, G = np.empty((6, 6)), np.empty((6, 6, 6)), np.empty(6)
+            Kx.dynamics_kernel(pk, q[a], nodes, weights, False, Mr, dM, G)
+            Nr = np.empty(6)
+            Kx.nle_kernel(pk, q[a], dq[a], nodes, weights, np.empty((6, 6)), np.empty((6, 6, 6)),
+                          np.empty((6, 6)), Nr)
+            np.testing.assert_allclose(M, Mr, rtol=1e-12, atol=1e-12 * np.abs(Mr).max())
+            np.testing.assert_allclose(N, Nr, rtol=1e-12, atol=1e-12 * np.abs(Nr).max())
+
+
+def test_tip_kinematics_equals_generic_chain_rule():
+    """tip_kinematics (order-1 path; sparse chain rule written out, mirrored upper triangle) = the
+    generic point_y_derivs + chain_to_q + chain_to_q_dot path."""
+    from controllers import cc
+
+    q, dq = _random_states(np.random.default_rng(4))
+    for a in range(len(q)):
+        d, th, ydot = np.empty(3), np.empty(3), np.empty(6)
+        cc.y_of_q(q[a], d, th, ydot, dq[a])
+        c = np.zeros(1, complex)
+        Jy, Hy, Ty = np.zeros(6, complex), np.zeros((6, 6), complex), np.zeros((6, 6), complex)
+        cc.point_y_derivs(2, 1.0, d, th, 3, ydot, c, Jy, Hy, Ty)
+        nzu, nzb, nzbd = np.empty((6, 2), np.int64), np.empty((6, 2)), np.empty((6, 2))
+        cc.chain_nz(q[a], dq[a], nzu, nzb, nzbd)
+        Jq, Hq, Hqd = np.empty(6, complex), np.empty((6, 6), complex), np.empty((6, 6), complex)
+        cc.chain_to_q(3, Jy, Hy, Ty, nzu, nzb, nzbd, Jq, Hq, Hqd)
+        cc.chain_to_q_dot(Jy, Hy, Ty, ydot, nzu, nzb, nzbd, Hqd)
+        for order in (0, 1, 2, 3):
+            x, J, H, Hd = np.zeros(2), np.zeros((2, 6)), np.zeros((2, 6, 6)), np.zeros((2, 6, 6))
+            K.tip_kinematics(q[a], dq[a], order, x, J, H, Hd)
+            np.testing.assert_allclose(x, [c[0].imag, c[0].real], rtol=1e-14, atol=1e-15)
+            if order >= 1:
+                np.testing.assert_allclose(J, np.stack([Jq.imag, Jq.real]), rtol=1e-13, atol=1e-14)
+            if order >= 2:
+                ref = np.stack([Hq.imag, Hq.real])
+                np.testing.assert_allclose(H, ref, rtol=1e-12, atol=1e-13 * np.abs(ref).max())
+            if order >= 3:
+                ref = np.stack([Hqd.imag, Hqd.real])
+                np.testing.assert_allclose(Hd, ref, rtol=1e-12, atol=1e-13 * np.abs(ref).max())
+
+
+def test_en_tuple_equals_complex_series():
+    """E_n by the real-arithmetic series (reciprocal table) = the complex power series."""
+    from controllers.cc import SERIES_RADIUS, en_tuple
+
+    for t in np.concatenate([np.linspace(-3.0, 3.0, 61), [1e-12, -1e-7, 1e-3, SERIES_RADIUS * 0.999]]):
+        ref = np.zeros(4, complex)
+        if abs(t) < SERIES_RADIUS:
+            term = 1.0 + 0.0j
+            for m in range(40):
+                for n in range(4):
+                    ref[n] += term / (n + m + 1)
+                term = term * (1j * t) / (m + 1)
+        else:
+            e = np.exp(1j * t)
+            ref[0] = (e - 1.0) / (1j * t)
+            for n in range(1, 4):
+                ref[n] = (e - n * ref[n - 1]) / (1j * t)
+        np.testing.assert_allclose(np.array(en_tuple(t)), ref, rtol=1e-14, atol=1e-16)
+
+
+@pytest.mark.parametrize("kind", ["mujoco", "analytic"])
+def test_noise_free_record_rows_equal_recomputed_rows(kind):
+    """Without noise the record row reuses the control laws' kinematics (record_row_info): the rows
+    equal record_row recomputed from the true state, bit for bit."""
+    from harness.sim import common_arrays, simulate
+    from harness.trajectory import ROW_SLICES, ROW_WIDTH
+
+    scn = Scenario(duration=0.2, snr_db=None, plant=PlantConfig(kind=kind, segments=4))
+    tr = simulate(scn)
+    assert tr.status == "ok"
+    a = common_arrays(scn)
+    row = np.zeros(ROW_WIDTH)
+    xd, dxd, ddxd = np.empty(2), np.empty(2), np.empty(2)
+    for k in range(0, len(tr), 7):
+        state = np.concatenate([tr.q1[k], tr.dq1[k], tr.q2[k], tr.dq2[k]])
+        K.desired(a["traj"], tr.t[k], xd, dxd, ddxd)
+        K.record_row(tr.t[k], state, xd, dxd, a["mpk_c"], a["gains"], a["spec"], tr.T1[k].copy(),
+                     tr.T2[k].copy(), tr.u2[k].copy(), tr.deN[k].copy(), row)
+        for name, sl in ROW_SLICES.items():
+            got = np.atleast_1d(getattr(tr, name)[k])
+            np.testing.assert_array_equal(got, row[sl], err_msg=f"{name} at step {k}")
