@@ -236,43 +236,34 @@ def term_y_derivs(j, u, d, th, phi_prev, order, ydot, c, Jy, Hy, Ty):
     Jy[3 + j] += tval(0, 0, 1, dj, b0, b1, b2, b3)
     if order < 2:
         return
-    dd = j
-    tt = 3 + j
-    h200 = tval(2, 0, 0, dj, b0, b1, b2, b3)
-    h110 = tval(1, 1, 0, dj, b0, b1, b2, b3)
-    h101 = tval(1, 0, 1, dj, b0, b1, b2, b3)
-    h011 = tval(0, 1, 1, dj, b0, b1, b2, b3)
-    h002 = tval(0, 0, 2, dj, b0, b1, b2, b3)
-    for la in range(j):
-        a = 3 + la
-        for lb in range(j):
-            Hy[a, 3 + lb] += h200
-        Hy[a, dd] += h110
-        Hy[dd, a] += h110
-        Hy[a, tt] += h101
-        Hy[tt, a] += h101
-    Hy[dd, tt] += h011
-    Hy[tt, dd] += h011
-    Hy[tt, tt] += h002
+    b = (b0, b1, b2, b3)
+    add_role_blocks(j, tval(2, 0, 0, dj, *b), tval(1, 1, 0, dj, *b), tval(1, 0, 1, dj, *b),
+                    tval(0, 1, 1, dj, *b), tval(0, 0, 2, dj, *b), Hy)
     if order < 3:
         return
     # Ty = sum_w ydot_w d^3 T / dy_a dy_b dy_w: one more derivative in one of the roles
-    t200 = ty_acc(j, 2, 0, 0, ydot, dj, b0, b1, b2, b3)
-    t110 = ty_acc(j, 1, 1, 0, ydot, dj, b0, b1, b2, b3)
-    t101 = ty_acc(j, 1, 0, 1, ydot, dj, b0, b1, b2, b3)
-    t011 = ty_acc(j, 0, 1, 1, ydot, dj, b0, b1, b2, b3)
-    t002 = ty_acc(j, 0, 0, 2, ydot, dj, b0, b1, b2, b3)
+    add_role_blocks(j, ty_acc(j, 2, 0, 0, ydot, dj, *b), ty_acc(j, 1, 1, 0, ydot, dj, *b),
+                    ty_acc(j, 1, 0, 1, ydot, dj, *b), ty_acc(j, 0, 1, 1, ydot, dj, *b),
+                    ty_acc(j, 0, 0, 2, ydot, dj, *b), Ty)
+
+
+def add_role_blocks(j, v200, v110, v101, v011, v002, X):
+    """Add a symmetric second-derivative pattern of T_j to X (6,6) complex: v_(npre, nd, nt) is the
+    value for npre derivatives in the earlier angles y[3 + l] (l < j), nd in d_j (= y[j]) and nt in
+    Theta_j (= y[3 + j]); every pair of variables gets the value of its roles."""
+    dd = j
+    tt = 3 + j
     for la in range(j):
         a = 3 + la
         for lb in range(j):
-            Ty[a, 3 + lb] += t200
-        Ty[a, dd] += t110
-        Ty[dd, a] += t110
-        Ty[a, tt] += t101
-        Ty[tt, a] += t101
-    Ty[dd, tt] += t011
-    Ty[tt, dd] += t011
-    Ty[tt, tt] += t002
+            X[a, 3 + lb] += v200
+        X[a, dd] += v110
+        X[dd, a] += v110
+        X[a, tt] += v101
+        X[tt, a] += v101
+    X[dd, tt] += v011
+    X[tt, dd] += v011
+    X[tt, tt] += v002
 
 
 def chain_nz(q, dq, nzu, nzb, nzbd):
@@ -497,36 +488,12 @@ def backbone_points(q, n_per_section, out):
         f = complex(np.cos(phi), np.sin(phi))
         for m in range(1, n_per_section + 1):
             u = m / n_per_section
-            p = base + f * u * ds * en0(u * ths)
+            p = base + f * u * ds * en_tuple(u * ths)[0]
             out[r, 0] = p.imag
             out[r, 1] = p.real
             r += 1
-        base = base + f * ds * en0(ths)
+        base = base + f * ds * en_tuple(ths)[0]
         phi += ths
-
-
-def en0(t):
-    """E_0(t) alone (the first value of en_tuple, computed by the same operations)."""
-    if abs(t) < SERIES_RADIUS:
-        r0 = 0.0
-        i0 = 0.0
-        a = 1.0
-        for m in range(26):
-            v0 = a * INV[m]
-            q = m & 3
-            if q == 0:
-                r0 += v0
-            elif q == 1:
-                i0 += v0
-            elif q == 2:
-                r0 -= v0
-            else:
-                i0 -= v0
-            a = a * t * INV[m]
-            if abs(a) < 1e-18:
-                break
-        return complex(r0, i0)
-    return complex(np.sin(t) / t, -(np.cos(t) - 1.0) / t)
 
 
 def gram_terms(J, Jd, out):
@@ -545,5 +512,6 @@ def gram_terms(J, Jd, out):
 KERNELS = (
     "gram_terms", "en_tuple", "en_values", "ipow_mul", "term_bases", "tval", "ty_acc", "term_grad_add",
     "term_ydd", "vtype", "term_mono", "term_table", "term_y_derivs", "chain_nz", "y_of_q", "chain_to_q",
-    "chain_to_q_dot", "point_y_derivs", "tip_point_jacobian", "tip_kinematics", "backbone_points", "en0",
+    "chain_to_q_dot", "point_y_derivs", "tip_point_jacobian", "tip_kinematics", "backbone_points",
+    "add_role_blocks",
 )

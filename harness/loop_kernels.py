@@ -32,10 +32,7 @@ from controllers.control import (
 from controllers.master import master_kernel
 from controllers.slave import mass_nle_kernel
 from controllers.subtasks import limits_kernel
-from harness.plant_model import (
-    chain_elastic_correction,
-    chain_force_from_T2,
-)
+from harness.plant_model import chain_elastic_correction, chain_force_from_T2, chain_sense
 
 # record row layout (must match harness.trajectory.ROW_FIELDS)
 R_T, R_Q1, R_DQ1, R_Q2, R_DQ2, R_XD, R_X1, R_X2 = 0, 1, 3, 5, 11, 17, 19, 21
@@ -181,6 +178,27 @@ def record_row_info(t, state, xd, dxd, minfo, sinfo, T1, T2, u2, deN, row):
         row[R_U2 + a] = u2[a]
 
 
+def control_step(t, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, weights, gains, spec, F,
+                 xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, row):
+    """One control step at time t on the true state (16,): x_d(t) into xd, dxd, ddxd; the sensed
+    state (true state + AWGN noise_scale * noise[k], noise (n, 16) read only if noise_scale > 0) into
+    sensed; both laws (control_laws); the record row of the true state into row.  Returns
+    control_laws' status."""
+    desired(traj, t, xd, dxd, ddxd)
+    if noise_scale > 0.0:
+        add_noise(state, noise[k], noise_scale, sensed)
+    else:
+        for i in range(16):
+            sensed[i] = state[i]
+    st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F,
+                      T1, T2, u2, deN, minfo, sinfo)
+    if noise_scale == 0.0 and st == 0:  # laws ran on the true state: reuse their kinematics
+        record_row_info(t, state, xd, dxd, minfo, sinfo, T1, T2, u2, deN, row)
+    else:
+        record_row(t, state, xd, dxd, mpk_c, gains, spec, T1, T2, u2, deN, row)
+    return st
+
+
 def plant_accel(mpk, spk, nodes, weights, s, T1, T2, F, acc):
     """Analytic plant forward dynamics: acc (16,) = d/dt [q1, dq1, q2, dq2].  False if not SPD."""
     x = np.empty(2)
@@ -259,18 +277,8 @@ def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale
     h = dt / nsub
     for k in range(k0, k1):
         t = k * dt
-        desired(traj, t, xd, dxd, ddxd)
-        if noise_scale > 0.0:
-            add_noise(state, noise[k], noise_scale, sensed)
-        else:
-            for i in range(16):
-                sensed[i] = state[i]
-        st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F,
-                          T1, T2, u2, deN, minfo, sinfo)
-        if noise_scale == 0.0 and st == 0:  # laws ran on the true state: reuse their kinematics
-            record_row_info(t, state, xd, dxd, minfo, sinfo, T1, T2, u2, deN, rows[k - k0])
-        else:
-            record_row(t, state, xd, dxd, mpk_c, gains, spec, T1, T2, u2, deN, rows[k - k0])
+        st = control_step(t, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, weights, gains, spec, F,
+                          xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, rows[k - k0])
         if st != 0:
             return st, k - k0 + 1
         for j in range(nsub):
@@ -321,8 +329,8 @@ def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale
     return 0, k1 - k0
 
 
-KERNELS = ("cholesky_solve", "add_noise", "control_laws", "record_row", "record_row_info", "plant_accel",
-           "desired", "analytic_chunk")
+KERNELS = ("cholesky_solve", "add_noise", "control_laws", "record_row", "record_row_info", "control_step",
+           "plant_accel", "desired", "analytic_chunk")
 
 
 # =============================================================================================
@@ -393,33 +401,14 @@ except ImportError:  # pragma: no cover
 
 
 def sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state):
-    """True (noise-free) state (16,) [q1, dq1, q2, dq2] from MuJoCo joints; qc, vc (n_chain,) work.
-
-    chain_q2_from_joints and chain_dq2_from_joints fused into one pass over R (the same sums in the
-    same order: identical numbers)."""
+    """True (noise-free) state (16,) [q1, dq1, q2, dq2] from MuJoCo joints; qc, vc (n_chain,) work."""
     for i in range(2):
         state[i] = qpos[m_qadr[i]]
         state[2 + i] = qvel[m_dadr[i]]
-    n = c_qadr.shape[0]
-    for c in range(n):
+    for c in range(c_qadr.shape[0]):
         qc[c] = qpos[c_qadr[c]]
         vc[c] = qvel[c_dadr[c]]
-    for i in range(3):
-        e = 0.0
-        th = 0.0
-        de = 0.0
-        dth = 0.0
-        for c in range(n):
-            e += R[i, c] * qc[c]
-            th += R[3 + i, c] * qc[c]
-            de += R[i, c] * vc[c]
-            dth += R[3 + i, c] * vc[c]
-        d = L0[i] + e
-        k = th / d
-        state[4 + i] = d
-        state[7 + i] = k
-        state[10 + i] = de
-        state[13 + i] = (dth - k * de) / d
+    chain_sense(qc, vc, R, L0, state[4:10], state[10:16])
 
 
 def mujoco_commands(servo, feedforward, dt, q2s, T2, u2, ref, C, R, L0, kv_over_kp, cmd):
@@ -506,18 +495,8 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
             if state[4 + i] <= 0.0:
                 return 5, k - k0
         t = k * dt
-        desired(traj, t, xd, dxd, ddxd)
-        if noise_scale > 0.0:
-            add_noise(state, noise[k], noise_scale, sensed)
-        else:
-            for i in range(16):
-                sensed[i] = state[i]
-        st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F,
-                          T1, T2, u2, deN, minfo, sinfo)
-        if noise_scale == 0.0 and st == 0:  # laws ran on the true state: reuse their kinematics
-            record_row_info(t, state, xd, dxd, minfo, sinfo, T1, T2, u2, deN, rows[k - k0])
-        else:
-            record_row(t, state, xd, dxd, mpk_c, gains, spec, T1, T2, u2, deN, rows[k - k0])
+        st = control_step(t, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, weights, gains, spec, F,
+                          xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, rows[k - k0])
         if hist:
             for i in range(qpos.shape[0]):
                 qpos_hist[k - k0, i] = qpos[i]
@@ -572,7 +551,6 @@ def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):
 
 
 KERNELS = KERNELS + ("sense_mujoco", "mujoco_commands", "mujoco_chunk", "replay_commands")
-
 
 
 # =============================================================================================

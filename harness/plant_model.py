@@ -158,10 +158,10 @@ def chain_q2_from_joints(qpos_chain, R, L0, out):
         out[3 + i] = th / d
 
 
-def chain_dq2_from_joints(qpos_chain, qvel_chain, R, L0, out):
-    """Sense dq2/dt (6,) [m/s, 1/(m s)] from chain joint positions and velocities (n_chain,).
-
-    dd_i = (R du)_i,  dk_i = (dTheta_i - k_i dd_i) / d_i  with du = R qvel_chain.
+def chain_sense(qpos_chain, qvel_chain, R, L0, q2, dq2):
+    """Sense q2 (6,) and dq2/dt (6,) [m/s, 1/(m s)] from chain joint positions and velocities
+    (n_chain,) in one pass over R: q2 as in ``chain_q2_from_joints`` (the same sums, identical
+    numbers), dd_i = (R du)_i, dk_i = (dTheta_i - k_i dd_i) / d_i with du = R qvel_chain.
     """
     n = R.shape[1]
     for i in range(3):
@@ -176,8 +176,10 @@ def chain_dq2_from_joints(qpos_chain, qvel_chain, R, L0, out):
             dth += R[3 + i, c] * qvel_chain[c]
         d = L0[i] + e
         k = th / d
-        out[i] = de
-        out[3 + i] = (dth - k * de) / d
+        q2[i] = d
+        q2[3 + i] = k
+        dq2[i] = de
+        dq2[3 + i] = (dth - k * de) / d
 
 
 def chain_force_from_T2(q2, T2, R, out):
@@ -543,10 +545,14 @@ class ChainMap:
 
     def dq2_from_joints(self, qpos_chain, qvel_chain) -> np.ndarray:
         """Sensed dq2/dt (6,) from chain joint positions and velocities (n_chain,)."""
-        out = np.empty(6)
-        chain_dq2_from_joints(np.asarray(qpos_chain, dtype=float), np.asarray(qvel_chain, dtype=float),
-                              self.R, self.L0, out)
-        return out
+        return self.sense_joints(qpos_chain, qvel_chain)[1]
+
+    def sense_joints(self, qpos_chain, qvel_chain) -> tuple[np.ndarray, np.ndarray]:
+        """Sensed (q2, dq2) (6,) each from chain joint positions and velocities (n_chain,)."""
+        q2, dq2 = np.empty(6), np.empty(6)
+        chain_sense(np.asarray(qpos_chain, dtype=float), np.asarray(qvel_chain, dtype=float), self.R, self.L0,
+                    q2, dq2)
+        return q2, dq2
 
     def force_from_T2(self, q2, T2) -> np.ndarray:
         """Chain joint forces (n_chain,) with A(q2)^T tau = T2 (see ``chain_force_from_T2``)."""
@@ -580,8 +586,7 @@ class ChainMap:
 
     def sense(self, d: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
         """(q2, dq2) sensed from the chain joints of d."""
-        q, v = self.chain_qpos(d), self.chain_qvel(d)
-        return self.q2_from_joints(q), self.dq2_from_joints(q, v)
+        return self.sense_joints(self.chain_qpos(d), self.chain_qvel(d))
 
     def master_tip(self, m: mujoco.MjModel, d: mujoco.MjData) -> np.ndarray:
         """[X, Z] of master_tip_site relative to master_base (needs up-to-date kinematics)."""
@@ -917,11 +922,11 @@ def export_mjcf(master: MasterParams, slave: SlaveParams, plant: PlantConfig, pa
 
 __all__ = [
     "CC_SOLIMP", "CC_SOLREF", "MJCF_DIR", "SCENE_XML", "TIP_MASS_FRACTION", "ChainMap", "PlantModelError",
-    "build_model", "build_spec", "chain_dq2_from_joints", "chain_elastic_correction", "chain_elastic_energy",
+    "build_model", "build_spec", "chain_sense", "chain_elastic_correction", "chain_elastic_energy",
     "chain_force_from_T2", "chain_joints_from_q2", "chain_joints_jacobian", "chain_layout",
     "chain_q2_from_joints", "export_mjcf", "stiffness_courant_number",
 ]
 
 # kernels compiled by harness.fast (numba) together with controllers/
-KERNELS = ("chain_joints_from_q2", "chain_joints_jacobian", "chain_q2_from_joints", "chain_dq2_from_joints",
+KERNELS = ("chain_joints_from_q2", "chain_joints_jacobian", "chain_q2_from_joints", "chain_sense",
            "chain_force_from_T2", "chain_elastic_correction", "chain_elastic_energy")

@@ -15,7 +15,7 @@ is right-handed, Z up, like MuJoCo):
     plots/q2                             d1..d3 (m), k1..k3 (1/m)
     plots/T1, plots/T2                   N m | [N, N m^2]
     world/master/arm, world/master/tip   line strip base-elbow-tip, tip point
-    world/slave/chain, .../bodies, .../segments   plant bodies: polyline, points, oriented boxes
+    world/slave/chain, .../segments      plant bodies: polyline, oriented boxes (size static, pose per step)
     world/slave/backbone                 analytic constant-curvature backbone of the sensed q2
     world/slave/tip                      plant tip (x2_plant; analytic x2 on the analytic plant)
     world/desired/master, .../slave      the desired path x_d (static)
@@ -284,7 +284,6 @@ def _log_static(rec: rr.RecordingStream, traj: Trajectory, master_base, slave_ba
     rec.log("world/master/arm", rr.LineStrips3D.from_fields(radii=0.012, colors=_C_MASTER), static=True)
     rec.log("world/master/tip", rr.Points3D.from_fields(radii=0.012, colors=_C_MASTER), static=True)
     rec.log("world/slave/chain", rr.LineStrips3D.from_fields(radii=0.006, colors=_C_SLAVE), static=True)
-    rec.log("world/slave/bodies", rr.Points3D.from_fields(radii=0.012, colors=_C_SLAVE), static=True)
     rec.log("world/slave/backbone", rr.LineStrips3D.from_fields(radii=0.004, colors=_C_BACKBONE), static=True)
     rec.log("world/slave/tip", rr.Points3D.from_fields(radii=0.012, colors=_C_SLAVE), static=True)
 
@@ -391,7 +390,7 @@ def _log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, eve
     tip = task_to_world(np.asarray(x2, dtype=float)[idx], slave_base)[:, None, :]
     _send(rec, "world/slave/tip", t, block, _points_columns(tip))
 
-    # (b) plant bodies: points, polyline base -> bodies (-> plant tip), oriented boxes
+    # (b) plant bodies: polyline base -> bodies (-> plant tip) and oriented boxes at the bodies
     if traj.body_pos is not None:
         bpos = np.asarray(traj.body_pos, dtype=float)[idx]
         nb = bpos.shape[1]
@@ -400,18 +399,19 @@ def _log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, eve
             parts.append(tip)
         chain = np.concatenate(parts, axis=1)
         _send_strips(rec, "world/slave/chain", t, block, chain)
-        _send(rec, "world/slave/bodies", t, block, _points_columns(bpos))
-        if traj.body_quat is not None and nb:
-            wxyz = np.asarray(traj.body_quat, dtype=float)[idx]
-            quat = np.empty(wxyz.shape, dtype=np.float32)  # wxyz -> xyzw (Rerun stores float32)
-            quat[..., :3] = wxyz[..., 1:]
-            quat[..., 3] = wxyz[..., 0]
-            half = _box_half_size(bpos, meta).astype(np.float32)
+        if nb:
             B, C = rr.Boxes3D, rr.components  # float32 in (Boxes3D.columns on all rows is ~10x slower)
-            boxes = (_flat(B.descriptor_half_sizes(), C.HalfSize3DBatch, np.tile(half, (len(t) * nb, 1)), nb)
-                     + _flat(B.descriptor_centers(), C.Translation3DBatch, _f32(bpos).reshape(-1, 3), nb)
-                     + _flat(B.descriptor_quaternions(), C.RotationQuatBatch, quat.reshape(-1, 4), nb))
-            rec.log("world/slave/segments", rr.Boxes3D.from_fields(colors=_C_SLAVE, radii=0.002), static=True)
+            # the box size is constant over the run: logged once (static), poses per step
+            half = np.tile(_box_half_size(bpos, meta).astype(np.float32), (nb, 1))
+            rec.log("world/slave/segments", B.from_fields(half_sizes=half, colors=_C_SLAVE, radii=0.002),
+                    static=True)
+            boxes = _flat(B.descriptor_centers(), C.Translation3DBatch, _f32(bpos).reshape(-1, 3), nb)
+            if traj.body_quat is not None:
+                wxyz = np.asarray(traj.body_quat, dtype=float)[idx]
+                quat = np.empty(wxyz.shape, dtype=np.float32)  # wxyz -> xyzw (Rerun stores float32)
+                quat[..., :3] = wxyz[..., 1:]
+                quat[..., 3] = wxyz[..., 0]
+                boxes += _flat(B.descriptor_quaternions(), C.RotationQuatBatch, quat.reshape(-1, 4), nb)
             _send(rec, "world/slave/segments", t, block, boxes)
 
     # (c) analytic backbone of the sensed q2

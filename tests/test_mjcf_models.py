@@ -110,11 +110,42 @@ def test_scene_options_and_bases():
     assert m.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     np.testing.assert_allclose(m.opt.gravity, [0, 0, -9.81])
     assert m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_CONTACT
+    # equality constraints only: no warm start, no island discovery (see scene.xml and the next test)
+    assert m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_WARMSTART
+    assert m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_ISLAND
     np.testing.assert_allclose(m.body("octarm_base").pos, [0, 0.3, 0])
     np.testing.assert_allclose(m.body("master_base").pos, [0, -0.3, 0])
     for path in ("master.xml", "octarm_base.xml"):
         text = (pm.MJCF_DIR / path).read_text()
         assert '<compiler angle="radian" autolimits="true"/>' in text
+
+
+@pytest.mark.parametrize("actuation", ["servo", "torque"])
+def test_cold_start_without_islands_solves_the_same_physics(actuation):
+    """The scene turns warm-starting and island discovery off for speed: with only equality
+    constraints the Newton problem is quadratic, so the closed-loop run's physics, replayed with both
+    turned back on, reaches the same state (to rounding) and the solver needs one iteration."""
+    from harness.config import Scenario
+    from harness.mujoco_sim import make_plant, simulate_mujoco
+
+    scn = Scenario(duration=0.3, plant=PlantConfig(actuation=actuation, segments=4))
+    m, _, _ = make_plant(scn)
+    log = np.zeros((scn.n_steps * scn.substeps, m.nu + m.nv))
+    assert simulate_mujoco(scn, cmd_log=log).status == "ok"
+    ends = []
+    for flags_on in (False, True):
+        m, d, _ = make_plant(scn)
+        if flags_on:
+            D = mujoco.mjtDisableBit
+            m.opt.disableflags &= ~int(D.mjDSBL_WARMSTART | D.mjDSBL_ISLAND)
+        iters = 0
+        for row in log:
+            d.ctrl[:], d.qfrc_applied[:] = row[:m.nu], row[m.nu:]
+            mujoco.mj_step(m, d)
+            iters = max(iters, int(d.solver_niter[0]))
+        assert d.nefc > 0 and iters == 1
+        ends.append(np.concatenate([d.qpos, d.qvel]))
+    np.testing.assert_allclose(ends[0], ends[1], rtol=0, atol=1e-12)
 
 
 # --- generated models --------------------------------------------------------------------------------
@@ -279,7 +310,9 @@ def test_kernels_compile_with_numba():
     o6 = np.empty(6)
     jit.chain_q2_from_joints(q, cm.R, cm.L0, o6)
     np.testing.assert_array_equal(o6, cm.q2_from_joints(q))
-    jit.chain_dq2_from_joints(q, v, cm.R, cm.L0, o6)
+    p6 = np.empty(6)
+    jit.chain_sense(q, v, cm.R, cm.L0, p6, o6)
+    np.testing.assert_array_equal(p6, cm.q2_from_joints(q))  # the same sums as the position-only map
     np.testing.assert_array_equal(o6, cm.dq2_from_joints(q, v))
     jit.chain_force_from_T2(q2, T2, cm.R, o)
     np.testing.assert_array_equal(o, cm.force_from_T2(q2, T2))

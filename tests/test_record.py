@@ -6,7 +6,6 @@ import math
 import shutil
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +13,7 @@ import pytest
 import rerun as rr
 from rerun.chunk import RrdReader
 
-from harness.record import TIMELINE, cc_backbone, read_series, write_recording
+from harness.record import STRIP_POINTS_PER_CHUNK, TIMELINE, cc_backbone, read_series, write_recording
 
 SERIES = ("e1", "e2", "e2_plant", "beta", "ya", "deN_norm", "q2", "T1", "T2")
 
@@ -128,8 +127,14 @@ def test_spatial_content(tmp_path, synthetic_trajectory):
     np.testing.assert_array_equal(t_ns, np.round(traj.t * 1e9).astype(np.int64))
     np.testing.assert_allclose(np.array([s[0] for s in arm]), traj.master_pos.astype(np.float32), atol=0)
 
-    _, bodies = _rows(path, "world/slave/bodies", "Points3D:positions")
-    np.testing.assert_array_equal(np.array(bodies, dtype=np.float32), traj.body_pos.astype(np.float32))
+    # plant bodies: boxes centred on the MuJoCo body origins, oriented like the bodies, sized once
+    _, centers = _rows(path, "world/slave/segments", "Boxes3D:centers")
+    np.testing.assert_array_equal(np.array(centers, dtype=np.float32), traj.body_pos.astype(np.float32))
+    half = [c.to_record_batch().column("Boxes3D:half_sizes").to_pylist()[0]
+            for c in RrdReader(path).stream().to_chunks() if c.entity_path == "/world/slave/segments"
+            and c.is_static]
+    assert len(half) == 1 and np.array(half[0]).shape == (traj.body_pos.shape[1], 3)
+    assert np.all(np.array(half[0]) > 0)
     _, quats = _rows(path, "world/slave/segments", "Boxes3D:quaternions")
     np.testing.assert_array_equal(np.array(quats, dtype=np.float32),
                                   traj.body_quat[..., [1, 2, 3, 0]].astype(np.float32))
@@ -196,7 +201,7 @@ def test_analytic_plant_without_bodies(tmp_path, synthetic_trajectory):
     np.testing.assert_array_equal(read_series(path, "plots/e2")[1], traj.e2)
     with pytest.raises(KeyError):
         read_series(path, "plots/e2_plant")
-    assert not _temporal_chunks(path, "world/slave/bodies")
+    assert not _temporal_chunks(path, "world/slave/segments")
     assert not _temporal_chunks(path, "world/slave/chain")
     _, stip = _rows(path, "world/slave/tip", "Points3D:positions")  # analytic x2 instead
     base = traj.meta["slave_base"]
@@ -258,12 +263,21 @@ def test_cc_backbone_limits():
 
 
 @pytest.mark.slow
-def test_write_20k_steps_is_fast(tmp_path, synthetic_trajectory):
-    traj = synthetic_trajectory(20_000)
-    t0 = time.perf_counter()
+def test_write_20k_steps_keeps_strip_chunks_small_and_verifies(tmp_path, synthetic_trajectory):
+    """A paper-length run (20k steps): every line-strip chunk stays within STRIP_POINTS_PER_CHUNK
+    points (what keeps `rerun rrd verify` linear; its speed is measured in benchmarks/, not here),
+    no row is lost, and the file verifies."""
+    n = 20_000
+    traj = synthetic_trajectory(n)
     path = write_recording(traj, tmp_path / "long.rrd")
-    dt = time.perf_counter() - t0
-    assert dt < 5.0, f"write took {dt:.2f} s"
-    t0 = time.perf_counter()
-    assert _cli("verify", str(path), timeout=300).returncode == 0
-    assert time.perf_counter() - t0 < 60.0
+    rows: dict[str, int] = {}
+    for c in RrdReader(path).stream().to_chunks():
+        if c.is_static:
+            continue
+        rows[c.entity_path] = rows.get(c.entity_path, 0) + c.num_rows
+        if "LineStrips3D:strips" in c.to_record_batch().schema.names:
+            points = sum(len(s) for s in c.to_record_batch().column("LineStrips3D:strips").to_pylist())
+            assert points <= STRIP_POINTS_PER_CHUNK, (c.entity_path, c.num_rows, points)
+    assert rows["/plots/e2"] == rows["/world/slave/backbone"] == rows["/world/slave/segments"] == n
+    r = _cli("verify", str(path), timeout=600)  # the timeout only guards against a hang
+    assert r.returncode == 0, (r.stdout + r.stderr)[-2000:]
