@@ -73,6 +73,64 @@ def raw_replay_s(scn: Scenario, log: np.ndarray) -> float:
     return time.perf_counter() - t
 
 
+def raw_replay_variant_s(scn: Scenario, log: np.ndarray, integrator: str | None = None,
+                         solver_defaults: bool = False) -> tuple[float, int]:
+    """raw_replay_s of the same logged commands on a variant of the plant model: another integrator
+    and/or MuJoCo's default solver flags (warm start and island discovery on, which the scene turns
+    off).  Returns (seconds, max Newton iterations of the last step)."""
+    m, d, _ = make_plant(scn)
+    if integrator is not None:
+        m.opt.integrator = INTEGRATOR_ENUM[integrator]
+    if solver_defaults:
+        m.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_WARMSTART | mujoco.mjtDisableBit.mjDSBL_ISLAND)
+    t = time.perf_counter()
+    K.replay_commands(m._address, d._address, MJ_FUNCS, d.ctrl, d.qfrc_applied, log)
+    return time.perf_counter() - t, int(d.solver_niter[0])
+
+
+INTEGRATOR_ENUM = {"implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST,
+                   "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT, "euler": mujoco.mjtIntegrator.mjINT_EULER,
+                   "rk4": mujoco.mjtIntegrator.mjINT_RK4}
+
+
+def settings_table(base: Scenario, reps: int, out) -> None:
+    """Solver flags and integrator: raw cost of the same physics steps, and closed-loop stability."""
+    scn = dataclasses.replace(base, duration=min(base.duration, 2.0))
+    _, log = logged_run(scn)
+    variants = [("implicitfast", False, "the plant's setting (scene.xml)"),
+                ("implicitfast", True, "MuJoCo's default solver flags (warm start, islands)"),
+                ("implicit", False, ""), ("euler", False, ""), ("rk4", False, "")]
+    times = {v: [] for v in variants}
+    for _ in range(max(reps, 5)):  # interleaved
+        for v in variants:
+            times[v].append(raw_replay_variant_s(scn, log, v[0], v[1])[0])
+    ref = min(times[variants[0]])
+    out(f"\nPlant settings (servo, N = {scn.plant.segments}, CC on; raw mj_step replaying the same logged "
+        f"commands of a {scn.duration:g} s run, best of {max(reps, 5)} interleaved; 'closed loop' = the "
+        "harness run with that integrator):\n")
+    out("| integrator | solver flags | raw mj_step | vs plant setting | closed loop | closed loop, servos at "
+        f"{STIFF_SERVO_HZ:g} Hz | note |")
+    out("|---|---|---|---|---|---|---|")
+
+    def loop_status(integ: str, **plant_kw) -> str:
+        plant = dataclasses.replace(scn.plant, integrator=integ, **plant_kw)
+        tr = simulate_mujoco(dataclasses.replace(scn, plant=plant))
+        return tr.status if tr.status == "ok" else f"{tr.status} at t = {tr.t[-1]:.3f} s"
+
+    for v in variants:
+        integ, defaults, note = v
+        best = min(times[v])
+        loops = ["same physics (tested)"] * 2
+        if not defaults:
+            loops = [loop_status(integ), loop_status(integ, servo_frequency=STIFF_SERVO_HZ)]
+        flags = "warm start + islands" if defaults else "cold start, no islands"
+        out(f"| {integ} | {flags} | {best / len(log) * 1e6:.1f} us | {best / ref:.2f}x | {loops[0]} | "
+            f"{loops[1]} | {note} |")
+
+
+STIFF_SERVO_HZ = 80.0  # a stiffer servo than the default 20 Hz (servo gains are a mismatch factor)
+
+
 def raw_hold_s(scn: Scenario, steps: int) -> float:
     """Seconds for `steps` raw mj_step with the chain servos holding the initial q2 (no controller):
     the only raw baseline where the harness itself diverges (free chain, CC off)."""
@@ -406,6 +464,8 @@ def main() -> None:
     out(f"| harness loop - raw mj_step (measured above) | {loop_us - raw_us:.2f} |")
     out(f"| rest: loop bookkeeping, per-chunk Python and numba dispatch, interleaving with mj_step (caches), "
         f"machine drift | {loop_us - raw_us - top:.2f} |")
+
+    settings_table(base, args.reps, out)
 
     out("\nCost vs segments per section N (2 s runs, CC constraints on unless stated; us per control "
         "step):\n")

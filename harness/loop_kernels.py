@@ -6,7 +6,9 @@ that the Python side of the loop is one kernel call plus `mj_step`:
 
 Status codes returned by the kernels (STATUS_TEXT in harness.sim):
 0 ok, 1 non-finite state or command, 2 master Jacobian singular, 3 slave J2 J2^T singular,
-4 runaway error (|e1| or |e2| above the limit), 5 slave section length <= 0.
+4 runaway error (|e1| or |e2| above the limit), 5 slave section length <= 0, 6 non-finite or
+exploding MuJoCo state, 7 a MuJoCo warning (counted by MuJoCo in mjData.warning; checked after
+every mj_step, so the run stops at the step that raised it).
 """
 
 from __future__ import annotations
@@ -453,7 +455,7 @@ def mujoco_commands(servo, feedforward, dt, q2s, T2, u2, ref, C, R, L0, kv_over_
 def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc, m_qadr, m_dadr, m_act,
                  c_qadr, c_dadr, c_act, R, C, L0, eargs,
                  servo, feedforward, kv_over_kp, traj, noise, noise_scale, F, mpk_c, spk_c, nodes,
-                 weights, gains, spec, ref, cmdbuf, delay, rows, qpos_hist, cmd_log, geo_in, geo_out):
+                 weights, gains, spec, ref, cmdbuf, delay, rows, qpos_hist, cmd_log, geo_in, geo_out, wnum):
     """Control steps k0..k1-1 on the MuJoCo plant (model/data pointers mptr, dptr; mjfn = MJ_FUNCS;
     qpos, qvel, ctrl, qfrc are numpy views of the same MjData).  Per step: sense -> noise -> both laws
     -> record -> commands (delayed by `delay` control steps through the ring buffer cmdbuf (delay+1, 2+2n)) ->
@@ -464,7 +466,9 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
     or, if geo_out = (body_pos, body_quat, master_pos, tip) has rows, `copy_geometry` fills them from the
     kinematics MuJoCo computed inside the first mj_step of the step (the start state: valid for the
     single-stage integrators, not RK4), geo_in = (xpos, xquat, site_xpos, xanchor, bodies, gids).
-    Returns (status, completed steps); status 6 = non-finite or exploding MuJoCo state (instability)."""
+    wnum: view of MuJoCo's warning counters (mjData.warning.number), checked after every mj_step.
+    Returns (status, completed steps); status 6 = non-finite or exploding MuJoCo state, 7 = a MuJoCo
+    warning was raised during the last completed step (whose row is recorded)."""
     n = C.shape[0]
     state = np.empty(16)
     sensed = np.empty(16)
@@ -534,6 +538,9 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
             mj_call(mjfn[MJ_STEP_FN], mptr, dptr)
             if live and s == 0:
                 copy_geometry(geo_in, k - k0, geo_out)
+            for w in range(wnum.shape[0]):
+                if wnum[w] != 0:  # any MuJoCo warning stops the run: it must never pass silently
+                    return 7, k - k0 + 1
     return 0, k1 - k0
 
 

@@ -105,7 +105,7 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     status, done, k = 0, 0, 0
     interrupted = False
     warned: dict[str, int] = {}
-    wnum = d.warning.number  # view of MuJoCo's warning counters (the dict is built only if one is set)
+    wnum = d.warning.number  # view of MuJoCo's warning counters, checked by the kernel after each mj_step
     t0 = time.perf_counter()
     try:
         while k < n:
@@ -117,16 +117,15 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
                 cmap.elastic_args, servo, scn.plant.servo_feedforward, kv_over_kp, a["traj"], noise,
                 scale, a["F"], a["mpk_c"], a["spk_c"], a["nodes"], a["weights"], a["gains"], a["spec"],
                 ref, cmdbuf, delay, rows[k:k1], geo.qpos_hist[k:k1],
-                cmd_log[k * sub:k1 * sub] if log else cmd_log, geo.inputs, geo.outputs(k, k1))
+                cmd_log[k * sub:k1 * sub] if log else cmd_log, geo.inputs, geo.outputs(k, k1), wnum)
             done = k + mdone
             if bar is not None:
                 bar.update(mdone)
             if wnum.any():
                 warned = warning_counts(d)
+                if status == 0:  # the kernel stops at the step that raised it; never pass silently
+                    status = 7
             if status != 0:
-                break
-            if warned:  # any MuJoCo warning stops the run: it must never pass silently
-                status = 6
                 break
             k = k1
             if STOP.is_set():

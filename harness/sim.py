@@ -32,7 +32,8 @@ STATUS_TEXT = {
     3: "slave J2 J2^T singular",
     4: "runaway tracking error (|e| > 1 m)",
     5: "slave section length <= 0",
-    6: "MuJoCo instability warning",
+    6: "non-finite or exploding MuJoCo state (|x| > 1e6)",
+    7: "MuJoCo warning",
 }
 
 

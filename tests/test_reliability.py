@@ -49,6 +49,26 @@ def test_diverging_mujoco_run_keeps_everything(tmp_path):
     assert "diverged" in res.stdout + res.stderr
 
 
+def test_mujoco_warning_stops_the_run_at_the_step_that_raised_it():
+    """An explicit integrator with stiff servos (euler, 160 Hz: h kv / M > 2) makes MuJoCo raise
+    mjWARN_BADQACC within a few ms.  The compiled loop checks MuJoCo's warning counters after every
+    mj_step: the run stops at that step (not at the end of a 1000-step chunk), the message names the
+    warning and MuJoCo's own text, and the rows up to it are finite."""
+    from harness.mujoco_sim import simulate_mujoco
+
+    scn = Scenario(duration=2.0, plant=PlantConfig(integrator="euler", servo_frequency=160.0))
+    tr = simulate_mujoco(scn)
+    assert tr.status == "diverged", tr.message
+    assert tr.message.startswith("MuJoCo warning (mjWARN_BADQACC"), tr.message
+    assert "MuJoCo says:" in tr.message and f"at t = {tr.t[-1]:.4f} s" in tr.message
+    assert tr.meta["mujoco_warnings"] >= 1 and tr.meta["mujoco_warning_counts"]["mjWARN_BADQACC"] >= 1
+    assert 1 <= len(tr) < 50  # stopped at the warning, well inside the first compiled chunk
+    assert np.all(np.isfinite(tr.q2[:-1])) and np.all(np.isfinite(tr.e2[:-1]))
+    # the same model with the implicit integrator (the default) runs through: the warning was real
+    ok = simulate_mujoco(Scenario(duration=0.2, plant=PlantConfig(servo_frequency=160.0)))
+    assert ok.status == "ok" and ok.meta["mujoco_warnings"] == 0
+
+
 def test_diverging_analytic_run_reports_time_and_cause():
     """+50 % slave mass on the plant: feedback linearization loses the arm; the partial trajectory is
     returned, finite, and the message names the cause and the time."""
