@@ -4,7 +4,7 @@
     teleop check [SCENARIO.toml] --bounds BOUNDS.toml ...    simulate and check acceptance bounds
     teleop models [SCENARIO.toml] [--segments N] ...         export the generated MuJoCo model (MJCF)
     teleop sweep STUDY.toml [--out DIR] [--workers N] ...    parameter sweep (local or Dask cluster)
-    teleop fidelity [--segments 4,8,16,32] [--out DIR]       plant-fidelity study over segment counts
+    teleop fidelity [--segments 4,8,16,32] [--samples N]     plant-fidelity study over segment counts
 
 Exit status: 0 success; 1 the run failed (diverged, output not written) or a bound was violated;
 2 invalid input (scenario, bounds, option, output folder); 130 interrupted (SIGINT/SIGTERM).
@@ -31,7 +31,7 @@ from typing import Any, NoReturn
 from controllers.params import ParameterError
 from harness.config import ACTUATIONS, PLANTS
 from harness.errors import ConfigError
-from harness.textio import jsonable
+from harness.textio import jsonable, prepare_out_dir
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 DEBUG_ENV = "TELEOP_DEBUG"  # set to 1 to print tracebacks of output-writing failures
@@ -91,11 +91,28 @@ def _positive_int(text: str) -> int:
     return v
 
 
+def _nonnegative_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {v}")
+    return v
+
+
+def _path(text: str) -> Path:
+    """A path argument; the empty string is rejected (Path('') would silently mean '.')."""
+    if not str(text).strip():
+        raise argparse.ArgumentTypeError("expected a path, got an empty string")
+    return Path(text)
+
+
 def _add_scenario_options(p: argparse.ArgumentParser, *, sim: bool = True) -> None:
     p.add_argument(
         "scenario", nargs="?", metavar="SCENARIO.toml", default=None,
         help="scenario file (layout: scenarios/paper.toml). Default: the built-in paper scenario "
-             "(identical to scenarios/paper.toml).")
+             "(the same values as scenarios/paper.toml, which spells every one of them out).")
     if sim:
         p.add_argument("--plant", choices=PLANTS, default=None,
                        help="plant that is simulated: 'mujoco' (MuJoCo multibody model) or 'analytic' "
@@ -111,8 +128,11 @@ def _add_scenario_options(p: argparse.ArgumentParser, *, sim: bool = True) -> No
                         "Shortcut for --set plant.segments=N. Default: from the scenario (paper: 8).")
     if sim:
         p.add_argument("--duration", metavar="S", default=None,
-                       help="simulated time in seconds, in (0, 3600]; must exceed the scenario's transient "
-                            "(add --set transient=0 for short runs). Default: from the scenario (paper: 20).")
+                       help="simulated time in seconds, in (0, 3600]. It must exceed the transient after "
+                            "which metrics are taken (scenario key 'transient', paper: 5 s); when the "
+                            "scenario does not set it, runs of 5 s or less use duration / 4. A scenario file "
+                            "that sets it (e.g. scenarios/paper.toml) needs --set transient=... for shorter "
+                            "runs. Default: from the scenario (paper: 20).")
         p.add_argument("--seed", metavar="N", default=None,
                        help="noise seed, integer >= 0. Default: from the scenario (paper: 0).")
         p.add_argument("--snr", metavar="DB|none", default=None,
@@ -125,7 +145,7 @@ def _add_scenario_options(p: argparse.ArgumentParser, *, sim: bool = True) -> No
 
 
 def _add_out_and_progress(p: argparse.ArgumentParser, out_help: str) -> None:
-    p.add_argument("--out", metavar="DIR", type=Path, default=None, help=out_help)
+    p.add_argument("--out", metavar="DIR", type=_path, default=None, help=out_help)
     p.add_argument("--no-progress", action="store_true",
                    help="do not show the progress bar (default: shown on stderr).")
 
@@ -162,7 +182,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="exit status: 0 all bounds satisfied; 1 a bound is violated (or the run failed); "
                "2 invalid input; 130 interrupted.")
     _add_scenario_options(check)
-    check.add_argument("--bounds", metavar="BOUNDS.toml", type=Path, required=True,
+    check.add_argument("--bounds", metavar="BOUNDS.toml", type=_path, required=True,
                        help="bounds file (required; layout: bounds/paper_mujoco.toml).")
     _add_out_and_progress(check, "also write the run outputs (as 'run' does) into this folder. "
                                  "Default: no files are written.")
@@ -176,17 +196,28 @@ def build_parser() -> argparse.ArgumentParser:
     models.add_argument("--enforce-cc", action=argparse.BooleanOptionalAction, default=None,
                         help="with / without the equality constraints holding each section at constant "
                              "curvature (sets plant.enforce_cc). Default: from the scenario (paper: true).")
-    models.add_argument("--out", metavar="FILE.xml", type=Path, default=None,
+    models.add_argument("--out", metavar="FILE.xml", type=_path, default=None,
                         help="output MJCF file (parent folders are created). "
                              "Default: mjcf/octarm_<actuation>_n<segments>[_cc].xml.")
     models.set_defaults(func=cmd_models)
 
     sweep = sub.add_parser(
         "sweep", formatter_class=_Formatter, help="run a parameter sweep (study file)",
-        description="Run every scenario of a study file (harness.sweep) locally in worker processes or on a "
-                    "Dask cluster, and write one output folder per run plus a summary.")
-    sweep.add_argument("study", metavar="STUDY.toml", type=Path, help="study file describing the sweep.")
-    sweep.add_argument("--out", metavar="DIR", type=Path, default=None,
+        description="Run every case of a study file (harness.sweep) in local worker processes or on a "
+                    "Dask cluster. Each finished case is appended to results.jsonl as it finishes; "
+                    "re-running the same command resumes (finished cases are skipped). Also written: "
+                    "summary.csv, metric plots (lines for 1-D factors, heatmaps for 2-D grids), "
+                    "study.toml (resolved) and optional recordings of the worst cases.",
+        epilog="study file (TOML; see studies/*.toml and the README): [study] name, scenario (base "
+               "scenario file), set (overrides for every case), metrics, record = {worst = k, by = METRIC}; "
+               "[[factor]] param = any scenario key (e.g. plant.slave.masses[0]) with scale = [...] "
+               "(x nominal), values = [...] or scale/values = {random = 'uniform', low, high}; "
+               "[sampling] mode = 'grid' | 'random', n, seed. "
+               "exit status: 0 every case has a row (diverged cases are rows too); 1 cases unfinished or "
+               "the executor failed; 2 invalid study, option or output folder; 130 interrupted (re-run to "
+               "resume).")
+    sweep.add_argument("study", metavar="STUDY.toml", type=_path, help="study file describing the sweep.")
+    sweep.add_argument("--out", metavar="DIR", type=_path, default=None,
                        help="output folder (created; must be writable; an existing sweep folder is "
                             "resumed). Default: runs/sweeps/<study name>.")
     sweep.add_argument("--workers", metavar="N", type=_positive_int, default=None,
@@ -204,12 +235,19 @@ def build_parser() -> argparse.ArgumentParser:
         description="Compare the generated MuJoCo Octarm with N rigid segments per section against the "
                     "analytic constant-curvature model (tip position, Jacobian, inertia, gravity, elastic "
                     "forces at seeded random configurations; plus the master) for several N, with the "
-                    "observed convergence order (harness.fidelity). Writes fidelity.md, fidelity.csv and "
-                    "fidelity.png.")
+                    "observed convergence order, and the same chain with and without the constant-curvature "
+                    "equality constraints (shape held under gravity, mj_step cost, closed loop) "
+                    "(harness.fidelity). Writes fidelity.md, fidelity.csv, fidelity.png, fidelity_cc.md and "
+                    "fidelity_cc.csv.")
     fid.add_argument("--segments", metavar="N,N,...", default="4,8,16,32",
                      help="comma-separated segment counts per section, each an integer in [1, 64]. "
                           "Default: 4,8,16,32.")
-    fid.add_argument("--out", metavar="DIR", type=Path, default=Path("runs/fidelity"),
+    fid.add_argument("--samples", metavar="N", type=_positive_int, default=50,
+                     help="random in-range slave configurations for the discretization table, integer >= 1. "
+                          "Default: 50.")
+    fid.add_argument("--seed", metavar="N", type=_nonnegative_int, default=0,
+                     help="seed of the random configurations, integer >= 0. Default: 0.")
+    fid.add_argument("--out", metavar="DIR", type=_path, default=Path("runs/fidelity"),
                      help="output folder (created; must be writable). Default: runs/fidelity.")
     fid.add_argument("--no-progress", action="store_true",
                      help="do not show progress output (default: shown on stderr when available).")
@@ -260,26 +298,6 @@ def load_from_args(args: argparse.Namespace, extra: Sequence[tuple[str, str]] = 
         overrides.append(text)
         labels.append(f"--set {text}")
     return load_scenario(args.scenario, overrides, labels=labels)
-
-
-def prepare_out_dir(path: Path, option: str = "--out") -> Path:
-    """Create `path` (and parents) and check that files can be written in it, else ConfigError."""
-    path = Path(path)
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except FileExistsError:
-        raise ConfigError(f"{option} = '{path}': exists and is not a directory", path=option) from None
-    except OSError as e:
-        raise ConfigError(f"{option} = '{path}': cannot create the output folder ({e.strerror or e})",
-                          path=option) from None
-    probe = path / f".teleop-write-test-{os.getpid()}"
-    try:
-        probe.write_bytes(b"")
-        probe.unlink()
-    except OSError as e:
-        raise ConfigError(f"{option} = '{path}': output folder is not writable ({e.strerror or e})",
-                          path=option) from None
-    return path
 
 
 def _import(name: str):
@@ -488,9 +506,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     study: Path = args.study
     if not study.is_file():
         raise ConfigError(f"study file not found: {study}", path=str(study))
-    out = prepare_out_dir(args.out) if args.out is not None else None  # None: harness.sweep's default
-    sweep = _import("harness.sweep")
-    rc = sweep.main_sweep(study, out, args.workers, args.scheduler, not args.no_progress)
+    sweep = _import("harness.sweep")  # validates the study, then creates and checks the output folder
+    rc = sweep.main_sweep(study, args.out, args.workers, args.scheduler, not args.no_progress)
     return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
 
 
@@ -514,19 +531,8 @@ def cmd_fidelity(args: argparse.Namespace) -> int:
     segments = parse_segment_list(args.segments)
     out = prepare_out_dir(args.out)
     fidelity = _import("harness.fidelity")
-    entry = getattr(fidelity, "main_fidelity", None)
-    if callable(entry):  # a dedicated CLI entry point, if harness.fidelity grows one
-        rc = entry(segments, out, not args.no_progress)
-        return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
-    # TODO(cli): harness.fidelity has no CLI entry taking the segment list (its `main(out_dir)` uses
-    # fixed Ns), so the steps of `main` are composed here; switch to `main_fidelity(segments, out,
-    # progress)` once it exists.  The study has no progress bar (--no-progress is accepted anyway).
-    table = fidelity.fidelity_study(Ns=tuple(segments))
-    written = [table.write_markdown(out / "fidelity.md"), table.write_csv(out / "fidelity.csv"),
-               fidelity.plot_fidelity(table, out / "fidelity.png")]
-    print(table.to_markdown())
-    print(f"outputs in {out}/: " + ", ".join(Path(p).name for p in written))
-    return EXIT_OK
+    rc = fidelity.main_fidelity(segments, out, not args.no_progress, args.samples, args.seed)
+    return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
 
 
 # ---------------------------------------------------------------------------------------------

@@ -19,12 +19,22 @@ The observed order between two resolutions is log(err_N / err_N') / log(N' / N).
 
 Master: MuJoCo inertia, bias (gravity at rest, plus Coriolis with velocity), tip site and site
 Jacobian vs ``controllers.master`` (must agree to ~1e-12).
+
+Constant curvature enforced or not (``cc_study``): the same chain with and without the equality
+constraints (``plant.enforce_cc``), servo actuation.  At seeded random bent q2 the servos hold the
+commanded shape under gravity with the analytic static feed-forward (gravity + elastic T2 mapped by
+virtual work, as the harness does) and the elastic correction, for ``settle_steps`` physics steps;
+then the chain's departure from constant curvature is measured: the tip site against the tip of the
+same discrete chain put on the CC manifold at the sensed q2 (so the discretization error of the
+table above cancels), and the largest hinge angle's departure from its section's CC value.  Also:
+mj_step cost (compiled replay of the held commands) and whether the paper scenario's closed loop
+runs (``loop_duration`` s).  A real continuum arm is not exactly CC; the free chain shows how far
+gravity alone bends it away, the constrained one how tightly the soft equalities hold.
 """
 
 from __future__ import annotations
 
 import csv
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -182,14 +192,7 @@ class FidelityTable:
         return "\n".join(lines)
 
     def write_csv(self, path) -> Path:
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        rows = self.rows()
-        with path.open("w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(rows)
-        return path
+        return write_rows_csv(self.rows(), path)
 
     def write_markdown(self, path) -> Path:
         path = Path(path)
@@ -279,35 +282,129 @@ def plot_fidelity(table: FidelityTable, path) -> Path:
     return path
 
 
-def step_cost(Ns=(4, 8, 16, 32), enforce_cc=(False, True), actuation: str = "servo",
-              n_steps: int = 2000, repeats: int = 3, master: MasterParams | None = None,
-              slave: SlaveParams | None = None, plant: PlantConfig | None = None) -> list[dict]:
-    """Wall time of one ``mj_step`` (microseconds, best of ``repeats``) vs N and enforce_cc.
+CC_COLUMNS = ("N", "enforce_cc", "us_per_step", "tip_dev_mm", "hinge_dev_mrad", "closed_loop")
 
-    The arm starts straight and is held by its servos (ctrl = 0) or left to its springs (torque);
-    only mj_step is timed (no Python work in the loop).  Rows: N, enforce_cc, us_per_step, warnings.
-    """
+
+def _held_bend(m: mujoco.MjModel, cm: ChainMap, slave: SlaveParams, q2: np.ndarray,
+               settle_steps: int) -> tuple[float, float, np.ndarray]:
+    """Servos hold q2 under gravity (static feed-forward + elastic correction every step): returns
+    (tip departure from the CC chain at the sensed q2 (m), largest hinge departure (rad), the command
+    log (settle_steps, nu + nv) of constant held commands for timing)."""
+    d = mujoco.MjData(m)
+    cm.set_q2(d, q2)
+    d.ctrl[np.asarray(cm.chain_actuator_ids)] = cm.joints_from_q2(q2)
+    ff = cm.force_from_T2(q2, slave_model.gravity_force(slave, q2) + slave_model.elastic_force(slave, q2))
+    dof = np.asarray(cm.chain_dof_adr)
+    for _ in range(settle_steps):
+        d.qfrc_applied[dof] = ff + cm.elastic_correction(cm.chain_qpos(d))
+        mujoco.mj_step(m, d)
+    log = np.tile(np.concatenate([d.ctrl, d.qfrc_applied]), (settle_steps, 1))
+    mujoco.mj_kinematics(m, d)
+    q = cm.chain_qpos(d)
+    q2_s = cm.q2_from_joints(q)
+    tip = cm.octarm_tip(m, d)
+    d_cc = mujoco.MjData(m)
+    cm.set_q2(d_cc, q2_s)
+    mujoco.mj_kinematics(m, d_cc)
+    hinge = np.asarray(cm.is_hinge) == 1
+    resid = (q - cm.joints_from_q2(q2_s))[hinge]
+    if not (np.all(np.isfinite(q)) and warning_count(d) == 0):
+        return float("nan"), float("nan"), log
+    return float(np.linalg.norm(tip - cm.octarm_tip(m, d_cc))), float(np.abs(resid).max()), log
+
+
+def cc_study(Ns=(4, 8, 16, 32), n_samples: int = 4, seed: int = 0, settle_steps: int = 1500,
+             loop_duration: float = 2.0, master: MasterParams | None = None, slave: SlaveParams | None = None,
+             plant: PlantConfig | None = None) -> list[dict]:
+    """Constrained vs free chain (see module docstring), servo actuation.  Rows (one per N and
+    enforce_cc): N, enforce_cc, us_per_step (best of 3 compiled replays of the held commands),
+    tip_dev_mm and hinge_dev_mrad (max over n_samples bent q2; nan if the hold went unstable),
+    closed_loop (status of the paper scenario on that plant for loop_duration s, with the time if it
+    diverged)."""
     from dataclasses import replace
+
+    from harness.config import Scenario
+    from harness.fast import K
+    from harness.loop_kernels import MJ_FUNCS
+    from harness.mujoco_sim import simulate_mujoco
 
     master = MasterParams() if master is None else master
     slave = SlaveParams() if slave is None else slave
     plant = PlantConfig() if plant is None else plant
+    q2s = sample_q2(slave, n_samples, seed)
     rows = []
     for N in Ns:
-        for cc in enforce_cc:
-            m, cm = build_model(master, slave, replace(plant, segments=int(N), enforce_cc=bool(cc),
-                                                       actuation=actuation))
+        for cc in (True, False):
+            p = replace(plant, segments=int(N), enforce_cc=cc, actuation="servo")
+            m, cm = build_model(master, slave, p)
+            tip_dev = hinge_dev = 0.0
+            log = None
+            for q2 in q2s:
+                t, h, log = _held_bend(m, cm, slave, q2, settle_steps)
+                tip_dev, hinge_dev = max(tip_dev, t), max(hinge_dev, h)  # nan propagates
+                if not np.isfinite(t):
+                    tip_dev = hinge_dev = float("nan")
             best = np.inf
-            warn = 0
-            for _ in range(repeats):
+            for _ in range(3):
                 d = mujoco.MjData(m)
+                cm.set_q2(d, q2s[-1])
                 t0 = time.perf_counter()
-                for _ in range(n_steps):
-                    mujoco.mj_step(m, d)
-                best = min(best, (time.perf_counter() - t0) / n_steps)
-                warn += warning_count(d)
-            rows.append({"N": int(N), "enforce_cc": bool(cc), "us_per_step": best * 1e6, "warnings": warn})
+                K.replay_commands(m._address, d._address, MJ_FUNCS, d.ctrl, d.qfrc_applied, log)
+                best = min(best, time.perf_counter() - t0)
+            tr = simulate_mujoco(Scenario(duration=loop_duration, plant=p, master=master, slave=slave))
+            loop = "ok" if tr.status == "ok" else f"{tr.status} at t = {tr.t[-1]:.3f} s"
+            rows.append({"N": int(N), "enforce_cc": cc, "us_per_step": best / len(log) * 1e6,
+                         "tip_dev_mm": tip_dev * 1e3, "hinge_dev_mrad": hinge_dev * 1e3, "closed_loop": loop})
     return rows
+
+
+def cc_markdown(rows: list[dict], n_samples: int, settle_steps: int, loop_duration: float) -> str:
+    lines = ["| N | CC enforced | mj_step (us) | tip off the CC shape (mm) | hinge off CC (mrad) | "
+             f"closed loop, paper scenario {loop_duration:g} s |", "|---:|:---:|---:|---:|---:|---|"]
+    for r in rows:
+        lines.append(f"| {r['N']} | {'yes' if r['enforce_cc'] else 'no'} | {r['us_per_step']:.1f} | "
+                     f"{r['tip_dev_mm']:.3f} | {r['hinge_dev_mrad']:.2f} | {r['closed_loop']} |")
+    lines.append("")
+    lines.append(f"servos holding {n_samples} random bent q2 under gravity for {settle_steps} steps "
+                 "(static feed-forward + elastic correction); max over the samples; mj_step = compiled "
+                 "replay of the held commands, best of 3.")
+    return "\n".join(lines)
+
+
+def write_rows_csv(rows: list[dict], path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    return path
+
+
+def main_fidelity(segments, out, progress: bool = True, samples: int = 50, seed: int = 0,
+                  cc_samples: int = 4) -> int:
+    """`teleop fidelity`: the discretization table (fidelity.md/.csv/.png) and the constant-curvature
+    study (fidelity_cc.md/.csv) for the given segment counts, printed and written into `out`."""
+    import sys
+
+    out = Path(out)
+    say = (lambda msg: print(msg, file=sys.stderr, flush=True)) if progress else (lambda msg: None)
+    say(f"discretization errors at {samples} random q2 for N = {', '.join(map(str, segments))} ...")
+    table = fidelity_study(Ns=tuple(segments), n_samples=samples, seed=seed)
+    written = [table.write_markdown(out / "fidelity.md"), table.write_csv(out / "fidelity.csv"),
+               plot_fidelity(table, out / "fidelity.png")]
+    print(table.to_markdown())
+    say("constant curvature enforced vs free chain (held bends, mj_step cost, closed loop) ...")
+    settle, loop = 1500, 2.0
+    rows = cc_study(Ns=tuple(segments), n_samples=cc_samples, seed=seed, settle_steps=settle,
+                    loop_duration=loop)
+    text = cc_markdown(rows, cc_samples, settle, loop)
+    (out / "fidelity_cc.md").write_text(text + "\n")
+    written += [out / "fidelity_cc.md", write_rows_csv(rows, out / "fidelity_cc.csv")]
+    print()
+    print(text)
+    print(f"outputs in {out}/: " + ", ".join(Path(p).name for p in written))
+    return 0
 
 
 def warning_count(d: mujoco.MjData) -> int:
@@ -316,15 +413,6 @@ def warning_count(d: mujoco.MjData) -> int:
                    if name != "mjNWARNING"))
 
 
-def main(out_dir: str | os.PathLike = "fidelity_out") -> FidelityTable:  # pragma: no cover - manual use
-    table = fidelity_study()
-    out = Path(out_dir)
-    table.write_markdown(out / "fidelity.md")
-    table.write_csv(out / "fidelity.csv")
-    plot_fidelity(table, out / "fidelity.png")
-    print(table.to_markdown())
-    return table
-
-
-__all__ = ["QUANTITIES", "FidelityTable", "fidelity_study", "master_errors", "observed_orders",
-           "plot_fidelity", "q2_scales", "sample_q2", "slave_errors", "step_cost", "warning_count"]
+__all__ = ["QUANTITIES", "FidelityTable", "cc_study", "fidelity_study", "main_fidelity", "master_errors",
+           "observed_orders", "plot_fidelity", "q2_scales", "sample_q2", "slave_errors",
+           "warning_count"]

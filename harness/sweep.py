@@ -94,6 +94,7 @@ from __future__ import annotations
 import concurrent.futures as cf
 import csv
 import dataclasses
+import difflib
 import hashlib
 import itertools
 import json
@@ -121,7 +122,7 @@ from tqdm import tqdm
 from harness.config import Scenario
 from harness.errors import ConfigError
 from harness.io_config import load_scenario, scenario_to_dict
-from harness.textio import jsonable, read_toml, toml_literal
+from harness.textio import jsonable, prepare_out_dir, read_toml, toml_literal
 
 log = logging.getLogger(__name__)
 
@@ -191,12 +192,24 @@ class Case:
     scenario: Scenario
 
 
-def _check_keys(table: Any, allowed: Sequence[str], where: str) -> None:
+def _check_keys(table: Any, allowed: Sequence[str], where: str,
+                elsewhere: dict[str, str] | None = None) -> None:
+    """Unknown keys of a study table are an error naming them, the allowed ones and, per key, where it
+    belongs (`elsewhere`: key -> table) or the closest allowed spelling."""
     if not isinstance(table, dict):
         raise ConfigError(f"{where}: expected a table, got {table!r}")
     unknown = sorted(set(table) - set(allowed))
     if unknown:
-        raise ConfigError(f"{where}: unknown key(s) {unknown}; allowed: {sorted(allowed)}")
+        hints = []
+        for k in unknown:
+            if elsewhere and k in elsewhere:
+                hints.append(f"{k!r} belongs under {elsewhere[k]}")
+            else:
+                close = difflib.get_close_matches(str(k), list(allowed), n=1)
+                if close:
+                    hints.append(f"did you mean {close[0]!r} for {k!r}?")
+        hint = f" ({'; '.join(hints)})" if hints else ""
+        raise ConfigError(f"{where}: unknown key(s) {unknown}; allowed: {sorted(allowed)}{hint}")
 
 
 def _is_real(v) -> bool:
@@ -278,9 +291,13 @@ def load_study(source: str | os.PathLike | dict, base_dir: str | os.PathLike | N
         doc = read_toml(path, "study file")
         stem = path.stem
         base = Path(base_dir) if base_dir is not None else path.resolve().parent
-    _check_keys(doc, ("study", "factor", "sampling", "scenario"), "study file")
+    study_keys = ("name", "scenario", "set", "metrics", "record", "description")
+    belongs = {k: "[study]" for k in study_keys if k != "scenario"}
+    belongs.update({k: "[sampling]" for k in ("mode", "n", "seed")} | {"param": "[[factor]]"})
+    _check_keys(doc, ("study", "factor", "sampling", "scenario"),
+                "study file" if stem is None else f"study file {source}", belongs)
     st = doc.get("study", {})
-    _check_keys(st, ("name", "scenario", "set", "metrics", "record", "description"), "[study]")
+    _check_keys(st, study_keys, "[study]")
     name = st.get("name", stem)
     if not isinstance(name, str) or not re.fullmatch(r"[\w.-]+", name):
         raise ConfigError(f"[study] name = {name!r}: required; letters, digits, '_', '-', '.' only")
@@ -825,8 +842,10 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
         study = load_study(study)
     base = load_base(study)
     cases = expand_cases(study, base)
-    out = Path(out) if out is not None else DEFAULT_OUT_ROOT / study.name
-    out.mkdir(parents=True, exist_ok=True)
+    if out is not None:
+        out = prepare_out_dir(Path(out), "--out")
+    else:
+        out = prepare_out_dir(DEFAULT_OUT_ROOT / study.name, "sweep output folder (default)")
     lock = _Lock(out)
     in_main = threading.current_thread() is threading.main_thread()
     old_term = signal.signal(signal.SIGTERM, _raise_interrupt) if in_main else None
@@ -1068,11 +1087,14 @@ def _plots(study: Study, rows: Sequence[dict], out: Path) -> list[Path]:
 
 
 # --- CLI entry --------------------------------------------------------------------------------------
+EXIT_INTERRUPTED = 130  # as `teleop run` (harness.cli)
+
+
 def main_sweep(study_path: str | os.PathLike, out: str | os.PathLike | None = None,
                workers: int | None = None, scheduler: str | None = None, progress: bool = True) -> int:
-    """`teleop sweep`: 0 when every case has a row (diverged/error cases are data), 1 when interrupted,
-    unfinished or the executor failed (re-run to resume).  A bad study raises ConfigError before
-    anything runs."""
+    """`teleop sweep`: 0 when every case has a row (diverged/error cases are data), 1 when cases are
+    unfinished or the executor failed, 130 when interrupted (SIGINT/SIGTERM; re-run to resume).  A bad
+    study or an unusable output folder raises ConfigError before anything runs."""
     try:
         res = run_sweep(study_path, out=out, workers=workers, scheduler=scheduler, progress=progress)
     except SweepError as e:
@@ -1082,7 +1104,7 @@ def main_sweep(study_path: str | os.PathLike, out: str | os.PathLike | None = No
         r = e.result
         print(f"interrupted: {len(r.rows)} of {len(r.cases)} cases done, kept in {r.out / RESULTS}; "
               "run the same command again to resume", file=sys.stderr)
-        return 1
+        return EXIT_INTERRUPTED
     counts = ", ".join(f"{n} {s}" for s, n in sorted(res.counts().items()))
     print(f"study {res.study.name}: {len(res.cases)} cases ({counts}); ran {res.ran}, "
           f"{res.skipped} already done -> {res.out}", file=sys.stderr)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -56,3 +57,23 @@ def toml_literal(v: Any) -> str:
         return tomli_w.dumps({"v": v})[len("v = "):].rstrip("\n")
     except TypeError:
         raise ConfigError(f"cannot write {v!r} as a TOML value") from None
+
+
+def prepare_out_dir(path: Path, option: str = "--out") -> Path:
+    """Create `path` (and parents) and check that files can be written in it, else ConfigError."""
+    path = Path(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise ConfigError(f"{option} = '{path}': exists and is not a directory", path=option) from None
+    except OSError as e:
+        raise ConfigError(f"{option} = '{path}': cannot create the output folder ({e.strerror or e})",
+                          path=option) from None
+    probe = path / f".teleop-write-test-{os.getpid()}"
+    try:
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as e:
+        raise ConfigError(f"{option} = '{path}': output folder is not writable ({e.strerror or e})",
+                          path=option) from None
+    return path

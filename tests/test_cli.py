@@ -440,7 +440,7 @@ def test_fidelity_delegates(monkeypatch, tmp_path, capsys):
     monkeypatch.setattr(_module(monkeypatch, "harness.fidelity"), "main_fidelity",
                         lambda *a: calls.append(a) or 0, raising=False)
     assert main(["fidelity", "--segments", "2, 4,8", "--out", str(tmp_path / "f")]) == 0
-    assert calls == [([2, 4, 8], tmp_path / "f", True)]
+    assert calls == [([2, 4, 8], tmp_path / "f", True, 50, 0)]
     for bad in ("4,x", "0,4", "4,4", "65", ""):
         assert main(["fidelity", "--segments", bad, "--out", str(tmp_path / "f")]) == 2
         assert "--segments" in _one_error_line(capsys.readouterr().err)
