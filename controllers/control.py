@@ -261,7 +261,9 @@ def slave_control(p: SlaveParams, gains: Gains, spec: SubtaskSpec, q2, dq2, x1, 
 
 
 def null_space_quantities(p: SlaveParams, q2, dq2, g, dg):
-    """(J2^+ (6,2), P (6,6), J_phi (6,6), de_N (6,), phi_N (6,)) for given g, dg; reference for tests."""
+    """(J2^+ (6,2), dJ2^+/dt (6,2), P = I - J2^+ J2 (6,6), J_phi (6,6) of (26), de_N (6,) of (23)) at
+    (q2, dq2) for a given g (6,); dg is accepted for symmetry with (27) and unused.  Reference for
+    tests (numpy, allocating)."""
     q2 = np.ascontiguousarray(q2, dtype=float)
     dq2 = np.ascontiguousarray(dq2, dtype=float)
     x, J, H, Hd = np.empty(2), np.empty((2, 6)), np.empty((2, 6, 6)), np.empty((2, 6, 6))

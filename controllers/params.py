@@ -168,7 +168,7 @@ class SubtaskSpec:
 
     kinds: subset of {"manipulability", "limits"}; their beta functions are summed with `weights`,
     beta = sum_j w_j beta_j(q2), so y_a = exp(-ky beta) = prod_j exp(-ky w_j beta_j).
-    `limit_margin_power` p shapes the limits term (see controllers.subtasks).
+    `limit_power` p shapes the limits term (see controllers.subtasks).
     """
 
     kinds: tuple[str, ...] = ("manipulability", "limits")

@@ -18,8 +18,9 @@ from .trajectory import Trajectory
 def _rms_max(e: np.ndarray | None, mask: np.ndarray) -> tuple[float, float]:
     if e is None or not mask.any():
         return math.nan, math.nan
-    n = np.linalg.norm(e[mask], axis=1)
-    return float(np.sqrt(np.mean(n * n))), float(n.max())
+    with np.errstate(over="ignore", invalid="ignore"):  # a diverged run may overflow: inf, not a warning
+        n = np.linalg.norm(e[mask], axis=1)
+        return float(np.sqrt(np.mean(n * n))), float(n.max())
 
 
 def compute_metrics(traj: Trajectory, scn: Scenario) -> dict:

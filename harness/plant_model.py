@@ -42,8 +42,8 @@ Elasticity: MuJoCo joint springs (hinge N Kb_i / L0_i; slide N Ke_i inside a sec
 combinations for the half/boundary rods) plus ``chain_elastic_correction`` (applied by the harness
 through qfrc_applied at every physics step) give -grad of the exact discrete energy, equal to the
 analytic elastic force on the CC manifold.  Without the correction the springs alone are exact only
-at rest length with equal neighbouring extensions.  Viscous damping of SlaveParams (on q2 rates) is not
-in the MJCF: apply ``chain_force_from_T2(q2, -D dq2)`` if wanted (exact on the manifold).
+at rest length with equal neighbouring extensions.  Viscous damping of SlaveParams (on q2 rates) is
+MuJoCo joint damping (``_joint_damping``, integrated implicitly; exact at rest length on the manifold).
 
 Actuation: ``servo`` = a position actuator per chain joint (force kp (ctrl - q) - kv qdot, ctrl = the
 joint target, e.g. ``joints_from_q2``), kp = M_jj (2 pi f)^2, kv = 2 zeta (2 pi f) M_jj with M_jj the

@@ -34,7 +34,11 @@ class Trajectory:
 
     t: (n,) s | q1, dq1: (n, 2) rad, rad/s | q2, dq2: (n, 6) [d (m), k (1/m)] and rates
     xd, x1, x2: (n, 2) m | e1 = xd - x1, e2 = x1 - x2: (n, 2) m (eq. 11, 16), x2 analytic of sensed q2
-    beta: (n,) manipulability (41) | ya: (n,) eq. (29) | deN: (n, 6) null-space velocity error (23)
+    beta: (n,) manipulability (41), the quantity of the paper's Fig. 4 | ya: (n,) eq. (29),
+      y_a = exp(-k_y beta_s) of the sub-task function the controller uses, beta_s = sum of weight x
+      part (default: manipulability + 0.05 x limits, controllers.subtasks), so ya != exp(-k_y beta)
+      when the limits part is on; beta_s < 0 (ya > 1) only outside the length/bend ranges
+    deN: (n, 6) null-space velocity error (23)
     T1: (n, 2) N m | T2: (n, 6) generalized forces [N, N m^2] | u2: (n, 6) slave auxiliary input (18)
     x2_plant: (n, 2) m, MuJoCo tip site (None on the analytic plant)
     body_pos/body_quat: (n, nb, 3) / (n, nb, 4 wxyz) world poses of the plant's slave segment bodies

@@ -44,3 +44,12 @@ def test_bounds_catch_a_dropped_null_space_term():
     violations = {v.bound for v in check_bounds(metrics, load_bounds(BOUNDS["servo"]))}
     assert {"deN_rms_max", "range_violation_max"} <= violations
     assert "e2_rms_max" not in violations
+
+
+def test_torque_bounds_catch_a_dropped_null_space_term():
+    """In torque mode the arm without phi_N drifts along its null space until the run diverges
+    (measured within 0.8 s): the status bound catches it."""
+    metrics = run("torque", "faults.null_space_scale=0", "duration=3.0", "transient=0.5")
+    violations = {v.bound for v in check_bounds(metrics, load_bounds(BOUNDS["torque"]))}
+    assert metrics["status"] == "diverged" and metrics["sim_time_reached"] < 3.0
+    assert "status_ok" in violations
