@@ -144,3 +144,36 @@ def test_unknown_key_suggestion_and_missing_file(tmp_path):
 def test_load_from_dict():
     b = load_bounds({"bounds": {"e2_rms_max": 1, "status_ok": False}})
     assert b.e2_rms_max == 1.0 and isinstance(b.e2_rms_max, float) and not b.status_ok
+
+
+# --------------------------------------------------------------------------------------------- fuzzing
+_BOUND_KEYS = sorted(Bounds.__dataclass_fields__) + ["description", "bounds", "x", ""]
+
+
+def _fuzz_values():
+    from hypothesis import strategies as st
+
+    scalars = (st.none() | st.booleans() | st.integers() | st.floats(allow_nan=True, allow_infinity=True)
+               | st.text(max_size=8))
+    keys = st.sampled_from(_BOUND_KEYS) | st.text(max_size=4)
+    return st.recursive(scalars, lambda inner: st.lists(inner, max_size=4)
+                        | st.dictionaries(keys, inner, max_size=4), max_leaves=12)
+
+
+def test_fuzz_bounds_loader():
+    """Random tables: load_bounds either returns Bounds or raises a one-line ConfigError."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    @settings(max_examples=300, deadline=None)
+    @given(st.dictionaries(st.sampled_from(_BOUND_KEYS) | st.text(max_size=5), _fuzz_values(), max_size=6))
+    def check(src):
+        try:
+            b = load_bounds(src)
+        except ConfigError as e:
+            assert "\n" not in str(e) and str(e)
+            return
+        assert isinstance(b, Bounds)
+        check_bounds(GOOD, b)  # a valid Bounds can always be checked
+
+    check()

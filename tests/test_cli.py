@@ -201,6 +201,36 @@ def test_unwritable_output_dir(stubs, tmp_path, capsys):
     assert "simulate" not in stubs.calls
 
 
+def test_empty_out_path_is_rejected(stubs, capsys):
+    for cmd in (["run"], ["check", "--bounds", "b.toml"], ["fidelity"], ["models"]):
+        assert main([*cmd, "--out", ""]) == 2
+        assert "--out" in _one_error_line(capsys.readouterr().err)
+    assert "simulate" not in stubs.calls
+
+
+def test_sweep_output_folder_errors_are_one_line(tmp_path, capsys, monkeypatch):
+    """A bad study creates no folder; an unusable output folder (given, or the default one under an
+    unwritable working directory) is a one-line error before any case runs."""
+    bad = tmp_path / "bad.toml"
+    bad.write_text('name = "x"\n[[factorz]]\nparam = "seed"\n')
+    assert main(["sweep", str(bad), "--out", str(tmp_path / "never")]) == 2
+    msg = _one_error_line(capsys.readouterr().err)
+    assert "'name' belongs under [study]" in msg and "did you mean 'factor'" in msg and str(bad) in msg
+    assert not (tmp_path / "never").exists()
+    good = tmp_path / "good.toml"
+    good.write_text('[study]\nname = "g"\n[[factor]]\nparam = "seed"\nvalues = [0, 1]\n')
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert main(["sweep", str(good), "--out", str(blocker)]) == 2
+    assert "--out" in _one_error_line(capsys.readouterr().err)
+    cwd = tmp_path / "cwd"  # the default folder runs/sweeps/g cannot be made: 'runs' is a file here
+    cwd.mkdir()
+    (cwd / "runs").write_text("x")
+    monkeypatch.chdir(cwd)
+    assert main(["sweep", str(good), "--no-progress"]) == 2
+    assert "sweep output folder (default)" in _one_error_line(capsys.readouterr().err)
+
+
 def test_bad_bounds_file_exit_2(stubs, tmp_path, capsys):
     b = tmp_path / "b.toml"
     b.write_text("[bounds]\ne2_rms_max = -1\n")

@@ -422,3 +422,46 @@ def test_end_to_end_analytic_plant(tmp_path):
         assert r["status"] == "ok", r["message"] + r["traceback"]
         assert all(isinstance(r["metrics"][m], float) and np.isfinite(r["metrics"][m]) for m in METRICS)
         assert r["wall_time"] > 0
+
+
+# --- fuzzing the study loader ----------------------------------------------------------------------
+def test_fuzz_study_loader():
+    """Random and mutated study tables: load_study + expand_cases either give cases or raise a
+    one-line ConfigError, never another exception (nothing runs)."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    keys = ["study", "factor", "sampling", "scenario", "name", "metrics", "set", "record", "param", "scale",
+            "values", "random", "low", "high", "mode", "n", "seed", "worst", "by", "x"]
+    params = ["seed", "snr_db", "plant.slave.masses", "plant.slave.masses[1]", "plant.segments", "gains.k4",
+              "plant.actuation", "control_dt", "nope.key"]
+    scalars = (st.none() | st.booleans() | st.integers(-5, 50)
+               | st.floats(allow_nan=True, allow_infinity=True) | st.text(max_size=6)
+               | st.sampled_from(params + ["grid", "random", "uniform", "e2_rms"]))
+    values = st.recursive(scalars, lambda inner: st.lists(inner, max_size=4)
+                          | st.dictionaries(st.sampled_from(keys), inner, max_size=4), max_leaves=14)
+
+    def check(doc):
+        try:
+            cases = expand_cases(load_study(doc))
+        except ConfigError as e:
+            assert "\n" not in str(e) and str(e)
+            return
+        assert all(c.case_id for c in cases)
+
+    @settings(max_examples=200, deadline=None)
+    @given(st.dictionaries(st.sampled_from(keys), values, max_size=5))
+    def random_tables(doc):
+        check(doc)
+
+    @settings(max_examples=200, deadline=None)
+    @given(st.sampled_from(["study", "factor", "sampling"]), st.sampled_from(keys), values)
+    def mutated(table, key, value):
+        doc = study([{"param": "plant.slave.masses", "scale": [0.5, 1.0]},
+                     {"param": "seed", "values": [0, 1]}], {"mode": "grid"})
+        node = doc[table] if table != "factor" else doc["factor"][0]
+        node[key] = value
+        check(doc)
+
+    random_tables()
+    mutated()
