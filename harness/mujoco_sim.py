@@ -225,4 +225,23 @@ def _plant_geometry(m: mujoco.MjModel, cmap: ChainMap, geo: _Geometry, done: int
         "slave_base": tuple(float(v) for v in base),
         "segments": cmap.n_segments, "actuation": cmap.actuation, "enforce_cc": cmap.enforce_cc,
         "body_names": [m.body(int(b)).name for b in geo.bodies], "backbone": bb,
+        "body_half_size": body_half_sizes(m, geo.bodies),
     }
+
+
+def body_half_sizes(m: mujoco.MjModel, bodies: np.ndarray) -> np.ndarray:
+    """(nb, 3) half extents (x, y, z in the body frame, m) of a box standing for each body's first
+    capsule geom (the segment rod: radius, radius, half the rod length, so consecutive boxes tile the
+    chain); a body without one (the tip body) gets a cube of the smallest capsule radius."""
+    out = np.zeros((len(bodies), 3))
+    radii = []
+    for k, b in enumerate(bodies):
+        gids = [g for g in range(int(m.body_geomadr[b]), int(m.body_geomadr[b] + m.body_geomnum[b]))
+                if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE]
+        if gids:
+            r, h = (float(v) for v in m.geom_size[gids[0], :2])
+            out[k] = (r, r, h)
+            radii.append(r)
+    r0 = min(radii) if radii else 0.01
+    out[~out.any(axis=1)] = r0
+    return out

@@ -141,26 +141,31 @@ def fig_q2(traj: Trajectory, path: Path) -> Path:
             ax_k.plot(traj.t, -kmax, ls="--", lw=0.8, color=c)
     if lr is not None:
         ax_d.plot([], [], "k--", lw=0.8, label="allowed range")
+    k = q2[:, 3:][np.isfinite(q2[:, 3:])]
+    d = q2[:, :3][np.isfinite(q2[:, :3]) & (q2[:, :3] > 0)]
+    kmin_limit = float(max_bend) / float(d.max()) if max_bend is not None and d.size else None
+    if k.size:  # data first; the bend-limit curves shown unless they are far outside the data
+        span = max(float(np.abs(k).max()), 1e-3)
+        lim = span
+        if max_bend is not None and d.size:
+            lim = max(span, min(float(max_bend) / float(d.min()), 10.0 * span))
+        ax_k.set_ylim(-1.1 * lim, 1.1 * lim)
+        if kmin_limit is not None and kmin_limit > 1.1 * lim:  # the limit curves are off the scale
+            kmin_limit = -kmin_limit
     if max_bend is not None:
-        ax_k.plot([], [], "k--", lw=0.8, label="+-max_bend / d_i")
+        label = "+-max_bend / d_i"
+        if kmin_limit is not None and kmin_limit < 0:
+            label = f"+-max_bend / d_i:\noff scale (>= {-kmin_limit:.2g} 1/m)"
+        ax_k.plot([], [], "k--", lw=0.8, label=label)
     ax_d.set_title("Slave section lengths d_i (q2[0:3])")
     ax_d.set_ylabel("d [m]")
-    ax_k.set_title("Slave section curvatures k_i (q2[3:6]), bend limit |k_i d_i| <= max_bend")
+    ax_k.set_title("Slave section curvatures k_i (q2[3:6]); limit |k_i d_i| <= max_bend")
     ax_k.set_ylabel("k [1/m]")
     ax_d.grid(True, alpha=0.3)
     ax_d.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     _finish_time_axis(ax_k, traj)
     if ax_k.get_legend() is not None:  # outside the axes: the limit curves leave no free corner
         ax_k.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
-    k = q2[:, 3:][np.isfinite(q2[:, 3:])]
-    if k.size:  # data first; the bend-limit curves shown unless they are far outside the data
-        span = max(float(np.abs(k).max()), 1e-3)
-        lim = span
-        if max_bend is not None:
-            d = q2[:, :3][np.isfinite(q2[:, :3]) & (q2[:, :3] > 0)]
-            if d.size:
-                lim = max(span, min(float(max_bend) / float(d.min()), 10.0 * span))
-        ax_k.set_ylim(-1.1 * lim, 1.1 * lim)
     _status_note(fig, traj)
     return _save(fig, path)
 

@@ -402,7 +402,7 @@ def _log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, eve
         if nb:
             B, C = rr.Boxes3D, rr.components  # float32 in (Boxes3D.columns on all rows is ~10x slower)
             # the box size is constant over the run: logged once (static), poses per step
-            half = np.tile(_box_half_size(bpos, meta).astype(np.float32), (nb, 1))
+            half = _box_half_size(bpos, meta).astype(np.float32)
             rec.log("world/slave/segments", B.from_fields(half_sizes=half, colors=_C_SLAVE, radii=0.002),
                     static=True)
             boxes = _flat(B.descriptor_centers(), C.Translation3DBatch, _f32(bpos).reshape(-1, 3), nb)
@@ -419,16 +419,21 @@ def _log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, eve
 
 
 def _box_half_size(bpos: np.ndarray, meta: dict) -> np.ndarray:
-    """Half extents of the per-body boxes: traj.meta['body_half_size'] or a fraction of the spacing."""
+    """Half extents (nb, 3) of the per-body boxes: traj.meta['body_half_size'] ((3,) for all bodies or
+    (nb, 3), e.g. the MJCF segment geoms) or a fraction of the body spacing."""
+    nb = bpos.shape[1]
     if meta.get("body_half_size") is not None:
-        return np.asarray(meta["body_half_size"], dtype=float).reshape(3)
-    if bpos.shape[1] >= 2:
+        h = np.asarray(meta["body_half_size"], dtype=float)
+        if h.shape == (nb, 3):
+            return h
+        return np.tile(h.reshape(3), (nb, 1))
+    if nb >= 2:
         gaps = np.linalg.norm(np.diff(bpos[0], axis=0), axis=-1)
         gaps = gaps[np.isfinite(gaps) & (gaps > 0)]
         s = float(np.median(gaps)) if gaps.size else 0.04
     else:
         s = 0.04
-    return np.array([0.3, 0.15, 0.45]) * s
+    return np.tile(np.array([0.3, 0.15, 0.45]) * s, (nb, 1))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -133,6 +133,15 @@ METRIC_NAMES = (
     "wall_time", "realtime_factor",
 )
 LOWER_IS_WORSE = frozenset({"beta_min"})
+# axis labels of the summary plots (units as in harness.metrics)
+METRIC_LABELS = {
+    "e1_rms": "e1_rms [m]", "e1_max": "e1_max [m]", "e2_rms": "e2_rms [m]", "e2_max": "e2_max [m]",
+    "e2_plant_rms": "e2_plant_rms [m]", "e2_plant_max": "e2_plant_max [m]",
+    "deN_rms": "deN_rms [mixed: m/s, 1/(m s)]", "beta_min": "beta_min [-] (41)", "ya_max": "ya_max [-] (29)",
+    "e1_final": "e1_final [m]", "e2_final": "e2_final [m]", "range_violation": "range_violation [m or rad]",
+    "mujoco_warnings": "mujoco_warnings [count]", "sim_time_reached": "sim_time_reached [s]",
+    "wall_time": "wall_time [s]", "realtime_factor": "realtime_factor [x real time]",
+}
 DISTRIBUTIONS = {
     "uniform": ("low", "high"), "loguniform": ("low", "high"), "normal": ("mean", "std"),
     "integers": ("low", "high"),
@@ -1047,7 +1056,7 @@ def _plots(study: Study, rows: Sequence[dict], out: Path) -> list[Path]:
             if ax is axes[0] and ax.get_legend_handles_labels()[0]:
                 ax.legend(fontsize="x-small")
             ax.set_xlabel(f"{f.name} ({f.mode} of {f.param})")
-            ax.set_ylabel(m)
+            ax.set_ylabel(METRIC_LABELS.get(m, m))
             ax.grid(alpha=0.3)
         fig.suptitle(f"{study.name}: metrics vs {f.name}")
         finish(fig, axes, f"metric_vs_{_safe(f.name)}.png")
@@ -1078,7 +1087,7 @@ def _plots(study: Study, rows: Sequence[dict], out: Path) -> list[Path]:
             ax.set_yticks(range(len(kb)), [_label(v) for v in fb.levels])
             ax.set_xlabel(fa.name)
             ax.set_ylabel(fb.name)
-            ax.set_title(m)
+            ax.set_title(METRIC_LABELS.get(m, m))
         more = " (mean over the other factors)" if len(study.factors) > 2 else ""
         star = "; * = some cases diverged or failed (partial runs)" if bad.any() else ""
         fig.suptitle(f"{study.name}: {fb.name} vs {fa.name}{more}{star}")

@@ -407,6 +407,10 @@ def test_metric_names_match_compute_metrics(synthetic_trajectory):
 
     produced = compute_metrics(synthetic_trajectory(), Scenario(transient=0.0))
     assert set(METRIC_NAMES) == set(produced) - {"status", "message"}
+    from harness.sweep import METRIC_LABELS
+
+    assert set(METRIC_LABELS) == set(METRIC_NAMES) and all("[" in v for v in METRIC_LABELS.values())
+
 
 def test_end_to_end_analytic_plant(tmp_path):
     """Two real 0.5 s cases on the analytic plant through the default worker (`run_case`).
