@@ -15,7 +15,8 @@ is right-handed, Z up, like MuJoCo):
     plots/q2                             d1..d3 (m), k1..k3 (1/m)
     plots/T1, plots/T2                   N m | [N, N m^2]
     world/master/arm, world/master/tip   line strip base-elbow-tip, tip point
-    world/slave/chain, .../segments      plant bodies: polyline, oriented boxes (size static, pose per step)
+    world/slave/segments                 plant bodies: oriented boxes sized like the segment rods (size
+                                         static, pose per step; consecutive boxes tile the chain)
     world/slave/backbone                 analytic constant-curvature backbone of the sensed q2
     world/slave/tip                      plant tip (x2_plant; analytic x2 on the analytic plant)
     world/desired/master, .../slave      the desired path x_d (static)
@@ -283,7 +284,6 @@ def _log_static(rec: rr.RecordingStream, traj: Trajectory, master_base, slave_ba
     # styling of the per-step entities (static, combined with the temporal data at query time)
     rec.log("world/master/arm", rr.LineStrips3D.from_fields(radii=0.012, colors=_C_MASTER), static=True)
     rec.log("world/master/tip", rr.Points3D.from_fields(radii=0.012, colors=_C_MASTER), static=True)
-    rec.log("world/slave/chain", rr.LineStrips3D.from_fields(radii=0.006, colors=_C_SLAVE), static=True)
     rec.log("world/slave/backbone", rr.LineStrips3D.from_fields(radii=0.004, colors=_C_BACKBONE), static=True)
     rec.log("world/slave/tip", rr.Points3D.from_fields(radii=0.012, colors=_C_SLAVE), static=True)
 
@@ -390,15 +390,10 @@ def _log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, eve
     tip = task_to_world(np.asarray(x2, dtype=float)[idx], slave_base)[:, None, :]
     _send(rec, "world/slave/tip", t, block, _points_columns(tip))
 
-    # (b) plant bodies: polyline base -> bodies (-> plant tip) and oriented boxes at the bodies
+    # (b) plant bodies: oriented boxes at the bodies (they tile the chain; the tip point is (e))
     if traj.body_pos is not None:
         bpos = np.asarray(traj.body_pos, dtype=float)[idx]
         nb = bpos.shape[1]
-        parts = [np.broadcast_to(slave_base, (len(t), 1, 3)), bpos]
-        if traj.x2_plant is not None:
-            parts.append(tip)
-        chain = np.concatenate(parts, axis=1)
-        _send_strips(rec, "world/slave/chain", t, block, chain)
         if nb:
             B, C = rr.Boxes3D, rr.components  # float32 in (Boxes3D.columns on all rows is ~10x slower)
             # the box size is constant over the run: logged once (static), poses per step

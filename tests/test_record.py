@@ -98,7 +98,7 @@ def test_blocks_bound_every_chunk(tmp_path, synthetic_trajectory):
                 continue
             seen.add(c.entity_path)
             assert 1 <= c.num_rows <= block, (c.entity_path, c.num_rows)
-        assert {"/plots/e2", "/world/master/arm", "/world/slave/chain", "/world/slave/backbone"} <= seen
+        assert {"/plots/e2", "/world/master/arm", "/world/slave/segments", "/world/slave/backbone"} <= seen
         # bulk send_columns: exactly ceil(n / block) chunks per scalar entity, n rows in total
         chunks = _temporal_chunks(path, "plots/e2")
         assert len(chunks) == math.ceil(n / block)
@@ -139,14 +139,8 @@ def test_spatial_content(tmp_path, synthetic_trajectory):
     np.testing.assert_array_equal(np.array(quats, dtype=np.float32),
                                   traj.body_quat[..., [1, 2, 3, 0]].astype(np.float32))
 
-    # chain: slave base -> 25 bodies -> plant tip (world)
-    _, chain = _rows(path, "world/slave/chain", "LineStrips3D:strips")
-    ch = np.array([s[0] for s in chain])
-    assert ch.shape == (n, 27, 3)
     base = traj.meta["slave_base"]
-    np.testing.assert_allclose(ch[:, 0], np.broadcast_to(base, (n, 3)), atol=1e-6)
     tip = np.stack([base[0] + traj.x2_plant[:, 0], np.full(n, base[1]), base[2] + traj.x2_plant[:, 1]], -1)
-    np.testing.assert_allclose(ch[:, -1], tip, atol=1e-6)
 
     # analytic backbone of q2 ends at the analytic tip x2 (computed independently in conftest)
     _, bb = _rows(path, "world/slave/backbone", "LineStrips3D:strips")
@@ -202,7 +196,6 @@ def test_analytic_plant_without_bodies(tmp_path, synthetic_trajectory):
     with pytest.raises(KeyError):
         read_series(path, "plots/e2_plant")
     assert not _temporal_chunks(path, "world/slave/segments")
-    assert not _temporal_chunks(path, "world/slave/chain")
     _, stip = _rows(path, "world/slave/tip", "Points3D:positions")  # analytic x2 instead
     base = traj.meta["slave_base"]
     np.testing.assert_allclose(np.array(stip)[:, 0, [0, 2]], traj.x2 + base[[0, 2]], atol=1e-6)
