@@ -386,6 +386,15 @@ def tip_point_jacobian(q, order, x, J):
         J[1, 3 + i] = jk.real
 
 
+def b_column(a, q, dq):
+    """Column a of B = dy/dq (y = [d, Theta], Theta_i = k_i d_i) as two (row, weight, rate) entries:
+    (r0, w0, v0, r1, w1, v1), rate = d(weight)/dt.  d_i (a = i < 3) enters y_i with 1 and Theta_i with
+    k_i; k_i (a = 3 + i) enters Theta_i with d_i (second entry weight 0)."""
+    if a < 3:
+        return a, 1.0, 0.0, 3 + a, q[3 + a], dq[3 + a]
+    return a, q[a - 3], dq[a - 3], a, 0.0, 0.0
+
+
 def tip_kinematics(q, dq, order, x, J, H, Hd):
     """Tip of the 3-section arm and its q-derivatives, as real arrays in [X, Z] rows.
 
@@ -414,41 +423,12 @@ def tip_kinematics(q, dq, order, x, J, H, Hd):
     # dB/dt the rates of those weights.  H and dH/dt are symmetric: the upper triangle is formed and
     # mirrored.
     for a in range(6):
-        i = a if a < 3 else a - 3
-        if a < 3:
-            ja = Jy[i] + Jy[3 + i] * q[3 + i]
-        else:
-            ja = Jy[3 + i] * q[i]
+        ra0, wa0, va0, ra1, wa1, va1 = b_column(a, q, dq)
+        ja = Jy[ra0] * wa0 + Jy[ra1] * wa1
         J[0, a] = ja.imag
         J[1, a] = ja.real
-    for a in range(6):
-        ia = a if a < 3 else a - 3
-        ra0 = a  # rows of column a of B and their weights (w) and rates (v)
-        wa0 = 1.0
-        va0 = 0.0
-        ra1 = 3 + ia
-        wa1 = q[3 + ia]
-        va1 = dq[3 + ia]
-        if a >= 3:
-            ra0 = 3 + ia
-            wa0 = q[ia]
-            va0 = dq[ia]
-            wa1 = 0.0
-            va1 = 0.0
         for b in range(a, 6):
-            ib = b if b < 3 else b - 3
-            rb0 = b
-            wb0 = 1.0
-            vb0 = 0.0
-            rb1 = 3 + ib
-            wb1 = q[3 + ib]
-            vb1 = dq[3 + ib]
-            if b >= 3:
-                rb0 = 3 + ib
-                wb0 = q[ib]
-                vb0 = dq[ib]
-                wb1 = 0.0
-                vb1 = 0.0
+            rb0, wb0, vb0, rb1, wb1, vb1 = b_column(b, q, dq)
             h = (Hy[ra0, rb0] * (wa0 * wb0) + Hy[ra0, rb1] * (wa0 * wb1)
                  + Hy[ra1, rb0] * (wa1 * wb0) + Hy[ra1, rb1] * (wa1 * wb1))
             if b == a + 3 and a < 3:  # d^2 Theta_i / (dd_i dk_i) = 1
@@ -513,5 +493,5 @@ KERNELS = (
     "gram_terms", "en_tuple", "en_values", "ipow_mul", "term_bases", "tval", "ty_acc", "term_grad_add",
     "term_ydd", "vtype", "term_mono", "term_table", "term_y_derivs", "chain_nz", "y_of_q", "chain_to_q",
     "chain_to_q_dot", "point_y_derivs", "tip_point_jacobian", "tip_kinematics", "backbone_points",
-    "add_role_blocks",
+    "add_role_blocks", "b_column",
 )
