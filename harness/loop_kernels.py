@@ -34,7 +34,13 @@ from controllers.control import (
 from controllers.master import master_kernel
 from controllers.slave import mass_nle_kernel
 from controllers.subtasks import limits_kernel
-from harness.plant_model import chain_elastic_correction, chain_force_from_T2, chain_sense
+from harness.plant_model import (
+    chain_elastic_correction,
+    chain_force_from_T2,
+    chain_joints_from_q2,
+    chain_joints_rate_add,
+    chain_sense,
+)
 
 # record row layout (must match harness.trajectory.ROW_FIELDS)
 R_T, R_Q1, R_DQ1, R_Q2, R_DQ2, R_XD, R_X1, R_X2 = 0, 1, 3, 5, 11, 17, 19, 21
@@ -419,28 +425,14 @@ def mujoco_commands(servo, feedforward, dt, q2s, T2, u2, ref, C, R, L0, kv_over_
     Torque actuation: chain ctrl = virtual-work map of T2 at the sensed q2s (motors).
     Servo actuation: integrate the reference q2 with u2 (semi-implicit Euler, ref = [q_ref, dq_ref]),
     ctrl = joints(q_ref) + (kv/kp) A(q_ref) dq_ref (position servo with velocity feed-forward folded
-    into the target), feed-forward = virtual-work map of T2 at q_ref (if enabled).  joints(q) = C u,
-    u = [d - L0, k d], and the rows of A = d joints / d q2 (chain_joints_from_q2 / _jacobian) are
-    formed on the fly, in the same order (identical numbers, no (n, 6) work array)."""
+    into the target), feed-forward = virtual-work map of T2 at q_ref (if enabled)."""
     n = C.shape[0]
     if servo:
         for a in range(6):
             ref[6 + a] += u2[a] * dt
             ref[a] += ref[6 + a] * dt
-        u = np.empty(6)
-        for i in range(3):
-            u[i] = ref[i] - L0[i]
-            u[3 + i] = ref[3 + i] * ref[i]
-        for c in range(n):
-            tgt = 0.0
-            for a in range(6):
-                tgt += C[c, a] * u[a]
-            v = 0.0
-            for i in range(3):
-                v += (C[c, i] + ref[3 + i] * C[c, 3 + i]) * ref[6 + i]
-            for i in range(3):
-                v += (ref[i] * C[c, 3 + i]) * ref[9 + i]
-            cmd[2 + c] = tgt + kv_over_kp[c] * v
+        chain_joints_from_q2(ref[0:6], C, L0, cmd[2:2 + n])
+        chain_joints_rate_add(ref[0:6], ref[6:12], C, kv_over_kp, cmd[2:2 + n])
         if feedforward:
             chain_force_from_T2(ref[0:6], T2, R, cmd[2 + n:2 + 2 * n])
         else:

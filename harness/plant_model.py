@@ -140,6 +140,17 @@ def chain_joints_jacobian(q2, C, out):
             out[r, 3 + i] = q2[i] * C[r, 3 + i]
 
 
+def chain_joints_rate_add(q2, dq2, C, scale, out):
+    """out (n_chain,) += scale (n_chain,) * A(q2) dq2, the joint rates of a CC motion, without forming A
+    (columns as in ``chain_joints_jacobian``: C[:, i] + k_i C[:, 3+i] and d_i C[:, 3+i])."""
+    n = C.shape[0]
+    for r in range(n):
+        v = 0.0
+        for i in range(3):
+            v += (C[r, i] + q2[3 + i] * C[r, 3 + i]) * dq2[i] + (q2[i] * C[r, 3 + i]) * dq2[3 + i]
+        out[r] += scale[r] * v
+
+
 def chain_q2_from_joints(qpos_chain, R, L0, out):
     """Sense q2 (6,) from chain joints (n_chain,).  R (6, n_chain): u = R qpos_chain; L0 (3,).
 
@@ -923,10 +934,12 @@ def export_mjcf(master: MasterParams, slave: SlaveParams, plant: PlantConfig, pa
 __all__ = [
     "CC_SOLIMP", "CC_SOLREF", "MJCF_DIR", "SCENE_XML", "TIP_MASS_FRACTION", "ChainMap", "PlantModelError",
     "build_model", "build_spec", "chain_sense", "chain_elastic_correction", "chain_elastic_energy",
-    "chain_force_from_T2", "chain_joints_from_q2", "chain_joints_jacobian", "chain_layout",
+    "chain_force_from_T2", "chain_joints_from_q2", "chain_joints_jacobian", "chain_joints_rate_add",
+    "chain_layout",
     "chain_q2_from_joints", "export_mjcf", "stiffness_courant_number",
 ]
 
 # kernels compiled by harness.fast (numba) together with controllers/
-KERNELS = ("chain_joints_from_q2", "chain_joints_jacobian", "chain_q2_from_joints", "chain_sense",
+KERNELS = ("chain_joints_from_q2", "chain_joints_jacobian", "chain_joints_rate_add", "chain_q2_from_joints",
+           "chain_sense",
            "chain_force_from_T2", "chain_elastic_correction", "chain_elastic_energy")

@@ -716,7 +716,15 @@ def _run_cases(runner: _Runner, case_fn: Callable, cases: Sequence[Case], metric
             ex = runner.executor()
             while queue and len(inflight) < runner.window:
                 case = queue.popleft()
-                inflight[ex.submit(_call, case_fn, _payload(case, metrics, record))] = case
+                try:
+                    fut = ex.submit(_call, case_fn, _payload(case, metrics, record))
+                except cf.BrokenExecutor:  # a worker died since the last wait: its futures say which
+                    queue.appendleft(case)
+                    break
+                inflight[fut] = case
+            if not inflight:  # broken before anything was in flight: nothing to blame, a fresh pool
+                runner.close(cancel=True)
+                continue
             done, _ = cf.wait(inflight, return_when=cf.FIRST_COMPLETED)
             if any(not f.cancelled() and isinstance(f.exception(), cf.BrokenExecutor) for f in done):
                 cf.wait(inflight)  # a broken pool fails every future at once

@@ -269,6 +269,42 @@ def test_dead_worker_is_isolated(tmp_path, calls):
     assert all(status[s]["status"] == "ok" for s in (0, 4, 5, 6))
 
 
+def test_pool_broken_between_waits_is_not_an_error(tmp_path, calls, monkeypatch):
+    """A worker can die after one wait returned and before the next submit: the submit then raises
+    BrokenProcessPool itself.  That case goes back to the queue, the in-flight case that died is
+    isolated as usual, and every case still gets its row (regression: this used to abort the sweep)."""
+    import concurrent.futures as cf
+    from concurrent.futures.process import BrokenProcessPool
+
+    import harness.sweep as sw
+
+    real = sw._process_pool
+    made = []
+
+    class BreaksOnSecondSubmit(cf.Executor):
+        def __init__(self):
+            self.n = 0
+
+        def submit(self, fn, /, *args, **kwargs):
+            self.n += 1
+            if self.n > 1:
+                raise BrokenProcessPool("a child process terminated abruptly")
+            fut = cf.Future()
+            fut.set_exception(BrokenProcessPool("a child process terminated abruptly"))
+            return fut
+
+    def pool(workers):
+        made.append(workers)
+        return BreaksOnSecondSubmit() if len(made) == 1 else real(workers)
+
+    monkeypatch.setattr(sw, "_process_pool", pool)
+    doc = study([{"param": "seed", "values": [0, 4, 5]}])
+    res = run_sweep(doc, out=tmp_path, workers=2, progress=False, case_fn=stub_case)
+    assert res.complete
+    assert all(r["status"] == "ok" for r in table_lines(tmp_path))
+    assert len(made) >= 2  # the broken pool was replaced
+
+
 def test_executor_failure_stops_the_sweep(tmp_path):
     # a case function the workers cannot unpickle: an executor problem, not a case result
     with pytest.raises(SweepError, match="executor failed"):
