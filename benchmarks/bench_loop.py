@@ -43,13 +43,14 @@ import numba
 import numpy as np
 
 from controllers.control import MASTER_INFO, SLAVE_INFO
-from harness.config import PlantConfig, Scenario
-from harness.fast import K
-from harness.loop_kernels import MJ_FUNCS
-from harness.mujoco_sim import make_plant, simulate_mujoco
-from harness.record import write_recording
-from harness.sim import common_arrays, initial_state, noise_table, simulate_analytic
-from harness.trajectory import ROW_WIDTH
+from harness.config.scenario import PlantConfig, Scenario
+from harness.loop.analytic_loop import simulate_analytic
+from harness.loop.common import common_arrays, initial_state, noise_table
+from harness.loop.fast import K
+from harness.loop.mujoco_kernels import MJ_FUNCS
+from harness.loop.mujoco_loop import make_plant, simulate_mujoco
+from harness.loop.trajectory import ROW_WIDTH
+from harness.output.record import write_recording
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -335,8 +336,8 @@ def paired_ratio(r: dict, key: str) -> float:
 _COLD = """
 import time
 t0 = time.perf_counter()
-from harness.config import Scenario
-from harness.mujoco_sim import simulate_mujoco
+from harness.config.scenario import Scenario
+from harness.loop.mujoco_loop import simulate_mujoco
 t1 = time.perf_counter()
 scn = Scenario(duration=0.01)
 tr = simulate_mujoco(scn); t2 = time.perf_counter()

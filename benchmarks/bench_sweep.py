@@ -4,7 +4,7 @@
     .venv/bin/python benchmarks/bench_sweep.py --plant analytic --duration 5 --cases 16
 
 Each configuration runs the same small mass-mismatch study (plant slave masses scaled 0.8..1.2)
-into a fresh temporary folder through `harness.sweep.run_sweep`, so the wall time includes starting
+into a fresh temporary folder through `harness.studies.sweep.run_sweep`, so the wall time includes starting
 the worker processes and their first-call costs (imports, loading the compiled kernels): what a user
 waits for.  One case is run in this process first so that the numba on-disk cache is warm for every
 configuration.  The table also gives the mean time per case measured inside the workers.
@@ -21,7 +21,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from harness.sweep import expand_cases, load_study, run_case, run_sweep  # noqa: E402
+from harness.studies.sweep import expand_cases, load_study, run_case, run_sweep  # noqa: E402
 
 
 def make_study(cases: int, duration: float, plant: str) -> dict:

@@ -16,32 +16,26 @@ The simulation back ends are imported lazily so that ``--help`` and input valida
 from __future__ import annotations
 
 import argparse
-import contextlib
 import importlib
 import json
 import os
-import signal
 import sys
-import threading
-import traceback
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
 from controllers.params import ParameterError
-from harness.config import ACTUATIONS, PLANTS
-from harness.errors import ConfigError
-from harness.textio import jsonable, prepare_out_dir
+from harness.config.errors import ConfigError
+from harness.config.scenario import ACTUATIONS, PLANTS
+from harness.config.textio import jsonable, prepare_out_dir
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
-DEBUG_ENV = "TELEOP_DEBUG"  # set to 1 to print tracebacks of output-writing failures
 
 # (module, attribute) of exception types that mean "invalid input" (exit 2).  Looked up in
 # sys.modules only: if the module was never imported, its exception cannot have been raised.
 _USER_ERRORS = (
-    ("harness.plant_model", "PlantModelError"),
-    ("harness.errors", "PlantModelError"),
-    ("harness.sim", "SimulationError"),
+    ("harness.plant.mujoco_model", "PlantModelError"),
+    ("harness.loop.common", "SimulationError"),
 )
 
 
@@ -154,7 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "rigid master.",
         epilog="exit status: 0 ok; 1 run failed (diverged, outputs not written) or bounds violated; "
                "2 invalid input; 130 interrupted (SIGINT/SIGTERM). "
-               f"Set {DEBUG_ENV}=1 to print tracebacks of output-writing failures. "
+               "Set TELEOP_DEBUG=1 to print tracebacks of output-writing failures. "
                "Run 'teleop COMMAND --help' for the options of each command.")
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}",
                         help="print the package version and exit.")
@@ -188,7 +182,7 @@ def build_parser() -> argparse.ArgumentParser:
     models = sub.add_parser(
         "models", formatter_class=_Formatter, help="export the generated MuJoCo model (MJCF)",
         description="Write the MJCF of the plant (plant master and plant slave of the scenario, i.e. with "
-                    "any [plant.master]/[plant.slave] mismatch) via harness.plant_model.export_mjcf.")
+                    "any [plant.master]/[plant.slave] mismatch) via harness.plant.mujoco_model.export_mjcf.")
     _add_scenario_options(models, sim=False)
     models.add_argument("--enforce-cc", action=argparse.BooleanOptionalAction, default=None,
                         help="with / without the equality constraints holding each section at constant "
@@ -200,8 +194,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     sweep = sub.add_parser(
         "sweep", formatter_class=_Formatter, help="run a parameter sweep (study file)",
-        description="Run every case of a study file (harness.sweep) in local worker processes or on a "
-                    "Dask cluster. Each finished case is appended to results.jsonl as it finishes; "
+        description="Run every case of a study file (harness.studies.sweep) in local worker processes or "
+                    "on a Dask cluster. Each finished case is appended to results.jsonl as it finishes; "
                     "re-running the same command resumes (finished cases are skipped). Also written: "
                     "summary.csv, metric plots (lines for 1-D factors, heatmaps for 2-D grids), "
                     "study.toml (resolved) and optional recordings of the worst cases.",
@@ -234,8 +228,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "forces at seeded random configurations; plus the master) for several N, with the "
                     "observed convergence order, and the same chain with and without the constant-curvature "
                     "equality constraints (shape held under gravity, mj_step cost, closed loop) "
-                    "(harness.fidelity). Writes fidelity.md, fidelity.csv, fidelity.png, fidelity_cc.md and "
-                    "fidelity_cc.csv.")
+                    "(harness.studies.fidelity). Writes fidelity.md, fidelity.csv, fidelity.png, "
+                    "fidelity_cc.md and fidelity_cc.csv.")
     fid.add_argument("--segments", metavar="N,N,...", default="4,8,16,32",
                      help="comma-separated segment counts per section, each an integer in [1, 64]. "
                           "Default: 4,8,16,32.")
@@ -276,7 +270,7 @@ _SHORTCUTS = (  # (attribute, option, dotted key)
 
 def load_from_args(args: argparse.Namespace, extra: Sequence[tuple[str, str]] = ()):
     """Scenario from the positional file, the shortcut options, `extra` (key=value, label) and --set."""
-    from harness.io_config import load_scenario
+    from harness.api import load_scenario
 
     overrides: list[str] = []
     labels: list[str | None] = []
@@ -309,35 +303,6 @@ def _import(name: str):
 
 class _Unavailable(RuntimeError):
     """A lazily imported back end (simulation, plotting, ...) is missing."""
-
-
-@contextlib.contextmanager
-def stop_on_signals(stop: threading.Event | None) -> Iterator[list[int]]:
-    """While active, SIGINT/SIGTERM set `stop` (the simulation then returns status "interrupted");
-    a second signal raises KeyboardInterrupt.  Yields the list of received signal numbers."""
-    received: list[int] = []
-    if stop is None or threading.current_thread() is not threading.main_thread():
-        yield received
-        return
-
-    def handler(signum, frame):  # noqa: ARG001
-        if stop.is_set():
-            raise KeyboardInterrupt
-        received.append(signum)
-        stop.set()
-        print(f"\n{signal.Signals(signum).name}: stopping the run, outputs will be written "
-              "(repeat to abort immediately)", file=sys.stderr)
-
-    stop.clear()
-    previous = {}
-    try:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            previous[sig] = signal.signal(sig, handler)
-        yield received
-    finally:
-        for sig, old in previous.items():
-            signal.signal(sig, old)
-        stop.clear()
 
 
 def _fmt_value(v: Any) -> str:
@@ -373,61 +338,14 @@ def _print_summary(scn, traj, metrics: dict | None, out: Path | None, written: l
 
 
 def _simulate_and_write(scn, out: Path | None, progress: bool):
-    """Simulate, compute metrics and (if out) write every output that can be written.
-
-    Returns (traj, metrics or None, list of output-writing failures, interrupted flag)."""
-    from harness.io_config import dump_scenario
-
-    written: list[Path] = []
-    failures: list[str] = []
-
-    def attempt(what: str, fn: Callable[[], Any]) -> Any:
-        try:
-            return fn()
-        except _Unavailable as e:
-            failures.append(f"{what}: {e}")
-        except Exception as e:  # noqa: BLE001 - write whatever else exists, report below
-            if os.environ.get(DEBUG_ENV):
-                traceback.print_exc()
-            failures.append(f"{what}: {type(e).__name__}: {e}")
-        return None
-
-    if out is not None:  # first, so the configuration is on disk whatever happens next
-        dump_scenario(scn, out / "config.toml")
-        written.append(out / "config.toml")
-    sim = _import("harness.sim")
-    with stop_on_signals(getattr(sim, "STOP", None)) as received:
-        traj = sim.simulate(scn, progress=progress)
-    interrupted = bool(received) or traj.status == "interrupted"
-
-    metrics = attempt("metrics", lambda: _import("harness.metrics").compute_metrics(traj, scn))
-    if metrics is not None:
-        metrics = dict(metrics)
-        metrics.setdefault("status", traj.status)
-        metrics.setdefault("message", traj.message)
-    if out is not None:
-        doc = metrics if metrics is not None else {"status": traj.status, "message": traj.message,
-                                                    "metrics_error": failures[-1] if failures else ""}
-
-        def write_metrics() -> Path:
-            p = out / "metrics.json"
-            p.write_text(json.dumps(jsonable(doc), indent=2, allow_nan=False) + "\n", encoding="utf-8")
-            return p
-
-        for what, fn in (
-            ("metrics.json", write_metrics),
-            ("run.rrd", lambda: _import("harness.record").write_recording(traj, out / "run.rrd")),
-            ("figures", lambda: _import("harness.plots").write_figures(traj, out)),
-        ):
-            res = attempt(what, fn)
-            if isinstance(res, (str, Path)):
-                written.append(Path(res))
-            elif isinstance(res, (list, tuple)):
-                written += [Path(p) for p in res]
-    _print_summary(scn, traj, metrics, out, written)
-    for f in failures:
+    """Simulate, compute metrics and (if out) write every output (`harness.api.run_scenario`), then print
+    the summary.  Returns (traj, metrics or None, list of output-writing failures, interrupted flag)."""
+    api = _import("harness.api")
+    res = api.run_scenario(scn, out, progress, handle_signals=True)
+    _print_summary(scn, res.traj, res.metrics, out, res.written)
+    for f in res.failures:
         _warn(f"could not produce {f}")
-    return traj, metrics, failures, interrupted
+    return res.traj, res.metrics, res.failures, res.interrupted
 
 
 def _run_exit_code(traj, failures: list[str], interrupted: bool, wrote: bool = True) -> int:
@@ -456,7 +374,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    from harness.bounds import check_bounds, load_bounds
+    from harness.config.bounds import check_bounds, load_bounds
 
     scn = load_from_args(args)
     bounds = load_bounds(args.bounds)
@@ -492,7 +410,7 @@ def cmd_models(args: argparse.Namespace) -> int:
     if path.is_dir():
         raise ConfigError(f"--out = '{path}': is a directory, expected a file name", path="--out")
     prepare_out_dir(path.parent if str(path.parent) else Path("."))
-    plant_model = _import("harness.plant_model")
+    plant_model = _import("harness.plant.mujoco_model")
     result = plant_model.export_mjcf(scn.plant_master, scn.plant_slave, p, path)
     print(f"wrote {result if isinstance(result, (str, Path)) else path} "
           f"({p.segments} segments/section, {p.actuation} actuation, enforce_cc={str(p.enforce_cc).lower()})")
@@ -503,7 +421,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     study: Path = args.study
     if not study.is_file():
         raise ConfigError(f"study file not found: {study}", path=str(study))
-    sweep = _import("harness.sweep")  # validates the study, then creates and checks the output folder
+    sweep = _import("harness.studies.sweep")  # validates the study, then creates and checks the output folder
     rc = sweep.main_sweep(study, args.out, args.workers, args.scheduler, not args.no_progress)
     return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
 
@@ -527,7 +445,7 @@ def parse_segment_list(text: str) -> list[int]:
 def cmd_fidelity(args: argparse.Namespace) -> int:
     segments = parse_segment_list(args.segments)
     out = prepare_out_dir(args.out)
-    fidelity = _import("harness.fidelity")
+    fidelity = _import("harness.studies.fidelity")
     rc = fidelity.main_fidelity(segments, out, not args.no_progress, args.samples, args.seed)
     return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
 

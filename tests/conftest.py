@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from harness.trajectory import Trajectory
+from harness.loop.trajectory import Trajectory
 
 MASTER_LENGTHS = (0.6, 0.6)
 MASTER_BASE = np.array([0.0, 0.0, 0.05])
@@ -16,7 +16,7 @@ SECTION_BODIES = (9, 8, 8)  # 25 plant bodies, segment origins, base to tip
 def _cc_point(q2: np.ndarray, section: int, frac: float) -> tuple[np.ndarray, np.ndarray]:
     """Task-space point and tangent angle at `frac` of `section` of a constant-curvature arm.
 
-    Written independently of harness.record (arc by arc, rotation form) so the tests cross-check it.
+    Written independently of harness.output.record (arc by arc, rotation form) so the tests cross-check it.
     """
     n = q2.shape[0]
     p = np.zeros((n, 2))

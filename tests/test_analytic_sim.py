@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from controllers.params import Gains, SlaveParams, SubtaskSpec
-from harness.config import InitialState, PlantConfig, Scenario
-from harness.sim import simulate
+from harness.config.scenario import InitialState, PlantConfig, Scenario
+from harness.loop import simulate
 
 ANALYTIC = PlantConfig(kind="analytic")
 

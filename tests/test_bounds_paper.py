@@ -5,10 +5,10 @@ from pathlib import Path
 
 import pytest
 
-from harness.bounds import check_bounds, load_bounds
-from harness.io_config import load_scenario
-from harness.metrics import compute_metrics
-from harness.sim import simulate
+from harness.config.bounds import check_bounds, load_bounds
+from harness.config.load import load_scenario
+from harness.loop import simulate
+from harness.loop.metrics import compute_metrics
 
 ROOT = Path(__file__).resolve().parents[1]
 BOUNDS = {"servo": ROOT / "bounds" / "paper_mujoco.toml",

@@ -22,9 +22,9 @@ import pytest
 
 from harness import cli
 from harness.cli import main
-from harness.config import Scenario
-from harness.io_config import load_scenario
-from harness.trajectory import ROW_WIDTH, Trajectory
+from harness.config.load import load_scenario
+from harness.config.scenario import Scenario
+from harness.loop.trajectory import ROW_WIDTH, Trajectory
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER_TOML = ROOT / "scenarios" / "paper.toml"
@@ -75,7 +75,7 @@ class Stubs:
     def _log(self, name, *args, **kwargs):
         self.calls.setdefault(name, []).append((args, kwargs))
 
-    def simulate(self, scn, progress=False):
+    def simulate(self, scn, plant=None, progress=False):
         self._log("simulate", scn, progress=progress)
         if self.simulate_hook is not None:
             return self.simulate_hook(scn)
@@ -100,15 +100,15 @@ class Stubs:
 @pytest.fixture
 def stubs(monkeypatch):
     s = Stubs()
-    sim = _module(monkeypatch, "harness.sim")
-    monkeypatch.setattr(sim, "simulate", s.simulate, raising=False)
+    monkeypatch.setattr(_module(monkeypatch, "harness.loop"), "simulate", s.simulate, raising=False)
+    sim = _module(monkeypatch, "harness.loop.common")
     if not isinstance(getattr(sim, "STOP", None), threading.Event):
         monkeypatch.setattr(sim, "STOP", threading.Event(), raising=False)
-    monkeypatch.setattr(_module(monkeypatch, "harness.metrics"), "compute_metrics", s.compute_metrics,
+    monkeypatch.setattr(_module(monkeypatch, "harness.loop.metrics"), "compute_metrics", s.compute_metrics,
                         raising=False)
-    monkeypatch.setattr(_module(monkeypatch, "harness.record"), "write_recording", s.write_recording,
+    monkeypatch.setattr(_module(monkeypatch, "harness.output.record"), "write_recording", s.write_recording,
                         raising=False)
-    monkeypatch.setattr(_module(monkeypatch, "harness.plots"), "write_figures", s.write_figures,
+    monkeypatch.setattr(_module(monkeypatch, "harness.output.plots"), "write_figures", s.write_figures,
                         raising=False)
     return s
 
@@ -290,7 +290,7 @@ def test_run_output_failure_is_reported(stubs, tmp_path, capsys, monkeypatch):
     def broken(traj, path):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(sys.modules["harness.record"], "write_recording", broken)
+    monkeypatch.setattr(sys.modules["harness.output.record"], "write_recording", broken)
     out = tmp_path / "o"
     assert main(["run", "--out", str(out), "--no-progress"]) == 1
     err = capsys.readouterr().err
@@ -302,7 +302,7 @@ def test_run_metrics_failure_still_writes_status(stubs, tmp_path, monkeypatch):
     def broken(traj, scn):
         raise ValueError("empty trajectory")
 
-    monkeypatch.setattr(sys.modules["harness.metrics"], "compute_metrics", broken)
+    monkeypatch.setattr(sys.modules["harness.loop.metrics"], "compute_metrics", broken)
     out = tmp_path / "o"
     assert main(["run", "--out", str(out), "--no-progress"]) == 1
     doc = json.loads((out / "metrics.json").read_text())
@@ -311,11 +311,11 @@ def test_run_metrics_failure_still_writes_status(stubs, tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_signal_stops_the_run_and_writes_outputs(stubs, tmp_path, capsys, sig):
-    stop = sys.modules["harness.sim"].STOP
+    stop = sys.modules["harness.loop.common"].STOP
 
     def hook(scn):
         os.kill(os.getpid(), sig)
-        assert stop.wait(5.0), "the signal handler did not set harness.sim.STOP"
+        assert stop.wait(5.0), "the signal handler did not set harness.loop.common.STOP"
         return make_traj(n=20, status="interrupted", message="interrupted at t = 0.019 s")
 
     stubs.simulate_hook = hook
@@ -330,7 +330,7 @@ def test_signal_stops_the_run_and_writes_outputs(stubs, tmp_path, capsys, sig):
 
 
 def test_simulation_error_is_an_input_error(stubs, tmp_path, capsys, monkeypatch):
-    sim = sys.modules["harness.sim"]
+    sim = sys.modules["harness.loop.common"]
     exc = getattr(sim, "SimulationError", None)
     if exc is None:
         exc = type("SimulationError", (RuntimeError,), {})
@@ -393,7 +393,7 @@ def export_stub(monkeypatch):
         Path(path).write_text("<mujoco/>")
         return Path(path)
 
-    monkeypatch.setattr(_module(monkeypatch, "harness.plant_model"), "export_mjcf", export_mjcf,
+    monkeypatch.setattr(_module(monkeypatch, "harness.plant.mujoco_model"), "export_mjcf", export_mjcf,
                         raising=False)
     return calls
 
@@ -427,7 +427,7 @@ def test_models_default_path_and_errors(export_stub, tmp_path, monkeypatch, caps
 
 
 def test_models_plant_model_error_exit_2(monkeypatch, tmp_path, capsys):
-    mod = _module(monkeypatch, "harness.plant_model")
+    mod = _module(monkeypatch, "harness.plant.mujoco_model")
     exc = getattr(mod, "PlantModelError", None)
     if exc is None:
         exc = type("PlantModelError", (ValueError,), {})
@@ -444,7 +444,7 @@ def test_models_plant_model_error_exit_2(monkeypatch, tmp_path, capsys):
 # ----------------------------------------------------------------------------------------- sweep / fidelity
 def test_sweep_delegates(monkeypatch, tmp_path):
     calls = []
-    monkeypatch.setattr(_module(monkeypatch, "harness.sweep"), "main_sweep",
+    monkeypatch.setattr(_module(monkeypatch, "harness.studies.sweep"), "main_sweep",
                         lambda *a: calls.append(a) or 0, raising=False)
     study = tmp_path / "study.toml"
     study.write_text("")
@@ -456,7 +456,8 @@ def test_sweep_delegates(monkeypatch, tmp_path):
 
 
 def test_sweep_errors(monkeypatch, tmp_path, capsys):
-    monkeypatch.setattr(_module(monkeypatch, "harness.sweep"), "main_sweep", lambda *a: 0, raising=False)
+    monkeypatch.setattr(_module(monkeypatch, "harness.studies.sweep"), "main_sweep", lambda *a: 0,
+                        raising=False)
     assert main(["sweep", str(tmp_path / "missing.toml")]) == 2
     assert "missing.toml" in _one_error_line(capsys.readouterr().err)
     study = tmp_path / "study.toml"
@@ -467,7 +468,7 @@ def test_sweep_errors(monkeypatch, tmp_path, capsys):
 
 def test_fidelity_delegates(monkeypatch, tmp_path, capsys):
     calls = []
-    monkeypatch.setattr(_module(monkeypatch, "harness.fidelity"), "main_fidelity",
+    monkeypatch.setattr(_module(monkeypatch, "harness.studies.fidelity"), "main_fidelity",
                         lambda *a: calls.append(a) or 0, raising=False)
     assert main(["fidelity", "--segments", "2, 4,8", "--out", str(tmp_path / "f")]) == 0
     assert calls == [([2, 4, 8], tmp_path / "f", True, 50, 0)]

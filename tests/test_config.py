@@ -1,4 +1,4 @@
-"""Scenario loading, validation, overrides and the TOML round trip (harness.io_config)."""
+"""Scenario loading, validation, overrides and the TOML round trip (harness.config.load)."""
 
 from __future__ import annotations
 
@@ -12,10 +12,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from controllers.params import Gains, MasterParams, SlaveParams, SubtaskSpec
-from harness import io_config
-from harness.config import FaultConfig, InitialState, PlantConfig, Scenario, TrajectoryConfig
-from harness.errors import ConfigError
-from harness.io_config import dump_scenario, load_scenario, parse_override, scenario_to_dict
+from harness.config import load as io_config
+from harness.config import schema
+from harness.config.errors import ConfigError
+from harness.config.load import dump_scenario, load_scenario, parse_override, scenario_to_dict
+from harness.config.scenario import FaultConfig, InitialState, PlantConfig, Scenario, TrajectoryConfig
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER_TOML = ROOT / "scenarios" / "paper.toml"
@@ -45,15 +46,15 @@ def test_paper_toml_spells_out_every_default():
 
 
 def test_schema_covers_every_dataclass_field():
-    """A field added to harness.config / controllers.params must be added to the loader too."""
+    """A field added to harness.config.scenario / controllers.params must be added to the loader too."""
     names = {f.name for f in dataclasses.fields(Scenario)}
-    assert set(io_config.TOP) | set(io_config.SECTIONS) == names
-    for sec, (cls, spec) in io_config.SECTIONS.items():
+    assert set(schema.TOP) | set(schema.SECTIONS) == names
+    for sec, (cls, spec) in schema.SECTIONS.items():
         expected = {f.name for f in dataclasses.fields(cls)}
         if cls is PlantConfig:
-            expected -= set(io_config.PLANT_MODELS)
+            expected -= set(schema.PLANT_MODELS)
         assert set(spec) == expected, sec
-    assert {c for c, _ in io_config.SECTIONS.values()} == {
+    assert {c for c, _ in schema.SECTIONS.values()} == {
         Gains, MasterParams, SlaveParams, SubtaskSpec, TrajectoryConfig, InitialState, PlantConfig,
         FaultConfig}
 
@@ -296,9 +297,9 @@ def test_subtask_weights_default_per_kind():
 
 def test_parameter_error_is_wrapped_with_the_path():
     with pytest.raises(ConfigError, match=r"^plant\.master\.lengths"):
-        io_config._build(MasterParams, {"lengths": (1.0,)}, "plant.master")
+        schema.build_section(MasterParams, {"lengths": (1.0,)}, "plant.master")
     with pytest.raises(ConfigError, match=r"^slave\.max_bend"):
-        io_config._build(SlaveParams, {"max_bend": 5.0}, "slave")
+        schema.build_section(SlaveParams, {"max_bend": 5.0}, "slave")
 
 
 # --------------------------------------------------------------------------------------------- round trip
@@ -327,7 +328,7 @@ def test_dump_load_round_trip(tmp_path, source, overrides):
     assert load_scenario(scenario_to_dict(scn)) == scn
     # the dump is complete: every schema key is present
     raw = tomllib.loads(path.read_text())
-    for key in io_config.schema_paths():
+    for key in schema.schema_paths():
         node = raw
         parts = key.split(".")
         if parts[0] == "plant" and len(parts) == 3 and not isinstance(raw["plant"][parts[1]], dict):
@@ -363,7 +364,7 @@ def test_round_trip_property(tmp_path, gains, snr, seed, segments, masses, amp):
 
 
 # --------------------------------------------------------------------------------------------- fuzzing
-_KEYS = sorted({p for path in io_config.schema_paths() for p in path.split(".")} | {"x", "", "none"})
+_KEYS = sorted({p for path in schema.schema_paths() for p in path.split(".")} | {"x", "", "none"})
 _scalars = (
     st.none() | st.booleans() | st.integers() | st.integers(-(10**400), 10**400)
     | st.floats(allow_nan=True, allow_infinity=True) | st.text(max_size=8)
@@ -398,7 +399,7 @@ def test_fuzz_mutated_valid_scenario(data):
     """Replace a few leaves (or whole tables) of a valid scenario with random values."""
     src = scenario_to_dict(Scenario())
     for _ in range(data.draw(st.integers(1, 3))):
-        path = data.draw(st.sampled_from(io_config.schema_paths())).split(".")
+        path = data.draw(st.sampled_from(schema.schema_paths())).split(".")
         node = src
         for p in path[:-1]:
             if not isinstance(node.get(p), dict):
@@ -426,18 +427,20 @@ def test_short_run_gets_a_quarter_transient_unless_set():
 
 
 def test_scene_xml_missing_malformed_or_incomplete(tmp_path):
+    from harness import load_scenario as load_with_plant  # the plant checks its own scene
+
     with pytest.raises(ConfigError, match=r"plant\.scene_xml.*not found"):
-        load_scenario({"plant": {"scene_xml": str(tmp_path / "nope.xml")}})
+        load_with_plant({"plant": {"scene_xml": str(tmp_path / "nope.xml")}})
     bad = tmp_path / "bad.xml"
     bad.write_text("<mujoco><worldbody><body name='x'><geom size='oops'/></body></worldbody></mujoco>")
     with pytest.raises(ConfigError, match=r"plant\.scene_xml.*unusable MJCF"):
-        load_scenario({"plant": {"scene_xml": str(bad)}})
+        load_with_plant({"plant": {"scene_xml": str(bad)}})
     empty = tmp_path / "empty.xml"
     empty.write_text("<mujoco><worldbody/></mujoco>")
     with pytest.raises(ConfigError, match=r"plant\.scene_xml.*unusable MJCF"):
-        load_scenario({"plant": {"scene_xml": str(empty)}})
+        load_with_plant({"plant": {"scene_xml": str(empty)}})
     with pytest.raises(ConfigError, match=r"plant\.scene_xml"):
-        load_scenario({"plant": {"scene_xml": 3}})
+        load_with_plant({"plant": {"scene_xml": 3}})
 
 
 def test_scene_xml_custom_scene_is_accepted(tmp_path):
@@ -455,7 +458,7 @@ def test_scene_xml_custom_scene_is_accepted(tmp_path):
 
 
 def test_scene_xml_is_used_by_the_plant(tmp_path):
-    from harness.plant_model import build_model
+    from harness.plant.mujoco_model import build_model
 
     mjcf = Path(__file__).resolve().parents[1] / "mjcf"
     scene = tmp_path / "my_scene.xml"

@@ -14,9 +14,9 @@ import pytest
 
 from controllers import slave as slave_model
 from controllers.params import MasterParams, SlaveParams
-from harness import fidelity as fid
-from harness.config import PlantConfig
-from harness.plant_model import build_model
+from harness.config.scenario import PlantConfig
+from harness.plant.mujoco_model import build_model
+from harness.studies import fidelity as fid
 
 NS = (8, 16, 32)
 ORDER = 1.95

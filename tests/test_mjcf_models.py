@@ -1,4 +1,4 @@
-"""Invariants of the MJCF files and of the generated plant models (harness.plant_model)."""
+"""Invariants of the MJCF files and of the generated plant models (harness.plant.mujoco_model)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from controllers.params import MasterParams, SlaveParams
-from harness import plant_model as pm
-from harness.config import PlantConfig
-from harness.fidelity import sample_q2, warning_count
+from harness.config.scenario import PlantConfig
+from harness.plant import mujoco_model as pm
+from harness.studies.fidelity import sample_q2, warning_count
 
 MASTER = MasterParams()
 SLAVE = SlaveParams()
@@ -125,8 +125,8 @@ def test_cold_start_without_islands_solves_the_same_physics(actuation):
     """The scene turns warm-starting and island discovery off for speed: with only equality
     constraints the Newton problem is quadratic, so the closed-loop run's physics, replayed with both
     turned back on, reaches the same state (to rounding) and the solver needs one iteration."""
-    from harness.config import Scenario
-    from harness.mujoco_sim import make_plant, simulate_mujoco
+    from harness.config.scenario import Scenario
+    from harness.loop.mujoco_loop import make_plant, simulate_mujoco
 
     scn = Scenario(duration=0.3, plant=PlantConfig(actuation=actuation, segments=4))
     m, _, _ = make_plant(scn)
@@ -295,9 +295,9 @@ def test_mujoco_springs_are_linear_about_zero():
 
 
 def test_kernels_compile_with_numba():
-    """The maps compile in harness.fast's shared namespace (numba, on-disk cache) and agree."""
+    """The maps compile in harness.loop.fast's shared namespace (numba, on-disk cache) and agree."""
     pytest.importorskip("numba")
-    from harness.fast import kernels
+    from harness.loop.fast import kernels
 
     jit = kernels(jit=True)
     _, cm = _model(2)

@@ -6,7 +6,7 @@ import pytest
 from controllers import master, slave, subtasks
 from controllers.control import null_space_quantities
 from controllers.params import MasterParams, SlaveParams, SubtaskSpec
-from harness.fast import kernels
+from harness.loop.fast import kernels
 
 SP = SlaveParams(slice_inertia=(2e-3, 1e-3, 5e-4), extension_damping=(1.0, 2.0, 3.0),
                  bending_damping=(0.1, 0.2, 0.3))
@@ -228,7 +228,7 @@ def test_master_model_against_finite_differences_and_energy(rng):
 
 
 def test_compiled_kernels_equal_interpreted(rng):
-    """harness.fast compiles controllers/ unchanged: same numbers as the interpreted code."""
+    """harness.loop.fast compiles controllers/ unchanged: same numbers as the interpreted code."""
     Kj, Kp = kernels(True), kernels(False)
     nodes, weights = slave.gauss_legendre01(8)
     spec = subtasks.pack_subtask(SubtaskSpec(), SP)

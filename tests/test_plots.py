@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from harness.plots import write_figures
+from harness.output.plots import write_figures
 
 NAMES = ["fig2_e1.png", "fig3_e2.png", "fig4_beta.png", "q2.png", "shapes.png"]
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

@@ -13,7 +13,7 @@ import pytest
 import rerun as rr
 from rerun.chunk import RrdReader
 
-from harness.record import STRIP_POINTS_PER_CHUNK, TIMELINE, cc_backbone, read_series, write_recording
+from harness.output.record import STRIP_POINTS_PER_CHUNK, TIMELINE, cc_backbone, read_series, write_recording
 
 SERIES = ("e1", "e2", "e2_plant", "beta", "ya", "deN_norm", "q2", "T1", "T2")
 
@@ -280,8 +280,8 @@ def test_real_mujoco_run_round_trips(tmp_path):
     """A real (short) paper-scenario run on the MuJoCo plant, written and read back with Rerun's own
     reader: every series equals the in-memory trajectory bit for bit, the plant bodies and the
     analytic backbone are the trajectory's (float32), and the file verifies."""
-    from harness.config import Scenario
-    from harness.mujoco_sim import simulate_mujoco
+    from harness.config.scenario import Scenario
+    from harness.loop.mujoco_loop import simulate_mujoco
 
     traj = simulate_mujoco(Scenario(duration=0.3))
     assert traj.status == "ok" and len(traj) == 300

@@ -15,12 +15,12 @@ import pytest
 from controllers import slave
 from controllers.control import slave_control
 from controllers.params import Gains, SlaveParams, SubtaskSpec
-from harness import sim
-from harness.config import PlantConfig, Scenario
-from harness.fast import K
-from harness.io_config import load_scenario
-from harness.metrics import compute_metrics
-from harness.sim import simulate
+from harness.config.load import load_scenario
+from harness.config.scenario import PlantConfig, Scenario
+from harness.loop import common as sim
+from harness.loop import simulate
+from harness.loop.fast import K
+from harness.loop.metrics import compute_metrics
 
 ROOT = Path(__file__).resolve().parents[1]
 TELEOP = [sys.executable, "-m", "harness.cli"]
@@ -54,7 +54,7 @@ def test_mujoco_warning_stops_the_run_at_the_step_that_raised_it():
     mjWARN_BADQACC within a few ms.  The compiled loop checks MuJoCo's warning counters after every
     mj_step: the run stops at that step (not at the end of a 1000-step chunk), the message names the
     warning and MuJoCo's own text, and the rows up to it are finite."""
-    from harness.mujoco_sim import simulate_mujoco
+    from harness.loop.mujoco_loop import simulate_mujoco
 
     scn = Scenario(duration=2.0, plant=PlantConfig(integrator="euler", servo_frequency=160.0))
     tr = simulate_mujoco(scn)

@@ -1,6 +1,6 @@
 """The compiled fast paths give the same numbers as the plain Python ones (no timing assertions).
 
-* recording geometry: `harness.loop_kernels.kinematics_replay` (MuJoCo's C mj_kinematics called from
+* recording geometry: `harness.loop.mujoco_kernels.kinematics_replay` (MuJoCo's C mj_kinematics called from
   numba) and `backbone_world` against a Python loop over `mujoco.mj_kinematics` / `slave.backbone`;
 * the command log of `mujoco_chunk`: replaying the logged [ctrl, qfrc_applied] with raw mj_step from
   the same initial state reproduces the harness run's MuJoCo state bit for bit.
@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from controllers import slave as slave_model
-from harness.config import PlantConfig, Scenario
-from harness.fast import K
-from harness.loop_kernels import MJ_FUNCS
-from harness.mujoco_sim import BACKBONE_POINTS, chain_body_ids, make_plant, simulate_mujoco
+from harness.config.scenario import PlantConfig, Scenario
+from harness.loop.fast import K
+from harness.loop.mujoco_kernels import MJ_FUNCS
+from harness.loop.mujoco_loop import BACKBONE_POINTS, chain_body_ids, make_plant, simulate_mujoco
 
 
 def _python_geometry(scn, m, cmap, qpos_hist, q2):
@@ -156,7 +156,7 @@ def test_fused_mass_nle_equals_reference(slice_inertia):
     """mass_nle_kernel (moments of the quadrature, Lagrange-form Coriolis) = dynamics_kernel M2 and
     the Christoffel-form nle_kernel N2 (compiled and interpreted)."""
     from controllers.params import SlaveParams
-    from harness.fast import kernels
+    from harness.loop.fast import kernels
 
     p = SlaveParams(slice_inertia=slice_inertia)
     pk = p.packed()
@@ -230,8 +230,9 @@ def test_en_tuple_equals_complex_series():
 def test_noise_free_record_rows_equal_recomputed_rows(kind):
     """Without noise the record row reuses the control laws' kinematics (record_row_info): the rows
     equal record_row recomputed from the true state, bit for bit."""
-    from harness.sim import common_arrays, simulate
-    from harness.trajectory import ROW_SLICES, ROW_WIDTH
+    from harness.loop import simulate
+    from harness.loop.common import common_arrays
+    from harness.loop.trajectory import ROW_SLICES, ROW_WIDTH
 
     scn = Scenario(duration=0.2, snr_db=None, plant=PlantConfig(kind=kind, segments=4))
     tr = simulate(scn)

@@ -1,4 +1,4 @@
-"""Mismatch-study sweeps (harness.sweep): expansion, ids, resume, failures, Dask, summary.
+"""Mismatch-study sweeps (harness.studies.sweep): expansion, ids, resume, failures, Dask, summary.
 
 Most tests run a cheap stub case function (`stub_case`, top level so worker processes can import
 it) through the real process pool; `test_end_to_end_analytic_plant` runs the real simulation.
@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from controllers.params import MasterParams, SlaveParams
-from harness.errors import ConfigError
-from harness.sweep import (
+from harness.config.errors import ConfigError
+from harness.studies.sweep import (
     METRIC_NAMES,
     RESULTS,
     SweepError,
@@ -142,7 +142,7 @@ def test_case_ids_stable_across_processes():
     doc = study(GRID2)
     ids = [c.case_id for c in expand_cases(load_study(doc))]
     assert len(set(ids)) == 9 and all(len(i) == 12 for i in ids)
-    code = ("import json, sys; from harness.sweep import load_study, expand_cases; "
+    code = ("import json, sys; from harness.studies.sweep import load_study, expand_cases; "
             "print(json.dumps([c.case_id for c in expand_cases(load_study(json.loads(sys.argv[1])))]))")
     proc = subprocess.run([sys.executable, "-c", code, json.dumps(doc)], capture_output=True, text=True,
                           cwd=ROOT, check=True)
@@ -276,7 +276,7 @@ def test_pool_broken_between_waits_is_not_an_error(tmp_path, calls, monkeypatch)
     import concurrent.futures as cf
     from concurrent.futures.process import BrokenProcessPool
 
-    import harness.sweep as sw
+    import harness.studies.executor as sw
 
     real = sw._process_pool
     made = []
@@ -315,7 +315,7 @@ def test_executor_failure_stops_the_sweep(tmp_path):
 def test_run_case_never_raises(monkeypatch):
     import types
 
-    from harness.trajectory import Trajectory
+    from harness.loop.trajectory import Trajectory
 
     (case,) = expand_cases(load_study(study([{"param": "seed", "values": [0]}])))
     payload = {"case_id": case.case_id, "scenario": case.scenario, "metrics": METRICS, "record": False}
@@ -331,12 +331,12 @@ def test_run_case_never_raises(monkeypatch):
 
     metrics = types.SimpleNamespace(compute_metrics=lambda traj, scn: {"e2_rms": float("nan"),
                                                                         "e2_max": np.float64(1.5)})
-    monkeypatch.setitem(sys.modules, "harness.metrics", metrics)
-    monkeypatch.setitem(sys.modules, "harness.sim", types.SimpleNamespace(simulate=boom))
+    monkeypatch.setitem(sys.modules, "harness.loop.metrics", metrics)
+    monkeypatch.setitem(sys.modules, "harness.loop", types.SimpleNamespace(simulate=boom))
     row = run_case(payload)
     assert row["status"] == "error" and "solver exploded" in row["message"]
     assert "RuntimeError" in row["traceback"] and row["wall_time"] >= 0
-    monkeypatch.setitem(sys.modules, "harness.sim", types.SimpleNamespace(simulate=diverges))
+    monkeypatch.setitem(sys.modules, "harness.loop", types.SimpleNamespace(simulate=diverges))
     row = run_case(payload)
     assert row["status"] == "diverged" and row["message"] == "NaN at t=0.1"
     assert row["metrics"] == {"e2_rms": None, "e2_max": 1.5, "beta_min": None}
@@ -364,7 +364,7 @@ def test_sigterm_stops_workers_and_keeps_rows(tmp_path):
         "import json, sys\n"
         f"sys.path.insert(0, {str(Path(__file__).parent)!r})\n"
         "from test_sweep import slow_stub\n"
-        "from harness.sweep import SweepInterrupted, run_sweep\n"
+        "from harness.studies.sweep import SweepInterrupted, run_sweep\n"
         "try:\n"
         f"    run_sweep(json.loads(sys.argv[1]), out={str(out)!r}, workers=2, progress=False,"
         " case_fn=slow_stub)\n"
@@ -438,21 +438,21 @@ def test_random_study_plots(tmp_path):
 
 # --- the real simulation ---------------------------------------------------------------------------
 def test_metric_names_match_compute_metrics(synthetic_trajectory):
-    from harness.config import Scenario
-    from harness.metrics import compute_metrics
+    from harness.config.scenario import Scenario
+    from harness.loop.metrics import compute_metrics
 
     produced = compute_metrics(synthetic_trajectory(), Scenario(transient=0.0))
     assert set(METRIC_NAMES) == set(produced) - {"status", "message"}
-    from harness.sweep import METRIC_LABELS
+    from harness.studies.sweep import METRIC_LABELS
 
     assert set(METRIC_LABELS) == set(METRIC_NAMES) and all("[" in v for v in METRIC_LABELS.values())
 
 
 def test_end_to_end_analytic_plant(tmp_path):
     """Two real 0.5 s cases on the analytic plant through the default worker (`run_case`).
-    Fails (does not skip) while harness.sim / harness.metrics are missing."""
-    import harness.metrics  # noqa: F401
-    import harness.sim  # noqa: F401
+    Fails (does not skip) while harness.loop.common / harness.loop.metrics are missing."""
+    import harness.loop.common  # noqa: F401
+    import harness.loop.metrics  # noqa: F401
 
     doc = study([{"name": "slave_mass", "param": "plant.slave.masses", "scale": [0.9, 1.1]}],
                 set=["duration=0.5", "transient=0.0", "plant.kind='analytic'"])

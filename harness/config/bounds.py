@@ -16,10 +16,10 @@ A bounds file is TOML with one ``[bounds]`` table (and an optional top-level ``d
 
 Every key is optional; ``<metric>_max`` bounds a metric from above, ``<metric>_min`` from below.
 Numeric limits must be finite numbers > 0.  A bound whose metric is missing (absent, None or NaN,
-which `harness.metrics` reports for e.g. e2_plant_* on the analytic plant or a run that stopped before
+which `harness.loop.metrics` reports for e.g. e2_plant_* on the analytic plant or a run that stopped before
 the transient) is a violation ("not measured"), as is an infinite or non-numeric measured value.
 
-Metric names (from `harness.metrics.compute_metrics`): e1_rms, e1_max, e2_rms, e2_max, e2_plant_rms,
+Metric names (from `harness.loop.metrics.compute_metrics`): e1_rms, e1_max, e2_rms, e2_max, e2_plant_rms,
 e2_plant_max, beta_min, mujoco_warnings (int), status (str).
 """
 
@@ -32,8 +32,8 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from harness.errors import ConfigError, short_repr
-from harness.textio import read_toml
+from harness.config.errors import ConfigError, short_repr
+from harness.config.textio import read_toml
 
 # bound key -> (metric, relation, unit, description)
 NUMERIC_BOUNDS: dict[str, tuple[str, str, str, str]] = {

@@ -30,432 +30,53 @@ Overrides are dotted ``key=value`` strings whose value is parsed as a TOML value
 (``plant.segments=16``, ``plant.slave.masses=[1.2,0.7,0.4]``, ``snr_db=30``); a bare word that
 is not valid TOML is taken as a string (``plant.kind=analytic``, ``snr_db=none``).
 
-Every error raises `harness.errors.ConfigError` with one line naming the dotted field, its value
+Every error raises `harness.config.errors.ConfigError` with one line naming the dotted field, its value
 and the allowed range or type.
 """
 
 from __future__ import annotations
 
 import copy
-import difflib
 import math
-import re
 import tomllib
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import fields, is_dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from controllers.params import Gains, MasterParams, ParameterError, SlaveParams, SubtaskSpec
-from harness.config import (
-    ACTUATIONS,
-    INTEGRATORS,
-    PLANTS,
-    FaultConfig,
-    InitialState,
+from controllers.params import MasterParams, SlaveParams, SubtaskSpec
+from harness.config.errors import ConfigError, short_repr
+from harness.config.scenario import (
     PlantConfig,
     Scenario,
     TrajectoryConfig,
 )
-from harness.errors import ConfigError, short_repr
-from harness.textio import read_toml, toml_literal
+from harness.config.schema import (
+    BARE_WORD_RE,
+    KEY_RE,
+    MASTER,
+    NAME_RE,
+    PLANT,
+    PLANT_MODELS,
+    SECTIONS,
+    SLAVE,
+    SUBTASK,
+    TOP,
+    as_table,
+    build_section,
+    check_keys,
+    is_none_word,
+    read_fields,
+    type_name,
+)
+from harness.config.textio import read_toml, toml_literal
 
 REACH_MARGIN = 1e-3  # m, the desired trajectory must stay this far inside the master workspace annulus
 MULTIPLE_RTOL = 1e-9  # relative tolerance for "integer multiple of a time step"
 MAX_SUBSTEPS = 100_000  # control_dt / physics_dt
 MAX_STEPS = 100_000_000  # duration / control_dt
-NONE_WORDS = ("none",)
-_NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.+=,@-]{0,99}$")
-_KEY_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*$")
-_BARE_WORD_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.+-]*$")
-
-Checker = Callable[[str, Any], Any]
-
-
-# ---------------------------------------------------------------------------------------------
-# primitive checkers: (dotted path, raw value) -> converted value, or ConfigError
-# ---------------------------------------------------------------------------------------------
-def _type_name(v: Any) -> str:
-    if v is None:
-        return "nothing"
-    if isinstance(v, bool):
-        return "a boolean"
-    if isinstance(v, int):
-        return "an integer"
-    if isinstance(v, float):
-        return "a float"
-    if isinstance(v, str):
-        return "a string"
-    if isinstance(v, (list, tuple)):
-        return "an array"
-    if isinstance(v, Mapping):
-        return "a table"
-    return f"a {type(v).__name__}"
-
-
-def _is_number(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-
-def _fmt(x: float) -> str:
-    if x == math.pi:
-        return "pi"
-    return f"{x:g}"
-
-
-class _Range:
-    """A real interval; `None` ends are unbounded."""
-
-    def __init__(self, lo: float | None = None, hi: float | None = None,
-                 lo_open: bool = False, hi_open: bool = False) -> None:
-        self.lo, self.hi, self.lo_open, self.hi_open = lo, hi, lo_open, hi_open
-
-    def __contains__(self, x: float) -> bool:
-        if self.lo is not None and (x <= self.lo if self.lo_open else x < self.lo):
-            return False
-        if self.hi is not None and (x >= self.hi if self.hi_open else x > self.hi):
-            return False
-        return True
-
-    def describe(self) -> str:
-        if self.lo is None and self.hi is None:
-            return "finite"
-        if self.hi is None:
-            return f"{'>' if self.lo_open else '>='} {_fmt(self.lo)}"
-        if self.lo is None:
-            return f"{'<' if self.hi_open else '<='} {_fmt(self.hi)}"
-        left, right = "(" if self.lo_open else "[", ")" if self.hi_open else "]"
-        return f"in {left}{_fmt(self.lo)}, {_fmt(self.hi)}{right}"
-
-
-POSITIVE = _Range(0.0, None, lo_open=True)
-NONNEG = _Range(0.0, None)
-FINITE = _Range()
-
-
-def _as_float(v: Any) -> float | None:
-    """float(v) for a finite real number (not bool), else None."""
-    if not _is_number(v):
-        return None
-    try:
-        f = float(v)
-    except OverflowError:
-        return None
-    return f if math.isfinite(f) else None
-
-
-def _num(rng: _Range = FINITE) -> Checker:
-    desc = "a finite number" if rng.describe() == "finite" else f"a number {rng.describe()}"
-
-    def check(path: str, v: Any) -> float:
-        f = _as_float(v)
-        if f is None:
-            got = "" if _is_number(v) else f" (got {_type_name(v)})"
-            raise ConfigError.field(path, v, f"must be {desc}{got}")
-        if f not in rng:
-            raise ConfigError.field(path, v, f"must be {desc}")
-        return f
-
-    check.desc = desc  # type: ignore[attr-defined]
-    return check
-
-
-def _int(lo: int, hi: int, allowed: tuple[int, ...] | None = None) -> Checker:
-    desc = (f"one of the integers {', '.join(map(str, allowed))}" if allowed
-            else f"an integer in [{lo}, {hi}]")
-
-    def check(path: str, v: Any) -> int:
-        if not isinstance(v, int) or isinstance(v, bool):
-            raise ConfigError.field(path, v, f"must be {desc} (got {_type_name(v)})")
-        if not lo <= v <= hi or (allowed and v not in allowed):
-            raise ConfigError.field(path, v, f"must be {desc}")
-        return int(v)
-
-    return check
-
-
-def _bool(path: str, v: Any) -> bool:
-    if not isinstance(v, bool):
-        raise ConfigError.field(path, v, f"must be true or false (got {_type_name(v)})")
-    return v
-
-
-def _choice(options: Iterable[str]) -> Checker:
-    options = tuple(options)
-    desc = "one of " + ", ".join(repr(o) for o in options)
-
-    def check(path: str, v: Any) -> str:
-        if not isinstance(v, str):
-            raise ConfigError.field(path, v, f"must be {desc} (got {_type_name(v)})")
-        if v not in options:
-            close = difflib.get_close_matches(v, options, n=1)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
-            raise ConfigError.field(path, v, f"must be {desc}{hint}")
-        return v
-
-    return check
-
-
-def _name(path: str, v: Any) -> str:
-    if not isinstance(v, str) or not _NAME_RE.match(v):
-        raise ConfigError.field(
-            path, v, "must be a string of 1-100 letters, digits or _ . + = , @ - (usable as a folder "
-            "name; no spaces or slashes, not starting with '.' or '-')")
-    return v
-
-
-def _mjcf_path(path: str, v: Any) -> str:
-    """An existing MJCF file (checked for parsing by the plant builder in the cross checks)."""
-    if not isinstance(v, str) or not v.strip():
-        raise ConfigError.field(path, v, "must be the path of an MJCF scene file (string)")
-    if not Path(v).is_file():
-        raise ConfigError.field(path, v, "must be an existing MJCF file (relative paths: from the "
-                                "current directory); file not found")
-    return v
-
-
-_mjcf_path.desc = "the path of an MJCF scene file"  # type: ignore[attr-defined]
-_mjcf_path.keep_message = True  # type: ignore[attr-defined]
-
-
-def _vec(n: int, rng: _Range = FINITE, unit: str = "numbers") -> Checker:
-    each = "" if rng.describe() == "finite" else f", each {rng.describe()}"
-    desc = f"an array of {n} finite {unit}{each}"
-
-    def check(path: str, v: Any) -> tuple[float, ...]:
-        if not isinstance(v, (list, tuple)):
-            raise ConfigError.field(path, v, f"must be {desc} (got {_type_name(v)})")
-        if len(v) != n:
-            raise ConfigError.field(path, v, f"must be {desc} (got {len(v)} entries)")
-        out = []
-        for i, x in enumerate(v):
-            f = _as_float(x)
-            if f is None or f not in rng:
-                raise ConfigError.field(path, v, f"must be {desc} (entry {i} is {short_repr(x, 30)})")
-            out.append(f)
-        return tuple(out)
-
-    check.desc = desc  # type: ignore[attr-defined]
-    return check
-
-
-def _matrix(rows: int, cols: int) -> Checker:
-    row = _vec(cols)
-    desc = f"an array of {rows} arrays of {cols} finite numbers"
-
-    def check(path: str, v: Any) -> tuple[tuple[float, ...], ...]:
-        if not isinstance(v, (list, tuple)) or len(v) != rows:
-            raise ConfigError.field(path, v, f"must be {desc}")
-        try:
-            return tuple(row(path, r) for r in v)
-        except ConfigError:
-            raise ConfigError.field(path, v, f"must be {desc}") from None
-
-    return check
-
-
-def _str_list(options: Iterable[str]) -> Checker:
-    options = tuple(options)
-    desc = "an array of distinct strings from " + ", ".join(repr(o) for o in options)
-
-    def check(path: str, v: Any) -> tuple[str, ...]:
-        if not isinstance(v, (list, tuple)) or not all(isinstance(x, str) for x in v):
-            raise ConfigError.field(path, v, f"must be {desc}")
-        bad = [x for x in v if x not in options]
-        if bad or len(set(v)) != len(v):
-            raise ConfigError.field(path, v, f"must be {desc}")
-        return tuple(v)
-
-    return check
-
-
-def _num_list(rng: _Range) -> Checker:
-    desc = f"an array of finite numbers, each {rng.describe()}"
-
-    def check(path: str, v: Any) -> tuple[float, ...]:
-        if not isinstance(v, (list, tuple)):
-            raise ConfigError.field(path, v, f"must be {desc} (got {_type_name(v)})")
-        return _vec(len(v), rng)(path, v)
-
-    return check
-
-
-def _is_none_word(v: Any) -> bool:
-    return isinstance(v, str) and v.strip().lower() in NONE_WORDS
-
-
-def _optional(inner: Checker, allow_false: bool = False) -> Checker:
-    def check(path: str, v: Any) -> Any:
-        if _is_none_word(v) or (allow_false and v is False):
-            return None
-        try:
-            return inner(path, v)
-        except ConfigError:
-            if getattr(inner, "keep_message", False):
-                raise
-            alt = ', "none" or false' if allow_false else ' or "none"'
-            raise ConfigError.field(path, v, f"must be {inner.desc}{alt} (got {_type_name(v)})") from None
-
-    return check
-
-
-# ---------------------------------------------------------------------------------------------
-# schema: section -> {field: checker}; every dataclass field must appear (tests check this)
-# ---------------------------------------------------------------------------------------------
-TOP: dict[str, Checker] = {
-    "name": _name,
-    "duration": _num(_Range(0.0, 3600.0, lo_open=True)),
-    "control_dt": _num(_Range(0.0, 1.0, lo_open=True)),
-    "snr_db": _optional(_num(_Range(0.0, 200.0)), allow_false=True),
-    "seed": _int(0, 2**63 - 1),
-    "transient": _num(_Range(0.0, 3600.0, hi_open=True)),
-    "continuous_control": _bool,
-    "interaction_forces": _matrix(2, 2),
-}
-
-GAINS: dict[str, Checker] = {f.name: _num(POSITIVE) for f in fields(Gains)}
-
-MASTER: dict[str, Checker] = {
-    "lengths": _vec(2, POSITIVE),
-    "masses": _vec(2, POSITIVE),
-    "damping": _vec(2, NONNEG),
-    "gravity": _num(NONNEG),
-}
-
-SLAVE: dict[str, Checker] = {
-    "rest_lengths": _vec(3, POSITIVE),
-    "masses": _vec(3, POSITIVE),
-    "bending_stiffness": _vec(3, NONNEG),
-    "extension_stiffness": _vec(3, NONNEG),
-    "extension_damping": _vec(3, NONNEG),
-    "bending_damping": _vec(3, NONNEG),
-    "slice_inertia": _vec(3, NONNEG),
-    "gravity": _vec(2),
-    "max_extension": _num(_Range(1.0, 100.0, lo_open=True)),
-    "max_bend": _num(_Range(0.0, math.pi, lo_open=True)),
-    "n_quad": _int(2, 32),
-}
-
-SUBTASK: dict[str, Checker] = {
-    "kinds": _str_list(("manipulability", "limits")),
-    "weights": _num_list(POSITIVE),
-    "limit_power": _int(1, 10),
-}
-
-TRAJECTORY: dict[str, Checker] = {
-    "center": _vec(2),
-    "amplitude": _vec(2),
-    "omega": _num(),
-}
-
-INITIAL: dict[str, Checker] = {
-    "master_offset": _vec(2),
-    "master_elbow": _int(-1, 1, allowed=(-1, 1)),
-    "slave_q2": _optional(_vec(6)),
-    "slave_curvature": _num(),
-}
-
-PLANT: dict[str, Checker] = {
-    "kind": _choice(PLANTS),
-    "actuation": _choice(ACTUATIONS),
-    "segments": _int(1, 64),
-    "enforce_cc": _bool,
-    "physics_dt": _num(_Range(0.0, 0.01, lo_open=True)),
-    "integrator": _choice(INTEGRATORS),
-    "servo_frequency": _num(_Range(0.0, 1000.0, lo_open=True)),
-    "servo_damping_ratio": _num(POSITIVE),
-    "servo_feedforward": _bool,
-    "actuation_delay": _num(NONNEG),
-    "armature_fraction": _num(NONNEG),
-    "scene_xml": _optional(_mjcf_path),
-}
-FAULTS: dict[str, Checker] = {
-    "e2_sign": _int(-1, 1, allowed=(-1, 1)),
-    "null_space_scale": _num(_Range(0.0, 10.0)),
-}
-PLANT_MODELS = ("master", "slave")  # optional sub-tables of [plant]
-
-SECTIONS: dict[str, tuple[type, dict[str, Checker]]] = {
-    "gains": (Gains, GAINS),
-    "master": (MasterParams, MASTER),
-    "slave": (SlaveParams, SLAVE),
-    "subtask": (SubtaskSpec, SUBTASK),
-    "trajectory": (TrajectoryConfig, TRAJECTORY),
-    "initial": (InitialState, INITIAL),
-    "plant": (PlantConfig, PLANT),
-    "faults": (FaultConfig, FAULTS),
-}
-
-
-def schema_paths() -> list[str]:
-    """Every settable dotted key (used for suggestions and tests)."""
-    out = list(TOP)
-    for sec, (_, spec) in SECTIONS.items():
-        out += [f"{sec}.{k}" for k in spec]
-    for sub, spec in (("master", MASTER), ("slave", SLAVE)):
-        out.append(f"plant.{sub}")
-        out += [f"plant.{sub}.{k}" for k in spec]
-    return out
-
-
-def _suggest(path: str, key: str, siblings: Iterable[str]) -> str:
-    siblings = list(siblings)
-    close = difflib.get_close_matches(key, siblings, n=3, cutoff=0.6)
-    prefix = path.rsplit(".", 1)[0] + "." if "." in path else ""
-    hints = [prefix + c for c in close]
-    # the key may belong to another section (e.g. top-level `segments` -> `plant.segments`)
-    hints += [p for p in schema_paths() if p.rsplit(".", 1)[-1] == key and p != path and p not in hints]
-    allowed = ", ".join(siblings)
-    did = f"did you mean {' or '.join(repr(h) for h in hints[:4])}? " if hints else ""
-    return f"unknown key {path!r}; {did}allowed keys here: {allowed}"
-
-
-def _check_keys(table: Mapping, prefix: str, allowed: Iterable[str]) -> None:
-    allowed = list(allowed)
-    for k in table:
-        if not isinstance(k, str):
-            raise ConfigError(f"{prefix or 'scenario'}: key {short_repr(k)} is not a string", path=prefix)
-        if k not in allowed:
-            path = f"{prefix}.{k}" if prefix else k
-            raise ConfigError(_suggest(path, k, allowed), path=path)
-
-
-def _table(path: str, v: Any) -> Mapping:
-    if not isinstance(v, Mapping):
-        raise ConfigError.field(path, v, f"must be a table [{path}] (got {_type_name(v)})")
-    return v
-
-
-def _read_fields(table: Mapping, prefix: str, spec: dict[str, Checker], defaults: Any) -> dict[str, Any]:
-    """Validate `table` against `spec`; missing keys take `getattr(defaults, key)`."""
-    _check_keys(table, prefix, spec)
-    out = {}
-    for key, check in spec.items():
-        out[key] = check(f"{prefix}.{key}" if prefix else key, table[key]) if key in table \
-            else getattr(defaults, key)
-    return out
-
-
-def _build(cls: type, kwargs: dict[str, Any], prefix: str) -> Any:
-    """Construct a params dataclass, turning its ParameterError into a ConfigError with the path."""
-    try:
-        return cls(**kwargs)
-    except ParameterError as e:
-        msg = str(e)
-        owner = msg.split(".", 1)[0]
-        # the dataclass messages start with their own short owner ("master.lengths = ...")
-        path_prefix = prefix.rsplit(".", 1)[0] + "." if "." in prefix else ""
-        msg = path_prefix + msg if owner and prefix.endswith(owner) else f"{prefix}: {msg}"
-        raise ConfigError(msg, path=prefix) from None
-    except (TypeError, ValueError) as e:  # defensive: should be caught by the checkers above
-        raise ConfigError(f"{prefix}: {e}", path=prefix) from None
-
-
-# ---------------------------------------------------------------------------------------------
-# cross-field checks
-# ---------------------------------------------------------------------------------------------
 def _is_multiple(x: float, step: float) -> tuple[bool, float]:
     ratio = x / step
     if not math.isfinite(ratio):
@@ -517,18 +138,6 @@ def _check_reach(scn: Scenario) -> None:
                 path="trajectory")
 
 
-def _check_scene_xml(scn: Scenario) -> None:
-    """A user scene file must parse and carry the master and Octarm base (built once, not stepped)."""
-    if scn.plant.scene_xml is None or scn.plant.kind != "mujoco":
-        return
-    from harness.plant_model import PlantModelError, build_spec
-
-    try:
-        build_spec(scn.plant_master, scn.plant_slave, scn.plant, scene_xml=scn.plant.scene_xml)
-    except PlantModelError as exc:
-        raise ConfigError.field("plant.scene_xml", scn.plant.scene_xml, f"unusable MJCF: {exc}") from None
-
-
 def _cross_checks(scn: Scenario) -> None:
     p = scn.plant
     if not scn.transient < scn.duration:
@@ -587,7 +196,7 @@ def _cross_checks(scn: Scenario) -> None:
 
 
 def _check_auto_slave_start(scn: Scenario) -> None:
-    """`initial.slave_q2 = none`: harness.sim starts the slave with three equal sections of curvature
+    """`initial.slave_q2 = none`: harness.loop.common starts the slave with three equal sections of curvature
     k = initial.slave_curvature whose tip height equals the master's initial tip height Z0.  Equal
     sections of equal curvature form one arc of length 3d, tip height f(d) = sin(3 d k) / k (3d for
     k = 0); Z0 must be in the range of f over the common section-length range [d_lo, d_hi]."""
@@ -623,14 +232,14 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     key, _, raw = text.partition("=")
     key, raw = key.strip(), raw.strip()
     parts = key.split(".")
-    if not key or not all(_KEY_RE.match(p) for p in parts):
+    if not key or not all(KEY_RE.match(p) for p in parts):
         raise ConfigError(f"override {text!r}: {key!r} is not a dotted key like plant.segments")
     if not raw:
         raise ConfigError(f"override {text!r}: missing value after '='")
     try:
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError as e:
-        if _BARE_WORD_RE.match(raw):
+        if BARE_WORD_RE.match(raw):
             value = raw
         else:
             raise ConfigError(f"override {text!r}: invalid TOML value {raw!r} ({e})") from None
@@ -642,7 +251,7 @@ def _apply_override(raw: dict, text: str) -> str:
     node = raw
     for i, p in enumerate(parts[:-1]):
         child = node.get(p)
-        if child is None or _is_none_word(child):
+        if child is None or is_none_word(child):
             child = node[p] = {}
         elif not isinstance(child, dict):
             where = ".".join(parts[: i + 1])
@@ -660,10 +269,10 @@ def _read_source(source: str | Path | Mapping | None) -> tuple[dict, str | None,
     if isinstance(source, Mapping):
         return _plain_copy(source), None, None
     if not isinstance(source, (str, Path)):
-        raise ConfigError(f"scenario source must be a path or a table, got {_type_name(source)}")
+        raise ConfigError(f"scenario source must be a path or a table, got {type_name(source)}")
     path = Path(source)
     raw = read_toml(path, "scenario file")
-    stem = path.stem if _NAME_RE.match(path.stem) else None
+    stem = path.stem if NAME_RE.match(path.stem) else None
     return raw, str(path), stem
 
 
@@ -712,8 +321,8 @@ def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterabl
 
 def _scenario_from_dict(raw: Mapping, default_name: str | None) -> Scenario:
     defaults = Scenario()
-    _check_keys(raw, "", list(TOP) + list(SECTIONS))
-    top = _read_fields({k: v for k, v in raw.items() if k in TOP}, "", TOP, defaults)
+    check_keys(raw, "", list(TOP) + list(SECTIONS))
+    top = read_fields({k: v for k, v in raw.items() if k in TOP}, "", TOP, defaults)
     if "name" not in raw and default_name:
         top["name"] = default_name
     if "transient" not in raw and top["duration"] <= defaults.transient:
@@ -721,40 +330,39 @@ def _scenario_from_dict(raw: Mapping, default_name: str | None) -> Scenario:
         top["transient"] = top["duration"] / 4.0
 
     def section(name: str) -> Mapping:
-        return _table(name, raw[name]) if name in raw else {}
+        return as_table(name, raw[name]) if name in raw else {}
 
     parts: dict[str, Any] = {}
     for sec in ("gains", "master", "slave", "trajectory", "initial", "faults"):
         cls, spec = SECTIONS[sec]
-        parts[sec] = _build(cls, _read_fields(section(sec), sec, spec, getattr(defaults, sec)), sec)
+        parts[sec] = build_section(cls, read_fields(section(sec), sec, spec, getattr(defaults, sec)), sec)
 
     sub_tbl = section("subtask")
-    sub = _read_fields(sub_tbl, "subtask", SUBTASK, defaults.subtask)
+    sub = read_fields(sub_tbl, "subtask", SUBTASK, defaults.subtask)
     if "weights" not in sub_tbl:
         default_w = dict(zip(defaults.subtask.kinds, defaults.subtask.weights, strict=True))
         sub["weights"] = tuple(default_w.get(k, 1.0) for k in sub["kinds"])
     if len(sub["weights"]) != len(sub["kinds"]):
         raise ConfigError.field("subtask.weights", list(sub["weights"]),
                                 f"must have one weight per entry of subtask.kinds ({len(sub['kinds'])})")
-    parts["subtask"] = _build(SubtaskSpec, sub, "subtask")
+    parts["subtask"] = build_section(SubtaskSpec, sub, "subtask")
 
     plant_tbl = section("plant")
-    _check_keys(plant_tbl, "plant", list(PLANT) + list(PLANT_MODELS))
-    plant = _read_fields({k: v for k, v in plant_tbl.items() if k in PLANT}, "plant", PLANT, defaults.plant)
+    check_keys(plant_tbl, "plant", list(PLANT) + list(PLANT_MODELS))
+    plant = read_fields({k: v for k, v in plant_tbl.items() if k in PLANT}, "plant", PLANT, defaults.plant)
     for sub_name, cls, spec in (("master", MasterParams, MASTER), ("slave", SlaveParams, SLAVE)):
         path = f"plant.{sub_name}"
         v = plant_tbl.get(sub_name)
-        if v is None or _is_none_word(v):
+        if v is None or is_none_word(v):
             plant[sub_name] = None
             continue
         if not isinstance(v, Mapping):
-            raise ConfigError.field(path, v, f'must be a table [{path}] or "none" (got {_type_name(v)})')
-        plant[sub_name] = _build(cls, _read_fields(v, path, spec, parts[sub_name]), path)
-    parts["plant"] = _build(PlantConfig, plant, "plant")
+            raise ConfigError.field(path, v, f'must be a table [{path}] or "none" (got {type_name(v)})')
+        plant[sub_name] = build_section(cls, read_fields(v, path, spec, parts[sub_name]), path)
+    parts["plant"] = build_section(PlantConfig, plant, "plant")
 
     scn = Scenario(**top, **parts)
     _cross_checks(scn)
-    _check_scene_xml(scn)
     return scn
 
 
@@ -791,7 +399,7 @@ def _toml_lines(table: Mapping[str, Any], name: str = "") -> list[str]:
 def dumps_scenario(scn: Scenario) -> str:
     """The fully resolved scenario as TOML text (see `dump_scenario`)."""
     header = [
-        "# Fully resolved scenario written by harness.io_config.dump_scenario.",
+        "# Fully resolved scenario written by harness.config.load.dump_scenario.",
         '# Every value is explicit; "none" = unset (no noise / automatic / same as the nominal model).',
         "# Reproduce with: teleop run <this file>",
         "",
@@ -810,5 +418,5 @@ def dump_scenario(scn: Scenario, path: str | Path) -> Path:
 
 __all__ = [
     "REACH_MARGIN", "dump_scenario", "dumps_scenario", "load_scenario", "parse_override",
-    "scenario_to_dict", "schema_paths", "trajectory_radius_range",
+    "scenario_to_dict", "trajectory_radius_range",
 ]

@@ -4,7 +4,7 @@ A scenario = controller side (nominal analytic models, gains, sub-tasks) + plant
 its own parameters, which may differ from the nominal ones: that difference is the *mismatch*) +
 trajectory, timing, noise and initial state.  Defaults reproduce the paper scenario (Sec. VI).
 
-Loading/validation from TOML lives in `harness.io_config`; this module only defines the types.
+Loading/validation from TOML lives in `harness.config.load`; this module only defines the types.
 """
 
 from __future__ import annotations

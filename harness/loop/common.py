@@ -1,16 +1,13 @@
-"""Closed-loop simulation: the paper's controllers (on the nominal analytic models) driving either
-the analytic plant (RK4) or the MuJoCo plant.  Returns an in-memory `Trajectory`; side effects
-(recordings, figures, files) are left to the callers.
+"""What every closed loop shares: the stop flag and status codes, the initial state, the desired
+trajectory, the seeded noise table, the controller-side packed arrays and the run metadata.
 
-A run that diverges (non-finite numbers, MuJoCo instability warnings, singular Jacobians, runaway
-errors) or is interrupted (`STOP` set, e.g. by SIGINT) stops and returns everything up to that
-point with `status` and `message` saying what happened and when.
+Used by the plant-specific loops (`harness.loop.analytic_loop`, `harness.loop.mujoco_loop`); it
+imports neither of them (the dispatch is `harness.loop.simulate`).
 """
 
 from __future__ import annotations
 
 import threading
-import time
 
 import numpy as np
 
@@ -18,10 +15,9 @@ from controllers import master as master_model
 from controllers import slave as slave_model
 from controllers.slave import gauss_legendre01
 from controllers.subtasks import pack_subtask
-
-from .config import Scenario
-from .fast import K
-from .trajectory import ROW_WIDTH, Trajectory
+from harness.config.scenario import Scenario
+from harness.loop.fast import K
+from harness.loop.trajectory import Trajectory
 
 STOP = threading.Event()  # set from a signal handler to stop a run cleanly
 CHUNK = 250  # control steps per compiled call between progress/interrupt checks
@@ -35,6 +31,21 @@ STATUS_TEXT = {
     6: "non-finite or exploding MuJoCo state (|x| > 1e6)",
     7: "MuJoCo warning",
 }
+
+
+def set_outcome(traj: Trajectory, status: int, interrupted: bool, error: str = "", detail: str = "") -> None:
+    """Set traj.status/message from a loop's end: an exception text (`error`), a kernel status code
+    (STATUS_TEXT, plus `detail`), an interrupt, or nothing (status stays "ok")."""
+    t_end = float(traj.t[-1]) if len(traj) else 0.0
+    if error:
+        traj.status, cause = "error", error
+    elif status != 0:
+        traj.status, cause = "diverged", STATUS_TEXT.get(status, "unknown") + detail
+    elif interrupted:
+        traj.status, cause = "interrupted", "interrupted"
+    else:
+        return
+    traj.message = f"{cause} at t = {t_end:.4f} s"
 
 
 class SimulationError(RuntimeError):
@@ -98,7 +109,7 @@ def noise_table(scn: Scenario, n: int) -> tuple[np.ndarray, float]:
     return rng.standard_normal((n, 16)), float(10.0 ** (-scn.snr_db / 20.0))
 
 
-def _progress_bar(enabled: bool, total: int, desc: str):
+def progress_bar(enabled: bool, total: int, desc: str):
     if not enabled:
         return None
     try:
@@ -106,15 +117,6 @@ def _progress_bar(enabled: bool, total: int, desc: str):
     except ImportError:  # pragma: no cover
         return None
     return tqdm(total=total, desc=desc, unit="step", unit_scale=True, leave=False)
-
-
-def simulate(scn: Scenario, progress: bool = False) -> Trajectory:
-    """Run one scenario; dispatches on scn.plant.kind."""
-    if scn.plant.kind == "analytic":
-        return simulate_analytic(scn, progress=progress)
-    from .mujoco_sim import simulate_mujoco
-
-    return simulate_mujoco(scn, progress=progress)
 
 
 def common_arrays(scn: Scenario):
@@ -128,59 +130,7 @@ def common_arrays(scn: Scenario):
         traj=trajectory_params(scn))
 
 
-def simulate_analytic(scn: Scenario, progress: bool = False) -> Trajectory:
-    """Closed loop on the analytic plant (plant params may differ from the controller's)."""
-    n = scn.n_steps
-    state = initial_state(scn)
-    noise, scale = noise_table(scn, n)
-    a = common_arrays(scn)
-    rows = np.zeros((n, ROW_WIDTH))
-    mpk_p = master_model.packed(scn.plant_master)
-    spk_p = scn.plant_slave.packed()
-    nsub = max(1, scn.substeps)
-    bar = _progress_bar(progress, n, "analytic plant")
-    status, done, k = 0, 0, 0
-    t0 = time.perf_counter()
-    interrupted = False
-    error = ""
-    try:
-        while k < n:
-            k1 = min(n, k + CHUNK)
-            status, m = K.analytic_chunk(state, k, k1, scn.control_dt, nsub, scn.continuous_control,
-                                         a["traj"], noise, scale, a["F"], a["mpk_c"], a["spk_c"], mpk_p,
-                                         spk_p, a["nodes"], a["weights"], a["gains"], a["spec"], rows[k:k1])
-            done = k + m
-            if bar is not None:
-                bar.update(m)
-            if status != 0:
-                break
-            k = k1
-            if STOP.is_set():
-                interrupted = True
-                break
-    except KeyboardInterrupt:
-        interrupted = True
-    except Exception as exc:  # keep what was computed; report the cause
-        error = f"{type(exc).__name__}: {exc}"
-    finally:
-        if bar is not None:
-            bar.close()
-    traj = Trajectory.from_rows(rows[:done])
-    traj.meta.update(_meta(scn, time.perf_counter() - t0))
-    t_end = traj.t[-1] if done else 0.0
-    if error:
-        traj.status = "error"
-        traj.message = f"{error} at t = {t_end:.4f} s"
-    elif status != 0:
-        traj.status = "diverged"
-        traj.message = f"{STATUS_TEXT.get(status, 'unknown')} at t = {t_end:.4f} s"
-    elif interrupted:
-        traj.status = "interrupted"
-        traj.message = f"interrupted at t = {t_end:.4f} s"
-    return traj
-
-
-def _meta(scn: Scenario, wall: float) -> dict:
+def run_meta(scn: Scenario, wall: float) -> dict:
     lo, hi = scn.slave.length_range
     return {
         "plant": scn.plant.kind, "wall_time": wall, "control_dt": scn.control_dt,

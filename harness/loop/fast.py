@@ -5,7 +5,7 @@ each kernel is cloned with a shared globals namespace in which every kernel name
 compiled counterpart, then wrapped in `numba.njit(cache=True)`, so calls between kernels stay in
 machine code.  The compiled functions give the same numbers as the interpreted ones (tested).
 
-Usage: `from harness.fast import K; K.slave_control_kernel(...)`.  `K` is built on first access.
+Usage: `from harness.loop.fast import K; K.slave_control_kernel(...)`.  `K` is built on first access.
 If numba is unavailable (or TELEOP_NO_JIT=1), K holds the interpreted functions (slow, same maths).
 
 On-disk cache: numba's own cache does not notice when a kernel in *another* file changes (a cached
@@ -29,20 +29,17 @@ MODULES = [cc, slave, master, subtasks, control]
 
 
 def _extra_modules():
+    """Kernel modules of harness/ (plant maps, analytic plant, loops), compiled the same way."""
+    import importlib
+
+    names = ("harness.plant.chain_map", "harness.plant.analytic", "harness.loop.kernels",
+             "harness.loop.mujoco_kernels")
     mods = []
-    try:  # plant maps live in harness/ (mujoco-side), compiled the same way
-        from harness import plant_model
-
-        if hasattr(plant_model, "KERNELS"):
-            mods.append(plant_model)
-    except ImportError:
-        pass
-    try:
-        from harness import loop_kernels
-
-        mods.append(loop_kernels)
-    except ImportError:
-        pass
+    for name in names:
+        try:
+            mods.append(importlib.import_module(name))
+        except ImportError:  # pragma: no cover - e.g. mujoco missing: its kernels are unavailable
+            pass
     return mods
 
 

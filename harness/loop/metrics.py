@@ -11,8 +11,8 @@ import math
 
 import numpy as np
 
-from .config import Scenario
-from .trajectory import Trajectory
+from harness.config.scenario import Scenario
+from harness.loop.trajectory import Trajectory
 
 
 def _rms_max(e: np.ndarray | None, mask: np.ndarray) -> tuple[float, float]:

@@ -2,7 +2,7 @@
 
 The controllers run on the nominal analytic models (Scenario.master/slave); MuJoCo simulates the
 plant built from Scenario.plant (its own parameters, segments, actuation).  The per-step work is
-one compiled kernel (`harness.loop_kernels.mujoco_chunk`) that also calls MuJoCo's C `mj_step`, so no
+one compiled kernel (`harness.loop.mujoco_kernels.mujoco_chunk`) that also calls MuJoCo's C `mj_step`, so no
 Python runs per step.  MuJoCo's auto-reset on instability is disabled: bad accelerations leave NaN or
 exploding states that the kernel detects, and every MuJoCo warning is counted and reported.
 
@@ -10,7 +10,7 @@ Recording geometry (MuJoCo tip site x2_plant, slave segment body poses, master b
 the single-stage integrators, mj_step leaves the kinematics of the step's start state in MjData, so the
 loop copies those rows after the first mj_step of each control step (no extra work); with RK4 the loop
 keeps the qpos history and MuJoCo's C `mj_kinematics` is replayed afterwards from compiled code
-(`harness.loop_kernels.kinematics_replay`).  The analytic backbone of the sensed q2 is computed after
+(`harness.loop.mujoco_kernels.kinematics_replay`).  The analytic backbone of the sensed q2 is computed after
 the loop by a compiled loop.  Both give the numbers of a per-step Python `mujoco.mj_kinematics` replay
 bit for bit (tests/test_speed_paths.py).
 
@@ -25,20 +25,21 @@ import time
 import mujoco
 import numpy as np
 
-from .config import Scenario
-from .fast import K
-from .loop_kernels import MJ_FUNCS
-from .plant_model import ChainMap, build_model
-from .sim import (
-    STATUS_TEXT,
+from harness.config.scenario import Scenario
+from harness.loop.common import (
     STOP,
-    _meta,
-    _progress_bar,
     common_arrays,
     initial_state,
     noise_table,
+    progress_bar,
+    run_meta,
+    set_outcome,
 )
-from .trajectory import ROW_WIDTH, Trajectory
+from harness.loop.fast import K
+from harness.loop.mujoco_kernels import MJ_FUNCS
+from harness.loop.trajectory import ROW_WIDTH, Trajectory
+from harness.plant.chain_map import ChainMap
+from harness.plant.mujoco_model import MujocoPlant
 
 # control steps per compiled call between progress/interrupt/warning checks (each call costs ~50 us of
 # numba dispatch; 1000 steps are 50-100 ms at N = 8)
@@ -58,9 +59,13 @@ def warning_counts(d: mujoco.MjData) -> dict[str, int]:
     return out
 
 
-def make_plant(scn: Scenario) -> tuple[mujoco.MjModel, mujoco.MjData, ChainMap]:
-    """Compiled plant model, data at the scenario's initial state, and its ChainMap."""
-    m, cmap = build_model(scn.plant_master, scn.plant_slave, scn.plant)
+def make_plant(scn: Scenario, plant: MujocoPlant | None = None
+               ) -> tuple[mujoco.MjModel, mujoco.MjData, ChainMap]:
+    """Compiled plant model, data at the scenario's initial state, and its ChainMap.
+    plant: an already built `MujocoPlant` of this scenario (default: built here)."""
+    if plant is None:
+        plant = MujocoPlant.build(scn)
+    m, cmap = plant.model, plant.cmap
     m.opt.timestep = scn.plant.physics_dt
     m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
     d = mujoco.MjData(m)
@@ -72,13 +77,14 @@ def make_plant(scn: Scenario) -> tuple[mujoco.MjModel, mujoco.MjData, ChainMap]:
     return m, d, cmap
 
 
-def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray | None = None) -> Trajectory:
+def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray | None = None,
+                    plant: MujocoPlant | None = None) -> Trajectory:
     """Run the scenario on the MuJoCo plant; returns the Trajectory (possibly cut short).
 
     cmd_log: optional (n_steps * substeps, nu + nv) array that receives, for every mj_step, the
     [ctrl, qfrc_applied] applied before it (to replay the same physics with raw mj_step)."""
     tb = time.perf_counter()
-    m, d, cmap = make_plant(scn)
+    m, d, cmap = make_plant(scn, plant)
     build_time = time.perf_counter() - tb
     n = scn.n_steps
     sub = scn.substeps
@@ -101,7 +107,7 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     cmdbuf = np.zeros((delay + 1, 2 + 2 * nchain))
     captured: list[str] = []
     mujoco.set_mju_user_warning(lambda msg: captured.append(str(msg)))
-    bar = _progress_bar(progress, n, f"MuJoCo plant (N={cmap.n_segments}, {scn.plant.actuation})")
+    bar = progress_bar(progress, n, f"MuJoCo plant (N={cmap.n_segments}, {scn.plant.actuation})")
     status, done, k = 0, 0, 0
     interrupted = False
     warned: dict[str, int] = {}
@@ -137,7 +143,7 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
             bar.close()
     wall = time.perf_counter() - t0
     traj = Trajectory.from_rows(rows[:done])
-    meta = _meta(scn, wall)
+    meta = run_meta(scn, wall)
     traj.meta.update(meta)
     tg = time.perf_counter()
     traj.meta.update(_plant_geometry(m, cmap, geo, done, traj))
@@ -146,18 +152,12 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     traj.meta["mujoco_warnings"] = int(sum(warned.values()))
     traj.meta["mujoco_warning_counts"] = warned
     traj.meta["mujoco_warning_text"] = captured[:20]
-    if status != 0:
-        traj.status = "diverged"
-        t_end = traj.t[-1] if done else 0.0
-        cause = STATUS_TEXT.get(status, "unknown")
-        if warned:
-            cause += " (" + ", ".join(f"{k_}: {v}" for k_, v in warned.items()) + ")"
-            if captured:
-                cause += f"; MuJoCo says: {captured[0].strip()}"
-        traj.message = f"{cause} at t = {t_end:.4f} s"
-    elif interrupted:
-        traj.status = "interrupted"
-        traj.message = f"interrupted at t = {traj.t[-1]:.4f} s"
+    detail = ""
+    if warned:
+        detail = " (" + ", ".join(f"{k_}: {v}" for k_, v in warned.items()) + ")"
+        if captured:
+            detail += f"; MuJoCo says: {captured[0].strip()}"
+    set_outcome(traj, status, interrupted, detail=detail)
     return traj
 
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-# Layout of the per-step record row written by the compiled control step (harness.sim).
+# Layout of the per-step record row written by the compiled control step (harness.loop.common).
 # name -> (start column, width)
 ROW_FIELDS: dict[str, int] = {
     "t": 1,

@@ -21,8 +21,8 @@ from matplotlib import colormaps
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from harness.record import cc_backbone
-from harness.trajectory import Trajectory
+from harness.loop.trajectory import Trajectory
+from harness.output.record import cc_backbone
 
 DPI = 130
 _SEC_COLORS = ("tab:green", "tab:purple", "tab:brown")

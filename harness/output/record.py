@@ -37,7 +37,7 @@ import rerun.blueprint as rrb
 from rerun.chunk import RrdReader
 from rerun.encodings import Vec3DBatch
 
-from harness.trajectory import Trajectory
+from harness.loop.trajectory import Trajectory
 
 APP_ID = "octarm_teleop"
 TIMELINE = "sim_time"

@@ -45,8 +45,8 @@ import numpy as np
 from controllers import master as master_model
 from controllers import slave as slave_model
 from controllers.params import MasterParams, SlaveParams
-from harness.config import PlantConfig
-from harness.plant_model import ChainMap, build_model
+from harness.config.scenario import PlantConfig
+from harness.plant.mujoco_model import ChainMap, build_model
 
 ROUNDING_LEVEL = 1e-12  # relative errors below this are rounding (no convergence order is shown)
 QUANTITIES = ("tip", "jacobian", "mass", "gravity", "elastic", "armature")
@@ -326,10 +326,10 @@ def cc_study(Ns=(4, 8, 16, 32), n_samples: int = 4, seed: int = 0, settle_steps:
     diverged)."""
     from dataclasses import replace
 
-    from harness.config import Scenario
-    from harness.fast import K
-    from harness.loop_kernels import MJ_FUNCS
-    from harness.mujoco_sim import simulate_mujoco
+    from harness.config.scenario import Scenario
+    from harness.loop.fast import K
+    from harness.loop.mujoco_kernels import MJ_FUNCS
+    from harness.loop.mujoco_loop import simulate_mujoco
 
     master = MasterParams() if master is None else master
     slave = SlaveParams() if slave is None else slave

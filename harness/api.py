@@ -1,0 +1,192 @@
+"""The public Python API (also what `teleop` is built on).
+
+    from harness import load_scenario, run, Trajectory, run_sweep
+
+    scn = load_scenario("scenarios/paper.toml", ["duration=5", "plant.slave.masses=[1.2,0.84,0.48]"])
+    traj = run(scn)                       # in-memory Trajectory; traj.meta["metrics"] has the metrics
+    traj = run(scn, out="runs/mine")      # ... and writes run.rrd, figures, metrics.json, config.toml
+
+`load_scenario` validates everything, including the plant (scene MJCF, model compilation), before
+anything runs.  `run` takes a path, a table, a `Scenario` or None (the paper scenario).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import sys
+import threading
+import traceback
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from harness.config import load as _load
+from harness.config.scenario import Scenario
+from harness.config.textio import jsonable
+
+DEBUG_ENV = "TELEOP_DEBUG"  # set to 1 to print tracebacks of output-writing failures
+
+
+def load_scenario(source: str | os.PathLike | Mapping | None = None, overrides: Iterable[str] = (), *,
+                  labels: Iterable[str | None] | None = None) -> Scenario:
+    """Read and validate a scenario (TOML path, parsed table or None = the paper scenario), apply the
+    dotted `key=value` overrides, and check that its plant can be built.  Raises `ConfigError`."""
+    from harness.plant import validate_plant
+
+    scn = _load.load_scenario(source, overrides, labels=labels)
+    validate_plant(scn)
+    return scn
+
+
+@dataclass
+class RunResult:
+    """What `run_scenario` produced: the trajectory, its metrics (None if they could not be computed),
+    the files written, the outputs that could not be produced (one line each) and whether a signal
+    interrupted the run."""
+
+    traj: Any
+    metrics: dict | None
+    written: list[Path] = field(default_factory=list)
+    failures: list[str] = field(default_factory=list)
+    interrupted: bool = False
+
+
+@contextlib.contextmanager
+def stop_on_signals(stop: threading.Event | None) -> Iterator[list[int]]:
+    """While active, SIGINT/SIGTERM set `stop` (the simulation then returns status "interrupted");
+    a second signal raises KeyboardInterrupt.  Yields the list of received signal numbers."""
+    received: list[int] = []
+    if stop is None or threading.current_thread() is not threading.main_thread():
+        yield received
+        return
+
+    def handler(signum, frame):  # noqa: ARG001
+        if stop.is_set():
+            raise KeyboardInterrupt
+        received.append(signum)
+        stop.set()
+        print(f"\n{signal.Signals(signum).name}: stopping the run, outputs will be written "
+              "(repeat to abort immediately)", file=sys.stderr)
+
+    stop.clear()
+    previous = {}
+    try:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, handler)
+        yield received
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+        stop.clear()
+
+
+def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False, *, plant: Any = None,
+                 handle_signals: bool = False) -> RunResult:
+    """Build the plant, simulate, compute metrics and (if `out`) write every output that can be written:
+    config.toml first, then metrics.json, run.rrd and the figures.  A failing output is listed in
+    `failures` and the others are still written.  handle_signals: SIGINT/SIGTERM stop the run cleanly."""
+    from harness import loop
+    from harness.loop import common
+    from harness.plant import build_plant
+
+    written: list[Path] = []
+    failures: list[str] = []
+
+    def attempt(what: str, fn: Callable[[], Any]) -> Any:
+        try:
+            return fn()
+        except Exception as e:  # noqa: BLE001 - write whatever else exists, report below
+            if os.environ.get(DEBUG_ENV):
+                traceback.print_exc()
+            failures.append(f"{what}: {type(e).__name__}: {e}")
+        return None
+
+    if plant is None:
+        plant = build_plant(scn)
+    if out is not None:  # first, so the configuration is on disk whatever happens next
+        _load.dump_scenario(scn, out / "config.toml")
+        written.append(out / "config.toml")
+    with stop_on_signals(common.STOP if handle_signals else None) as received:
+        traj = loop.simulate(scn, plant=plant, progress=progress)
+    interrupted = bool(received) or traj.status == "interrupted"
+
+    def metrics_of():
+        from harness.loop.metrics import compute_metrics
+
+        return compute_metrics(traj, scn)
+
+    metrics = attempt("metrics", metrics_of)
+    if metrics is not None:
+        metrics = dict(metrics)
+        metrics.setdefault("status", traj.status)
+        metrics.setdefault("message", traj.message)
+        traj.meta["metrics"] = metrics
+    if out is not None:
+        doc = metrics if metrics is not None else {"status": traj.status, "message": traj.message,
+                                                    "metrics_error": failures[-1] if failures else ""}
+
+        def write_metrics() -> Path:
+            p = out / "metrics.json"
+            p.write_text(json.dumps(jsonable(doc), indent=2, allow_nan=False) + "\n", encoding="utf-8")
+            return p
+
+        def write_recording() -> Path:
+            from harness.output.record import write_recording as write
+
+            return write(traj, out / "run.rrd")
+
+        def write_figures() -> list[Path]:
+            from harness.output.plots import write_figures as write
+
+            return write(traj, out)
+
+        for what, fn in (("metrics.json", write_metrics), ("run.rrd", write_recording),
+                         ("figures", write_figures)):
+            res = attempt(what, fn)
+            if isinstance(res, (str, Path)):
+                written.append(Path(res))
+            elif isinstance(res, (list, tuple)):
+                written += [Path(p) for p in res]
+    return RunResult(traj, metrics, written, failures, interrupted)
+
+
+def run(scenario: Scenario | str | os.PathLike | Mapping | None = None, overrides: Iterable[str] = (), *,
+        out: str | os.PathLike | None = None, progress: bool = False):
+    """Run a scenario and return its `Trajectory` (metrics in `traj.meta["metrics"]`).
+
+    scenario: a `Scenario`, a TOML path, a parsed table, or None (the paper scenario on MuJoCo);
+    overrides: dotted `key=value` strings (not with a `Scenario`).  out: folder for run.rrd, figures,
+    metrics.json and config.toml (None = write nothing).  Raises `ConfigError` for bad input and
+    `RuntimeError` if an output could not be written (the trajectory is then in the exception's
+    `traj` attribute)."""
+    if isinstance(scenario, Scenario):
+        if overrides:
+            raise TypeError("overrides apply to a scenario file or table, not to a Scenario object")
+        scn = scenario
+        from harness.plant import validate_plant
+
+        validate_plant(scn)
+    else:
+        scn = load_scenario(scenario, overrides)
+    out_dir = None
+    if out is not None:
+        from harness.config.textio import prepare_out_dir
+
+        out_dir = prepare_out_dir(out)
+    res = run_scenario(scn, out_dir, progress)
+    if res.failures:
+        err = RuntimeError("could not produce: " + "; ".join(res.failures))
+        err.traj = res.traj  # type: ignore[attr-defined]
+        raise err
+    return res.traj
+
+
+def run_sweep(study, out=None, **kwargs):
+    """Run a mismatch study (see `harness.studies.sweep.run_sweep`)."""
+    from harness.studies.sweep import run_sweep as _run_sweep
+
+    return _run_sweep(study, out, **kwargs)

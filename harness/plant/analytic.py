@@ -1,0 +1,97 @@
+"""The analytic plant: the paper's models (1) themselves as the "true" plant, with the plant's own
+parameters (which may differ from the controller's nominal ones).  `plant_accel` is the forward
+dynamics kernel (numba-compatible; compiled by `harness.loop.fast`) that the RK4 loop of
+`harness.loop.analytic_loop` integrates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers.cc import tip_kinematics
+from controllers.master import master_kernel
+from controllers.params import MasterParams, SlaveParams
+from controllers.slave import mass_nle_kernel
+
+
+def cholesky_solve(A, b, out):
+    """Solve A x = b for symmetric positive definite A (n,n) by Cholesky; returns False if not SPD."""
+    n = A.shape[0]
+    L = np.zeros((n, n))
+    for i in range(n):
+        for j in range(i + 1):
+            s = A[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            if i == j:
+                if s <= 0.0:
+                    return False
+                L[i, i] = np.sqrt(s)
+            else:
+                L[i, j] = s / L[j, j]
+    y = np.empty(n)
+    for i in range(n):
+        s = b[i]
+        for k in range(i):
+            s -= L[i, k] * y[k]
+        y[i] = s / L[i, i]
+    for i in range(n - 1, -1, -1):
+        s = y[i]
+        for k in range(i + 1, n):
+            s -= L[k, i] * out[k]
+        out[i] = s / L[i, i]
+    return True
+
+
+def plant_accel(mpk, spk, nodes, weights, s, T1, T2, F, acc):
+    """Analytic plant forward dynamics: acc (16,) = d/dt [q1, dq1, q2, dq2].  False if not SPD."""
+    x = np.empty(2)
+    J1 = np.empty((2, 2))
+    Jd1 = np.empty((2, 2))
+    M1 = np.empty((2, 2))
+    N1 = np.empty(2)
+    master_kernel(mpk, s[0:2], s[2:4], x, J1, Jd1, M1, N1)
+    rhs1 = np.empty(2)
+    for i in range(2):
+        rhs1[i] = T1[i] - N1[i] + J1[0, i] * F[0] + J1[1, i] * F[1]
+    dd1 = np.empty(2)
+    ok1 = cholesky_solve(M1, rhs1, dd1)
+    M2 = np.empty((6, 6))
+    N2 = np.empty(6)
+    mass_nle_kernel(spk, s[4:10], s[10:16], nodes, weights, M2, N2)
+    rhs2 = np.empty(6)
+    if F[2] != 0.0 or F[3] != 0.0:
+        x2 = np.empty(2)
+        J2 = np.empty((2, 6))
+        H = np.empty((2, 6, 6))
+        tip_kinematics(s[4:10], s[10:16], 1, x2, J2, H, H)
+        for a in range(6):
+            rhs2[a] = T2[a] - N2[a] + J2[0, a] * F[2] + J2[1, a] * F[3]
+    else:
+        for a in range(6):
+            rhs2[a] = T2[a] - N2[a]
+    dd2 = np.empty(6)
+    ok2 = cholesky_solve(M2, rhs2, dd2)
+    acc[0] = s[2]
+    acc[1] = s[3]
+    acc[2] = dd1[0]
+    acc[3] = dd1[1]
+    for a in range(6):
+        acc[4 + a] = s[10 + a]
+        acc[10 + a] = dd2[a]
+    return ok1 and ok2
+
+
+KERNELS = ("cholesky_solve", "plant_accel")
+
+
+@dataclass(frozen=True)
+class AnalyticPlant:
+    """The analytic plant's parameters (the plant's own, which may differ from the controller's)."""
+
+    master: MasterParams
+    slave: SlaveParams
+
+    kind = "analytic"

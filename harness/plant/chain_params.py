@@ -1,0 +1,126 @@
+"""Per-joint physical parameters of the discretized Octarm chain, from the slave parameters: segment
+masses and inertias, joint stiffness, damping and armature (layout and maps: `harness.plant.chain_map`;
+the model they go into: `harness.plant.mujoco_model`, whose docstring gives the derivations).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from controllers.params import SlaveParams
+
+TIP_MASS_FRACTION = 1e-3  # tip body mass as a fraction of one last-section segment mass (taken from it)
+TIP_SLIDE_ARMATURE = 1.0  # extra armature of the tip slide, in last-section segment masses m_2 / N
+
+
+def segment_inertias(slave: SlaveParams, N: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """Per-body masses (3, N) [kg], inertias about y (3, N) [kg m^2] and the tip mass [kg].
+
+    Rod term (m_i / N) l0_i^2 / 12 on the segment's own body.  Slice inertia I_s,i / N of segment (i, j)
+    (slice_inertia is per unit *normalized* material coordinate, i.e. the section total) is split in
+    halves between the two bodies whose frames carry the tangents at the segment's ends: the parent
+    (start tangent) and the segment's own body (end tangent) -- the trapezoidal rule on the tangent rate,
+    second order.  The first segment's start half goes to the (fixed) base and is dropped: it has no
+    kinetic energy.
+    """
+    m = np.asarray(slave.masses)
+    L0 = np.asarray(slave.rest_lengths)
+    Is = np.asarray(slave.slice_inertia)
+    mass = np.repeat((m / N)[:, None], N, axis=1)
+    iyy = mass * (L0[:, None] / N) ** 2 / 12.0
+    for i in range(3):
+        for j in range(N):
+            iyy[i, j] += 0.5 * Is[i] / N  # end half of own segment
+            # start half of the next segment (same orientation as this body)
+            if j + 1 < N:
+                iyy[i, j] += 0.5 * Is[i] / N
+            elif i + 1 < 3:
+                iyy[i, j] += 0.5 * Is[i + 1] / N
+    tip_mass = TIP_MASS_FRACTION * m[2] / N
+    mass[2, N - 1] -= tip_mass
+    return mass, iyy, tip_mass
+
+
+def slide_pattern(per_section, N: int, layout: dict) -> np.ndarray:
+    """Per-chain-joint values of a rod property that adds like a spring (stiffness, damping) for the
+    slides, from its per-section value v_i: N v_i inside a section (a rod of rest length L0_i / N),
+    2N v for the first half rod and the tip half rod, and the two half rods of sections i-1 and i in
+    series at a boundary, 2N v_{i-1} v_i / (v_{i-1} + v_i).  Hinge entries are 0."""
+    v = np.asarray(per_section, dtype=float)
+    n = layout["C"].shape[0]
+    out = np.zeros(n)
+    for c in range(n):
+        if layout["is_hinge"][c]:
+            continue
+        i, j = int(layout["section"][c]), int(layout["segment"][c])
+        if j == N:  # tip
+            out[c] = 2.0 * N * v[2]
+        elif j >= 1:
+            out[c] = N * v[i]
+        elif i == 0:
+            out[c] = 2.0 * N * v[0]
+        else:
+            a, b = v[i - 1], v[i]
+            out[c] = 2.0 * N * a * b / (a + b) if a + b > 0 else 0.0
+    return out
+
+
+def hinge_values(per_section, layout: dict) -> np.ndarray:
+    """Per-chain-joint values for the hinges from a per-section value (0 on slides)."""
+    v = np.asarray(per_section, dtype=float)
+    return np.where(layout["is_hinge"] == 1, v[layout["section"]], 0.0)
+
+
+def joint_stiffness(slave: SlaveParams, N: int, layout: dict) -> np.ndarray:
+    """MuJoCo joint stiffness per chain joint (N m/rad for hinges, N/m for slides).
+
+    Hinge: N Kb_i / L0_i (a segment of rest length L0_i / N with bending stiffness Kb_i), reproducing
+    1/2 Kb_i Theta_i^2 / L0_i per section at rest length.  Slides: `_slide_pattern` of Ke (N Ke_i
+    inside a section, half rods 2N Ke, boundary rods in series).  For uniform section extensions this
+    already gives sum_i 1/2 Ke_i (d_i - L0_i)^2; the elastic correction handles the length dependence
+    and unequal neighbours exactly.
+    """
+    L0 = np.asarray(slave.rest_lengths)
+    return (hinge_values(N * np.asarray(slave.bending_stiffness) / L0, layout)
+            + slide_pattern(slave.extension_stiffness, N, layout))
+
+
+def joint_damping(slave: SlaveParams, N: int, layout: dict) -> np.ndarray:
+    """MuJoCo joint damping per chain joint (N m s/rad, N s/m), integrated implicitly by MuJoCo.
+
+    The analytic model's viscous damping on q2 rates, dissipating De_i dd_i^2 + Dk_i dk_i^2, mapped
+    like the springs: slides get `_slide_pattern` of De; hinges get N Dk_i / L0_i^2 (at k = 0 and
+    d = L0 a hinge rate is dk d / N, so N hinges dissipate Dk dk^2).  Exact at rest length on the CC
+    manifold; the length dependence is a modelled mismatch.  (Applying -D dq2 as an explicit force
+    instead is unstable on the light distal joints at 1 ms.)
+    """
+    L0 = np.asarray(slave.rest_lengths)
+    return (hinge_values(N * np.asarray(slave.bending_damping) / L0**2, layout)
+            + slide_pattern(slave.extension_damping, N, layout))
+
+
+def joint_armature(slave: SlaveParams, N: int, layout: dict, fraction: float) -> np.ndarray:
+    """Joint armature per chain joint: ``fraction`` times the section's own inertia scale.
+
+    Hinges of section i: fraction * m_i L0_i^2 / 3 (kg m^2, the section as a rod about its base);
+    slides: fraction * m_i (kg).  The tip slide moves only the tip site and the tiny tip mass, yet
+    carries a half-rod spring 2 N Ke_2: alone it would be the fastest mode of the model (h w = 2.5 at
+    N = 32, 1 ms).  It gets TIP_SLIDE_ARMATURE * m_2 / N more (one segment mass), which brings it below
+    the bulk chain modes; since the tip slide is (d_2 - L0_2) / (2N), this adds only m_2 / (4 N^3) to
+    M2[d_2, d_2] (third order).  The same value on every joint of a section,
+    independent of N (it is a regularizer of the joint-space inertia: it lifts the tiny diagonal entries
+    of the distal segments and helps the equality constraints).  Its contribution to the q2 inertia,
+    A^T diag(armature) A, is a modelled mismatch that decays like 1/N: measured ~ fraction / (6 N) of M2
+    for the default parameters (reported separately by ``harness.studies.fidelity``).  It is needed: with
+    fraction = 0 the loaded N = 8 and N = 16 plants diverge within 1 s at 1 ms (measured; they are
+    stable with the default 0.01, or with enforce_cc).
+    """
+    m = np.asarray(slave.masses)
+    L0 = np.asarray(slave.rest_lengths)
+    n = layout["C"].shape[0]
+    a = np.zeros(n)
+    for c in range(n):
+        i = int(layout["section"][c])
+        a[c] = fraction * (m[i] * L0[i] ** 2 / 3.0 if layout["is_hinge"][c] else m[i])
+    a[-1] += TIP_SLIDE_ARMATURE * m[2] / N
+    return a

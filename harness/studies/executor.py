@@ -1,0 +1,225 @@
+"""Executors of a sweep: the worker function (`run_case`), a process pool (recreated after a worker
+died; a dying worker's case is isolated and blamed) or a Dask client, and the loop that keeps cases in
+flight and hands each result to the parent as it finishes.
+"""
+
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import logging
+import math
+import multiprocessing
+import os
+import signal
+import tempfile
+import time
+import traceback
+from collections import deque
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from harness.config.errors import ConfigError
+from harness.config.textio import jsonable
+from harness.studies.study import Case
+
+log = logging.getLogger(__name__)
+
+
+def _error_result(e: BaseException) -> dict:
+    return {"status": "error", "message": f"{type(e).__name__}: {e}",
+            "traceback": "".join(traceback.format_exception(e))}
+
+
+def run_case(case: dict) -> dict:
+    """Worker: simulate one case and compute its metrics.  Never raises (an exception gives status
+    "error" with the message and traceback); a diverged run keeps the Trajectory's status.
+
+    case: {"case_id", "scenario": Scenario, "metrics": [names], "record": bool}.
+    Returns {"case_id", "status", "message", "metrics", "wall_time", "traceback"} (+ "recording":
+    the .rrd bytes when case["record"])."""
+    t0 = time.perf_counter()
+    out = {"case_id": case.get("case_id"), "metrics": {}, "traceback": ""}
+    try:
+        from harness.loop import simulate
+        from harness.loop.metrics import compute_metrics
+
+        scn = case["scenario"]
+        traj = simulate(scn, progress=False)
+        metrics = compute_metrics(traj, scn)
+        out.update(status=traj.status, message=traj.message,
+                   metrics={k: jsonable(metrics.get(k)) for k in case["metrics"]})
+        if case.get("record"):
+            from harness.output.record import write_recording
+
+            with tempfile.TemporaryDirectory(prefix="sweep-rec-") as tmp:
+                path = Path(tmp) / f"{case.get('case_id')}.rrd"
+                write_recording(traj, path)
+                out["recording"] = path.read_bytes()
+    except Exception as e:
+        out.update(_error_result(e))
+    out["wall_time"] = time.perf_counter() - t0
+    return out
+
+
+def _call(case_fn: Callable[[dict], dict], payload: dict) -> dict:
+    """Runs in the worker: an exception raised by case_fn is the case's result, so that any exception
+    a future raises in the parent comes from the executor itself."""
+    try:
+        return case_fn(payload)
+    except Exception as e:
+        return _error_result(e)
+
+
+def _worker_init() -> None:
+    # Ctrl-C reaches the whole process group: only the parent reacts (it cancels and stops us).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+# --- execution --------------------------------------------------------------------------------------
+class SweepError(RuntimeError):
+    """The executor failed (not a case): the sweep stops; finished rows are kept, a re-run resumes."""
+
+
+class Runner:
+    """An executor created on demand: a process pool (recreated after a worker died) or a Dask client."""
+
+    def __init__(self, workers: int | None, scheduler: str | None):
+        self.workers = max(1, workers or os.cpu_count() or 1)
+        self.scheduler = scheduler
+        self._ex: cf.Executor | None = None
+        self._client = None
+
+    @property
+    def window(self) -> float:
+        # Process pool: only `workers` cases in flight, so a dead worker implicates few cases.
+        return math.inf if self.scheduler else self.workers
+
+    def executor(self) -> cf.Executor:
+        if self._ex is None:
+            if self.scheduler:
+                from distributed import Client
+
+                try:
+                    self._client = Client(self.scheduler)
+                except (OSError, ValueError) as e:
+                    raise ConfigError(f"scheduler = {self.scheduler!r}: cannot connect to the Dask "
+                                      f"scheduler ({e})", path="scheduler") from None
+                self._ex = self._client.get_executor(pure=False)
+            else:
+                self._ex = _process_pool(self.workers)
+        return self._ex
+
+    def close(self, cancel: bool = False) -> None:
+        ex, self._ex = self._ex, None
+        if ex is not None:
+            if isinstance(ex, cf.ProcessPoolExecutor):
+                _stop_pool(ex, cancel)
+            else:
+                ex.shutdown(wait=not cancel)
+        if self._client is not None:
+            self._client.close()
+            self._client = None
+
+
+def _process_pool(workers: int) -> cf.ProcessPoolExecutor:
+    # "spawn": fresh interpreters (safe with the parent's threads), and unlike "forkserver" they see
+    # the parent's current environment, not the one of whenever a fork server was started.
+    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                  initializer=_worker_init)
+
+
+def _stop_pool(ex: cf.ProcessPoolExecutor, cancel: bool) -> None:
+    if not cancel:
+        ex.shutdown(wait=True)
+        return
+    if hasattr(ex, "terminate_workers"):  # Python >= 3.14
+        ex.terminate_workers()
+        return
+    procs = list((getattr(ex, "_processes", None) or {}).values())
+    ex.shutdown(wait=False, cancel_futures=True)
+    for p in procs:  # running cases are lost (they re-run on resume); don't wait for them
+        if p.is_alive():
+            p.terminate()
+    for p in procs:
+        p.join(timeout=10)
+
+
+def _payload(case: Case, metrics: Sequence[str], record: bool) -> dict:
+    return {"case_id": case.case_id, "scenario": case.scenario, "metrics": list(metrics), "record": record}
+
+
+def run_cases(runner: Runner, case_fn: Callable, cases: Sequence[Case], metrics: Sequence[str],
+               record: bool, on_result: Callable[[Case, dict], None]) -> None:
+    """Run cases through the runner, calling on_result(case, result) in the parent as each finishes.
+    An exception raised by case_fn counts as the case's result (status "error"); a dead process pool
+    re-runs the cases that were in flight one by one to find the one that kills its worker."""
+    queue = deque(cases)
+    inflight: dict[cf.Future, Case] = {}
+    try:
+        while queue or inflight:
+            ex = runner.executor()
+            while queue and len(inflight) < runner.window:
+                case = queue.popleft()
+                try:
+                    fut = ex.submit(_call, case_fn, _payload(case, metrics, record))
+                except cf.BrokenExecutor:  # a worker died since the last wait: its futures say which
+                    queue.appendleft(case)
+                    break
+                inflight[fut] = case
+            if not inflight:  # broken before anything was in flight: nothing to blame, a fresh pool
+                runner.close(cancel=True)
+                continue
+            done, _ = cf.wait(inflight, return_when=cf.FIRST_COMPLETED)
+            if any(not f.cancelled() and isinstance(f.exception(), cf.BrokenExecutor) for f in done):
+                cf.wait(inflight)  # a broken pool fails every future at once
+                done = set(inflight)
+            suspects = []
+            for fut in done:
+                case = inflight.pop(fut)
+                if fut.cancelled():
+                    raise RuntimeError(f"case {case.case_id} was cancelled by the executor "
+                                       "(scheduler or workers lost?); run again to resume")
+                exc = fut.exception()
+                if exc is None:
+                    on_result(case, fut.result())
+                elif isinstance(exc, cf.BrokenExecutor):
+                    suspects.append(case)
+                elif type(exc).__name__ == "KilledWorker":  # Dask: this case killed its workers
+                    on_result(case, _error_result(exc))
+                else:
+                    raise SweepError(f"the executor failed on case {case.case_id}: "
+                                     f"{type(exc).__name__}: {exc}; re-run to resume") from exc
+            if suspects:
+                log.warning("a worker process died; re-running %d case(s) one at a time", len(suspects))
+                runner.close(cancel=True)
+                for case in suspects:
+                    on_result(case, _isolated(case_fn, _payload(case, metrics, record)))
+    finally:
+        for fut in inflight:
+            fut.cancel()
+
+
+def _probe() -> int:
+    return os.getpid()
+
+
+def _isolated(case_fn: Callable, payload: dict) -> dict:
+    """Run one case alone in a fresh 1-process pool whose worker has first run a no-op, so that a
+    dead worker is this case's doing (else: SweepError, e.g. workers that cannot start)."""
+    ex = _process_pool(1)
+    try:
+        try:
+            ex.submit(_probe).result()
+        except cf.BrokenExecutor:
+            raise SweepError(
+                "worker processes die before running any case (if run_sweep is called from a script, "
+                "guard the call with `if __name__ == '__main__':`)") from None
+        return ex.submit(_call, case_fn, payload).result()
+    except cf.BrokenExecutor:
+        return {"status": "error", "traceback": "", "message":
+                "the worker process died while running this case (segfault, abort or out of memory)"}
+    finally:
+        _stop_pool(ex, cancel=True)
+
+

@@ -1,0 +1,105 @@
+"""The results folder of a sweep: the append-only `results.jsonl` (one fsynced line per case), its
+reader (torn tails ignored), the folder lock and atomic writes.
+"""
+
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from pathlib import Path
+
+from harness.config.errors import ConfigError
+from harness.config.textio import jsonable
+from harness.studies.study import Case
+
+log = logging.getLogger(__name__)
+
+RESULTS = "results.jsonl"  # the results table in a sweep's output folder
+
+
+# --- results table ----------------------------------------------------------------------------------
+def read_results(path: str | os.PathLike) -> dict[str, dict]:
+    """Rows of a results.jsonl by case id (first occurrence wins).  A last line without its newline
+    (torn by a crash) is ignored; other unreadable lines are skipped with a warning."""
+    path = Path(path)
+    rows: dict[str, dict] = {}
+    if not path.exists():
+        return rows
+    lines = path.read_bytes().split(b"\n")
+    if lines[-1].strip():
+        log.warning("%s: ignoring a torn last line (%d bytes)", path, len(lines[-1]))
+    for no, line in enumerate(lines[:-1], 1):
+        if not line.strip():
+            continue
+        try:
+            row = json.loads(line)
+        except ValueError:
+            row = None
+        if not isinstance(row, dict) or not isinstance(row.get("case_id"), str):
+            log.warning("%s:%d: unreadable row skipped", path, no)
+            continue
+        rows.setdefault(row["case_id"], row)
+    return rows
+
+
+class ResultsWriter:
+    """Appends rows to results.jsonl, one fsynced line each; cuts a torn tail off first."""
+
+    def __init__(self, path: Path):
+        if path.exists():
+            data = path.read_bytes()
+            keep = data.rfind(b"\n") + 1
+            if keep != len(data):
+                with open(path, "r+b") as fh:
+                    fh.truncate(keep)
+        self._fh = open(path, "ab")
+
+    def append(self, row: dict) -> None:
+        self._fh.write((json.dumps(row, allow_nan=False) + "\n").encode())
+        self._fh.flush()
+        os.fsync(self._fh.fileno())
+
+    def close(self) -> None:
+        self._fh.close()
+
+
+def make_row(case: Case, result: dict) -> dict:
+    return {
+        "case_id": case.case_id,
+        "params": case.params,
+        "status": str(result.get("status", "error")),
+        "message": str(result.get("message", "")),
+        "metrics": jsonable(result.get("metrics") or {}),
+        "wall_time": jsonable(result.get("wall_time")),
+        "traceback": str(result.get("traceback", "")),
+    }
+
+
+class OutputLock:
+    """Exclusive lock on the output folder: two sweeps must not append to the same table."""
+
+    def __init__(self, out: Path):
+        self._fh = open(out / ".lock", "w")
+        try:
+            import fcntl
+
+            fcntl.flock(self._fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except ImportError:  # not POSIX: no lock
+            pass
+        except OSError:
+            self._fh.close()
+            raise ConfigError(f"{out} is in use by another sweep") from None
+
+    def release(self) -> None:
+        self._fh.close()
+
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
+
+

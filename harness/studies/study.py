@@ -1,0 +1,483 @@
+"""Mismatch studies: vary the *plant* (and sensing) of a scenario, run every case in parallel, resume.
+
+A mismatch study keeps the controller's nominal analytic model (`Scenario.master`, `Scenario.slave`,
+`Scenario.gains`) and varies what the controller does not know: the plant (`plant.master`,
+`plant.slave`, `plant.segments`, `plant.physics_dt`, `plant.actuation`, `plant.servo_frequency`,
+`plant.servo_damping_ratio`, `plant.actuation_delay`, `plant.enforce_cc`, ...) and the sensing
+(`snr_db`, `control_dt`).  Each case is one fully resolved `Scenario`; cases run through a
+`concurrent.futures` executor (a process pool, or Dask distributed with `scheduler=ADDRESS`).
+
+Study file (TOML)
+-----------------
+::
+
+    [study]
+    name = "mass_stiffness"            # output folder name; default: the file's stem
+    description = "..."                # optional, free text
+    scenario = "../scenarios/x.toml"   # base scenario, relative to the study file; default: built-in paper
+    set = ["duration=5.0", "plant.kind='mujoco'"]   # scenario overrides applied to every case
+    metrics = ["e2_rms", "e2_max", "beta_min"]      # metrics kept per case; default: all (METRIC_NAMES)
+    record = {worst = 2, by = "e2_rms"}  # optional: .rrd recordings of the worst k cases by a metric;
+                                         # order = "max" | "min" (default "min" for beta_min, else "max")
+
+    [[factor]]
+    name = "slave_mass"                # label in tables and plots; default: param
+    param = "plant.slave.masses"       # dotted Scenario path; `plant.slave.masses[0]` = one section
+    scale = [0.5, 0.75, 1.0, 1.25, 1.5]   # multiplicative factors (see below) ...
+    # values = [4, 8, 16]                 # ... or absolute values (exactly one of scale / values)
+
+    [[factor]]
+    name = "bending"
+    param = "plant.slave.bending_stiffness"
+    scale = {random = "uniform", low = 0.5, high = 1.5}   # seeded random draws instead of a list
+
+    [sampling]
+    mode = "grid"      # "grid" (default) | "random"
+    n = 20             # number of random draws (see below)
+    seed = 0           # seed of the draws (default 0)
+
+    [scenario]         # optional inline base scenario (instead of study.scenario); same keys as a
+    duration = 5.0     # scenario file.  The `study.toml` written to the output folder uses it.
+
+Factors
+  * `param` is any field path of `Scenario` (`plant.slave.masses`, `plant.segments`, `snr_db`,
+    `control_dt`, `plant.actuation`, `seed`, ...), optionally indexed (`plant.slave.masses[0]`,
+    `plant.master.lengths[1]`).  The controller's model (`master.*`, `slave.*`) is rejected:
+    a mismatch study varies `plant.master.*` / `plant.slave.*`.
+  * `scale = s` multiplies the NOMINAL value: for `plant.master.*` / `plant.slave.*` that is the
+    controller's model (`Scenario.master` / `Scenario.slave`), so s = 1 means "no mismatch"; for
+    any other field it is the base scenario's value (after `set`).  Vector fields are scaled
+    element-wise; integer fields must stay integers.
+  * `values = [...]` are absolute values, passed to the scenario loader as given (a scalar given
+    for a vector field is used for every entry).  The loader validates them.
+  * Each case is the base scenario + `set` + one `key=value` override per varied field (an indexed
+    factor writes the whole vector).  Untouched fields of `plant.slave` / `plant.master` keep the
+    base plant's values, i.e. the nominal model when the base has none (`harness.config.load` rule).
+  * Random draws (`{random = ...}` for `scale` or `values`): `uniform` / `loguniform` (`low`,
+    `high`), `normal` (`mean`, `std`), `integers` (`low`, `high`, inclusive).  Each factor draws
+    from its own generator seeded by (seed, factor name), so adding a factor leaves the others'
+    draws unchanged.  Deterministic for a given seed (and numpy version).
+
+Sampling
+  * `grid`: cartesian product of the list factors.  If some factors are random, each grid point
+    is combined with the same `n` draws of the random factors (common random numbers).
+  * `random`: `n` cases; random factors are drawn, list factors are picked uniformly at random.
+
+Running, results and summaries: `harness.studies.sweep`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import hashlib
+import itertools
+import json
+import logging
+import math
+import os
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from harness.config.errors import ConfigError
+from harness.config.load import load_scenario, scenario_to_dict
+from harness.config.scenario import Scenario
+from harness.config.textio import jsonable, read_toml, toml_literal
+
+log = logging.getLogger(__name__)
+
+
+# Keys of harness.loop.metrics.compute_metrics kept in a row's "metrics" (status/message are row fields).
+METRIC_NAMES = (
+    "e1_rms", "e1_max", "e2_rms", "e2_max", "e2_plant_rms", "e2_plant_max", "deN_rms", "beta_min",
+    "ya_max", "e1_final", "e2_final", "range_violation", "mujoco_warnings", "sim_time_reached",
+    "wall_time", "realtime_factor",
+)
+LOWER_IS_WORSE = frozenset({"beta_min"})
+# axis labels of the summary plots (units as in harness.loop.metrics)
+METRIC_LABELS = {
+    "e1_rms": "e1_rms [m]", "e1_max": "e1_max [m]", "e2_rms": "e2_rms [m]", "e2_max": "e2_max [m]",
+    "e2_plant_rms": "e2_plant_rms [m]", "e2_plant_max": "e2_plant_max [m]",
+    "deN_rms": "deN_rms [mixed: m/s, 1/(m s)]", "beta_min": "beta_min [-] (41)", "ya_max": "ya_max [-] (29)",
+    "e1_final": "e1_final [m]", "e2_final": "e2_final [m]", "range_violation": "range_violation [m or rad]",
+    "mujoco_warnings": "mujoco_warnings [count]", "sim_time_reached": "sim_time_reached [s]",
+    "wall_time": "wall_time [s]", "realtime_factor": "realtime_factor [x real time]",
+}
+DISTRIBUTIONS = {
+    "uniform": ("low", "high"), "loguniform": ("low", "high"), "normal": ("mean", "std"),
+    "integers": ("low", "high"),
+}
+DEFAULT_OUT_ROOT = Path("runs") / "sweeps"
+RESULTS = "results.jsonl"
+_PLANT_TABLES = (("plant", "master"), ("plant", "slave"))
+_PARAM_RE = re.compile(r"^([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)(?:\[(\d+)\])?$")
+
+
+# --- study file -------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Factor:
+    name: str
+    param: str  # as written, e.g. "plant.slave.masses[0]"
+    path: tuple[str, ...]  # ("plant", "slave", "masses")
+    index: int | None  # 0 for "[0]"
+    mode: str  # "scale" | "values"
+    levels: tuple | None  # list factor: its levels; None for a random factor
+    dist: dict | None  # random factor: {"random": kind, ...}
+
+    @property
+    def is_random(self) -> bool:
+        return self.dist is not None
+
+
+@dataclass(frozen=True)
+class RecordSpec:
+    worst: int
+    by: str
+    order: str  # "max" | "min": which end of the metric is worst
+
+
+@dataclass(frozen=True)
+class Study:
+    name: str
+    description: str
+    scenario: Path | dict | None  # base scenario: file, inline table, or None = built-in paper
+    set: tuple[str, ...]
+    metrics: tuple[str, ...]
+    record: RecordSpec | None
+    factors: tuple[Factor, ...]
+    mode: str  # "grid" | "random"
+    n: int | None
+    seed: int
+
+    @property
+    def scenario_source(self) -> Path | dict | None:
+        return self.scenario  # None = load_scenario's built-in defaults (the paper scenario)
+
+
+@dataclass(frozen=True)
+class Case:
+    case_id: str
+    params: dict  # factor name -> level (scale factor or absolute value), JSON-able
+    overrides: tuple[str, ...]  # scenario overrides of this case (after the study's `set`)
+    scenario: Scenario
+
+
+def _check_keys(table: Any, allowed: Sequence[str], where: str,
+                elsewhere: dict[str, str] | None = None) -> None:
+    """Unknown keys of a study table are an error naming them, the allowed ones and, per key, where it
+    belongs (`elsewhere`: key -> table) or the closest allowed spelling."""
+    if not isinstance(table, dict):
+        raise ConfigError(f"{where}: expected a table, got {table!r}")
+    unknown = sorted(set(table) - set(allowed))
+    if unknown:
+        hints = []
+        for k in unknown:
+            if elsewhere and k in elsewhere:
+                hints.append(f"{k!r} belongs under {elsewhere[k]}")
+            else:
+                close = difflib.get_close_matches(str(k), list(allowed), n=1)
+                if close:
+                    hints.append(f"did you mean {close[0]!r} for {k!r}?")
+        hint = f" ({'; '.join(hints)})" if hints else ""
+        raise ConfigError(f"{where}: unknown key(s) {unknown}; allowed: {sorted(allowed)}{hint}")
+
+
+def is_real(v) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool)
+
+
+def canon(v) -> str:
+    return json.dumps(v, sort_keys=True, separators=(",", ":"), default=str)
+
+
+def _parse_dist(spec: dict, where: str) -> dict:
+    kind = spec.get("random")
+    if kind not in DISTRIBUTIONS:
+        raise ConfigError(f"{where}: random = {kind!r}; expected one of {sorted(DISTRIBUTIONS)}")
+    keys = DISTRIBUTIONS[kind]
+    _check_keys(spec, ("random", *keys), where)
+    missing = [k for k in keys if k not in spec]
+    if missing or not all(is_real(spec[k]) for k in keys):
+        raise ConfigError(f"{where}: random = {kind!r} needs numbers {list(keys)}, got {spec!r}")
+    a, b = (spec[k] for k in keys)
+    if kind == "normal" and not b > 0:
+        raise ConfigError(f"{where}: std must be > 0, got {b!r}")
+    if kind in ("uniform", "loguniform") and not a < b:
+        raise ConfigError(f"{where}: need low < high, got {spec!r}")
+    if kind == "loguniform" and not a > 0:
+        raise ConfigError(f"{where}: loguniform needs low > 0, got {a!r}")
+    if kind == "integers" and not (isinstance(a, int) and isinstance(b, int) and a <= b):
+        raise ConfigError(f"{where}: integers needs integer low <= high, got {spec!r}")
+    return dict(spec)
+
+
+def _parse_factor(i: int, t: Any) -> Factor:
+    where = f"[[factor]] #{i + 1}"
+    _check_keys(t, ("name", "param", "scale", "values"), where)
+    param = t.get("param")
+    if not isinstance(param, str):
+        raise ConfigError(f"{where}: 'param' (a dotted Scenario path) is required")
+    name = t.get("name", param)
+    where = f"[[factor]] {name!r}"
+    if not isinstance(name, str) or not name:
+        raise ConfigError(f"{where}: 'name' must be a non-empty string")
+    m = _PARAM_RE.match(param)
+    if not m:
+        raise ConfigError(f"{where}: param = {param!r} is not a dotted path like 'plant.slave.masses[0]'")
+    path = tuple(m.group(1).split("."))
+    index = None if m.group(2) is None else int(m.group(2))
+    if path[0] in ("master", "slave"):
+        raise ConfigError(
+            f"{where}: param = {param!r} is the controller's nominal model; a mismatch study varies "
+            f"the plant: use 'plant.{param}'")
+    if path == ("name",):
+        raise ConfigError(f"{where}: the scenario name is not a parameter")
+    modes = [k for k in ("scale", "values") if k in t]
+    if len(modes) != 1:
+        raise ConfigError(f"{where}: give exactly one of 'scale' (factors) or 'values' (absolute values)")
+    mode = modes[0]
+    spec = t[mode]
+    if isinstance(spec, dict):
+        return Factor(name, param, path, index, mode, None, _parse_dist(spec, f"{where}: {mode}"))
+    if not isinstance(spec, list) or not spec:
+        raise ConfigError(f"{where}: {mode} must be a non-empty list or a {{random = ...}} table")
+    if mode == "scale" and not all(is_real(v) for v in spec):
+        raise ConfigError(f"{where}: scale = {spec!r}: every entry must be a number")
+    keys = [canon(v) for v in spec]
+    if len(set(keys)) != len(keys):
+        raise ConfigError(f"{where}: {mode} = {spec!r} has duplicate entries")
+    return Factor(name, param, path, index, mode, tuple(spec), None)
+
+
+def load_study(source: str | os.PathLike | dict, base_dir: str | os.PathLike | None = None) -> Study:
+    """Parse and check a study (TOML file or the equivalent dict).  Structural errors raise
+    `ConfigError` naming the table/factor; values are checked by `expand_cases`.
+    `base_dir` resolves a relative `study.scenario` (default: the study file's folder, or cwd)."""
+    if isinstance(source, dict):
+        doc, stem = source, None
+        base = Path(base_dir) if base_dir is not None else Path.cwd()
+    else:
+        path = Path(source)
+        doc = read_toml(path, "study file")
+        stem = path.stem
+        base = Path(base_dir) if base_dir is not None else path.resolve().parent
+    study_keys = ("name", "scenario", "set", "metrics", "record", "description")
+    belongs = {k: "[study]" for k in study_keys if k != "scenario"}
+    belongs.update({k: "[sampling]" for k in ("mode", "n", "seed")} | {"param": "[[factor]]"})
+    _check_keys(doc, ("study", "factor", "sampling", "scenario"),
+                "study file" if stem is None else f"study file {source}", belongs)
+    st = doc.get("study", {})
+    _check_keys(st, study_keys, "[study]")
+    name = st.get("name", stem)
+    if not isinstance(name, str) or not re.fullmatch(r"[\w.-]+", name):
+        raise ConfigError(f"[study] name = {name!r}: required; letters, digits, '_', '-', '.' only")
+
+    scenario: Path | dict | None = None
+    if "scenario" in st and "scenario" in doc:
+        raise ConfigError("give either [study] scenario (a file) or an inline [scenario] table, not both")
+    if "scenario" in st:
+        if not isinstance(st["scenario"], str):
+            raise ConfigError(f"[study] scenario = {st['scenario']!r}: must be a path string")
+        scenario = (base / st["scenario"]).resolve()
+    elif "scenario" in doc:
+        if not isinstance(doc["scenario"], dict):
+            raise ConfigError("[scenario] must be a table (an inline base scenario)")
+        scenario = doc["scenario"]
+
+    sets = st.get("set", [])
+    if not (isinstance(sets, list) and all(isinstance(s, str) for s in sets)):
+        raise ConfigError(f"[study] set = {sets!r}: must be a list of 'key=value' strings")
+
+    metrics = st.get("metrics", list(METRIC_NAMES))
+    if not (isinstance(metrics, list) and metrics and all(isinstance(m, str) for m in metrics)):
+        raise ConfigError(f"[study] metrics = {metrics!r}: must be a non-empty list of metric names")
+    bad = [m for m in metrics if m not in METRIC_NAMES]
+    if bad:
+        raise ConfigError(f"[study] metrics: unknown {bad}; known: {list(METRIC_NAMES)}")
+
+    record = None
+    if "record" in st:
+        r = st["record"]
+        _check_keys(r, ("worst", "by", "order"), "[study] record")
+        worst, by = r.get("worst", 1), r.get("by", "e2_rms")
+        if not (isinstance(worst, int) and not isinstance(worst, bool) and worst >= 1):
+            raise ConfigError(f"[study] record.worst = {worst!r}: must be an integer >= 1")
+        if by not in metrics:
+            raise ConfigError(f"[study] record.by = {by!r}: must be one of the collected metrics {metrics}")
+        order = r.get("order", "min" if by in LOWER_IS_WORSE else "max")
+        if order not in ("max", "min"):
+            raise ConfigError(f"[study] record.order = {order!r}: 'max' or 'min'")
+        record = RecordSpec(worst, by, order)
+
+    ftables = doc.get("factor", [])
+    if not isinstance(ftables, list) or not ftables:
+        raise ConfigError("study file: at least one [[factor]] table is required")
+    factors = tuple(_parse_factor(i, t) for i, t in enumerate(ftables))
+    names = [f.name for f in factors]
+    if len(set(names)) != len(names):
+        raise ConfigError(f"[[factor]] names must be unique, got {names}")
+    for a, b in itertools.combinations(factors, 2):
+        if a.path == b.path and (a.index is None or b.index is None or a.index == b.index):
+            raise ConfigError(f"[[factor]] {a.name!r} and {b.name!r} both set {a.param!r} / {b.param!r}")
+
+    sp = doc.get("sampling", {})
+    _check_keys(sp, ("mode", "n", "seed"), "[sampling]")
+    mode, n, seed = sp.get("mode", "grid"), sp.get("n"), sp.get("seed", 0)
+    if mode not in ("grid", "random"):
+        raise ConfigError(f"[sampling] mode = {mode!r}: 'grid' or 'random'")
+    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
+        raise ConfigError(f"[sampling] seed = {seed!r}: must be an integer >= 0")
+    needs_n = mode == "random" or any(f.is_random for f in factors)
+    if needs_n and not (isinstance(n, int) and not isinstance(n, bool) and n >= 1):
+        raise ConfigError(f"[sampling] n = {n!r}: an integer >= 1 is required for random draws")
+    if not needs_n and n is not None:
+        raise ConfigError("[sampling] n is used only with mode = 'random' or random factors")
+    description = st.get("description", "")
+    if not isinstance(description, str):
+        raise ConfigError(f"[study] description = {description!r}: must be a string")
+    return Study(name, description, scenario, tuple(sets), tuple(metrics), record, factors, mode, n, seed)
+
+
+# --- case expansion ---------------------------------------------------------------------------------
+def _clean(x: float) -> float:
+    """Round to 12 significant digits: 0.35000000000000003 -> 0.35 (stable labels and ids)."""
+    return float(f"{x:.12g}")
+
+
+def _draws(study: Study, f: Factor, n: int) -> list:
+    key = int.from_bytes(hashlib.sha256(f.name.encode()).digest()[:8], "little")
+    rng = np.random.default_rng([study.seed, key])
+    if f.levels is not None:  # list factor in random mode: uniform choice
+        return [f.levels[i] for i in rng.integers(len(f.levels), size=n)]
+    d = f.dist
+    kind = d["random"]
+    if kind == "uniform":
+        x = rng.uniform(d["low"], d["high"], n)
+    elif kind == "loguniform":
+        x = np.exp(rng.uniform(math.log(d["low"]), math.log(d["high"]), n))
+    elif kind == "normal":
+        x = rng.normal(d["mean"], d["std"], n)
+    else:
+        return [int(v) for v in rng.integers(d["low"], d["high"] + 1, size=n)]
+    return [_clean(float(v)) for v in x]
+
+
+def _level_combinations(study: Study) -> list[tuple]:
+    """One tuple of levels (in factor order) per case."""
+    fs = study.factors
+    if study.mode == "random":
+        cols = [_draws(study, f, study.n) for f in fs]
+        return list(zip(*cols, strict=True))
+    grid = [f.levels if not f.is_random else (None,) for f in fs]
+    rand = {i: _draws(study, f, study.n) for i, f in enumerate(fs) if f.is_random}
+    out = []
+    for point in itertools.product(*grid):
+        for j in range(study.n if rand else 1):
+            out.append(tuple(rand[i][j] if i in rand else v for i, v in enumerate(point)))
+    return out
+
+
+def _get(obj: Any, path: Sequence[str], base: Scenario, where: str) -> Any:
+    """Field at `path`; an unset plant.master/plant.slave reads as the base plant model."""
+    for i, p in enumerate(path):
+        if not dataclasses.is_dataclass(obj) or p not in {f.name for f in dataclasses.fields(obj)}:
+            owner = ".".join(path[:i]) or "Scenario"
+            known = sorted(f.name for f in dataclasses.fields(obj)) if dataclasses.is_dataclass(obj) else []
+            hint = f"; fields: {known}" if known else ""
+            raise ConfigError(f"{where}: {owner} has no field {p!r}{hint}")
+        obj = getattr(obj, p)
+        if obj is None and tuple(path[: i + 1]) in _PLANT_TABLES:
+            obj = base.plant_master if p == "master" else base.plant_slave
+    if dataclasses.is_dataclass(obj):
+        raise ConfigError(f"{where}: {'.'.join(path)!r} is a table; name one of its fields")
+    return obj
+
+
+def _pick(v: Any, index: int | None, where: str) -> Any:
+    if index is None:
+        return v
+    if not isinstance(v, tuple | list) or not 0 <= index < len(v):
+        raise ConfigError(f"{where}: index [{index}] out of range for value {v!r}")
+    return v[index]
+
+
+def _scaled(nominal: Any, s: float, where: str) -> Any:
+    if isinstance(nominal, tuple | list):
+        return [_scaled(v, s, where) for v in nominal]
+    if not is_real(nominal):
+        raise ConfigError(f"{where}: cannot scale {nominal!r}; use 'values' for this parameter")
+    x = nominal * s
+    if isinstance(nominal, int):
+        if abs(x - round(x)) > 1e-9:
+            raise ConfigError(f"{where}: scale {s} of the integer {nominal} gives {x}, not an integer")
+        return int(round(x))
+    return _clean(float(x))
+
+
+def _case_overrides(base: Scenario, factors: Sequence[Factor], levels: Sequence) -> list[str]:
+    leaves: dict[tuple[str, ...], Any] = {}
+    for f, level in zip(factors, levels, strict=True):
+        where = f"[[factor]] {f.name!r} ({f.param})"
+        current = leaves.get(f.path, _get(base, f.path, base, where))
+        if f.mode == "scale":
+            nominal_root = {("plant", "master"): base.master, ("plant", "slave"): base.slave}.get(f.path[:2])
+            nominal = current if nominal_root is None else _get(nominal_root, f.path[2:], base, where)
+            value = _scaled(_pick(nominal, f.index, where), level, where)
+        else:
+            value = level
+        if f.index is not None:
+            _pick(current, f.index, where)
+            new = list(current)
+            new[f.index] = value
+            value = new
+        elif isinstance(current, tuple) and is_real(value) and all(is_real(c) for c in current):
+            value = [value] * len(current)  # a scalar for a vector field: every entry
+        leaves[f.path] = value
+    return [f"{'.'.join(path)}={toml_literal(value)}" for path, value in leaves.items()]
+
+
+def scenario_id(scn: Scenario) -> str:
+    """Short stable id of a resolved scenario (its name excluded)."""
+    d = {k: v for k, v in scenario_to_dict(scn).items() if k != "name"}
+    return hashlib.sha256(canon(d).encode()).hexdigest()[:12]
+
+
+def _in_context(e: ValueError, context: str) -> ConfigError:
+    return e.with_context(context) if isinstance(e, ConfigError) else ConfigError(f"{context}: {e}")
+
+
+def load_base(study: Study) -> Scenario:
+    try:
+        return load_scenario(study.scenario_source, list(study.set))
+    except ValueError as e:  # ConfigError, or a model's ParameterError
+        raise _in_context(e, f"study {study.name!r}: base scenario (with [study] set)") from None
+
+
+def expand_cases(study: Study, base: Scenario | None = None) -> list[Case]:
+    """All cases of the study, each validated by `load_scenario` (ConfigError naming the factor
+    values on the first bad one), duplicates (same resolved scenario) removed."""
+    base = load_base(study) if base is None else base
+    cases: dict[str, Case] = {}
+    for levels in _level_combinations(study):
+        params = {f.name: jsonable(v) for f, v in zip(study.factors, levels, strict=True)}
+        ovr = _case_overrides(base, study.factors, levels)
+        try:
+            scn = load_scenario(study.scenario_source, [*study.set, *ovr])
+        except ValueError as e:
+            raise _in_context(e, f"study {study.name!r}: case {params}") from None
+        cid = scenario_id(scn)
+        if cid not in cases:
+            scn = dataclasses.replace(scn, name=f"{study.name}-{cid}")
+            cases[cid] = Case(cid, params, tuple(ovr), scn)
+        elif cases[cid].params != params:
+            log.warning("study %s: case %s is the same scenario as %s; run once",
+                        study.name, params, cases[cid].params)
+    return list(cases.values())
+
+
+# --- worker -----------------------------------------------------------------------------------------
