@@ -102,8 +102,8 @@ A chain of rigid segments of length h discretizing the same rod gets hinge dampi
 (N m s/rad, like its hinge stiffness EI / h) and slide damping eta_a / h (N s/m, like Ke L0 / h):
 `hinge_damping`, `slide_damping`.  Default: eta_b = 0.01 N m^2 s and eta_a = 0.3 N s in every
 section (`DEFAULT_ETA_B`, `DEFAULT_ETA_A`), i.e. c_k = 0.003 and c_d = 1 in SlaveParams units:
-small (measured first-mode damping ratio in `tests/test_cosserat.py::test_damping_ratio_small`)
-but enough to settle the servo in a few seconds.
+small (a free motion of the default arm still rings for several seconds; the modal damping
+ratios are not measured yet).
 
 Actuation
 ---------
@@ -125,9 +125,10 @@ Sensing
 `sense()`: per section, the chords of its n elements (lengths c_j, angles phi_j from +Z toward
 +X, unwrapped) are fitted by a circle: phi_j = phi_0 + k s_j (least squares in s_j, the arc length
 at the chord's mid-arc), with the chord-to-arc correction a_j = 2 asin(k c_j / 2) / k iterated
-(6 times) with the fit; d = sum a_j.  On points sampled on an exact arc this recovers d and k to
-round-off.  Rates: d' = sum c_j' a_j / c_j, k' = sum w_j (phi_j' - k s_j') with w the least-squares
-weights (exact on CC data, first order otherwise), from the node velocities.
+(16 times) with the fit; d = sum a_j.  On points sampled on an exact arc this recovers d and k to
+round-off.  Rates, from the node velocities: k' = sum w_j (phi_j' - k s_j') with w the least-squares
+weights, a_j' = (da/dc) c_j' + (da/dk) k', d' = sum a_j' (3 fixed-point passes; exact on CC
+data, first order in the residual otherwise).
 
 Time stepping
 -------------
@@ -137,8 +138,8 @@ PyElastica's update kernels, compiled into one loop (`cosserat_rod.run_steps`); 
 (same numbers, slower; used to check the compiled loop).  `stable_dt` is a CFL-type estimate:
 min over sections of 2 / omega_max (axial and shear waves 2 c / h, c = sqrt(EA / rho A),
 sqrt(GA / rho A); element rotation omega^2 = GA / rho I + 4 EI / (rho I h^2)), reduced for the
-explicit extension damping by sqrt(1 + zeta^2) - zeta, times a safety factor 0.5 (the measured
-divergence limit is about 1.7x the estimate at 10 elements per section, see tests).  The
+explicit extension damping by sqrt(1 + zeta^2) - zeta, times a safety factor 0.5 (not yet calibrated
+against measured divergence limits).  The
 default dt is the largest 1 ms / m below it.
 """
 
@@ -159,7 +160,7 @@ DEFAULT_ETA_A = 0.3  # N s, extension viscosity per section
 DEFAULT_SHEAR_FACTOR = 10.0
 DEFAULT_ROTARY_RADIUS = 0.04  # m
 SAFETY = 0.5
-FIT_ITERATIONS = 6
+FIT_ITERATIONS = 16
 _BASE_DT = 1e-3
 
 

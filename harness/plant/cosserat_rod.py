@@ -355,16 +355,26 @@ def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
             sxx += (smid[t] - sbar) ** 2
         for t in range(m):
             w[t] = (smid[t] - sbar) / sxx if m > 1 else 0.0
-        # rates: arc rate ~ chord rate * arc / chord; dk = sum w dphi - k sum w ds (exact on CC data)
-        dd = 0.0
+        # rates: a' = (da/dc) c' + (da/dk) k', k' = sum w (phi' - k s') (exact on CC data), iterated
         dk = 0.0
-        sd = 0.0
-        for t in range(m):
-            ad = cd[j0 + t] * arc[t] / c[j0 + t]
-            sdm = sd + 0.5 * ad
-            sd += ad
-            dk += w[t] * (phid[j0 + t] - k * sdm)
-            dd += ad
+        dd = 0.0
+        for _ in range(3):
+            dd = 0.0
+            dk_new = 0.0
+            sd = 0.0
+            for t in range(m):
+                cj = c[j0 + t]
+                u = 0.5 * k * cj
+                if abs(u) < 1e-4:
+                    ad = cd[j0 + t] * (1.0 + 0.5 * u * u) + dk * cj * cj * cj * k / 12.0
+                else:
+                    r = 1.0 / np.sqrt(max(1.0 - u * u, 1e-12))
+                    ad = cd[j0 + t] * r + dk * (cj * r - arc[t]) / k
+                sdm = sd + 0.5 * ad
+                sd += ad
+                dk_new += w[t] * (phid[j0 + t] - k * sdm)
+                dd += ad
+            dk = dk_new
         q2[s] = d
         q2[3 + s] = k
         dq2[s] = dd
