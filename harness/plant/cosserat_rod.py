@@ -1,0 +1,381 @@
+"""Compiled physics of the planar Octarm Cosserat rod (kernels for `harness.plant.cosserat`).
+
+The maths, the frames and the parameter mapping are documented in `harness.plant.cosserat`; this
+module holds the numba kernels only:
+
+* `rod_loads`: the elastic, damping, active and external loads of one step, written into the
+  PyElastica rod's own arrays (`internal_forces`, `internal_torques`, `external_forces`,
+  `external_torques`), from the strains computed by PyElastica's kernels
+  (`_compute_shear_stretch_strains`, `_compute_bending_twist_strains`, `_compute_dilatation_rate`,
+  `_inv_rotate`);
+* `run_steps`: position-Verlet steps (PyElastica's `PositionVerlet` scheme: half drift, loads,
+  kick, half drift) compiled into one loop with PyElastica's own update kernels
+  (`overload_operator_kinematic_numba`, `_update_accelerations`), so a step has no Python overhead;
+* `cc_nodes`: node positions and element angles of a constant-curvature shape;
+* `cc_fit`: the least-squares constant-curvature fit of a section's nodes (and its rates).
+
+Planar embedding: plane point [X, Z] -> (X, 0, Z); the rod's directors are d1 = (cos p, 0, -sin p),
+d2 = +Y, d3 = (sin p, 0, cos p) for an element at tangent angle p (from +Z toward +X), so a
+positive curvature k is a positive rotation about d2 = +Y and is kappa[1] in PyElastica's arrays.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from elastica._linalg import _batch_cross, _batch_matvec
+from elastica._rotations import _inv_rotate
+from elastica.rod.cosserat_rod import (
+    _compute_bending_twist_strains,
+    _compute_dilatation_rate,
+    _compute_shear_stretch_strains,
+    _update_accelerations,
+)
+from elastica.rod.data_structures import overload_operator_kinematic_numba
+from numba import njit
+
+
+@njit(cache=True)
+def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_lengths, rest_vor,
+              dil, vdil, sigma, kappa, dil_rate, rest_sigma, rest_kappa, shear_matrix, bend_matrix,
+              eta_e, eta_v, base_Q, base_B, base_eta, base_kappa0, act_n, act_m, act_m_base,
+              node_force, tip_force, analytic_law, dt, f_int, tau_int, f_ext, tau_ext):
+    """Loads of one step into f_int (3, nn), tau_int (3, ne), f_ext, tau_ext (see module cosserat).
+
+    eta_e (3, ne): Kelvin-Voigt viscosity of [shear, shear, axial] strain rates (N s);
+    eta_v (3, nv): of the curvature rates at the hinges (N m^2 s), applied implicitly;
+    act_n (ne,): active axial force (N, positive extends); act_m (3, nv), act_m_base (3,): active
+    couples at the hinges and the base half-element (N m, positive bends toward +kappa);
+    node_force (3, nn): gravity; tip_force (3,); analytic_law: 1 for the energy
+    1/2 B (kappa - kappa0)^2 / eps (CC-consistent), 0 for the linear law B (kappa - kappa0).
+    """
+    ne = lengths.shape[0]
+    nv = ne - 1
+    nn = ne + 1
+    _compute_shear_stretch_strains(pos, volume, lengths, tangents, radius, rest_lengths, rest_vor,
+                                   dil, vdil, Q, sigma)
+    _compute_bending_twist_strains(Q, rest_vor, kappa)
+    _compute_dilatation_rate(pos, vel, lengths, rest_lengths, dil_rate)
+
+    # --- shear/stretch stress n (material frame), Kelvin-Voigt on the strain rate -------------------
+    # sigma = Q (x_{i+1} - x_i) / l0 - e3; d sigma / dt = Q dv / l0 - omega x (sigma + e3)
+    dv = np.empty((3, ne))
+    for i in range(3):
+        for k in range(ne):
+            dv[i, k] = (vel[i, k + 1] - vel[i, k]) / rest_lengths[k]
+    qdv = _batch_matvec(Q, dv)
+    se3 = sigma.copy()
+    for k in range(ne):
+        se3[2, k] += 1.0
+    sdot = qdv - _batch_cross(omega, se3)
+    n = np.empty((3, ne))
+    for i in range(3):
+        for k in range(ne):
+            n[i, k] = shear_matrix[i, i, k] * (sigma[i, k] - rest_sigma[i, k]) + eta_e[i, k] * sdot[i, k]
+    for k in range(ne):
+        n[2, k] -= act_n[k]
+
+    # --- bending couples m at the hinges (elastic + active), base half-element hinge -------------------
+    m = np.empty((3, nv))
+    tension = np.zeros(ne)  # extra chord tension dW/dl from the analytic law (lab, along the chord)
+    for k in range(nv):
+        w = 0.0
+        for i in range(3):
+            dk = kappa[i, k] - rest_kappa[i, k]
+            el = bend_matrix[i, i, k] * dk
+            if analytic_law:
+                el /= vdil[k]
+                w += el * dk / vdil[k]
+            m[i, k] = el - act_m[i, k]
+        if analytic_law:
+            tension[k] -= 0.25 * w
+            tension[k + 1] -= 0.25 * w
+    pair = np.empty((3, 3, 2))
+    pair[:, :, 0] = base_Q
+    pair[:, :, 1] = Q[:, :, 0]
+    half0 = 0.5 * rest_lengths[0]
+    kb = _inv_rotate(pair)[:, 0] / half0
+    mb = np.empty(3)
+    wb = 0.0
+    for i in range(3):
+        dk = kb[i] - base_kappa0[i]
+        el = base_B[i] * dk
+        if analytic_law:
+            el /= dil[0]
+            wb += el * dk / dil[0]
+        mb[i] = el - act_m_base[i]
+    if analytic_law:
+        tension[0] -= 0.25 * wb
+
+    # --- forces: difference of the lab-frame element forces Q^T n + T t ------------------------------
+    N = np.empty((3, ne))
+    for i in range(3):
+        for k in range(ne):
+            N[i, k] = (Q[0, i, k] * n[0, k] + Q[1, i, k] * n[1, k] + Q[2, i, k] * n[2, k]
+                       + tension[k] * tangents[i, k])
+    for i in range(3):
+        f_int[i, 0] = N[i, 0]
+        for k in range(1, ne):
+            f_int[i, k] = N[i, k] - N[i, k - 1]
+        f_int[i, ne] = -N[i, ne - 1]
+
+    # --- torques: couple difference + kappa x m (trapezoid) + (sigma + e3) x n l0 + inertial terms ----
+    km = _batch_cross(kappa, m)
+    kmb = np.cross(kb, mb)
+    sn = _batch_cross(se3, n)
+    Jw = _batch_matvec(J, omega)
+    lag = _batch_cross(Jw, omega)
+    for i in range(3):
+        for k in range(ne):
+            left = mb[i] if k == 0 else m[i, k - 1]
+            right = m[i, k] if k < nv else 0.0
+            q = 0.0
+            if k < nv:
+                q += 0.5 * km[i, k] * rest_vor[k]
+            if k > 0:
+                q += 0.5 * km[i, k - 1] * rest_vor[k - 1]
+            else:
+                q += 0.5 * kmb[i] * half0
+            tau_int[i, k] = (right - left + q + sn[i, k] * rest_lengths[k]
+                             + lag[i, k] / dil[k] + Jw[i, k] * dil_rate[k] / (dil[k] * dil[k]))
+
+    # --- external: gravity, tip force; the base node is held (zero net force, zero velocity) ---------
+    for i in range(3):
+        for k in range(nn):
+            f_ext[i, k] = node_force[i, k]
+        f_ext[i, nn - 1] += tip_force[i]
+        for k in range(ne):
+            tau_ext[i, k] = 0.0
+        f_int[i, 0] = -f_ext[i, 0]
+
+    # --- Kelvin-Voigt bending damping, backward Euler over the kick (tridiagonal per component) -------
+    # (J_i / (e_i dt)) (w_i' - w_i) = tau_i - sum_hinges g (w' differences); g = eta / (D0 eps)
+    if dt > 0.0:
+        g = np.empty(nv)
+        a = np.empty(ne)
+        b = np.empty(ne)
+        c = np.empty(ne)
+        r = np.empty(ne)
+        for i in range(3):
+            for k in range(nv):
+                g[k] = eta_v[i, k] / rest_vor[k]
+                if analytic_law:
+                    g[k] /= vdil[k]
+            gb = base_eta[i] / half0
+            if analytic_law:
+                gb /= dil[0]
+            for k in range(ne):
+                jh = J[i, i, k] / dil[k] / dt
+                diag = jh
+                a[k] = 0.0
+                c[k] = 0.0
+                if k > 0:
+                    diag += g[k - 1]
+                    a[k] = -g[k - 1]
+                else:
+                    diag += gb
+                if k < nv:
+                    diag += g[k]
+                    c[k] = -g[k]
+                b[k] = diag
+                r[k] = jh * omega[i, k] + tau_int[i, k] + tau_ext[i, k]
+            # Thomas algorithm
+            for k in range(1, ne):
+                f = a[k] / b[k - 1]
+                b[k] -= f * c[k - 1]
+                r[k] -= f * r[k - 1]
+            w_new = np.empty(ne)
+            w_new[ne - 1] = r[ne - 1] / b[ne - 1]
+            for k in range(ne - 2, -1, -1):
+                w_new[k] = (r[k] - c[k] * w_new[k + 1]) / b[k]
+            for k in range(ne):
+                td = 0.0
+                if k < nv:
+                    td += g[k] * (w_new[k + 1] - w_new[k])
+                if k > 0:
+                    td -= g[k - 1] * (w_new[k] - w_new[k - 1])
+                else:
+                    td -= gb * w_new[k]
+                tau_int[i, k] += td
+
+
+@njit(cache=True)
+def run_steps(nsteps, dt, pos, vel, Q, omega, acc, alpha, mass, J, invJ, volume, lengths, tangents,
+              radius, rest_lengths, rest_vor, dil, vdil, sigma, kappa, dil_rate, rest_sigma, rest_kappa,
+              shear_matrix, bend_matrix, eta_e, eta_v, base_Q, base_B, base_eta, base_kappa0, act_n,
+              act_m, act_m_base, node_force, tip_force, analytic_law, f_int, tau_int, f_ext, tau_ext):
+    """`nsteps` position-Verlet steps of size dt (PyElastica's PositionVerlet order); returns False
+    as soon as the state is not finite."""
+    half = 0.5 * dt
+    for _ in range(nsteps):
+        overload_operator_kinematic_numba(half, pos, Q, vel, omega)
+        rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_lengths, rest_vor,
+                  dil, vdil, sigma, kappa, dil_rate, rest_sigma, rest_kappa, shear_matrix, bend_matrix,
+                  eta_e, eta_v, base_Q, base_B, base_eta, base_kappa0, act_n, act_m, act_m_base,
+                  node_force, tip_force, analytic_law, dt, f_int, tau_int, f_ext, tau_ext)
+        _update_accelerations(acc, f_int, f_ext, mass, alpha, invJ, tau_int, tau_ext, dil)
+        for i in range(3):
+            for k in range(vel.shape[1]):
+                vel[i, k] += dt * acc[i, k]
+            for k in range(omega.shape[1]):
+                omega[i, k] += dt * alpha[i, k]
+        overload_operator_kinematic_numba(half, pos, Q, vel, omega)
+    for i in range(3):
+        for k in range(pos.shape[1]):
+            if not np.isfinite(pos[i, k]):
+                return False
+    return True
+
+
+# --- constant-curvature geometry and its least-squares fit ------------------------------------------------
+
+
+@njit(cache=True)
+def _sinc(x):
+    if abs(x) < 1e-4:
+        return 1.0 - x * x / 6.0
+    return np.sin(x) / x
+
+
+@njit(cache=True)
+def _one_minus_cos_over(x):
+    """(1 - cos x) / x, accurate at small x."""
+    if abs(x) < 1e-4:
+        return 0.5 * x - x * x * x / 24.0
+    return (1.0 - np.cos(x)) / x
+
+
+@njit(cache=True)
+def cc_nodes(q2, n_per_section, xz, elem_angle):
+    """Nodes [X, Z] (3 n + 1, 2) of the CC shape q2 at uniform arc-length steps d_i / n within each
+    section (exactly on the arcs) and the element chord angles (3 n,) (from +Z toward +X)."""
+    x = 0.0
+    z = 0.0
+    phi = 0.0
+    xz[0, 0] = 0.0
+    xz[0, 1] = 0.0
+    idx = 0
+    for s in range(3):
+        h = q2[s] / n_per_section
+        k = q2[3 + s]
+        dphi = k * h
+        for _ in range(n_per_section):
+            # chord of an arc of length h turning by dphi: length h sinc(dphi/2), at angle phi + dphi/2
+            c = h * _sinc(0.5 * dphi)
+            a = phi + 0.5 * dphi
+            x += c * np.sin(a)
+            z += c * np.cos(a)
+            elem_angle[idx] = a
+            idx += 1
+            xz[idx, 0] = x
+            xz[idx, 1] = z
+            phi += dphi
+
+
+@njit(cache=True)
+def _wrap(a):
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+@njit(cache=True)
+def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
+    """Least-squares CC fit of each section's nodes; see `harness.plant.cosserat` (Sensing).
+
+    xz, vxz (nn, 2): node positions and velocities [X, Z]; bounds (4,): section boundary nodes.
+    Writes q2 = [d, k] and dq2 (first-order rates) in place.
+    """
+    nn = xz.shape[0]
+    ne = nn - 1
+    phi = np.empty(ne)
+    phid = np.empty(ne)
+    c = np.empty(ne)
+    cd = np.empty(ne)
+    prev = 0.0
+    for j in range(ne):
+        ex = xz[j + 1, 0] - xz[j, 0]
+        ez = xz[j + 1, 1] - xz[j, 1]
+        vx = vxz[j + 1, 0] - vxz[j, 0]
+        vz = vxz[j + 1, 1] - vxz[j, 1]
+        c2 = ex * ex + ez * ez
+        c[j] = np.sqrt(c2)
+        cd[j] = (ex * vx + ez * vz) / c[j]
+        a = np.arctan2(ex, ez)
+        # unwrap against the previous chord (|turn| < pi per element)
+        a = prev + _wrap(a - prev) if j > 0 else _wrap(a)
+        phi[j] = a
+        prev = a
+        phid[j] = (ez * vx - ex * vz) / c2
+    for s in range(3):
+        j0 = bounds[s]
+        j1 = bounds[s + 1]
+        m = j1 - j0
+        arc = np.empty(m)
+        smid = np.empty(m)
+        w = np.empty(m)
+        for t in range(m):
+            arc[t] = c[j0 + t]
+        k = 0.0
+        for _ in range(n_iter):
+            acc = 0.0
+            for t in range(m):
+                smid[t] = acc + 0.5 * arc[t]
+                acc += arc[t]
+            sbar = 0.0
+            pbar = 0.0
+            for t in range(m):
+                sbar += smid[t]
+                pbar += phi[j0 + t]
+            sbar /= m
+            pbar /= m
+            sxx = 0.0
+            sxy = 0.0
+            for t in range(m):
+                sxx += (smid[t] - sbar) ** 2
+                sxy += (smid[t] - sbar) * (phi[j0 + t] - pbar)
+            k = sxy / sxx if m > 1 else 0.0
+            # chord -> arc length for the fitted curvature: a = c / sinc(k a / 2), solved as 2 asin(kc/2)/k
+            for t in range(m):
+                u = 0.5 * k * c[j0 + t]
+                if abs(u) < 1e-6:
+                    arc[t] = c[j0 + t] * (1.0 + u * u / 6.0)
+                elif abs(u) < 1.0:
+                    arc[t] = c[j0 + t] * np.arcsin(u) / u
+                else:
+                    arc[t] = c[j0 + t] * 0.5 * np.pi / min(abs(u), 1.0)
+        acc = 0.0
+        for t in range(m):
+            smid[t] = acc + 0.5 * arc[t]
+            acc += arc[t]
+        d = acc
+        sbar = 0.0
+        for t in range(m):
+            sbar += smid[t]
+        sbar /= m
+        sxx = 0.0
+        for t in range(m):
+            sxx += (smid[t] - sbar) ** 2
+        for t in range(m):
+            w[t] = (smid[t] - sbar) / sxx if m > 1 else 0.0
+        # rates: a' = (da/dc) c' + (da/dk) k', k' = sum w (phi' - k s') (exact on CC data), iterated
+        dk = 0.0
+        dd = 0.0
+        for _ in range(3):
+            dd = 0.0
+            dk_new = 0.0
+            sd = 0.0
+            for t in range(m):
+                cj = c[j0 + t]
+                u = 0.5 * k * cj
+                if abs(u) < 1e-4:
+                    ad = cd[j0 + t] * (1.0 + 0.5 * u * u) + dk * cj * cj * cj * k / 12.0
+                else:
+                    r = 1.0 / np.sqrt(max(1.0 - u * u, 1e-12))
+                    ad = cd[j0 + t] * r + dk * (cj * r - arc[t]) / k
+                sdm = sd + 0.5 * ad
+                sd += ad
+                dk_new += w[t] * (phid[j0 + t] - k * sdm)
+                dd += ad
+            dk = dk_new
+        q2[s] = d
+        q2[3 + s] = k
+        dq2[s] = dd
+        dq2[3 + s] = dk
