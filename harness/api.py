@@ -6,8 +6,9 @@
     traj = run(scn)                       # in-memory Trajectory; traj.meta["metrics"] has the metrics
     traj = run(scn, out="runs/mine")      # ... and writes run.rrd, figures, metrics.json, config.toml
 
-`load_scenario` validates everything, including the plant (scene MJCF, model compilation), before
-anything runs.  `run` takes a path, a table, a `Scenario` or None (the paper scenario).
+`load_scenario` validates everything, including the plant (scene MJCF, model compilation) and the
+controller (`[controller]`: class, actuation, params; harness.loop.controllers), before anything runs.
+`run` takes a path, a table, a `Scenario` or None (the paper scenario).
 """
 
 from __future__ import annotations
@@ -35,11 +36,12 @@ def load_scenario(source: str | os.PathLike | Mapping | None = None, overrides: 
                   labels: Iterable[str | None] | None = None) -> Scenario:
     """Read and validate a scenario (TOML path, parsed table or None = the paper scenario), apply the
     dotted `key=value` overrides, and check that its plant can be built.  Raises `ConfigError`."""
+    from harness.loop.controllers import resolve_controller
     from harness.plant import validate_plant
 
     scn = _load.load_scenario(source, overrides, labels=labels)
     validate_plant(scn)
-    return scn
+    return resolve_controller(scn)
 
 
 @dataclass
@@ -166,10 +168,11 @@ def run(scenario: Scenario | str | os.PathLike | Mapping | None = None, override
     if isinstance(scenario, Scenario):
         if overrides:
             raise TypeError("overrides apply to a scenario file or table, not to a Scenario object")
-        scn = scenario
+        from harness.loop.controllers import resolve_controller
         from harness.plant import validate_plant
 
-        validate_plant(scn)
+        validate_plant(scenario)
+        scn = resolve_controller(scenario)
     else:
         scn = load_scenario(scenario, overrides)
     out_dir = None

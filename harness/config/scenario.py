@@ -72,6 +72,19 @@ class FaultConfig:
 
 
 @dataclass(frozen=True)
+class ControllerConfig:
+    """Which controller runs (see controllers/interface.py and harness/loop/controllers.py).
+
+    name: a built-in ("paper" = the paper's law (12)-(33), compiled; `teleop controllers` lists the
+    others), or a user class "path/to/file.py:ClassName" / "package.module:ClassName".
+    params: the controller's own parameters (TOML values), validated by its class (`Params`) when the
+    scenario is loaded through harness.api; the resolved config.toml spells out every one of them."""
+
+    name: str = "paper"
+    params: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class Scenario:
     """One fully resolved run."""
 
@@ -91,6 +104,7 @@ class Scenario:
     interaction_forces: tuple[tuple[float, float], tuple[float, float]] = ((0.0, 0.0), (0.0, 0.0))  # F1, F2 N
     continuous_control: bool = False  # analytic plant only: evaluate the control law in every RK4 stage
     faults: FaultConfig = field(default_factory=FaultConfig)  # deliberate faults (testing bounds)
+    controller: ControllerConfig = field(default_factory=ControllerConfig)  # which control law runs
 
     @property
     def plant_master(self) -> MasterParams:

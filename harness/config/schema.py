@@ -20,6 +20,7 @@ from harness.config.scenario import (
     ACTUATIONS,
     INTEGRATORS,
     PLANTS,
+    ControllerConfig,
     FaultConfig,
     InitialState,
     PlantConfig,
@@ -261,6 +262,48 @@ def _optional(inner: Checker, allow_false: bool = False) -> Checker:
     return check
 
 
+CONTROLLER_RE = re.compile(r"^(?:[A-Za-z_][A-Za-z0-9_]*|[^\s:]+:[A-Za-z_][A-Za-z0-9_]*)$")
+CONTROLLER_DESC = ("a built-in controller name (see 'teleop controllers'), 'path/to/file.py:ClassName' or "
+                   "'package.module:ClassName'")
+
+
+def _param_value(path: str, v: Any, depth: int = 0) -> Any:
+    """A controller parameter: a TOML boolean, integer, finite float, string or array of these."""
+    if isinstance(v, (bool, int, str)):
+        return v
+    if isinstance(v, float):
+        if not math.isfinite(v):
+            raise ConfigError.field(path, v, "must be finite")
+        return v
+    if isinstance(v, (list, tuple)) and depth < 3:
+        return [_param_value(f"{path}[{i}]", x, depth + 1) for i, x in enumerate(v)]
+    raise ConfigError.field(path, v, f"must be a boolean, number, string or array (got {type_name(v)})")
+
+
+def _controller(path: str, v: Any) -> ControllerConfig:
+    """[controller]: a table {name, params} or just the name.  The class and its params are checked by
+    the loop layer (harness.loop.controllers.resolve_controller): config/ never imports controllers."""
+    if isinstance(v, str):
+        v = {"name": v}
+    if not isinstance(v, Mapping):
+        raise ConfigError.field(path, v, f"must be a table [controller] or a name (got {type_name(v)})")
+    check_keys(v, path, ("name", "params"))
+    name = v.get("name", ControllerConfig.name)
+    if not isinstance(name, str) or not CONTROLLER_RE.match(name.strip()):
+        raise ConfigError.field(f"{path}.name", name, f"must be {CONTROLLER_DESC}")
+    params = v.get("params", {})
+    if is_none_word(params):
+        params = {}
+    if not isinstance(params, Mapping):
+        raise ConfigError.field(f"{path}.params", params, f"must be a table (got {type_name(params)})")
+    out = {}
+    for k, x in params.items():
+        if not isinstance(k, str) or not KEY_RE.match(k):
+            raise ConfigError.field(f"{path}.params", k, "keys must be names like 'gain'")
+        out[k] = _param_value(f"{path}.params.{k}", x)
+    return ControllerConfig(name=name.strip(), params=out)
+
+
 # ---------------------------------------------------------------------------------------------
 # schema: section -> {field: checker}; every dataclass field must appear (tests check this)
 # ---------------------------------------------------------------------------------------------
@@ -273,6 +316,7 @@ TOP: dict[str, Checker] = {
     "transient": _num(_Range(0.0, 3600.0, hi_open=True)),
     "continuous_control": _bool,
     "interaction_forces": _matrix(2, 2),
+    "controller": _controller,
 }
 
 GAINS: dict[str, Checker] = {f.name: _num(POSITIVE) for f in fields(Gains)}

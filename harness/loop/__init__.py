@@ -22,6 +22,10 @@ def simulate(scn, plant: Any = None, progress: bool = False):
         from harness.plant import build_plant
 
         plant = build_plant(scn)
+    if scn.controller.name != "paper":  # a controller through the Python interface (harness.loop.controllers)
+        from harness.loop.interface_loop import simulate_controller
+
+        return simulate_controller(scn, progress=progress, plant=plant)
     if plant.kind == "analytic":
         from harness.loop.analytic_loop import simulate_analytic
 

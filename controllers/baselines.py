@@ -1,0 +1,130 @@
+"""Built-in baseline controllers (numpy only), implementations of `controllers.interface.Controller`.
+
+All of them keep the paper's master law (12)-(13) (the master stands for the operator-driven arm
+tracking x_d); they differ in how the redundant slave (2 task coordinates, 6 joints) follows the
+master tip x1:
+
+* `PaperNoNullSpace`   -- the paper's slave law (17)-(18) with the null-space term dropped:
+                          u2 = J2^+ (ddx_d + k1 de1 + k2 e1 + k3 de2 + k4 e2 - dJ2 dq2), phi_N = 0
+                          (no sub-task (29)-(33), no de_N (23)); torque and servo plants.
+* `DampedLeastSquaresIK` -- closed-loop resolved-rate inverse kinematics with a damped
+                          least-squares inverse (Wampler 1986; Nakamura & Hanafusa 1986) on the servo
+                          reference; servo plants only.
+
+The paper's full law is `harness.loop.controllers.PaperController` (it calls the compiled kernels).
+A Jacobian-transpose PD with gravity compensation is the worked user example
+(examples/controllers/jacobian_transpose.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .interface import Action, Controller, ControllerContext, ControllerDiverged, Observation, check_range
+
+DET_MIN = 1e-14  # det(J J^T) at or below this: singular (as controllers.control.DET_MIN)
+
+
+def paper_master_law(models, gains, obs: Observation, T1: np.ndarray) -> tuple:
+    """Master law (12)-(13) on the sensed master state.  Writes T1 (2,) (N m); returns (x1, dx1, a1)
+    (2,) each: tip, tip velocity and the commanded task acceleration a1 = ddx_d + k1 de1 + k2 e1."""
+    x1, J1, Jd1, M1, N1 = models.master(obs.q1, obs.dq1)
+    dx1 = J1 @ obs.dq1
+    e1 = obs.x_d - x1  # (11)
+    de1 = obs.dx_d - dx1
+    a1 = obs.ddx_d + gains.k1 * de1 + gains.k2 * e1
+    if J1[0, 0] * J1[1, 1] - J1[0, 1] * J1[1, 0] == 0.0:
+        raise ControllerDiverged("master Jacobian J1 singular", code=2)
+    u1 = np.linalg.solve(J1, a1 - Jd1 @ obs.dq1)  # (13)
+    T1[:] = M1 @ u1 + N1 - J1.T @ obs.F1  # (12)
+    return x1.copy(), dx1, a1
+
+
+class PaperNoNullSpace(Controller):
+    """The paper's controller without its null-space terms.
+
+    Master: (12)-(13).  Slave: (17)-(18) with phi_N = 0,
+        u2 = J2^+ (ddx_d + k1 de1 + k2 e1 + k3 de2 + k4 e2 - dJ2 dq2),   J2^+ = J2^T (J2 J2^T)^-1  (7),
+        T2 = M2 u2 + N2 - J2^T F2,
+    e1 = x_d - x1 (11), e2 = x1 - x2 (16), gains (39) from the scenario.  The self-motion of the
+    redundant slave is left uncontrolled (the paper's sub-task (29)-(33) keeps it away from singular
+    configurations).  Supports torque and servo plants (T2 and u2)."""
+
+    name = "paper_no_null"
+    description = "paper's law (12)-(13), (17)-(18) without the null-space terms (phi_N = 0)"
+    actuations = ("torque", "servo")
+
+    def step(self, obs: Observation) -> Action:
+        ctx, a = self.ctx, self.action
+        g = ctx.gains
+        x1, dx1, a1 = paper_master_law(ctx.models, g, obs, a.T1)
+        x2, J2, Jd2 = ctx.models.slave_kinematics(obs.q2, obs.dq2)
+        e2 = x1 - x2  # (16)
+        de2 = dx1 - J2 @ obs.dq2
+        A = J2 @ J2.T
+        if A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0] <= DET_MIN:
+            raise ControllerDiverged("slave J2 J2^T singular", code=3)
+        v = a1 + g.k3 * de2 + g.k4 * e2 - Jd2 @ obs.dq2
+        a.u2[:] = J2.T @ np.linalg.solve(A, v)  # (18), phi_N = 0
+        M2, N2 = ctx.models.slave_dynamics(obs.q2, obs.dq2)
+        a.T2[:] = M2 @ a.u2 + N2 - J2.T @ obs.F2  # (17)
+        return a
+
+
+class DampedLeastSquaresIK(Controller):
+    """Closed-loop resolved-rate IK with a damped least-squares inverse, driving the section servos.
+
+    The slave reference q_r follows the master tip x1 (sensed) with
+        dq_r = J^T (J J^T + lambda^2 I)^-1 (dx1 + K (x1 - f(q_r))),   J = J2(q_r),
+    (damped least squares: Wampler 1986, Nakamura & Hanafusa 1986; closed-loop IK on the reference:
+    Sciavicco & Siciliano 1988), integrated q_r <- q_r + dt dq_r, section lengths clamped to the
+    nominal [L0, max_extension L0].  The servo gets (q_r, dq_r) and the static feed-forward
+    T2 = G2(q_r) + K2(q_r) (gravity and elasticity of the nominal model).  u2 records
+    (dq_r - dq_r_prev) / dt.  The master runs the paper's law (12)-(13).  Servo plants only.
+
+    Params: gain K (1/s), damping lambda (m)."""
+
+    name = "dls_ik"
+    description = "resolved-rate IK, damped least-squares J^T (J J^T + lambda^2 I)^-1, on the servo reference"
+    actuations = ("servo",)
+
+    @dataclass(frozen=True)
+    class Params:
+        gain: float = 20.0  # 1/s, K of the task-space error feedback
+        damping: float = 0.01  # m, lambda of the damped least-squares inverse
+
+        def check(self) -> None:
+            check_range("gain", self.gain, 0.0, 1e4, lo_open=True)
+            check_range("damping", self.damping, 0.0, 10.0)
+
+    def reset(self, ctx: ControllerContext) -> None:
+        super().reset(ctx)
+        self.qr = ctx.q0[4:10].copy()
+        self.dqr = np.zeros(6)
+        lo, hi = ctx.slave.length_range
+        self.lo, self.hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+        self.eye = np.eye(2)
+        self.action.use_ref = True
+
+    def step(self, obs: Observation) -> Action:
+        ctx, a, p = self.ctx, self.action, self.ctx.params
+        x1, dx1, _ = paper_master_law(ctx.models, ctx.gains, obs, a.T1)
+        x2, J, _ = ctx.models.slave_kinematics(self.qr, self.dqr)
+        v = dx1 + p.gain * (x1 - x2)
+        dq = J.T @ np.linalg.solve(J @ J.T + p.damping ** 2 * self.eye, v)
+        a.u2[:] = (dq - self.dqr) / ctx.dt
+        self.dqr[:] = dq
+        self.qr += ctx.dt * dq
+        np.clip(self.qr[0:3], self.lo, self.hi, out=self.qr[0:3])
+        a.q2_ref[:] = self.qr
+        a.dq2_ref[:] = dq
+        a.T2[:] = ctx.models.slave_static(self.qr)
+        a.use_ref = True
+        return a
+
+
+BUILTIN_BASELINES = (PaperNoNullSpace, DampedLeastSquaresIK)
+
+__all__ = ["BUILTIN_BASELINES", "DampedLeastSquaresIK", "PaperNoNullSpace", "paper_master_law"]

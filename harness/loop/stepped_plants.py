@@ -1,0 +1,172 @@
+"""Plants stepped from Python, one control step at a time, for controllers that run in Python
+(`harness.loop.interface_loop`).  Each adapter does exactly what the compiled loop does around the
+control law, with the same compiled kernels, so the paper's law through the interface gives the
+compiled loop's numbers bit for bit:
+
+* `MujocoStepped`: sensing `sense_mujoco`, the state checks of `mujoco_chunk` (status 6, 5), the command
+  maps `mujoco_commands` (servo reference integration of u2 / torque map of T2 at the sensed q2), the
+  actuation-delay ring buffer, per substep the elastic correction into qfrc_applied and `mujoco.mj_step`
+  (the Python binding of the same C function), MuJoCo warnings (status 7).
+* `AnalyticStepped`: RK4 of `harness.plant.analytic.plant_accel` with the commands held over the control
+  step (as `analytic_chunk` without continuous control).
+
+Protocol: reset() -> None; true_state(out16) -> status (0 ok); command(k, sensed, action) -> None;
+advance() -> status (0 ok); finish(traj, done) -> None (plant geometry for the recording).
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from controllers import master as master_model
+from harness.config.scenario import Scenario
+from harness.loop.common import common_arrays, initial_state
+from harness.loop.fast import K
+from harness.loop.mujoco_loop import _Geometry, _plant_geometry, make_plant, warning_counts
+
+
+class MujocoStepped:
+    """The MuJoCo plant of `harness.loop.mujoco_loop`, stepped from Python."""
+
+    def __init__(self, scn: Scenario, plant=None) -> None:
+        self.scn = scn
+        self.m, self.d, self.cmap = make_plant(scn, plant)
+        c = self.cmap
+        self.n = c.n_chain
+        self.servo = scn.plant.actuation == "servo"
+        self.ff = bool(scn.plant.servo_feedforward)
+        self.dt = scn.control_dt
+        self.sub = scn.substeps
+        self.kv_over_kp = (np.divide(c.servo_kv, c.servo_kp, out=np.zeros(self.n), where=c.servo_kp > 0)
+                           if self.servo else np.zeros(self.n))
+        s0 = initial_state(scn)
+        self.ref = np.concatenate([s0[4:10], s0[10:16]])
+        self.delay = int(round(scn.plant.actuation_delay / scn.control_dt))
+        self.cmdbuf = np.zeros((self.delay + 1, 2 + 2 * self.n))
+        self.qc, self.vc, self.corr = np.empty(self.n), np.empty(self.n), np.empty(self.n)
+        self.geo = _Geometry(self.m, self.d, c, scn.n_steps, live=False)
+        self.k = 0
+        self.warned: dict[str, int] = {}
+
+    def reset(self) -> None:
+        """The plant is at the scenario's initial state after construction (make_plant)."""
+
+    def true_state(self, state: np.ndarray) -> int:
+        d, c = self.d, self.cmap
+        K.sense_mujoco(d.qpos, d.qvel, c.master_qpos_adr, c.master_dof_adr, c.chain_qpos_adr, c.chain_dof_adr,
+                       c.R, c.L0, self.qc, self.vc, state)
+        if not np.all(np.isfinite(state)) or np.any(np.abs(state) > 1e6):
+            return 6
+        if np.any(state[4:7] <= 0.0):
+            return 5
+        return 0
+
+    def record_start(self, k: int) -> None:
+        self.geo.qpos_hist[k] = self.d.qpos
+
+    def command(self, k: int, sensed: np.ndarray, action) -> None:
+        c, n = self.cmap, self.n
+        self.k = k
+        cmd = self.cmdbuf[k % (self.delay + 1)]
+        cmd[0] = action.T1[0]
+        cmd[1] = action.T1[1]
+        if self.servo and action.use_ref:  # the reference given directly (no integration of u2)
+            self.ref[0:6] = action.q2_ref
+            self.ref[6:12] = action.dq2_ref
+            K.chain_joints_from_q2(self.ref[0:6], c.C, c.L0, cmd[2:2 + n])
+            K.chain_joints_rate_add(self.ref[0:6], self.ref[6:12], c.C, self.kv_over_kp, cmd[2:2 + n])
+            if self.ff:
+                K.chain_force_from_T2(self.ref[0:6], action.T2, c.R, cmd[2 + n:2 + 2 * n])
+            else:
+                cmd[2 + n:] = 0.0
+        else:
+            K.mujoco_commands(self.servo, self.ff, self.dt, sensed[4:10], action.T2, action.u2, self.ref, c.C,
+                              c.R, c.L0, self.kv_over_kp, cmd)
+
+    def advance(self) -> int:
+        d, c, n, k = self.d, self.cmap, self.n, self.k
+        use = self.cmdbuf[(k - self.delay) % (self.delay + 1)] if k >= self.delay else self.cmdbuf[0]
+        d.ctrl[c.master_actuator_ids] = use[0:2]
+        d.ctrl[c.chain_actuator_ids] = use[2:2 + n]
+        wnum = d.warning.number
+        for _ in range(self.sub):
+            self.qc[:] = d.qpos[c.chain_qpos_adr]
+            K.chain_elastic_correction(self.qc, *c.elastic_args, self.corr)
+            d.qfrc_applied[c.chain_dof_adr] = use[2 + n:2 + 2 * n] + self.corr
+            mujoco.mj_step(self.m, d)
+            if wnum.any():
+                self.warned = warning_counts(d)
+                return 7
+        return 0
+
+    def finish(self, traj, done: int) -> None:
+        traj.meta.update(_plant_geometry(self.m, self.cmap, self.geo, done, traj))
+        traj.meta["mujoco_warnings"] = int(sum(self.warned.values()))
+        traj.meta["mujoco_warning_counts"] = self.warned
+
+
+class AnalyticStepped:
+    """The analytic plant (its own parameters) integrated with RK4, commands held over the step."""
+
+    def __init__(self, scn: Scenario, plant=None) -> None:
+        from harness.plant.analytic import AnalyticPlant
+
+        if plant is None:
+            plant = AnalyticPlant(scn.plant_master, scn.plant_slave)
+        a = common_arrays(scn)
+        self.mpk = master_model.packed(plant.master)
+        self.spk = plant.slave.packed()
+        self.nodes, self.weights, self.F = a["nodes"], a["weights"], a["F"]
+        self.h = scn.control_dt / max(1, scn.substeps)
+        self.nsub = max(1, scn.substeps)
+        self.state = initial_state(scn)
+        self.T1, self.T2 = np.zeros(2), np.zeros(6)
+        self.ks = [np.empty(16) for _ in range(4)]
+        self.tmp = np.empty(16)
+
+    def reset(self) -> None:
+        pass
+
+    def true_state(self, state: np.ndarray) -> int:
+        state[:] = self.state
+        return 0
+
+    def record_start(self, k: int) -> None:
+        pass
+
+    def command(self, k: int, sensed: np.ndarray, action) -> None:
+        self.T1[:] = action.T1
+        self.T2[:] = action.T2
+
+    def advance(self) -> int:
+        s, h, tmp = self.state, self.h, self.tmp
+        k1, k2, k3, k4 = self.ks
+        args = (self.mpk, self.spk, self.nodes, self.weights)
+        for _ in range(self.nsub):
+            for src, scale, out in ((s, 0.0, k1), (k1, 0.5, k2), (k2, 0.5, k3), (k3, 1.0, k4)):
+                if scale == 0.0:
+                    tmp[:] = s
+                else:
+                    np.multiply(src, scale * h, out=tmp)
+                    tmp += s
+                if not K.plant_accel(*args, tmp, self.T1, self.T2, self.F, out):
+                    return 1
+            s += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        if not np.all(np.isfinite(s)):
+            return 1
+        if np.any(s[4:7] <= 0.0):
+            return 5
+        return 0
+
+    def finish(self, traj, done: int) -> None:
+        pass
+
+
+def stepped_plant(scn: Scenario, plant=None):
+    """The Python-stepped adapter of the scenario's plant."""
+    if scn.plant.kind == "analytic":
+        return AnalyticStepped(scn, plant)
+    if scn.plant.kind == "mujoco":
+        return MujocoStepped(scn, plant)
+    raise NotImplementedError(f"plant.kind = {scn.plant.kind!r} has no Python-stepped adapter yet")
