@@ -4,6 +4,7 @@
     teleop check [SCENARIO.toml] --bounds BOUNDS.toml ...    simulate and check acceptance bounds
     teleop models [SCENARIO.toml] [--segments N] ...         export the generated MuJoCo model (MJCF)
     teleop sweep STUDY.toml [--out DIR] [--workers N] ...    parameter sweep (local or Dask cluster)
+    teleop controllers                                       list the built-in controllers
     teleop fidelity [--segments 4,8,16,32] [--samples N]     plant-fidelity study over segment counts
 
 Exit status: 0 success; 1 the run failed (diverged, output not written) or a bound was violated;
@@ -124,6 +125,12 @@ def _add_scenario_options(p: argparse.ArgumentParser, *, sim: bool = True) -> No
                             "scenario does not set it, runs of 5 s or less use duration / 4. A scenario file "
                             "that sets it (e.g. scenarios/paper.toml) needs --set transient=... for shorter "
                             "runs. Default: from the scenario (paper: 20).")
+        p.add_argument("--controller", metavar="NAME|FILE.py:CLASS", default=None,
+                       help="controller: a built-in name ('teleop controllers' lists them; 'paper' = the "
+                            "paper's law, compiled), 'path/to/file.py:ClassName' or "
+                            "'package.module:ClassName' (controllers/interface.py). Shortcut for --set "
+                            "controller.name=...; its parameters: --set controller.params.KEY=VALUE. "
+                            "Default: from the scenario (paper: paper).")
         p.add_argument("--seed", metavar="N", default=None,
                        help="noise seed, integer >= 0. Default: from the scenario (paper: 0).")
         p.add_argument("--snr", metavar="DB|none", default=None,
@@ -221,6 +228,12 @@ def build_parser() -> argparse.ArgumentParser:
                        help="do not show the progress bar (default: shown on stderr).")
     sweep.set_defaults(func=cmd_sweep)
 
+    ctl = sub.add_parser(
+        "controllers", formatter_class=_Formatter, help="list the built-in controllers",
+        description="List the built-in controllers (name, supported plant actuations, one-line description). "
+                    "Your own: --controller path/to/file.py:ClassName (README 'Bring your own controller').")
+    ctl.set_defaults(func=cmd_controllers)
+
     fid = sub.add_parser(
         "fidelity", formatter_class=_Formatter, help="plant-fidelity study over MuJoCo segment counts",
         description="Compare the generated MuJoCo Octarm with N rigid segments per section against the "
@@ -263,6 +276,7 @@ _SHORTCUTS = (  # (attribute, option, dotted key)
     ("actuation", "--actuation", "plant.actuation"),
     ("segments", "--segments", "plant.segments"),
     ("duration", "--duration", "duration"),
+    ("controller", "--controller", "controller.name"),
     ("seed", "--seed", "seed"),
     ("snr", "--snr", "snr_db"),
 )
@@ -278,7 +292,7 @@ def load_from_args(args: argparse.Namespace, extra: Sequence[tuple[str, str]] = 
         value = getattr(args, attr, None)
         if value is not None:
             text = str(value).strip()
-            if key in ("plant.kind", "plant.actuation"):
+            if key in ("plant.kind", "plant.actuation", "controller.name"):
                 text = json.dumps(text)  # always a TOML string
             overrides.append(f"{key}={text}")
             labels.append(f"{option} {value}")
@@ -424,6 +438,17 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     sweep = _import("harness.studies.sweep")  # validates the study, then creates and checks the output folder
     rc = sweep.main_sweep(study, args.out, args.workers, args.scheduler, not args.no_progress)
     return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
+
+
+def cmd_controllers(args: argparse.Namespace) -> int:  # noqa: ARG001
+    registry = _import("harness.loop.controllers")
+    items = registry.describe_builtins()
+    width = max(len(n) for n, _, _ in items)
+    for name, desc, acts in items:
+        print(f"{name:<{width}}  [{'/'.join(acts):<12}]  {desc}")
+    print("your own: --controller path/to/file.py:ClassName or package.module:ClassName "
+          "(see controllers/interface.py)")
+    return EXIT_OK
 
 
 def parse_segment_list(text: str) -> list[int]:

@@ -53,6 +53,8 @@ def toml_literal(v: Any) -> str:
         v = v.item()
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(toml_literal(x) for x in v) + "]"
+    if isinstance(v, dict):  # inline table (e.g. controller={name = "dls_ik"})
+        return "{" + ", ".join(f"{k} = {toml_literal(x)}" for k, x in v.items()) + "}"
     try:
         return tomli_w.dumps({"v": v})[len("v = "):].rstrip("\n")
     except TypeError:

@@ -48,6 +48,10 @@ Factors
     controller's model (`Scenario.master` / `Scenario.slave`), so s = 1 means "no mismatch"; for
     any other field it is the base scenario's value (after `set`).  Vector fields are scaled
     element-wise; integer fields must stay integers.
+  * `param = "controller"` with `values = ["paper", "dls_ik", "file.py:Class", ...]` compares
+    controllers (each level replaces the whole [controller] table: its params start from the class
+    defaults); `controller.params.<key>` varies one parameter (values, or scale of the base's value).
+    The summary plots draw one line per controller.
   * `values = [...]` are absolute values, passed to the scenario loader as given (a scalar given
     for a vector field is used for every entry).  The loader validates them.
   * Each case is the base scenario + `set` + one `key=value` override per varied field (an indexed
@@ -88,6 +92,7 @@ from harness.config.errors import ConfigError
 from harness.config.load import load_scenario, scenario_to_dict
 from harness.config.scenario import Scenario
 from harness.config.textio import jsonable, read_toml, toml_literal
+from harness.loop.controllers import resolve_controller
 
 log = logging.getLogger(__name__)
 
@@ -419,10 +424,35 @@ def _scaled(nominal: Any, s: float, where: str) -> Any:
     return _clean(float(x))
 
 
+def _controller_leaf(base: Scenario, f: Factor, level: Any, where: str) -> Any:
+    """Value of a `controller` (the name: the whole [controller] table is replaced, so the params start
+    from the class defaults) or `controller.params.<key>` factor level."""
+    if f.path == ("controller",) or f.path == ("controller", "name"):
+        if f.mode != "values" or not isinstance(level, str):
+            raise ConfigError(f"{where}: give the controllers as values = [\"paper\", \"dls_ik\", ...]")
+        return {"name": level}
+    if len(f.path) != 3 or f.path[1] != "params":
+        raise ConfigError(f"{where}: a controller factor is 'controller' or 'controller.params.<key>'")
+    if f.mode == "values":
+        return level
+    nominal = base.controller.params.get(f.path[2])
+    if nominal is None:
+        raise ConfigError(f"{where}: scale needs controller.params.{f.path[2]} in the base scenario; "
+                          "use values")
+    return _scaled(_pick(nominal, f.index, where), level, where)
+
+
 def _case_overrides(base: Scenario, factors: Sequence[Factor], levels: Sequence) -> list[str]:
     leaves: dict[tuple[str, ...], Any] = {}
-    for f, level in zip(factors, levels, strict=True):
+    # a `controller` factor replaces the whole [controller] table: before any controller.params factor
+    pairs = sorted(zip(factors, levels, strict=True), key=lambda fl: fl[0].path[:1] != ("controller",)
+                   or len(fl[0].path) > 2)
+    for f, level in pairs:
         where = f"[[factor]] {f.name!r} ({f.param})"
+        if f.path[0] == "controller":
+            path = ("controller",) if f.path[-1] == "name" else f.path
+            leaves[path] = _controller_leaf(base, f, level, where)
+            continue
         current = leaves.get(f.path, _get(base, f.path, base, where))
         if f.mode == "scale":
             nominal_root = {("plant", "master"): base.master, ("plant", "slave"): base.slave}.get(f.path[:2])
@@ -468,6 +498,10 @@ def expand_cases(study: Study, base: Scenario | None = None) -> list[Case]:
         ovr = _case_overrides(base, study.factors, levels)
         try:
             scn = load_scenario(study.scenario_source, [*study.set, *ovr])
+        except ValueError as e:
+            raise _in_context(e, f"study {study.name!r}: case {params}") from None
+        try:
+            scn = resolve_controller(scn)
         except ValueError as e:
             raise _in_context(e, f"study {study.name!r}: case {params}") from None
         cid = scenario_id(scn)

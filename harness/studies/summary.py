@@ -111,6 +111,11 @@ def _plots(study: Study, rows: Sequence[dict], out: Path) -> list[Path]:
             for r in rows:
                 key = ", ".join(f"{o}={_label(r['params'].get(o))}" for o in others)
                 groups.setdefault(key, []).append(r)
+            ctl = [g.name for g in grid_factors if g is not f and g.path[:1] == ("controller",)]
+            if len(groups) > 6 and ctl:  # one line per controller, band over the other factors
+                groups = {}
+                for r in rows:
+                    groups.setdefault(f"{ctl[0]}={_label(r['params'].get(ctl[0]))}", []).append(r)
             if len(groups) > 6:  # too many lines: one mean line with a min/max band
                 groups = {"mean, min-max over the other factors": list(rows)}
             for ax, m in zip(axes, metrics, strict=False):
