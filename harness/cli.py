@@ -231,7 +231,8 @@ def build_parser() -> argparse.ArgumentParser:
     ctl = sub.add_parser(
         "controllers", formatter_class=_Formatter, help="list the built-in controllers",
         description="List the built-in controllers (name, supported plant actuations, one-line description). "
-                    "Your own: --controller path/to/file.py:ClassName (README 'Bring your own controller').")
+                    "Your own: --controller path/to/file.py:ClassName (README 'Bring your own controller').",
+        epilog="Default controller of every scenario: paper (the paper's laws on the compiled fast path).")
     ctl.set_defaults(func=cmd_controllers)
 
     fid = sub.add_parser(
