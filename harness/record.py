@@ -20,13 +20,20 @@ is right-handed, Z up, like MuJoCo):
     world/slave/backbone                 analytic constant-curvature backbone of the sensed q2
     world/slave/tip                      plant tip (x2_plant; analytic x2 on the analytic plant)
     world/desired/master, .../slave      the desired path x_d (static)
+    traces/desired, traces/master,       2-D tip traces in task space (each arm relative to its own base)
+    traces/slave                         as (X, -Z) (2-D views have y down, so Z points up on screen)
     status                               run status and message (static text)
+
+The blueprint frames its views for the run's content (`frame_eye`, `frame_traces`): the 3-D view looks
+along +Y at the X-Z plane the arms move in, from far enough to show both arms whole over the run's
+range of motion; the 2-D "Tip traces" view shows the desired path and both tip traces with a margin.
 """
 
 from __future__ import annotations
 
 import warnings
 from collections.abc import Iterator
+from datetime import timedelta
 from functools import cache
 from pathlib import Path
 
@@ -54,6 +61,15 @@ _C_X2, _C_Z2 = (23, 190, 207), (214, 39, 40)
 _C_SECTIONS = ((44, 160, 44), (148, 103, 189), (140, 86, 75))
 _C_MASTER, _C_SLAVE, _C_BACKBONE = (220, 60, 60), (40, 160, 80), (250, 200, 40)
 _C_DESIRED = (120, 120, 120)
+# view backgrounds (solid, distinct from each other and from the viewer's panels; tests locate the views
+# on screenshots by them)
+_BG_3D, _BG_2D = (22, 27, 38), (30, 24, 38)
+
+# framing of the default views (`frame_eye`, `frame_traces`)
+VIEWER_FOV_Y = np.radians(55.0)  # vertical field of view of the viewer's 3-D eye (not a blueprint property)
+FRAME_MIN_ASPECT = 0.75  # the eye distance fits the content in 3-D views down to this width / height
+FRAME_MARGIN = 0.12  # fraction of the content extent added on each side
+TRACE_POINT_RADIUS = rr.Radius.ui_points(2.5)  # on-screen size: the traces stay visible at any zoom
 
 
 # ---------------------------------------------------------------------------------------------
@@ -180,6 +196,66 @@ def _backbone_world(traj: Trajectory, slave_base: np.ndarray) -> np.ndarray | No
     return task_to_world(cc_backbone(traj.q2), slave_base)
 
 
+def _finite(points: np.ndarray, dim: int) -> np.ndarray:
+    p = np.asarray(points, dtype=float).reshape(-1, dim)
+    return p[np.isfinite(p).all(axis=1)]
+
+
+def scene_bounds(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """World bounding box (lo (3,), hi (3,)) of both arms over the whole run: bases, master base-elbow-tip,
+    slave bodies (padded by their box half-size), backbone, tips and the desired paths."""
+    meta = traj.meta or {}
+    mb, sb = _base(meta, "master_base"), _base(meta, "slave_base")
+    parts = [mb[None], sb[None]]
+    pad = 0.02  # the base markers' radius
+    if len(traj):
+        if traj.master_pos is not None:
+            parts.append(_finite(traj.master_pos, 3))
+        else:
+            parts.append(_finite(master_points(traj.q1, meta.get("master_lengths", DEFAULT_MASTER_LENGTHS),
+                                               mb), 3))
+        x2 = traj.x2_plant if traj.x2_plant is not None else traj.x2
+        parts.append(_finite(task_to_world(np.asarray(x2, dtype=float), sb), 3))
+        for base in (mb, sb):
+            parts.append(_finite(task_to_world(np.asarray(traj.xd, dtype=float), base), 3))
+        if traj.body_pos is not None and np.asarray(traj.body_pos).size:
+            parts.append(_finite(traj.body_pos, 3))
+            pad = max(pad, float(np.max(_box_half_size(np.asarray(traj.body_pos), meta))))
+        parts.append(_finite(_backbone_world(traj, sb), 3))
+    pts = np.concatenate(parts, axis=0)
+    return pts.min(axis=0) - pad, pts.max(axis=0) + pad
+
+
+def frame_eye(traj: Trajectory) -> rrb.EyeControls3D:
+    """3-D eye looking along +Y at the X-Z plane (X right, Z up) that shows the whole `scene_bounds`
+    with FRAME_MARGIN on each side, in views of aspect FRAME_MIN_ASPECT or wider."""
+    lo, hi = scene_bounds(traj)
+    c = 0.5 * (lo + hi)
+    half_x, half_z = 0.5 * (hi - lo)[[0, 2]] * (1.0 + 2.0 * FRAME_MARGIN)
+    dist = max(half_z, half_x / FRAME_MIN_ASPECT) / np.tan(0.5 * VIEWER_FOV_Y)  # from the nearest plane
+    pos = [c[0], lo[1] - dist, c[2]]
+    return rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=pos, look_target=[c[0], c[1], c[2]],
+                             eye_up=[0.0, 0.0, 1.0])
+
+
+def trace_points(traj: Trajectory) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Task-space (X, Z) of the desired path, the master tip and the slave tip (plant site if any)."""
+    x2 = traj.x2_plant if traj.x2_plant is not None else traj.x2
+    return (np.asarray(traj.xd, dtype=float).reshape(-1, 2), np.asarray(traj.x1, dtype=float).reshape(-1, 2),
+            np.asarray(x2, dtype=float).reshape(-1, 2))
+
+
+def frame_traces(traj: Trajectory) -> rrb.VisualBounds2D | None:
+    """2-D bounds (screen x = X, y = -Z) of the desired path and both tip traces with FRAME_MARGIN on each
+    side (at least 1 mm); None without finite data."""
+    pts = _finite(np.concatenate(trace_points(traj), axis=0), 2) if len(traj) else np.zeros((0, 2))
+    if not len(pts):
+        return None
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = max(FRAME_MARGIN * float(np.max(hi - lo)), 1e-3)
+    return rrb.VisualBounds2D(x_range=[lo[0] - pad, hi[0] + pad], y_range=[-hi[1] - pad, -lo[1] + pad])
+
+
 def build_blueprint(traj: Trajectory) -> rrb.Blueprint:
     """Default layout: 3-D view of both arms | tabs of time-series views."""
     e2_contents = ["plots/e2"] + (["plots/e2_plant"] if traj.x2_plant is not None else [])
@@ -197,12 +273,12 @@ def build_blueprint(traj: Trajectory) -> rrb.Blueprint:
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
-                rrb.Spatial3DView(origin="world", contents="world/**", name="Master | slave (world, Z up)"),
-                rrb.Spatial3DView(
-                    origin="world", name="Tip traces",
-                    contents=["world/master/tip", "world/slave/tip", "world/desired/**"],
-                    time_ranges=trace_range),
-                row_shares=[3, 1],
+                rrb.Spatial3DView(origin="world", contents="world/**", name="Master | slave (world, Z up)",
+                                  eye_controls=frame_eye(traj), background=_BG_3D),
+                rrb.Spatial2DView(origin="traces", name="Tip traces, task space X-Z (grey: desired)",
+                                  visual_bounds=frame_traces(traj), background=_BG_2D,
+                                  time_ranges=trace_range),
+                row_shares=[3, 2],
             ),
             rrb.Tabs(
                 errors,
@@ -213,6 +289,7 @@ def build_blueprint(traj: Trajectory) -> rrb.Blueprint:
             ),
             column_shares=[1, 1],
         ),
+        rrb.SelectionPanel(state="collapsed"),  # room for the views; opens on a click on the arrow
         collapse_panels=False,
     )
 
@@ -255,7 +332,10 @@ def write_recording(
     meta = traj.meta or {}
     master_base, slave_base = _base(meta, "master_base"), _base(meta, "slave_base")
 
-    rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
+    # batches flushed by size only (never by the 200 ms timer): the same run gives the same chunks even on
+    # a loaded machine (`rerun rrd compare`)
+    rec = rr.RecordingStream(APP_ID, recording_id=recording_id,
+                             batcher_config=rr.ChunkBatcherConfig(flush_tick=timedelta(days=1)))
     rec.save(path, default_blueprint=build_blueprint(traj))
     rec.set_log_time_enabled(False)
     try:
@@ -281,11 +361,25 @@ def _log_static(rec: rr.RecordingStream, traj: Trajectory, master_base, slave_ba
         for name, base in (("master", master_base), ("slave", slave_base)):
             rec.log(f"world/desired/{name}",
                     rr.LineStrips3D([task_to_world(xd, base)], radii=0.0015, colors=_C_DESIRED), static=True)
+        rec.log("traces/desired", rr.LineStrips2D([_screen(xd)], radii=rr.Radius.ui_points(1.5),
+                                                  colors=_C_DESIRED), static=True)
     # styling of the per-step entities (static, combined with the temporal data at query time)
     rec.log("world/master/arm", rr.LineStrips3D.from_fields(radii=0.012, colors=_C_MASTER), static=True)
     rec.log("world/master/tip", rr.Points3D.from_fields(radii=0.012, colors=_C_MASTER), static=True)
     rec.log("world/slave/backbone", rr.LineStrips3D.from_fields(radii=0.004, colors=_C_BACKBONE), static=True)
     rec.log("world/slave/tip", rr.Points3D.from_fields(radii=0.012, colors=_C_SLAVE), static=True)
+    # the master trace drawn larger, under the slave's: both stay visible where they overlap
+    rec.log("traces/master", rr.Points2D.from_fields(radii=TRACE_POINT_RADIUS, colors=_C_MASTER,
+                                                     draw_order=1.0), static=True)
+    rec.log("traces/slave", rr.Points2D.from_fields(radii=rr.Radius.ui_points(1.5), colors=_C_SLAVE,
+                                                    draw_order=2.0), static=True)
+
+
+def _screen(x: np.ndarray) -> np.ndarray:
+    """Task-space (..., 2) [X, Z] to 2-D view coordinates [X, -Z] (2-D views have y pointing down)."""
+    out = np.array(x, dtype=float)
+    out[..., 1] *= -1.0
+    return out
 
 
 class _Arrow:
@@ -390,6 +484,12 @@ def _log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, eve
     tip = task_to_world(np.asarray(x2, dtype=float)[idx], slave_base)[:, None, :]
     _send(rec, "world/slave/tip", t, block, _points_columns(tip))
 
+    # (f) 2-D tip traces in task space
+    _, x1_task, x2_task = trace_points(traj)
+    for entity, x in (("traces/master", x1_task), ("traces/slave", x2_task)):
+        _send(rec, entity, t, block, _flat(rr.Points2D.descriptor_positions(), rr.components.Position2DBatch,
+                                           _f32(_screen(x[idx])), 1))
+
     # (b) plant bodies: oriented boxes at the bodies (they tile the chain; the tip point is (e))
     if traj.body_pos is not None:
         bpos = np.asarray(traj.body_pos, dtype=float)[idx]
@@ -467,5 +567,5 @@ def read_series(path: str | Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
     return t_ns[order] / 1e9, values[order]
 
 
-__all__ = ["APP_ID", "TIMELINE", "build_blueprint", "cc_backbone", "master_points", "read_series",
-           "task_to_world", "write_recording"]
+__all__ = ["APP_ID", "TIMELINE", "build_blueprint", "cc_backbone", "frame_eye", "frame_traces",
+           "master_points", "read_series", "scene_bounds", "task_to_world", "write_recording"]

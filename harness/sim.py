@@ -108,13 +108,14 @@ def _progress_bar(enabled: bool, total: int, desc: str):
     return tqdm(total=total, desc=desc, unit="step", unit_scale=True, leave=False)
 
 
-def simulate(scn: Scenario, progress: bool = False) -> Trajectory:
-    """Run one scenario; dispatches on scn.plant.kind."""
+def simulate(scn: Scenario, progress: bool = False, on_chunk=None) -> Trajectory:
+    """Run one scenario; dispatches on scn.plant.kind.  on_chunk: optional callable receiving each
+    finished chunk of steps as a `Trajectory` (with the plant's meta), e.g. harness.viewer.LiveView."""
     if scn.plant.kind == "analytic":
-        return simulate_analytic(scn, progress=progress)
+        return simulate_analytic(scn, progress=progress, on_chunk=on_chunk)
     from .mujoco_sim import simulate_mujoco
 
-    return simulate_mujoco(scn, progress=progress)
+    return simulate_mujoco(scn, progress=progress, on_chunk=on_chunk)
 
 
 def common_arrays(scn: Scenario):
@@ -128,7 +129,7 @@ def common_arrays(scn: Scenario):
         traj=trajectory_params(scn))
 
 
-def simulate_analytic(scn: Scenario, progress: bool = False) -> Trajectory:
+def simulate_analytic(scn: Scenario, progress: bool = False, on_chunk=None) -> Trajectory:
     """Closed loop on the analytic plant (plant params may differ from the controller's)."""
     n = scn.n_steps
     state = initial_state(scn)
@@ -152,6 +153,10 @@ def simulate_analytic(scn: Scenario, progress: bool = False) -> Trajectory:
             done = k + m
             if bar is not None:
                 bar.update(m)
+            if on_chunk is not None and m:
+                part = Trajectory.from_rows(rows[k:done])
+                part.meta.update(_meta(scn, 0.0))
+                on_chunk(part)
             if status != 0:
                 break
             k = k1

@@ -32,12 +32,12 @@ PAPER_BOUNDS = ROOT / "bounds" / "paper_mujoco.toml"
 
 OPTIONS = {
     "run": ["--plant", "--actuation", "--segments", "--duration", "--seed", "--snr", "--set", "--out",
-            "--no-progress", "SCENARIO.toml"],
+            "--no-progress", "--view", "SCENARIO.toml"],
     "check": ["--plant", "--actuation", "--segments", "--duration", "--seed", "--snr", "--set", "--out",
               "--no-progress", "--bounds", "SCENARIO.toml"],
     "models": ["--segments", "--out", "--enforce-cc", "--no-enforce-cc", "--actuation", "--set",
                "SCENARIO.toml"],
-    "sweep": ["--out", "--workers", "--scheduler", "--no-progress", "STUDY.toml"],
+    "sweep": ["--out", "--workers", "--scheduler", "--no-progress", "--view", "STUDY.toml"],
     "fidelity": ["--segments", "--out", "--no-progress"],
 }
 
