@@ -473,7 +473,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         if live.url and not interrupted:
             print(f"serving the web viewer at {live.url} - Ctrl-C to stop", file=sys.stderr)
             with contextlib.suppress(KeyboardInterrupt):
-                threading.Event().wait()
+                while not threading.Event().wait(0.5):  # short waits: Ctrl-C is handled promptly
+                    pass
         live.close()
     return rc
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import shutil
 import sys
+import urllib.parse
 import warnings
 from pathlib import Path
 
@@ -65,7 +66,7 @@ class LiveView:
         else:
             uri = rec.serve_grpc(grpc_port=grpc_port)
             rr.serve_web_viewer(web_port=web_port, open_browser=open_browser, connect_to=uri)
-            view.url = f"http://127.0.0.1:{web_port or 9090}/?url={uri}"
+            view.url = f"http://127.0.0.1:{web_port or 9090}/?url={urllib.parse.quote(uri, safe='')}"
         return view
 
     @classmethod
