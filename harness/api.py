@@ -87,10 +87,11 @@ def stop_on_signals(stop: threading.Event | None) -> Iterator[list[int]]:
 
 
 def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False, *, plant: Any = None,
-                 handle_signals: bool = False) -> RunResult:
+                 handle_signals: bool = False, on_chunk: Callable | None = None) -> RunResult:
     """Build the plant, simulate, compute metrics and (if `out`) write every output that can be written:
     config.toml first, then metrics.json, run.rrd and the figures.  A failing output is listed in
-    `failures` and the others are still written.  handle_signals: SIGINT/SIGTERM stop the run cleanly."""
+    `failures` and the others are still written.  handle_signals: SIGINT/SIGTERM stop the run cleanly;
+    on_chunk: passed to `harness.loop.simulate` (live viewing)."""
     from harness import loop
     from harness.loop import common
     from harness.plant import build_plant
@@ -113,7 +114,7 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
         _load.dump_scenario(scn, out / "config.toml")
         written.append(out / "config.toml")
     with stop_on_signals(common.STOP if handle_signals else None) as received:
-        traj = loop.simulate(scn, plant=plant, progress=progress)
+        traj = loop.simulate(scn, plant=plant, progress=progress, on_chunk=on_chunk)
     interrupted = bool(received) or traj.status == "interrupted"
 
     def metrics_of():

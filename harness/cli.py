@@ -17,10 +17,12 @@ The simulation back ends are imported lazily so that ``--help`` and input valida
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
 import os
 import sys
+import threading
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
@@ -171,6 +173,10 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="exit status: 0 ok; 1 diverged / outputs not written; 2 invalid input; 130 interrupted.")
     _add_scenario_options(run)
     _add_out_and_progress(run, "output folder (created; must be writable). Default: runs/<scenario name>.")
+    run.add_argument("--view", nargs="?", const="native", choices=("native", "web"), default=None,
+                     help="stream the run to a Rerun viewer while it is simulated: 'native' (the default "
+                          "with a bare --view) spawns the viewer, 'web' serves Rerun's web viewer and waits "
+                          "for Ctrl-C after the run. run.rrd is written as without it. Default: no viewer.")
     run.set_defaults(func=cmd_run)
 
     check = sub.add_parser(
@@ -226,6 +232,10 @@ def build_parser() -> argparse.ArgumentParser:
                             "cluster. Default: none (local processes).")
     sweep.add_argument("--no-progress", action="store_true",
                        help="do not show the progress bar (default: shown on stderr).")
+    sweep.add_argument("--view", metavar="CASE_ID", default=None,
+                       help="do not run: open the recording of case CASE_ID of this sweep "
+                            "(<out>/recordings/CASE_ID.rrd, written for the worst cases, see record) in a "
+                            "Rerun viewer. Default: run the sweep.")
     sweep.set_defaults(func=cmd_sweep)
 
     ctl = sub.add_parser(
@@ -352,11 +362,15 @@ def _print_summary(scn, traj, metrics: dict | None, out: Path | None, written: l
         print(f"  outputs in {out}/: {names or '(none)'}")
 
 
-def _simulate_and_write(scn, out: Path | None, progress: bool):
+def _simulate_and_write(scn, out: Path | None, progress: bool, live=None):
     """Simulate, compute metrics and (if out) write every output (`harness.api.run_scenario`), then print
-    the summary.  Returns (traj, metrics or None, list of output-writing failures, interrupted flag)."""
+    the summary.  live: optional harness.output.viewer.LiveView that receives the run chunk by chunk
+    while it is simulated.  Returns (traj, metrics or None, output-writing failures, interrupted flag)."""
     api = _import("harness.api")
-    res = api.run_scenario(scn, out, progress, handle_signals=True)
+    res = api.run_scenario(scn, out, progress, handle_signals=True,
+                           on_chunk=live.on_chunk if live is not None else None)
+    if live is not None:
+        live.finish(res.traj)
     _print_summary(scn, res.traj, res.metrics, out, res.written)
     for f in res.failures:
         _warn(f"could not produce {f}")
@@ -384,8 +398,21 @@ def _run_exit_code(traj, failures: list[str], interrupted: bool, wrote: bool = T
 def cmd_run(args: argparse.Namespace) -> int:
     scn = load_from_args(args)
     out = prepare_out_dir(args.out if args.out is not None else Path("runs") / scn.name)
-    traj, _, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress)
-    return _run_exit_code(traj, failures, interrupted)
+    live = _import("harness.output.viewer").LiveView.open(args.view, scn) if args.view else None
+    if live is not None and live.url:
+        print(f"web viewer: {live.url}", file=sys.stderr)
+    traj, _, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress, live=live)
+    rc = _run_exit_code(traj, failures, interrupted)
+    if live is not None:
+        if live.failed:
+            _warn(f"live view: {live.failed}")
+        if live.url and not interrupted:
+            print(f"serving the web viewer at {live.url} - Ctrl-C to stop", file=sys.stderr)
+            with contextlib.suppress(KeyboardInterrupt):
+                while not threading.Event().wait(0.5):  # short waits: Ctrl-C is handled promptly
+                    pass
+        live.close()
+    return rc
 
 
 def cmd_check(args: argparse.Namespace) -> int:
@@ -436,6 +463,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     study: Path = args.study
     if not study.is_file():
         raise ConfigError(f"study file not found: {study}", path=str(study))
+    if args.view is not None:
+        return _view_case(study, args.out, args.view)
     sweep = _import("harness.studies.sweep")  # validates the study, then creates and checks the output folder
     rc = sweep.main_sweep(study, args.out, args.workers, args.scheduler, not args.no_progress)
     return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
@@ -449,6 +478,24 @@ def cmd_controllers(args: argparse.Namespace) -> int:  # noqa: ARG001
         print(f"{name:<{width}}  [{'/'.join(acts):<12}]  {desc}")
     print("your own: --controller path/to/file.py:ClassName or package.module:ClassName "
           "(see controllers/interface.py)")
+    return EXIT_OK
+
+
+def _view_case(study: Path, out: Path | None, case_id: str) -> int:
+    """`teleop sweep STUDY --view CASE_ID`: open a case's recording in a spawned Rerun viewer."""
+    import subprocess
+
+    if out is None:
+        out = Path("runs") / "sweeps" / _import("harness.studies.sweep").load_study(study).name
+    path = out / "recordings" / f"{case_id}.rrd"
+    if not path.is_file():
+        have = sorted(p.stem for p in (out / "recordings").glob("*.rrd"))
+        raise ConfigError(f"--view {case_id}: no recording {path} (recorded cases: "
+                          f"{', '.join(have) or 'none'}; re-run the case with 'teleop run --view')",
+                          path="--view")
+    cmd = _import("harness.output.viewer").open_recording(path)
+    subprocess.Popen(cmd, start_new_session=True, stdin=subprocess.DEVNULL)
+    print(f"opened {path} ({' '.join(cmd)})")
     return EXIT_OK
 
 

@@ -32,12 +32,12 @@ PAPER_BOUNDS = ROOT / "bounds" / "paper_mujoco.toml"
 
 OPTIONS = {
     "run": ["--plant", "--actuation", "--segments", "--duration", "--seed", "--snr", "--set", "--out",
-            "--no-progress", "--controller", "SCENARIO.toml"],
+            "--no-progress", "--controller", "--view", "SCENARIO.toml"],
     "check": ["--plant", "--actuation", "--segments", "--duration", "--seed", "--snr", "--set", "--out",
               "--no-progress", "--controller", "--bounds", "SCENARIO.toml"],
     "models": ["--segments", "--out", "--enforce-cc", "--no-enforce-cc", "--actuation", "--set",
                "SCENARIO.toml"],
-    "sweep": ["--out", "--workers", "--scheduler", "--no-progress", "STUDY.toml"],
+    "sweep": ["--out", "--workers", "--scheduler", "--no-progress", "--view", "STUDY.toml"],
     "fidelity": ["--segments", "--out", "--no-progress"],
     "controllers": [],
 }
@@ -76,7 +76,7 @@ class Stubs:
     def _log(self, name, *args, **kwargs):
         self.calls.setdefault(name, []).append((args, kwargs))
 
-    def simulate(self, scn, plant=None, progress=False):
+    def simulate(self, scn, plant=None, progress=False, on_chunk=None):
         self._log("simulate", scn, progress=progress)
         if self.simulate_hook is not None:
             return self.simulate_hook(scn)

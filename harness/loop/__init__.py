@@ -13,8 +13,10 @@ from __future__ import annotations
 from typing import Any
 
 
-def simulate(scn, plant: Any = None, progress: bool = False):
+def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None):
     """Run one scenario on `plant` (default: the plant `scn.plant` describes); returns the Trajectory.
+    on_chunk: optional callable receiving each finished chunk of control steps as a `Trajectory`
+    (e.g. a live viewer, `harness.output.viewer.LiveView`).
 
     A run that diverges or is interrupted (`harness.loop.common.STOP`) returns everything up to that
     point, with `status` and `message` saying what happened and when."""
@@ -25,11 +27,11 @@ def simulate(scn, plant: Any = None, progress: bool = False):
     if scn.controller.name != "paper":  # a controller through the Python interface (harness.loop.controllers)
         from harness.loop.interface_loop import simulate_controller
 
-        return simulate_controller(scn, progress=progress, plant=plant)
+        return simulate_controller(scn, progress=progress, plant=plant, on_chunk=on_chunk)
     if plant.kind == "analytic":
         from harness.loop.analytic_loop import simulate_analytic
 
-        return simulate_analytic(scn, progress=progress, plant=plant)
+        return simulate_analytic(scn, progress=progress, plant=plant, on_chunk=on_chunk)
     from harness.loop.mujoco_loop import simulate_mujoco
 
-    return simulate_mujoco(scn, progress=progress, plant=plant)
+    return simulate_mujoco(scn, progress=progress, plant=plant, on_chunk=on_chunk)

@@ -27,9 +27,10 @@ from harness.plant.analytic import AnalyticPlant
 
 
 def simulate_analytic(scn: Scenario, progress: bool = False,
-                      plant: AnalyticPlant | None = None) -> Trajectory:
+                      plant: AnalyticPlant | None = None, on_chunk=None) -> Trajectory:
     """Closed loop on the analytic plant (plant params may differ from the controller's).
-    plant: the plant's parameters (default: the scenario's plant side)."""
+    plant: the plant's parameters (default: the scenario's plant side); on_chunk: optional callable
+    receiving each finished chunk of steps as a `Trajectory` (e.g. a live viewer)."""
     if plant is None:
         plant = AnalyticPlant(scn.plant_master, scn.plant_slave)
     n = scn.n_steps
@@ -54,6 +55,10 @@ def simulate_analytic(scn: Scenario, progress: bool = False,
             done = k + m
             if bar is not None:
                 bar.update(m)
+            if on_chunk is not None and m:
+                part = Trajectory.from_rows(rows[k:done])
+                part.meta.update(run_meta(scn, 0.0))
+                on_chunk(part)
             if status != 0:
                 break
             k = k1

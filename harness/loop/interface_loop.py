@@ -20,6 +20,7 @@ import numpy as np
 from controllers.interface import ControllerDiverged, Observation
 from harness.config.scenario import Scenario
 from harness.loop.common import (
+    CHUNK,
     STATUS_TEXT,
     STOP,
     common_arrays,
@@ -65,8 +66,9 @@ def check_action(act, name: str, k: int, t: float, servo: bool) -> str:
     return ""
 
 
-def simulate_controller(scn: Scenario, progress: bool = False, plant=None) -> Trajectory:
-    """Run the scenario with its (Python) controller; returns the Trajectory (possibly cut short)."""
+def simulate_controller(scn: Scenario, progress: bool = False, plant=None, on_chunk=None) -> Trajectory:
+    """Run the scenario with its (Python) controller; returns the Trajectory (possibly cut short).
+    on_chunk: optional callable receiving every CHUNK steps as a `Trajectory` (time series only)."""
     name = scn.controller.name
     tb = time.perf_counter()
     ctrl, ctx = make_controller(scn)
@@ -135,6 +137,10 @@ def simulate_controller(scn: Scenario, progress: bool = False, plant=None) -> Tr
                 break
             if bar is not None and k % 250 == 249:
                 bar.update(250)
+            if on_chunk is not None and (k + 1) % CHUNK == 0:
+                part = Trajectory.from_rows(rows[k + 1 - CHUNK:k + 1])
+                part.meta.update(run_meta(scn, 0.0))
+                on_chunk(part)
             if STOP.is_set():
                 interrupted = True
                 break

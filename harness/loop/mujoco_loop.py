@@ -78,11 +78,13 @@ def make_plant(scn: Scenario, plant: MujocoPlant | None = None
 
 
 def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray | None = None,
-                    plant: MujocoPlant | None = None) -> Trajectory:
+                    plant: MujocoPlant | None = None, on_chunk=None) -> Trajectory:
     """Run the scenario on the MuJoCo plant; returns the Trajectory (possibly cut short).
 
     cmd_log: optional (n_steps * substeps, nu + nv) array that receives, for every mj_step, the
-    [ctrl, qfrc_applied] applied before it (to replay the same physics with raw mj_step)."""
+    [ctrl, qfrc_applied] applied before it (to replay the same physics with raw mj_step).
+    on_chunk: optional callable receiving each finished chunk of steps as a `Trajectory` (with the plant
+    geometry when the integrator provides it in the loop, see `_chunk`)."""
     tb = time.perf_counter()
     m, d, cmap = make_plant(scn, plant)
     build_time = time.perf_counter() - tb
@@ -127,6 +129,8 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
             done = k + mdone
             if bar is not None:
                 bar.update(mdone)
+            if on_chunk is not None and mdone:
+                on_chunk(_chunk(scn, m, cmap, geo, rows, k, done))
             if wnum.any():
                 warned = warning_counts(d)
                 if status == 0:  # the kernel stops at the step that raised it; never pass silently
@@ -159,6 +163,23 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
             detail += f"; MuJoCo says: {captured[0].strip()}"
     set_outcome(traj, status, interrupted, detail=detail)
     return traj
+
+
+def _chunk(scn: Scenario, m: mujoco.MjModel, cmap: ChainMap, geo: _Geometry, rows: np.ndarray, k0: int,
+           k1: int) -> Trajectory:
+    """Steps k0..k1 as a Trajectory for live viewing: the plant geometry of the loop (single-stage
+    integrators; with RK4 it exists only after the run, and the chunk carries the analytic state only)."""
+    part = Trajectory.from_rows(rows[k0:k1])
+    part.meta.update(run_meta(scn, 0.0))
+    base = np.asarray(cmap.octarm_base_pos, dtype=float)
+    part.meta.update(master_base=tuple(float(v) for v in cmap.master_base_pos),
+                     slave_base=tuple(float(v) for v in base), body_half_size=body_half_sizes(m, geo.bodies))
+    if geo.live:
+        tip = geo.tip[k0:k1]
+        part.x2_plant = np.stack([tip[:, 0] - base[0], tip[:, 2] - base[2]], axis=1)
+        part.body_pos, part.body_quat = geo.body_pos[k0:k1].copy(), geo.body_quat[k0:k1].copy()
+        part.master_pos = geo.master_pos[k0:k1].copy()
+    return part
 
 
 BACKBONE_POINTS = 8  # analytic backbone points per section in the recording

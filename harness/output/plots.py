@@ -22,7 +22,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from harness.loop.trajectory import Trajectory
-from harness.output.record import cc_backbone
+from harness.output.scene import cc_backbone
 
 DPI = 130
 _SEC_COLORS = ("tab:green", "tab:purple", "tab:brown")

@@ -20,111 +20,56 @@ is right-handed, Z up, like MuJoCo):
     world/slave/backbone                 analytic constant-curvature backbone of the sensed q2
     world/slave/tip                      plant tip (x2_plant; analytic x2 on the analytic plant)
     world/desired/master, .../slave      the desired path x_d (static)
+    traces/desired, traces/master,       2-D tip traces in task space (each arm relative to its own base)
+    traces/slave                         as (X, -Z) (2-D views have y down, so Z points up on screen)
     status                               run status and message (static text)
+
+The blueprint and the scene geometry (colours, arm points, framing of the views) are
+`harness.output.scene`.
 """
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Iterator
+from datetime import timedelta
 from functools import cache
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 import rerun as rr
-import rerun.blueprint as rrb
 from rerun.chunk import RrdReader
 from rerun.encodings import Vec3DBatch
 
 from harness.loop.trajectory import Trajectory
+from harness.output.scene import (
+    C_BACKBONE,
+    C_DESIRED,
+    C_MASTER,
+    C_SECTIONS,
+    C_SLAVE,
+    C_X,
+    C_X2,
+    C_Z,
+    C_Z2,
+    DEFAULT_MASTER_LENGTHS,
+    TIMELINE,
+    TRACE_POINT_RADIUS,
+    backbone_points_world,
+    box_half_size,
+    build_blueprint,
+    cc_backbone,
+    master_points,
+    task_to_world,
+    trace_points,
+    world_base,
+)
 
 APP_ID = "octarm_teleop"
-TIMELINE = "sim_time"
-DEFAULT_MASTER_LENGTHS = (0.6, 0.6)  # m, paper Sec. VI (used only if traj.meta has no "master_lengths")
-BACKBONE_POINTS_PER_SECTION = 10  # analytic backbone resolution when traj.meta has no "backbone"
 MAX_STATIC_PATH_POINTS = 4000  # the static desired path is decimated to at most this many points
 # `rerun rrd verify` costs ~ rows x points of each LineStrips3D chunk (measured: 20k rows of 25-point
 # strips, 500-row chunks 4.3 s, 100-row chunks 1.1 s); strip chunks are capped at this many points.
 STRIP_POINTS_PER_CHUNK = 2500
-
-# RGB colours: X blue / Z orange as in most plotting defaults, master red-ish, slave green-ish.
-_C_X, _C_Z = (31, 119, 180), (255, 127, 14)
-_C_X2, _C_Z2 = (23, 190, 207), (214, 39, 40)
-_C_SECTIONS = ((44, 160, 44), (148, 103, 189), (140, 86, 75))
-_C_MASTER, _C_SLAVE, _C_BACKBONE = (220, 60, 60), (40, 160, 80), (250, 200, 40)
-_C_DESIRED = (120, 120, 120)
-
-
-# ---------------------------------------------------------------------------------------------
-# geometry helpers (numpy, vectorized over steps)
-# ---------------------------------------------------------------------------------------------
-def _base(meta: dict, key: str) -> np.ndarray:
-    b = meta.get(key)
-    if b is None:
-        return np.zeros(3)
-    b = np.asarray(b, dtype=float).reshape(-1)
-    if b.shape != (3,):
-        raise ValueError(f"traj.meta[{key!r}] must be 3 numbers (world x, y, z), got shape {b.shape}")
-    return b
-
-
-def task_to_world(x: np.ndarray, base: np.ndarray) -> np.ndarray:
-    """Task-space [X, Z] (..., 2), relative to `base`, to world (..., 3): (b_x + X, b_y, b_z + Z)."""
-    x = np.asarray(x, dtype=float)
-    out = np.empty(x.shape[:-1] + (3,))
-    out[..., 0] = base[0] + x[..., 0]
-    out[..., 1] = base[1]
-    out[..., 2] = base[2] + x[..., 1]
-    return out
-
-
-def master_points(q1: np.ndarray, lengths, base: np.ndarray) -> np.ndarray:
-    """World positions of master base, elbow, tip, (n, 3, 3), from joint angles q1 (n, 2).
-
-    Angles from +Z towards +X (controllers.params.MasterParams):
-    x1 = [l1 sin qa + l2 sin(qa + qb), l1 cos qa + l2 cos(qa + qb)].
-    """
-    q1 = np.asarray(q1, dtype=float).reshape(-1, 2)
-    l1, l2 = (float(v) for v in np.asarray(lengths, dtype=float).reshape(2))
-    a, ab = q1[:, 0], q1[:, 0] + q1[:, 1]
-    elbow = np.stack([l1 * np.sin(a), l1 * np.cos(a)], axis=-1)
-    tip = elbow + np.stack([l2 * np.sin(ab), l2 * np.cos(ab)], axis=-1)
-    task = np.stack([np.zeros_like(elbow), elbow, tip], axis=1)  # (n, 3, 2)
-    return task_to_world(task, base)
-
-
-def cc_backbone(q2: np.ndarray, points_per_section: int = BACKBONE_POINTS_PER_SECTION) -> np.ndarray:
-    """Planar constant-curvature backbone of q2 = [d1, d2, d3, k1, k2, k3], task space (n, 3 P + 1, 2).
-
-    Base at the origin, tangent +Z, k > 0 bends toward +X (controllers.params.SlaveParams).  Along a
-    section with tangent angle phi (from +Z toward +X) and arc s: p(s) = p0 + t sin(k s)/k
-    + nrm (1 - cos(k s))/k with t = (sin phi, cos phi), nrm = (cos phi, -sin phi); phi += k d.
-    Near-zero curvature uses the series limits (s, k s^2 / 2), so k = 0 is exact.
-    """
-    q2 = np.asarray(q2, dtype=float).reshape(-1, 6)
-    n, P = q2.shape[0], int(points_per_section)
-    u = np.linspace(0.0, 1.0, P + 1)[1:]  # fraction of the section, (P,)
-    pts = np.empty((n, 3 * P + 1, 2))
-    pts[:, 0] = 0.0
-    p0 = np.zeros((n, 2))
-    phi = np.zeros(n)
-    for i in range(3):
-        d, k = q2[:, i], q2[:, 3 + i]
-        s = d[:, None] * u[None, :]  # (n, P)
-        ks = k[:, None] * s
-        small = np.abs(ks) < 1e-6
-        with np.errstate(divide="ignore", invalid="ignore"):
-            along = np.where(small, s * (1.0 - ks * ks / 6.0), np.sin(ks) / k[:, None])
-            across = np.where(small, 0.5 * ks * s, (1.0 - np.cos(ks)) / k[:, None])
-        t = np.stack([np.sin(phi), np.cos(phi)], axis=-1)[:, None, :]
-        nrm = np.stack([np.cos(phi), -np.sin(phi)], axis=-1)[:, None, :]
-        seg = p0[:, None, :] + t * along[..., None] + nrm * across[..., None]
-        pts[:, 1 + i * P: 1 + (i + 1) * P] = seg
-        p0 = seg[:, -1]
-        phi = phi + k * d
-    return pts
-
 
 def _blocks(n: int, block: int) -> Iterator[slice]:
     for s in range(0, n, block):
@@ -149,72 +94,22 @@ def _decimate(n: int, m: int) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 def _series(traj: Trajectory) -> list[tuple[str, np.ndarray, list[str], list[tuple[int, int, int]]]]:
     """(entity, values (n, k), series names, colours) of every time series."""
-    sec = list(_C_SECTIONS)
+    sec = list(C_SECTIONS)
     out = [
-        ("plots/e1", traj.e1, ["e1 X", "e1 Z"], [_C_X, _C_Z]),
-        ("plots/e2", traj.e2, ["e2 X", "e2 Z"], [_C_X, _C_Z]),
+        ("plots/e1", traj.e1, ["e1 X", "e1 Z"], [C_X, C_Z]),
+        ("plots/e2", traj.e2, ["e2 X", "e2 Z"], [C_X, C_Z]),
     ]
     if traj.x2_plant is not None:
-        out.append(("plots/e2_plant", traj.e2_plant, ["e2 plant X", "e2 plant Z"], [_C_X2, _C_Z2]))
+        out.append(("plots/e2_plant", traj.e2_plant, ["e2 plant X", "e2 plant Z"], [C_X2, C_Z2]))
     out += [
-        ("plots/beta", np.asarray(traj.beta).reshape(-1, 1), ["beta"], [_C_SLAVE]),
-        ("plots/ya", np.asarray(traj.ya).reshape(-1, 1), ["y_a"], [_C_MASTER]),
-        ("plots/deN_norm", np.linalg.norm(np.asarray(traj.deN, dtype=float), axis=-1), ["|e_N-dot|"], [_C_X]),
+        ("plots/beta", np.asarray(traj.beta).reshape(-1, 1), ["beta"], [C_SLAVE]),
+        ("plots/ya", np.asarray(traj.ya).reshape(-1, 1), ["y_a"], [C_MASTER]),
+        ("plots/deN_norm", np.linalg.norm(np.asarray(traj.deN, dtype=float), axis=-1), ["|e_N-dot|"], [C_X]),
         ("plots/q2", traj.q2, ["d1", "d2", "d3", "k1", "k2", "k3"], sec + sec),
-        ("plots/T1", traj.T1, ["T1 a", "T1 b"], [_C_X, _C_Z]),
+        ("plots/T1", traj.T1, ["T1 a", "T1 b"], [C_X, C_Z]),
         ("plots/T2", traj.T2, ["T2 d1", "T2 d2", "T2 d3", "T2 k1", "T2 k2", "T2 k3"], sec + sec),
     ]
     return [(e, np.asarray(v, dtype=np.float64).reshape(len(traj), len(nm)), nm, c) for e, v, nm, c in out]
-
-
-def _backbone_world(traj: Trajectory, slave_base: np.ndarray) -> np.ndarray | None:
-    bb = traj.meta.get("backbone")
-    if bb is not None:
-        bb = np.asarray(bb, dtype=float)
-        if bb.ndim != 3 or bb.shape[0] != len(traj) or bb.shape[2] != 3:
-            warnings.warn(
-                f"traj.meta['backbone'] has shape {bb.shape}, expected ({len(traj)}, P, 3); "
-                "logging the analytic backbone of q2 instead", stacklevel=3)
-        else:
-            return bb
-    return task_to_world(cc_backbone(traj.q2), slave_base)
-
-
-def build_blueprint(traj: Trajectory) -> rrb.Blueprint:
-    """Default layout: 3-D view of both arms | tabs of time-series views."""
-    e2_contents = ["plots/e2"] + (["plots/e2_plant"] if traj.x2_plant is not None else [])
-    ts = rrb.TimeSeriesView
-    errors = rrb.Grid(
-        ts(origin="plots/e1", name="e1 = x_d - x1 (11) [m]"),
-        ts(origin="plots", contents=e2_contents, name="e2 = x1 - x2 (16) [m]"),
-        ts(origin="plots/beta", name="beta, manipulability (41)"),
-        ts(origin="plots/ya", name="y_a = exp(-k_y beta) (29)"),
-        ts(origin="plots/deN_norm", name="|e_N-dot| (23)"),
-        grid_columns=2, name="Errors & sub-task",
-    )
-    trace_range = rrb.VisibleTimeRange(
-        TIMELINE, start=rr.TimeRangeBoundary.infinite(), end=rr.TimeRangeBoundary.cursor_relative())
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Vertical(
-                rrb.Spatial3DView(origin="world", contents="world/**", name="Master | slave (world, Z up)"),
-                rrb.Spatial3DView(
-                    origin="world", name="Tip traces",
-                    contents=["world/master/tip", "world/slave/tip", "world/desired/**"],
-                    time_ranges=trace_range),
-                row_shares=[3, 1],
-            ),
-            rrb.Tabs(
-                errors,
-                ts(origin="plots/q2", name="q2: d (m), k (1/m)"),
-                rrb.Vertical(ts(origin="plots/T1", name="T1 [N m]"),
-                             ts(origin="plots/T2", name="T2 [N, N m^2]"), name="Torques"),
-                rrb.TextDocumentView(origin="status", name="Run status"),
-            ),
-            column_shares=[1, 1],
-        ),
-        collapse_panels=False,
-    )
 
 
 def _status_text(traj: Trajectory) -> str:
@@ -253,39 +148,56 @@ def write_recording(
     path.parent.mkdir(parents=True, exist_ok=True)
     n = len(traj)
     meta = traj.meta or {}
-    master_base, slave_base = _base(meta, "master_base"), _base(meta, "slave_base")
+    master_base, slave_base = world_base(meta, "master_base"), world_base(meta, "slave_base")
 
-    rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
+    # batches flushed by size only (never by the 200 ms timer): the same run gives the same chunks even on
+    # a loaded machine (`rerun rrd compare`)
+    rec = rr.RecordingStream(APP_ID, recording_id=recording_id,
+                             batcher_config=rr.ChunkBatcherConfig(flush_tick=timedelta(days=1)))
     rec.save(path, default_blueprint=build_blueprint(traj))
     rec.set_log_time_enabled(False)
     try:
-        _log_static(rec, traj, master_base, slave_base)
+        log_static(rec, traj, master_base, slave_base)
         if n:
-            _log_series(rec, traj, block)
-            _log_spatial(rec, traj, master_base, slave_base, block, spatial_every)
+            log_series(rec, traj, block)
+            log_spatial(rec, traj, master_base, slave_base, block, spatial_every)
     finally:
         rec.disconnect()  # completes the file
     return path
 
 
-def _log_static(rec: rr.RecordingStream, traj: Trajectory, master_base, slave_base) -> None:
+def log_static(rec: rr.RecordingStream, traj: Trajectory, master_base, slave_base) -> None:
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     rec.log("status", rr.TextDocument(_status_text(traj), media_type=rr.MediaType.MARKDOWN), static=True)
     for entity, _, names, colors in _series(traj):
         rec.log(entity, rr.SeriesLines(names=names, colors=colors), static=True)
-    rec.log("world/bases", rr.Points3D([master_base, slave_base], radii=0.02, colors=[_C_MASTER, _C_SLAVE],
+    rec.log("world/bases", rr.Points3D([master_base, slave_base], radii=0.02, colors=[C_MASTER, C_SLAVE],
                                        labels=["master base", "slave base"]), static=True)
     if len(traj):
         idx = _decimate(len(traj), MAX_STATIC_PATH_POINTS)
         xd = np.asarray(traj.xd, dtype=float)[idx]
         for name, base in (("master", master_base), ("slave", slave_base)):
             rec.log(f"world/desired/{name}",
-                    rr.LineStrips3D([task_to_world(xd, base)], radii=0.0015, colors=_C_DESIRED), static=True)
+                    rr.LineStrips3D([task_to_world(xd, base)], radii=0.0015, colors=C_DESIRED), static=True)
+        rec.log("traces/desired", rr.LineStrips2D([_screen(xd)], radii=rr.Radius.ui_points(1.5),
+                                                  colors=C_DESIRED), static=True)
     # styling of the per-step entities (static, combined with the temporal data at query time)
-    rec.log("world/master/arm", rr.LineStrips3D.from_fields(radii=0.012, colors=_C_MASTER), static=True)
-    rec.log("world/master/tip", rr.Points3D.from_fields(radii=0.012, colors=_C_MASTER), static=True)
-    rec.log("world/slave/backbone", rr.LineStrips3D.from_fields(radii=0.004, colors=_C_BACKBONE), static=True)
-    rec.log("world/slave/tip", rr.Points3D.from_fields(radii=0.012, colors=_C_SLAVE), static=True)
+    rec.log("world/master/arm", rr.LineStrips3D.from_fields(radii=0.012, colors=C_MASTER), static=True)
+    rec.log("world/master/tip", rr.Points3D.from_fields(radii=0.012, colors=C_MASTER), static=True)
+    rec.log("world/slave/backbone", rr.LineStrips3D.from_fields(radii=0.004, colors=C_BACKBONE), static=True)
+    rec.log("world/slave/tip", rr.Points3D.from_fields(radii=0.012, colors=C_SLAVE), static=True)
+    # the master trace drawn larger, under the slave's: both stay visible where they overlap
+    rec.log("traces/master", rr.Points2D.from_fields(radii=TRACE_POINT_RADIUS, colors=C_MASTER,
+                                                     draw_order=1.0), static=True)
+    rec.log("traces/slave", rr.Points2D.from_fields(radii=rr.Radius.ui_points(1.5), colors=C_SLAVE,
+                                                    draw_order=2.0), static=True)
+
+
+def _screen(x: np.ndarray) -> np.ndarray:
+    """Task-space (..., 2) [X, Z] to 2-D view coordinates [X, -Z] (2-D views have y pointing down)."""
+    out = np.array(x, dtype=float)
+    out[..., 1] *= -1.0
+    return out
 
 
 class _Arrow:
@@ -349,7 +261,7 @@ def _strip_type() -> pa.DataType:
     return rr.components.LineStrip3DBatch(np.zeros((1, 2, 3))).as_arrow_array().type
 
 
-def _log_series(rec: rr.RecordingStream, traj: Trajectory, block: int) -> None:
+def log_series(rec: rr.RecordingStream, traj: Trajectory, block: int) -> None:
     for entity, values, _, _ in _series(traj):
         _send(rec, entity, traj.t, block, _flat(rr.Scalars.descriptor_scalars(), rr.components.ScalarBatch,
                                                 np.ascontiguousarray(values).reshape(-1), values.shape[1]))
@@ -366,7 +278,7 @@ def _f32(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float32)
 
 
-def _log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, every: int) -> None:
+def log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, every: int) -> None:
     meta = traj.meta or {}
     n = len(traj)
     idx = np.arange(0, n, every)
@@ -390,6 +302,12 @@ def _log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, eve
     tip = task_to_world(np.asarray(x2, dtype=float)[idx], slave_base)[:, None, :]
     _send(rec, "world/slave/tip", t, block, _points_columns(tip))
 
+    # (f) 2-D tip traces in task space
+    _, x1_task, x2_task = trace_points(traj)
+    for entity, x in (("traces/master", x1_task), ("traces/slave", x2_task)):
+        _send(rec, entity, t, block, _flat(rr.Points2D.descriptor_positions(), rr.components.Position2DBatch,
+                                           _f32(_screen(x[idx])), 1))
+
     # (b) plant bodies: oriented boxes at the bodies (they tile the chain; the tip point is (e))
     if traj.body_pos is not None:
         bpos = np.asarray(traj.body_pos, dtype=float)[idx]
@@ -397,8 +315,8 @@ def _log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, eve
         if nb:
             B, C = rr.Boxes3D, rr.components  # float32 in (Boxes3D.columns on all rows is ~10x slower)
             # the box size is constant over the run: logged once (static), poses per step
-            half = _box_half_size(bpos, meta).astype(np.float32)
-            rec.log("world/slave/segments", B.from_fields(half_sizes=half, colors=_C_SLAVE, radii=0.002),
+            half = box_half_size(bpos, meta).astype(np.float32)
+            rec.log("world/slave/segments", B.from_fields(half_sizes=half, colors=C_SLAVE, radii=0.002),
                     static=True)
             boxes = _flat(B.descriptor_centers(), C.Translation3DBatch, _f32(bpos).reshape(-1, 3), nb)
             if traj.body_quat is not None:
@@ -410,30 +328,9 @@ def _log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, eve
             _send(rec, "world/slave/segments", t, block, boxes)
 
     # (c) analytic backbone of the sensed q2
-    _send_strips(rec, "world/slave/backbone", t, block, _backbone_world(traj, slave_base)[idx])
+    _send_strips(rec, "world/slave/backbone", t, block, backbone_points_world(traj, slave_base)[idx])
 
 
-def _box_half_size(bpos: np.ndarray, meta: dict) -> np.ndarray:
-    """Half extents (nb, 3) of the per-body boxes: traj.meta['body_half_size'] ((3,) for all bodies or
-    (nb, 3), e.g. the MJCF segment geoms) or a fraction of the body spacing."""
-    nb = bpos.shape[1]
-    if meta.get("body_half_size") is not None:
-        h = np.asarray(meta["body_half_size"], dtype=float)
-        if h.shape == (nb, 3):
-            return h
-        return np.tile(h.reshape(3), (nb, 1))
-    if nb >= 2:
-        gaps = np.linalg.norm(np.diff(bpos[0], axis=0), axis=-1)
-        gaps = gaps[np.isfinite(gaps) & (gaps > 0)]
-        s = float(np.median(gaps)) if gaps.size else 0.04
-    else:
-        s = 0.04
-    return np.tile(np.array([0.3, 0.15, 0.45]) * s, (nb, 1))
-
-
-# ---------------------------------------------------------------------------------------------
-# reading back
-# ---------------------------------------------------------------------------------------------
 def read_series(path: str | Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
     """Read a `plots/...` series back with Rerun's own reader: (t seconds (n,), values (n, k)).
 
@@ -467,5 +364,4 @@ def read_series(path: str | Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
     return t_ns[order] / 1e9, values[order]
 
 
-__all__ = ["APP_ID", "TIMELINE", "build_blueprint", "cc_backbone", "master_points", "read_series",
-           "task_to_world", "write_recording"]
+__all__ = ["APP_ID", "TIMELINE", "cc_backbone", "read_series", "write_recording"]  # (geometry: scene)

@@ -1,0 +1,240 @@
+"""The 3-D scene of a run as the recording shows it: colours, world geometry of both arms (numpy,
+vectorized over steps), and the default blueprint with its views framed for the run's content
+(`frame_eye`, `frame_traces`): the 3-D view looks along +Y at the X-Z plane the arms move in, from far
+enough to show both arms whole over the run's range of motion; the 2-D "Tip traces" view shows the
+desired path and both tip traces with a margin.  Used by `harness.output.record` and the live viewer.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from harness.loop.trajectory import Trajectory
+
+DEFAULT_MASTER_LENGTHS = (0.6, 0.6)  # m, paper Sec. VI (used only if traj.meta has no "master_lengths")
+TIMELINE = "sim_time"  # the duration timeline of every recording
+BACKBONE_POINTS_PER_SECTION = 10  # analytic backbone resolution when traj.meta has no "backbone"
+
+# RGB colours: X blue / Z orange as in most plotting defaults, master red-ish, slave green-ish.
+C_X, C_Z = (31, 119, 180), (255, 127, 14)
+C_X2, C_Z2 = (23, 190, 207), (214, 39, 40)
+C_SECTIONS = ((44, 160, 44), (148, 103, 189), (140, 86, 75))
+C_MASTER, C_SLAVE, C_BACKBONE = (220, 60, 60), (40, 160, 80), (250, 200, 40)
+C_DESIRED = (120, 120, 120)
+# view backgrounds (solid, distinct from each other and from the viewer's panels; tests locate the views
+# on screenshots by them)
+BG_3D, BG_2D = (22, 27, 38), (30, 24, 38)
+
+# framing of the default views (`frame_eye`, `frame_traces`)
+VIEWER_FOV_Y = np.radians(55.0)  # vertical field of view of the viewer's 3-D eye (not a blueprint property)
+FRAME_MIN_ASPECT = 0.75  # the eye distance fits the content in 3-D views down to this width / height
+FRAME_MARGIN = 0.12  # fraction of the content extent added on each side
+TRACE_POINT_RADIUS = rr.Radius.ui_points(2.5)  # on-screen size: the traces stay visible at any zoom
+
+
+# ---------------------------------------------------------------------------------------------
+# geometry helpers (numpy, vectorized over steps)
+# ---------------------------------------------------------------------------------------------
+def world_base(meta: dict, key: str) -> np.ndarray:
+    b = meta.get(key)
+    if b is None:
+        return np.zeros(3)
+    b = np.asarray(b, dtype=float).reshape(-1)
+    if b.shape != (3,):
+        raise ValueError(f"traj.meta[{key!r}] must be 3 numbers (world x, y, z), got shape {b.shape}")
+    return b
+
+
+def task_to_world(x: np.ndarray, base: np.ndarray) -> np.ndarray:
+    """Task-space [X, Z] (..., 2), relative to `base`, to world (..., 3): (b_x + X, b_y, b_z + Z)."""
+    x = np.asarray(x, dtype=float)
+    out = np.empty(x.shape[:-1] + (3,))
+    out[..., 0] = base[0] + x[..., 0]
+    out[..., 1] = base[1]
+    out[..., 2] = base[2] + x[..., 1]
+    return out
+
+
+def master_points(q1: np.ndarray, lengths, base: np.ndarray) -> np.ndarray:
+    """World positions of master base, elbow, tip, (n, 3, 3), from joint angles q1 (n, 2).
+
+    Angles from +Z towards +X (controllers.params.MasterParams):
+    x1 = [l1 sin qa + l2 sin(qa + qb), l1 cos qa + l2 cos(qa + qb)].
+    """
+    q1 = np.asarray(q1, dtype=float).reshape(-1, 2)
+    l1, l2 = (float(v) for v in np.asarray(lengths, dtype=float).reshape(2))
+    a, ab = q1[:, 0], q1[:, 0] + q1[:, 1]
+    elbow = np.stack([l1 * np.sin(a), l1 * np.cos(a)], axis=-1)
+    tip = elbow + np.stack([l2 * np.sin(ab), l2 * np.cos(ab)], axis=-1)
+    task = np.stack([np.zeros_like(elbow), elbow, tip], axis=1)  # (n, 3, 2)
+    return task_to_world(task, base)
+
+
+def cc_backbone(q2: np.ndarray, points_per_section: int = BACKBONE_POINTS_PER_SECTION) -> np.ndarray:
+    """Planar constant-curvature backbone of q2 = [d1, d2, d3, k1, k2, k3], task space (n, 3 P + 1, 2).
+
+    Base at the origin, tangent +Z, k > 0 bends toward +X (controllers.params.SlaveParams).  Along a
+    section with tangent angle phi (from +Z toward +X) and arc s: p(s) = p0 + t sin(k s)/k
+    + nrm (1 - cos(k s))/k with t = (sin phi, cos phi), nrm = (cos phi, -sin phi); phi += k d.
+    Near-zero curvature uses the series limits (s, k s^2 / 2), so k = 0 is exact.
+    """
+    q2 = np.asarray(q2, dtype=float).reshape(-1, 6)
+    n, P = q2.shape[0], int(points_per_section)
+    u = np.linspace(0.0, 1.0, P + 1)[1:]  # fraction of the section, (P,)
+    pts = np.empty((n, 3 * P + 1, 2))
+    pts[:, 0] = 0.0
+    p0 = np.zeros((n, 2))
+    phi = np.zeros(n)
+    for i in range(3):
+        d, k = q2[:, i], q2[:, 3 + i]
+        s = d[:, None] * u[None, :]  # (n, P)
+        ks = k[:, None] * s
+        small = np.abs(ks) < 1e-6
+        with np.errstate(divide="ignore", invalid="ignore"):
+            along = np.where(small, s * (1.0 - ks * ks / 6.0), np.sin(ks) / k[:, None])
+            across = np.where(small, 0.5 * ks * s, (1.0 - np.cos(ks)) / k[:, None])
+        t = np.stack([np.sin(phi), np.cos(phi)], axis=-1)[:, None, :]
+        nrm = np.stack([np.cos(phi), -np.sin(phi)], axis=-1)[:, None, :]
+        seg = p0[:, None, :] + t * along[..., None] + nrm * across[..., None]
+        pts[:, 1 + i * P: 1 + (i + 1) * P] = seg
+        p0 = seg[:, -1]
+        phi = phi + k * d
+    return pts
+
+
+def backbone_points_world(traj: Trajectory, slave_base: np.ndarray) -> np.ndarray | None:
+    bb = traj.meta.get("backbone")
+    if bb is not None:
+        bb = np.asarray(bb, dtype=float)
+        if bb.ndim != 3 or bb.shape[0] != len(traj) or bb.shape[2] != 3:
+            warnings.warn(
+                f"traj.meta['backbone'] has shape {bb.shape}, expected ({len(traj)}, P, 3); "
+                "logging the analytic backbone of q2 instead", stacklevel=3)
+        else:
+            return bb
+    return task_to_world(cc_backbone(traj.q2), slave_base)
+
+
+def _finite(points: np.ndarray, dim: int) -> np.ndarray:
+    p = np.asarray(points, dtype=float).reshape(-1, dim)
+    return p[np.isfinite(p).all(axis=1)]
+
+
+def scene_bounds(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """World bounding box (lo (3,), hi (3,)) of both arms over the whole run: bases, master base-elbow-tip,
+    slave bodies (padded by their box half-size), backbone, tips and the desired paths."""
+    meta = traj.meta or {}
+    mb, sb = world_base(meta, "master_base"), world_base(meta, "slave_base")
+    parts = [mb[None], sb[None]]
+    pad = 0.02  # the base markers' radius
+    if len(traj):
+        if traj.master_pos is not None:
+            parts.append(_finite(traj.master_pos, 3))
+        else:
+            parts.append(_finite(master_points(traj.q1, meta.get("master_lengths", DEFAULT_MASTER_LENGTHS),
+                                               mb), 3))
+        x2 = traj.x2_plant if traj.x2_plant is not None else traj.x2
+        parts.append(_finite(task_to_world(np.asarray(x2, dtype=float), sb), 3))
+        for base in (mb, sb):
+            parts.append(_finite(task_to_world(np.asarray(traj.xd, dtype=float), base), 3))
+        if traj.body_pos is not None and np.asarray(traj.body_pos).size:
+            parts.append(_finite(traj.body_pos, 3))
+            pad = max(pad, float(np.max(box_half_size(np.asarray(traj.body_pos), meta))))
+        parts.append(_finite(backbone_points_world(traj, sb), 3))
+    pts = np.concatenate(parts, axis=0)
+    return pts.min(axis=0) - pad, pts.max(axis=0) + pad
+
+
+def frame_eye(traj: Trajectory) -> rrb.EyeControls3D:
+    """3-D eye looking along +Y at the X-Z plane (X right, Z up) that shows the whole `scene_bounds`
+    with FRAME_MARGIN on each side, in views of aspect FRAME_MIN_ASPECT or wider."""
+    lo, hi = scene_bounds(traj)
+    c = 0.5 * (lo + hi)
+    half_x, half_z = 0.5 * (hi - lo)[[0, 2]] * (1.0 + 2.0 * FRAME_MARGIN)
+    dist = max(half_z, half_x / FRAME_MIN_ASPECT) / np.tan(0.5 * VIEWER_FOV_Y)  # from the nearest plane
+    pos = [c[0], lo[1] - dist, c[2]]
+    return rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=pos, look_target=[c[0], c[1], c[2]],
+                             eye_up=[0.0, 0.0, 1.0])
+
+
+def trace_points(traj: Trajectory) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Task-space (X, Z) of the desired path, the master tip and the slave tip (plant site if any)."""
+    x2 = traj.x2_plant if traj.x2_plant is not None else traj.x2
+    return (np.asarray(traj.xd, dtype=float).reshape(-1, 2), np.asarray(traj.x1, dtype=float).reshape(-1, 2),
+            np.asarray(x2, dtype=float).reshape(-1, 2))
+
+
+def frame_traces(traj: Trajectory) -> rrb.VisualBounds2D | None:
+    """2-D bounds (screen x = X, y = -Z) of the desired path and both tip traces with FRAME_MARGIN on each
+    side (at least 1 mm); None without finite data."""
+    pts = _finite(np.concatenate(trace_points(traj), axis=0), 2) if len(traj) else np.zeros((0, 2))
+    if not len(pts):
+        return None
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = max(FRAME_MARGIN * float(np.max(hi - lo)), 1e-3)
+    return rrb.VisualBounds2D(x_range=[lo[0] - pad, hi[0] + pad], y_range=[-hi[1] - pad, -lo[1] + pad])
+
+
+def build_blueprint(traj: Trajectory) -> rrb.Blueprint:
+    """Default layout: 3-D view of both arms | tabs of time-series views."""
+    e2_contents = ["plots/e2"] + (["plots/e2_plant"] if traj.x2_plant is not None else [])
+    ts = rrb.TimeSeriesView
+    errors = rrb.Grid(
+        ts(origin="plots/e1", name="e1 = x_d - x1 (11) [m]"),
+        ts(origin="plots", contents=e2_contents, name="e2 = x1 - x2 (16) [m]"),
+        ts(origin="plots/beta", name="beta, manipulability (41)"),
+        ts(origin="plots/ya", name="y_a = exp(-k_y beta) (29)"),
+        ts(origin="plots/deN_norm", name="|e_N-dot| (23)"),
+        grid_columns=2, name="Errors & sub-task",
+    )
+    trace_range = rrb.VisibleTimeRange(
+        TIMELINE, start=rr.TimeRangeBoundary.infinite(), end=rr.TimeRangeBoundary.cursor_relative())
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(
+                rrb.Spatial3DView(origin="world", contents="world/**", name="Master | slave (world, Z up)",
+                                  eye_controls=frame_eye(traj), background=BG_3D),
+                rrb.Spatial2DView(origin="traces", name="Tip traces, task space X-Z (grey: desired)",
+                                  visual_bounds=frame_traces(traj), background=BG_2D,
+                                  time_ranges=trace_range),
+                row_shares=[3, 2],
+            ),
+            rrb.Tabs(
+                errors,
+                ts(origin="plots/q2", name="q2: d (m), k (1/m)"),
+                rrb.Vertical(ts(origin="plots/T1", name="T1 [N m]"),
+                             ts(origin="plots/T2", name="T2 [N, N m^2]"), name="Torques"),
+                rrb.TextDocumentView(origin="status", name="Run status"),
+            ),
+            column_shares=[1, 1],
+        ),
+        rrb.SelectionPanel(state="collapsed"),  # room for the views; opens on a click on the arrow
+        collapse_panels=False,
+    )
+
+
+def box_half_size(bpos: np.ndarray, meta: dict) -> np.ndarray:
+    """Half extents (nb, 3) of the per-body boxes: traj.meta['body_half_size'] ((3,) for all bodies or
+    (nb, 3), e.g. the MJCF segment geoms) or a fraction of the body spacing."""
+    nb = bpos.shape[1]
+    if meta.get("body_half_size") is not None:
+        h = np.asarray(meta["body_half_size"], dtype=float)
+        if h.shape == (nb, 3):
+            return h
+        return np.tile(h.reshape(3), (nb, 1))
+    if nb >= 2:
+        gaps = np.linalg.norm(np.diff(bpos[0], axis=0), axis=-1)
+        gaps = gaps[np.isfinite(gaps) & (gaps > 0)]
+        s = float(np.median(gaps)) if gaps.size else 0.04
+    else:
+        s = 0.04
+    return np.tile(np.array([0.3, 0.15, 0.45]) * s, (nb, 1))
+
+
+# ---------------------------------------------------------------------------------------------
+# reading back
+# ---------------------------------------------------------------------------------------------
