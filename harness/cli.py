@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import math
 import os
 import sys
 from collections.abc import Callable, Sequence
@@ -135,6 +136,26 @@ def _add_scenario_options(p: argparse.ArgumentParser, *, sim: bool = True) -> No
                         "plant.kind=analytic). Repeatable; applied in order after the shortcut options.")
 
 
+def _record_rate(text: str) -> float:
+    """argparse type of --record-rate: a rate in Hz > 0, or 'full' (every control step)."""
+    if str(text).strip().lower() == "full":
+        return math.inf
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"expected a rate in Hz > 0 or 'full', got {text!r}")
+    return v
+
+
+def _add_record_rate(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--record-rate", metavar="HZ|full", type=_record_rate, default=None,
+                   help="rate of the 3-D geometry (arms, segments, backbone) in run.rrd, Hz > 0, or 'full' "
+                        "for every control step; the time series are always written at the control rate. "
+                        "Default: 100 (chosen by measurement, see README 'Speed').")
+
+
 def _add_out_and_progress(p: argparse.ArgumentParser, out_help: str) -> None:
     p.add_argument("--out", metavar="DIR", type=_path, default=None, help=out_help)
     p.add_argument("--no-progress", action="store_true",
@@ -164,6 +185,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="exit status: 0 ok; 1 diverged / outputs not written; 2 invalid input; 130 interrupted.")
     _add_scenario_options(run)
     _add_out_and_progress(run, "output folder (created; must be writable). Default: runs/<scenario name>.")
+    _add_record_rate(run)
     run.set_defaults(func=cmd_run)
 
     check = sub.add_parser(
@@ -177,6 +199,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="bounds file (required; layout: bounds/paper_mujoco.toml).")
     _add_out_and_progress(check, "also write the run outputs (as 'run' does) into this folder. "
                                  "Default: no files are written.")
+    _add_record_rate(check)
     check.set_defaults(func=cmd_check)
 
     models = sub.add_parser(
@@ -337,11 +360,11 @@ def _print_summary(scn, traj, metrics: dict | None, out: Path | None, written: l
         print(f"  outputs in {out}/: {names or '(none)'}")
 
 
-def _simulate_and_write(scn, out: Path | None, progress: bool):
+def _simulate_and_write(scn, out: Path | None, progress: bool, record_rate: float | None = None):
     """Simulate, compute metrics and (if out) write every output (`harness.api.run_scenario`), then print
     the summary.  Returns (traj, metrics or None, list of output-writing failures, interrupted flag)."""
     api = _import("harness.api")
-    res = api.run_scenario(scn, out, progress, handle_signals=True)
+    res = api.run_scenario(scn, out, progress, handle_signals=True, record_rate=record_rate)
     _print_summary(scn, res.traj, res.metrics, out, res.written)
     for f in res.failures:
         _warn(f"could not produce {f}")
@@ -369,7 +392,8 @@ def _run_exit_code(traj, failures: list[str], interrupted: bool, wrote: bool = T
 def cmd_run(args: argparse.Namespace) -> int:
     scn = load_from_args(args)
     out = prepare_out_dir(args.out if args.out is not None else Path("runs") / scn.name)
-    traj, _, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress)
+    traj, _, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress,
+                                                         record_rate=args.record_rate)
     return _run_exit_code(traj, failures, interrupted)
 
 
@@ -379,7 +403,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     scn = load_from_args(args)
     bounds = load_bounds(args.bounds)
     out = prepare_out_dir(args.out) if args.out is not None else None
-    traj, metrics, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress)
+    traj, metrics, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress,
+                                                               record_rate=args.record_rate)
     if interrupted:
         return _run_exit_code(traj, failures, interrupted, wrote=out is not None)
     if metrics is None:
