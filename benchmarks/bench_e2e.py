@@ -27,6 +27,7 @@ import datetime
 import json
 import multiprocessing
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -45,21 +46,22 @@ from bench_sweep import make_study  # noqa: E402
 # Runs `teleop run` (harness.cli.main) in this fresh process with timers around its phases; prints JSON.
 _CHILD = r"""
 import json, sys, time
-t_start = time.perf_counter()
+t_start, c_start = time.perf_counter(), time.process_time()
 import harness.cli as cli
 from harness import api
 import harness.loop as loop_pkg
-t_imported = time.perf_counter()
-phases = {}
+t_imported, c_imported = time.perf_counter(), time.process_time()
+phases, cpu = {}, {}
 
 def timed(mod, name, key):
     real = getattr(mod, name)
     def wrapper(*a, **k):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         try:
             return real(*a, **k)
         finally:
             phases[key] = phases.get(key, 0.0) + time.perf_counter() - t
+            cpu[key] = cpu.get(key, 0.0) + time.process_time() - c
     setattr(mod, name, wrapper)
 
 timed(loop_pkg, "simulate", "simulate")
@@ -68,36 +70,58 @@ timed(metrics_mod, "compute_metrics", "metrics")
 real_run_scenario = api.run_scenario
 info = {}
 def run_scenario(scn, *a, **k):
-    phases["until_run"] = time.perf_counter() - t_start
-    import harness.output.plots as plots, harness.output.record as record
+    phases["until_run"], cpu["until_run"] = time.perf_counter() - t_start, time.process_time() - c_start
+    t, c = time.perf_counter(), time.process_time()
+    import harness.output.plots as plots, harness.output.record as record  # api imports them anyway
+    phases["output_imports"], cpu["output_imports"] = time.perf_counter() - t, time.process_time() - c
     timed(record, "write_recording", "recording")
     timed(plots, "write_figures", "figures")
     res = real_run_scenario(scn, *a, **k)
     info["loop"] = res.traj.meta["wall_time"]
-    info["build"] = res.traj.meta.get("build_time", 0.0)
     info["steps"] = len(res.traj)
     info["status"] = res.traj.status
     return res
 api.run_scenario = run_scenario
 rc = cli.main(sys.argv[1:])
 phases["total_in_process"] = time.perf_counter() - t_start
-phases["imports"] = t_imported - t_start
-print("E2E-JSON " + json.dumps({"rc": rc, **phases, **info}))
+cpu["total_in_process"] = time.process_time() - c_start
+phases["imports"], cpu["imports"] = t_imported - t_start, c_imported - c_start
+print("E2E-JSON " + json.dumps({"rc": rc, "wall": phases, "cpu": cpu, **info}))
 """
-# Note: importing plots/record inside run_scenario (to wrap them) costs what api would pay there anyway.
-
 
 def e2e_once(args_run: list[str]) -> dict:
+    """One `teleop run` in a fresh process: {"wall": {phase: s}, "cpu": {phase: s}, "loop", "steps", ...};
+    "total" = the whole process (wall from outside; CPU from the OS accounting of the reaped child)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
     res = subprocess.run([sys.executable, "-c", _CHILD, "run", *args_run], capture_output=True, text=True,
                          cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
     wall = time.perf_counter() - t
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     line = [ln for ln in res.stdout.splitlines() if ln.startswith("E2E-JSON ")]
     if not line:
         raise RuntimeError(f"teleop run failed: {res.stdout[-2000:]}{res.stderr[-2000:]}")
     d = json.loads(line[-1][9:])
-    d["wall"] = wall
+    d["wall"]["total"] = wall
+    d["cpu"]["total"] = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     return d
+
+
+KEYS = ["total", "raw", "startup", "simulate", "metrics", "output_imports", "recording", "figures", "rest"]
+LABELS = {"total": "**total (fresh process)**", "raw": "raw mj_step, same physics steps",
+          "startup": "start-up: interpreter, imports, scenario validation",
+          "simulate": "simulate: plant build, numba kernel load, loop, recording geometry",
+          "metrics": "metrics", "output_imports": "imports of rerun + matplotlib (when outputs are written)",
+          "recording": "run.rrd (geometry at the default rate)", "figures": "figures (5 PNGs)",
+          "rest": "rest (config.toml, metrics.json, summary, interpreter exit)"}
+
+
+def _split(d: dict, kind: str) -> dict:
+    x = dict(d[kind])
+    x["startup"] = x["until_run"] + (x["total"] - x["total_in_process"])  # + interpreter start and exit
+    x["rest"] = x["total"] - sum(x.get(k, 0.0) for k in ("startup", "simulate", "metrics", "output_imports",
+                                                           "recording", "figures"))
+    return x
 
 
 def run_table(scenario: str, overrides: list[str], reps: int, out) -> dict:
@@ -111,39 +135,39 @@ def run_table(scenario: str, overrides: list[str], reps: int, out) -> dict:
         for o in overrides:
             cli_args += ["--set", o]
         for _ in range(reps):
+            c0 = time.process_time()
             raw = raw_replay_s(scn, log)
+            raw_cpu = time.process_time() - c0  # includes the plant build of the replay (~10 ms)
             d = e2e_once(cli_args)
-            d["raw"] = raw
-            rows.append(d)
-    keys = ["wall", "raw", "startup", "simulate", "loop", "sim_other", "metrics", "recording", "figures",
-            "rest"]
-    for d in rows:
-        d["startup"] = d["until_run"] + (d["wall"] - d["total_in_process"])  # + interpreter start
-        d["sim_other"] = d["simulate"] - d["loop"]
-        d["rest"] = (d["wall"] - d["startup"] - d["simulate"] - d.get("metrics", 0) - d["recording"]
-                     - d["figures"])
-    med = {k: float(np.median([d.get(k, 0.0) for d in rows])) for k in keys}
-    rng = {k: (min(d.get(k, 0.0) for d in rows), max(d.get(k, 0.0) for d in rows)) for k in keys}
-    ratio = [d["wall"] / d["raw"] for d in rows]
-    fixed = [(d["wall"] - 1.5 * d["raw"]) for d in rows]
-    out(f"`teleop run {scenario}` {' '.join('--set ' + o for o in overrides)} ({rows[0]['steps']} steps, "
-        f"status {rows[0]['status']}), {reps} repetition(s), median [min, max] seconds:\n")
-    out("| phase | seconds | / raw mj_step |")
-    out("|---|---|---|")
-    labels = {"wall": "**total wall (fresh process)**", "raw": "raw mj_step, same physics steps",
-              "startup": "start-up: interpreter, imports, scenario validation",
-              "simulate": "simulate (build, kernel load, loop, geometry)",
-              "loop": "&nbsp;&nbsp;of which the loop",
-              "sim_other": "&nbsp;&nbsp;of which build + numba kernel load + recording geometry",
-              "metrics": "metrics", "recording": "run.rrd (geometry at the default rate)",
-              "figures": "figures (5 PNGs)", "rest": "rest (config.toml, metrics.json, summary, exit)"}
-    for k in keys:
-        lo, hi = rng[k]
-        out(f"| {labels[k]} | {med[k]:.2f} [{lo:.2f}, {hi:.2f}] | {med[k] / med['raw']:.2f}x |")
-    out(f"\nwall / raw per pair: median {np.median(ratio):.2f}x [{min(ratio):.2f}, {max(ratio):.2f}]; "
-        f"goal wall <= 1.5 x raw + 1.5 s: wall - 1.5 x raw = {np.median(fixed):.2f} s "
-        f"[{min(fixed):.2f}, {max(fixed):.2f}]\n")
-    return {"rows": rows, "median": med}
+            w, c = _split(d, "wall"), _split(d, "cpu")
+            w["raw"], c["raw"] = raw, raw_cpu
+            rows.append({"wall": w, "cpu": c, "loop": d["loop"], "steps": d["steps"], "status": d["status"]})
+
+    def stat(kind, k):
+        v = [r[kind].get(k, 0.0) for r in rows]
+        return float(np.median(v)), min(v), max(v)
+
+    out(f"`teleop run {scenario}`{''.join(' --set ' + o for o in overrides)} ({rows[0]['steps']} steps, "
+        f"status {rows[0]['status']}), {reps} repetition(s), seconds, median [min, max]:\n")
+    out("| phase | wall | CPU | CPU / raw CPU |")
+    out("|---|---|---|---|")
+    raw_c = stat("cpu", "raw")[0]
+    for k in KEYS:
+        (wm, wl, wh), (cm, cl, ch) = stat("wall", k), stat("cpu", k)
+        out(f"| {LABELS[k]} | {wm:.2f} [{wl:.2f}, {wh:.2f}] | {cm:.2f} [{cl:.2f}, {ch:.2f}] "
+            f"| {cm / raw_c:.2f}x |")
+        if k == "simulate":
+            lw = [r["loop"] for r in rows]
+            out(f"| &nbsp;&nbsp;of which the loop (wall) | {np.median(lw):.2f} "
+                f"[{min(lw):.2f}, {max(lw):.2f}] | | |")
+    for kind in ("wall", "cpu"):
+        ratio = [r[kind]["total"] / r[kind]["raw"] for r in rows]
+        fixed = [r[kind]["total"] - 1.5 * r[kind]["raw"] for r in rows]
+        out(f"\n{kind}: total / raw per pair {np.median(ratio):.2f}x [{min(ratio):.2f}, {max(ratio):.2f}]; "
+            f"goal total <= 1.5 x raw + 1.5 s: total - 1.5 x raw = {np.median(fixed):.2f} s "
+            f"[{min(fixed):.2f}, {max(fixed):.2f}]")
+    out("")
+    return {"rows": rows}
 
 
 # ---------------------------------------------------------------------------------------------
