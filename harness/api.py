@@ -87,11 +87,14 @@ def stop_on_signals(stop: threading.Event | None) -> Iterator[list[int]]:
 
 
 def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False, *, plant: Any = None,
-                 handle_signals: bool = False, on_chunk: Callable | None = None) -> RunResult:
+                 handle_signals: bool = False, on_chunk: Callable | None = None,
+                 record_rate: float | None = None) -> RunResult:
     """Build the plant, simulate, compute metrics and (if `out`) write every output that can be written:
     config.toml first, then metrics.json, run.rrd and the figures.  A failing output is listed in
     `failures` and the others are still written.  handle_signals: SIGINT/SIGTERM stop the run cleanly;
-    on_chunk: passed to `harness.loop.simulate` (live viewing)."""
+    on_chunk: passed to `harness.loop.simulate` (live viewing).  record_rate: Hz of the 3-D geometry in
+    run.rrd (None = record.DEFAULT_GEOMETRY_RATE, math.inf = every control step); the time series are
+    always written at the control rate."""
     from harness import loop
     from harness.loop import common
     from harness.plant import build_plant
@@ -138,8 +141,10 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
             return p
 
         def write_recording() -> Path:
+            from harness.output.record import DEFAULT_GEOMETRY_RATE
             from harness.output.record import write_recording as write
 
+            traj.meta["geometry_rate"] = DEFAULT_GEOMETRY_RATE if record_rate is None else float(record_rate)
             return write(traj, out / "run.rrd")
 
         def write_figures() -> list[Path]:

@@ -20,6 +20,7 @@ import argparse
 import contextlib
 import importlib
 import json
+import math
 import os
 import sys
 import threading
@@ -144,6 +145,26 @@ def _add_scenario_options(p: argparse.ArgumentParser, *, sim: bool = True) -> No
                         "plant.kind=analytic). Repeatable; applied in order after the shortcut options.")
 
 
+def _record_rate(text: str) -> float:
+    """argparse type of --record-rate: a rate in Hz > 0, or 'full' (every control step)."""
+    if str(text).strip().lower() == "full":
+        return math.inf
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"expected a rate in Hz > 0 or 'full', got {text!r}")
+    return v
+
+
+def _add_record_rate(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--record-rate", metavar="HZ|full", type=_record_rate, default=None,
+                   help="rate of the 3-D geometry (arms, segments, backbone) in run.rrd, Hz > 0, or 'full' "
+                        "for every control step; the time series are always written at the control rate. "
+                        "Default: 100 (chosen by measurement, see README 'Speed').")
+
+
 def _add_out_and_progress(p: argparse.ArgumentParser, out_help: str) -> None:
     p.add_argument("--out", metavar="DIR", type=_path, default=None, help=out_help)
     p.add_argument("--no-progress", action="store_true",
@@ -177,6 +198,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="stream the run to a Rerun viewer while it is simulated: 'native' (the default "
                           "with a bare --view) spawns the viewer, 'web' serves Rerun's web viewer and waits "
                           "for Ctrl-C after the run. run.rrd is written as without it. Default: no viewer.")
+    _add_record_rate(run)
     run.set_defaults(func=cmd_run)
 
     check = sub.add_parser(
@@ -190,6 +212,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="bounds file (required; layout: bounds/paper_mujoco.toml).")
     _add_out_and_progress(check, "also write the run outputs (as 'run' does) into this folder. "
                                  "Default: no files are written.")
+    _add_record_rate(check)
     check.set_defaults(func=cmd_check)
 
     models = sub.add_parser(
@@ -362,12 +385,12 @@ def _print_summary(scn, traj, metrics: dict | None, out: Path | None, written: l
         print(f"  outputs in {out}/: {names or '(none)'}")
 
 
-def _simulate_and_write(scn, out: Path | None, progress: bool, live=None):
+def _simulate_and_write(scn, out: Path | None, progress: bool, live=None, record_rate: float | None = None):
     """Simulate, compute metrics and (if out) write every output (`harness.api.run_scenario`), then print
     the summary.  live: optional harness.output.viewer.LiveView that receives the run chunk by chunk
     while it is simulated.  Returns (traj, metrics or None, output-writing failures, interrupted flag)."""
     api = _import("harness.api")
-    res = api.run_scenario(scn, out, progress, handle_signals=True,
+    res = api.run_scenario(scn, out, progress, handle_signals=True, record_rate=record_rate,
                            on_chunk=live.on_chunk if live is not None else None)
     if live is not None:
         live.finish(res.traj)
@@ -401,7 +424,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     live = _import("harness.output.viewer").LiveView.open(args.view, scn) if args.view else None
     if live is not None and live.url:
         print(f"web viewer: {live.url}", file=sys.stderr)
-    traj, _, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress, live=live)
+    traj, _, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress, live=live,
+                                                         record_rate=args.record_rate)
     rc = _run_exit_code(traj, failures, interrupted)
     if live is not None:
         if live.failed:
@@ -421,7 +445,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     scn = load_from_args(args)
     bounds = load_bounds(args.bounds)
     out = prepare_out_dir(args.out) if args.out is not None else None
-    traj, metrics, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress)
+    traj, metrics, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress,
+                                                               record_rate=args.record_rate)
     if interrupted:
         return _run_exit_code(traj, failures, interrupted, wrote=out is not None)
     if metrics is None:

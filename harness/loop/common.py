@@ -8,6 +8,7 @@ imports neither of them (the dispatch is `harness.loop.simulate`).
 from __future__ import annotations
 
 import threading
+from functools import partial
 
 import numpy as np
 
@@ -135,6 +136,6 @@ def run_meta(scn: Scenario, wall: float) -> dict:
     return {
         "plant": scn.plant.kind, "wall_time": wall, "control_dt": scn.control_dt,
         "master_lengths": scn.plant_master.lengths, "length_range": (lo.tolist(), hi.tolist()),
-        "max_bend": scn.slave.max_bend, "backbone_fn": lambda q2, p=scn.slave: slave_model.backbone(p, q2),
+        "max_bend": scn.slave.max_bend, "backbone_fn": partial(slave_model.backbone, scn.slave),  # picklable
         "master_base": (0.0, 0.0, 0.0), "slave_base": (0.0, 0.0, 0.0), "mujoco_warnings": 0,
     }

@@ -22,9 +22,14 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from harness.loop.trajectory import Trajectory
-from harness.output.scene import cc_backbone
+from harness.output.decimate import envelope
 
 DPI = 130
+# Time-series lines are drawn from their min/max envelope at this many columns per inch of figure
+# width (2 per pixel at DPI): every extremum is kept and the PNG is the same to the eye (compare
+# with FULL_RESOLUTION = True; measured in benchmarks/RESULTS.md), 5-7x fewer points to draw.
+COLUMNS_PER_INCH = 2 * DPI
+FULL_RESOLUTION = False  # True: draw every sample (reference for comparisons)
 _SEC_COLORS = ("tab:green", "tab:purple", "tab:brown")
 
 
@@ -33,6 +38,15 @@ def _figure(nrows: int = 1, figsize=(7.0, 3.6)):
     FigureCanvasAgg(fig)
     axes = fig.subplots(nrows, 1, sharex=True, squeeze=False)[:, 0]
     return fig, axes
+
+
+def _plot_series(ax, t, y, *args, **kwargs):
+    """ax.plot of one time series, decimated to its min/max envelope at display resolution."""
+    t = np.asarray(t, dtype=float).reshape(-1)
+    y = np.asarray(y, dtype=float).reshape(-1)
+    if not FULL_RESOLUTION:
+        t, y = envelope(t, y, int(COLUMNS_PER_INCH * ax.figure.get_figwidth()))
+    return ax.plot(t, y, *args, **kwargs)
 
 
 def _status_note(fig: Figure, traj: Trajectory) -> None:
@@ -51,7 +65,8 @@ def _finish_time_axis(ax, traj: Trajectory) -> None:
 
 
 def _save(fig: Figure, path: Path) -> Path:
-    fig.savefig(path, dpi=DPI)
+    # zlib level 1: the same pixels, ~10 % larger files, ~10 % less figure time (benchmarks/RESULTS.md)
+    fig.savefig(path, dpi=DPI, pil_kwargs={"compress_level": 1})
     return path
 
 
@@ -63,8 +78,8 @@ def fig_e1(traj: Trajectory, path: Path) -> Path:
     fig, (ax,) = _figure()
     e1 = np.asarray(traj.e1, dtype=float).reshape(len(traj), 2)
     m = _marker(traj)
-    ax.plot(traj.t, e1[:, 0], color="tab:blue", marker=m, label="e1 X")
-    ax.plot(traj.t, e1[:, 1], color="tab:orange", marker=m, label="e1 Z")
+    _plot_series(ax, traj.t, e1[:, 0], color="tab:blue", marker=m, label="e1 X")
+    _plot_series(ax, traj.t, e1[:, 1], color="tab:orange", marker=m, label="e1 Z")
     ax.set_title("Master tracking error e1 = x_d - x1 (eq. 11)")
     ax.set_ylabel("e1 [m]")
     _finish_time_axis(ax, traj)
@@ -76,12 +91,14 @@ def fig_e2(traj: Trajectory, path: Path) -> Path:
     fig, (ax,) = _figure()
     e2 = np.asarray(traj.e2, dtype=float).reshape(len(traj), 2)
     m = _marker(traj)
-    ax.plot(traj.t, e2[:, 0], color="tab:blue", marker=m, label="e2 X (analytic x2 of sensed q2)")
-    ax.plot(traj.t, e2[:, 1], color="tab:orange", marker=m, label="e2 Z (analytic x2 of sensed q2)")
+    _plot_series(ax, traj.t, e2[:, 0], color="tab:blue", marker=m, label="e2 X (analytic x2 of sensed q2)")
+    _plot_series(ax, traj.t, e2[:, 1], color="tab:orange", marker=m, label="e2 Z (analytic x2 of sensed q2)")
     if traj.x2_plant is not None:
         ep = np.asarray(traj.e2_plant, dtype=float).reshape(len(traj), 2)
-        ax.plot(traj.t, ep[:, 0], "--", color="tab:cyan", marker=m, label="X, x1 - x2_plant (MuJoCo tip)")
-        ax.plot(traj.t, ep[:, 1], "--", color="tab:red", marker=m, label="Z, x1 - x2_plant (MuJoCo tip)")
+        _plot_series(ax, traj.t, ep[:, 0], "--", color="tab:cyan", marker=m,
+                     label="X, x1 - x2_plant (MuJoCo tip)")
+        _plot_series(ax, traj.t, ep[:, 1], "--", color="tab:red", marker=m,
+                     label="Z, x1 - x2_plant (MuJoCo tip)")
     ax.set_title("Master-slave coordination error e2 = x1 - x2 (eq. 16)")
     ax.set_ylabel("e2 [m]")
     _finish_time_axis(ax, traj)
@@ -91,7 +108,7 @@ def fig_e2(traj: Trajectory, path: Path) -> Path:
 
 def fig_beta(traj: Trajectory, path: Path) -> Path:
     fig, (ax,) = _figure()
-    ax.plot(traj.t, np.asarray(traj.beta, dtype=float).reshape(-1), color="tab:green",
+    _plot_series(ax, traj.t, np.asarray(traj.beta, dtype=float).reshape(-1), color="tab:green",
             marker=_marker(traj), label="beta(q2)")
     ax.axhline(0.0, color="k", lw=0.8)
     ax.set_title("Slave manipulability beta = sqrt(det(J2 J2^T)) (eq. 41)")
@@ -128,8 +145,8 @@ def fig_q2(traj: Trajectory, path: Path) -> Path:
     lr = _length_range(meta)
     max_bend = meta.get("max_bend")
     for i, c in enumerate(_SEC_COLORS):
-        ax_d.plot(traj.t, q2[:, i], color=c, marker=m, label=f"d{i + 1}")
-        ax_k.plot(traj.t, q2[:, 3 + i], color=c, marker=m, label=f"k{i + 1}")
+        _plot_series(ax_d, traj.t, q2[:, i], color=c, marker=m, label=f"d{i + 1}")
+        _plot_series(ax_k, traj.t, q2[:, 3 + i], color=c, marker=m, label=f"k{i + 1}")
         if lr is not None:
             ax_d.axhspan(lr[0][i], lr[1][i], color=c, alpha=0.07)
             for v in (lr[0][i], lr[1][i]):
@@ -137,8 +154,8 @@ def fig_q2(traj: Trajectory, path: Path) -> Path:
         if max_bend is not None and len(traj):
             with np.errstate(divide="ignore", invalid="ignore"):
                 kmax = float(max_bend) / q2[:, i]  # |k_i d_i| <= max_bend
-            ax_k.plot(traj.t, kmax, ls="--", lw=0.8, color=c)
-            ax_k.plot(traj.t, -kmax, ls="--", lw=0.8, color=c)
+            _plot_series(ax_k, traj.t, kmax, ls="--", lw=0.8, color=c)
+            _plot_series(ax_k, traj.t, -kmax, ls="--", lw=0.8, color=c)
     if lr is not None:
         ax_d.plot([], [], "k--", lw=0.8, label="allowed range")
     k = q2[:, 3:][np.isfinite(q2[:, 3:])]
@@ -194,6 +211,8 @@ def _slave_xz(traj: Trajectory, i: int, fn: Callable | None, base: np.ndarray) -
             warnings.warn(f"backbone_fn returned shape {pts.shape}, expected (P, 2)", stacklevel=3)
         except Exception as exc:  # plotting must not kill a run's post-processing
             warnings.warn(f"backbone_fn failed ({exc!r}); using the analytic backbone", stacklevel=3)
+    from harness.output.geometry import cc_backbone
+
     return cc_backbone(q2[None])[0] + base[[0, 2]]
 
 

@@ -42,6 +42,14 @@ from rerun.chunk import RrdReader
 from rerun.encodings import Vec3DBatch
 
 from harness.loop.trajectory import Trajectory
+from harness.output.geometry import (
+    DEFAULT_MASTER_LENGTHS,
+    backbone_points_world,
+    cc_backbone,
+    master_points,
+    task_to_world,
+    world_base,
+)
 from harness.output.scene import (
     C_BACKBONE,
     C_DESIRED,
@@ -52,17 +60,11 @@ from harness.output.scene import (
     C_X2,
     C_Z,
     C_Z2,
-    DEFAULT_MASTER_LENGTHS,
     TIMELINE,
     TRACE_POINT_RADIUS,
-    backbone_points_world,
     box_half_size,
     build_blueprint,
-    cc_backbone,
-    master_points,
-    task_to_world,
     trace_points,
-    world_base,
 )
 
 APP_ID = "octarm_teleop"
@@ -70,6 +72,11 @@ MAX_STATIC_PATH_POINTS = 4000  # the static desired path is decimated to at most
 # `rerun rrd verify` costs ~ rows x points of each LineStrips3D chunk (measured: 20k rows of 25-point
 # strips, 500-row chunks 4.3 s, 100-row chunks 1.1 s); strip chunks are capped at this many points.
 STRIP_POINTS_PER_CHUNK = 2500
+# Rate (Hz) of the 3-D geometry in `teleop run`'s recording (`geometry_rate`; time series stay at the
+# control rate, bit-exact).  Measured on the paper run (benchmarks/RESULTS.md, "End to end"): every
+# step (1 kHz) writes 22 MB, 100 Hz 8.4 MB in about half the time; 50 Hz saves no more (the scalars
+# dominate) and 100 Hz is above a viewer's 60 fps playback.
+DEFAULT_GEOMETRY_RATE = 100.0
 
 def _blocks(n: int, block: int) -> Iterator[slice]:
     for s in range(0, n, block):
@@ -133,6 +140,7 @@ def write_recording(
     recording_id: str | None = None,
     block: int = 500,
     spatial_every: int = 1,
+    geometry_rate: float | None = None,
 ) -> Path:
     """Write `traj` to the Rerun file `path` (parents created) and return the path.
 
@@ -140,7 +148,14 @@ def write_recording(
     `rerun rrd compare` equal). block: rows per chunk (line-strip chunks are further capped at
     STRIP_POINTS_PER_CHUNK points, since `rerun rrd verify` grows with rows x points per chunk).
     spatial_every: log the 3-D scene every k-th step (time series are always full rate).
+    geometry_rate: Hz, if given (else traj.meta["geometry_rate"], if set): log the 3-D scene at (at
+    least) this rate instead, i.e. every `geometry_every(traj, rate)`-th step (the final step is always
+    logged; math.inf = every step).  `harness.api.run_scenario` sets DEFAULT_GEOMETRY_RATE.
     """
+    if geometry_rate is None:
+        geometry_rate = (traj.meta or {}).get("geometry_rate")
+    if geometry_rate is not None:
+        spatial_every = geometry_every(traj, geometry_rate)
     block, spatial_every = int(block), int(spatial_every)
     if block < 1 or spatial_every < 1:
         raise ValueError(f"block ({block}) and spatial_every ({spatial_every}) must be >= 1")
@@ -164,6 +179,20 @@ def write_recording(
     finally:
         rec.disconnect()  # completes the file
     return path
+
+
+def geometry_every(traj: Trajectory, rate: float) -> int:
+    """Steps between logged 3-D scenes for a display rate `rate` (Hz, > 0): floor(1 / (rate dt)) >= 1,
+    so the logged rate is >= `rate`; dt = traj.meta["control_dt"], else the median step of traj.t."""
+    rate = float(rate)
+    if not rate > 0:
+        raise ValueError(f"geometry_rate = {rate}: must be > 0 Hz")
+    dt = (traj.meta or {}).get("control_dt")
+    if dt is None:
+        dt = float(np.median(np.diff(traj.t))) if len(traj) > 1 else 0.0
+    if not (np.isfinite(dt) and dt > 0) or not np.isfinite(rate):
+        return 1
+    return max(1, int(np.floor(1.0 / (rate * float(dt)) + 1e-9)))
 
 
 def log_static(rec: rr.RecordingStream, traj: Trajectory, master_base, slave_base) -> None:
@@ -364,4 +393,5 @@ def read_series(path: str | Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
     return t_ns[order] / 1e9, values[order]
 
 
-__all__ = ["APP_ID", "TIMELINE", "cc_backbone", "read_series", "write_recording"]  # (geometry: scene)
+__all__ = ["APP_ID", "DEFAULT_GEOMETRY_RATE", "TIMELINE", "cc_backbone", "geometry_every", "read_series",
+           "write_recording"]  # (scene geometry and blueprint: harness.output.scene)

@@ -27,7 +27,7 @@ import numpy as np
 import rerun as rr
 
 from harness.loop.trajectory import Trajectory
-from harness.output import record, scene
+from harness.output import geometry, record, scene
 
 VIEW_MODES = ("native", "web")
 DESIRED_PATH_POINTS = 400
@@ -85,7 +85,7 @@ class LiveView:
             if self._first is None:
                 self._first = part
                 self._start(part)
-            mb, sb = scene.world_base(part.meta, "master_base"), scene.world_base(part.meta, "slave_base")
+            mb, sb = (geometry.world_base(part.meta, key) for key in ("master_base", "slave_base"))
             record.log_series(self.rec, part, 500)
             record.log_spatial(self.rec, part, mb, sb, 500, 1)
             self.chunks += 1
@@ -96,8 +96,8 @@ class LiveView:
     def _start(self, part: Trajectory) -> None:
         framing = self._with_desired_path(part)
         self.rec.send_blueprint(scene.build_blueprint(framing))
-        record.log_static(self.rec, framing, scene.world_base(part.meta, "master_base"),
-                           scene.world_base(part.meta, "slave_base"))
+        record.log_static(self.rec, framing, geometry.world_base(part.meta, "master_base"),
+                           geometry.world_base(part.meta, "slave_base"))
         self.rec.log("status", rr.TextDocument("# Run status\n\n* status: **running**\n",
                                                media_type=rr.MediaType.MARKDOWN), static=True)
 
@@ -124,7 +124,7 @@ class LiveView:
         if self._first is None or self.failed:
             return
         try:
-            mb, sb = scene.world_base(traj.meta, "master_base"), scene.world_base(traj.meta, "slave_base")
+            mb, sb = (geometry.world_base(traj.meta, key) for key in ("master_base", "slave_base"))
             record.log_static(self.rec, traj, mb, sb)
             self.rec.flush()
         except Exception as e:  # noqa: BLE001

@@ -1,0 +1,58 @@
+"""Display-resolution decimation of time series (numpy only; used by `plots`).
+
+A line plot of n >> width samples draws many samples into each pixel column; what the eye sees in a
+column is the vertical extent [min, max] of the samples in it and the joins to the neighbouring
+columns.  `envelope` keeps exactly those samples: per column of equal time width, the first, the
+minimum, the maximum and the last sample (in time order), plus every non-finite sample (a NaN
+breaks a matplotlib line, so the gaps stay where they were).  Every extremum of the full series is
+kept: the global min/max, and each column's min/max, are samples of the output.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def envelope_indices(t: np.ndarray, y: np.ndarray, n_columns: int) -> np.ndarray:
+    """Sorted indices of the samples of (t, y) that `envelope` keeps.
+
+    t: (n,) non-decreasing sample times (any unit); y: (n,) values; n_columns >= 1: number of equal
+    time bins over [t[0], t[-1]] (use at least the plot's width in pixels).  Returns (m,) int64
+    indices, m <= 4 n_columns + (number of non-finite y), all of range(n) when n <= 4 n_columns.
+    """
+    t = np.asarray(t, dtype=float).reshape(-1)
+    y = np.asarray(y, dtype=float).reshape(-1)
+    n, n_columns = t.shape[0], int(n_columns)
+    if y.shape[0] != n:
+        raise ValueError(f"t has {n} samples, y has {y.shape[0]}")
+    if n_columns < 1:
+        raise ValueError(f"n_columns = {n_columns}: must be >= 1")
+    if n <= 4 * n_columns:
+        return np.arange(n)
+    span = t[-1] - t[0]
+    if not np.isfinite(span) or span <= 0:
+        col = np.zeros(n, dtype=np.int64)
+    else:
+        col = np.minimum(((t - t[0]) * (n_columns / span)).astype(np.int64), n_columns - 1)
+    if np.any(np.diff(col) < 0):
+        raise ValueError("t must be non-decreasing")
+    starts = np.flatnonzero(np.r_[True, col[1:] != col[:-1]])  # first sample of each non-empty column
+    ends = np.r_[starts[1:], n] - 1  # last sample of each column
+    finite = np.isfinite(y)
+    # argmin / argmax per column: sort by (column, value); non-finite values never win
+    lo_key = np.where(finite, y, np.inf)
+    hi_key = np.where(finite, y, -np.inf)
+    by_lo = np.lexsort((np.arange(n), lo_key, col))  # ties: earliest sample
+    by_hi = np.lexsort((-np.arange(n), hi_key, col))  # ties: earliest sample (last of the reversed)
+    keep = np.concatenate([starts, ends, by_lo[starts], by_hi[ends], np.flatnonzero(~finite)])
+    return np.unique(keep)
+
+
+def envelope(t: np.ndarray, y: np.ndarray, n_columns: int) -> tuple[np.ndarray, np.ndarray]:
+    """Min/max envelope of the series (t, y) at `n_columns` columns: (t_kept (m,), y_kept (m,)), the
+    samples of `envelope_indices` in time order (see the module docstring)."""
+    idx = envelope_indices(t, y, n_columns)
+    return np.asarray(t).reshape(-1)[idx], np.asarray(y).reshape(-1)[idx]
+
+
+__all__ = ["envelope", "envelope_indices"]
