@@ -113,7 +113,8 @@ def add_environment(spec: mujoco.MjSpec, env: EnvironmentConfig, invweight: dict
     tip = spec.body("octarm_tip_body")
     r = float(spec.geom(arm_geoms[0][0]).size[0])
     tip.add_geom(name="octarm_tip_geom", type=mujoco.mjtGeom.mjGEOM_SPHERE,
-                 size=[TIP_RADIUS_FACTOR * r, 0, 0], contype=0, conaffinity=0, density=0.0, group=2, rgba=[0.9, 0.2, 0.2, 1.0])
+                 size=[TIP_RADIUS_FACTOR * r, 0, 0], contype=0, conaffinity=0, density=0.0, group=2,
+                 rgba=[0.9, 0.2, 0.2, 1.0])
     geoms = list(arm_geoms) + [("octarm_tip_geom", "octarm_tip_body")]
     for obj in env.objects:
         oname = _add_object(spec, obj, base)
@@ -137,7 +138,8 @@ def contact_map(m: mujoco.MjModel) -> ContactMap:
     names = ("tip_contact_net", "arm_contact_net", "arm_contact_min", "arm_contact_pts")
     adr = np.array([m.sensor_adr[m.sensor(n).id] for n in names], dtype=np.int64)
     obj = [g for g in range(m.ngeom) if m.geom(g).name.startswith("env_")]
-    arm = sorted({int(m.pair_geom1[p]) for p in range(m.npair)})
+    paired = {int(m.pair_geom1[p]) for p in range(m.npair)} | {int(m.pair_geom2[p]) for p in range(m.npair)}
+    arm = sorted(paired - set(obj))  # MuJoCo may store either geom of a pair first
     return ContactMap(adr=adr, object_geoms=np.array(obj, dtype=np.int64), arm_geoms=np.array(arm, np.int64),
                       tip_body=int(m.body("octarm_tip_body").id))
 

@@ -356,7 +356,8 @@ def build_spec(master: MasterParams, slave: SlaveParams, plant: PlantConfig, *,
 
 
 def build_model(master: MasterParams, slave: SlaveParams, plant: PlantConfig, *,
-                scene_xml: str | os.PathLike | None = None, environment=None) -> tuple[mujoco.MjModel, ChainMap]:
+                scene_xml: str | os.PathLike | None = None,
+                environment=None) -> tuple[mujoco.MjModel, ChainMap]:
     """Compiled plant model and its ``ChainMap`` (addresses + constant maps); see ``build_spec``.
     environment: an `EnvironmentConfig` whose objects are added (`harness.plant.environment`)."""
     spec, N, layout, joint_names, act_names, stiff, arm, tip_mass, kp, kv = _build(master, slave, plant,
