@@ -38,6 +38,7 @@ from rerun.chunk import RrdReader
 from rerun.encodings import Vec3DBatch
 
 from harness.loop.trajectory import Trajectory
+from harness.output.record_contact import force_series, has_interaction, log_contacts
 
 APP_ID = "octarm_teleop"
 TIMELINE = "sim_time"
@@ -164,6 +165,8 @@ def _series(traj: Trajectory) -> list[tuple[str, np.ndarray, list[str], list[tup
         ("plots/T1", traj.T1, ["T1 a", "T1 b"], [_C_X, _C_Z]),
         ("plots/T2", traj.T2, ["T2 d1", "T2 d2", "T2 d3", "T2 k1", "T2 k2", "T2 k3"], sec + sec),
     ]
+    if has_interaction(traj):
+        out += force_series(traj)
     return [(e, np.asarray(v, dtype=np.float64).reshape(len(traj), len(nm)), nm, c) for e, v, nm, c in out]
 
 
@@ -209,6 +212,8 @@ def build_blueprint(traj: Trajectory) -> rrb.Blueprint:
                 ts(origin="plots/q2", name="q2: d (m), k (1/m)"),
                 rrb.Vertical(ts(origin="plots/T1", name="T1 [N m]"),
                              ts(origin="plots/T2", name="T2 [N, N m^2]"), name="Torques"),
+                *([ts(origin="plots/forces", name="Forces [N]: true vs to the law")] if has_interaction(traj)
+                  else []),
                 rrb.TextDocumentView(origin="status", name="Run status"),
             ),
             column_shares=[1, 1],
@@ -263,6 +268,8 @@ def write_recording(
         if n:
             _log_series(rec, traj, block)
             _log_spatial(rec, traj, master_base, slave_base, block, spatial_every)
+            if has_interaction(traj):
+                log_contacts(rec, traj, TIMELINE, master_base)
     finally:
         rec.disconnect()  # completes the file
     return path
