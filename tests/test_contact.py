@@ -229,3 +229,19 @@ def test_contact_divergence_is_reported_with_partial_outputs():
     assert 500 < len(tr) < scn.n_steps
     metrics = compute_metrics(tr, scn)
     assert metrics["status"] == "diverged" and metrics["contact_force_peak"] > 10.0
+
+
+def test_contact_outputs_forces_figure_and_recording(exact_run, tmp_path):
+    """forces.png is written for runs with interaction; the recording holds the force series (true and
+    to-the-law F2 read back equal the trajectory's) and the contact arrows."""
+    from harness.output.plots import write_figures
+    from harness.output.record import read_series, write_recording
+
+    scn, tr = exact_run
+    names = [p.name for p in write_figures(tr, tmp_path)]
+    assert names[-1] == "forces.png" and (tmp_path / "forces.png").stat().st_size > 10_000
+    path = write_recording(tr, tmp_path / "run.rrd")
+    t, v = read_series(path, "plots/forces/F2")
+    assert len(t) == len(tr)
+    np.testing.assert_allclose(v[:, 1], tr.F_true[:, 3])
+    assert b"world/contact/forces" in path.read_bytes()
