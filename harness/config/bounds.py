@@ -20,7 +20,8 @@ which `harness.loop.metrics` reports for e.g. e2_plant_* on the analytic plant o
 the transient) is a violation ("not measured"), as is an infinite or non-numeric measured value.
 
 Metric names (from `harness.loop.metrics.compute_metrics`): e1_rms, e1_max, e2_rms, e2_max, e2_plant_rms,
-e2_plant_max, beta_min, mujoco_warnings (int), status (str).
+e2_plant_max, beta_min, deN_rms, range_violation, the contact metrics (contact_force_peak,
+contact_force_rms, penetration_max, contact_time, force_tracking_rms), mujoco_warnings (int), status (str).
 """
 
 from __future__ import annotations
@@ -49,6 +50,16 @@ NUMERIC_BOUNDS: dict[str, tuple[str, str, str, str]] = {
     "range_violation_max": ("range_violation", "max", "",
                             "largest excursion of section lengths (m) / bend angles (rad) "
                             "outside their range"),
+    # contact scenarios (harness.loop.metrics.contact_metrics)
+    "contact_force_peak_max": ("contact_force_peak", "max", "N",
+                               "peak |true F2| (slave tip contact + constant)"),
+    "contact_force_rms_max": ("contact_force_rms", "max", "N", "RMS |true F2| after the transient"),
+    "contact_force_rms_min": ("contact_force_rms", "min", "N",
+                              "RMS |true F2| after the transient (contact held)"),
+    "penetration_max_max": ("penetration_max", "max", "m", "max penetration of the arm into an object"),
+    "contact_time_min": ("contact_time", "min", "s", "time with any arm contact"),
+    "force_tracking_rms_max": ("force_tracking_rms", "max", "N",
+                               "RMS |F2 given to the law - true F2| after the transient"),
 }
 FLAG_BOUNDS: dict[str, str] = {
     "no_mujoco_warnings": "mujoco_warnings must be 0",
@@ -69,6 +80,12 @@ class Bounds:
     beta_min_min: float | None = None
     deN_rms_max: float | None = None
     range_violation_max: float | None = None
+    contact_force_peak_max: float | None = None
+    contact_force_rms_max: float | None = None
+    contact_force_rms_min: float | None = None
+    penetration_max_max: float | None = None
+    contact_time_min: float | None = None
+    force_tracking_rms_max: float | None = None
     no_mujoco_warnings: bool = False
     status_ok: bool = True
     description: str = ""

@@ -49,6 +49,7 @@ import numpy as np
 from controllers.params import MasterParams, SlaveParams, SubtaskSpec
 from harness.config.errors import ConfigError, short_repr
 from harness.config.scenario import (
+    EnvironmentConfig,
     PlantConfig,
     Scenario,
     TrajectoryConfig,
@@ -63,6 +64,7 @@ from harness.config.schema import (
     SECTIONS,
     SLAVE,
     SUBTASK,
+    TABLE_KEYS,
     TOP,
     as_table,
     build_section,
@@ -190,9 +192,34 @@ def _cross_checks(scn: Scenario) -> None:
                     "initial.slave_q2", list(q2),
                     f"bend |k{i + 1} d{i + 1}| = {abs(k[i] * d[i]):g} rad exceeds the plant slave "
                     f"max_bend = {ps.max_bend:g} rad")
+    _contact_checks(scn)
     _check_reach(scn)
     if q2 is None:
         _check_auto_slave_start(scn)
+
+
+def _contact_checks(scn: Scenario) -> None:
+    """Environment, force sensing and operator (the plant checks object/arm intersection at t = 0)."""
+    fs, env, op = scn.sensing.force, scn.environment, scn.operator
+    ok, ratio = _is_multiple(fs.delay, scn.control_dt)
+    if not ok or not fs.delay < scn.duration:
+        raise ConfigError.field("sensing.force.delay", fs.delay, "must be >= 0, < duration and an integer "
+                                f"multiple of control_dt = {scn.control_dt:g} s (ratio {ratio:.12g})")
+    if fs.cutoff is not None and fs.cutoff * scn.duration * 2.0 * math.pi <= 1.0:
+        raise ConfigError.field("sensing.force.cutoff", fs.cutoff, "is slower than the run: the filter time "
+                                f"constant 1/(2 pi cutoff) must be < duration = {scn.duration:g} s")
+    if fs.cutoff is not None and fs.cutoff >= 0.5 / scn.control_dt:
+        raise ConfigError.field("sensing.force.cutoff", fs.cutoff,
+                                f"must be < the control Nyquist frequency 1/(2 control_dt) = "
+                                f"{0.5 / scn.control_dt:g} Hz")
+    needs = [("environment.objects", bool(env.objects)), ("operator.enabled", op.enabled),
+             ("sensing.force.mode", fs.mode == "sensed")]
+    for key, used in needs:
+        if used and scn.plant.kind != "mujoco":
+            raise ConfigError(f"{key}: requires plant.kind = 'mujoco' (got {scn.plant.kind!r})", path=key)
+    names = [o.name for o in env.objects]
+    if len(set(names)) != len(names):
+        raise ConfigError.field("environment.objects", names, "object names must be distinct")
 
 
 def _check_auto_slave_start(scn: Scenario) -> None:
@@ -323,6 +350,9 @@ def _scenario_from_dict(raw: Mapping, default_name: str | None) -> Scenario:
     defaults = Scenario()
     check_keys(raw, "", list(TOP) + list(SECTIONS))
     top = read_fields({k: v for k, v in raw.items() if k in TOP}, "", TOP, defaults)
+    for k in TABLE_KEYS:  # table-valued top-level keys: an absent table is read as empty (its defaults)
+        if k not in raw:
+            top[k] = TOP[k](k, {})
     if "name" not in raw and default_name:
         top["name"] = default_name
     if "transient" not in raw and top["duration"] <= defaults.transient:
@@ -369,6 +399,9 @@ def _scenario_from_dict(raw: Mapping, default_name: str | None) -> Scenario:
 def _to_toml_value(v: Any) -> Any:
     if v is None:
         return "none"
+    if isinstance(v, EnvironmentConfig):  # named objects: [environment.objects.<name>]
+        return {"objects": {o.name: {f.name: _to_toml_value(getattr(o, f.name)) for f in fields(o)
+                                     if f.name != "name"} for o in v.objects}}
     if is_dataclass(v) and not isinstance(v, type):
         return {f.name: _to_toml_value(getattr(v, f.name)) for f in fields(v)}
     if isinstance(v, (list, tuple)):

@@ -16,6 +16,8 @@ from controllers.params import Gains, MasterParams, SlaveParams, SubtaskSpec
 PLANTS = ("mujoco", "analytic")
 ACTUATIONS = ("servo", "torque")
 INTEGRATORS = ("implicitfast", "implicit", "euler", "rk4")
+ENV_KINDS = ("plane", "box", "sphere")
+FORCE_MODES = ("exact", "sensed", "ignored")
 
 
 @dataclass(frozen=True)
@@ -85,6 +87,66 @@ class ControllerConfig:
 
 
 @dataclass(frozen=True)
+class EnvObject:
+    """One object of the environment the slave can touch (MuJoCo plant), in the slave's task plane:
+    coordinates [X, Z] in metres relative to the Octarm base.  Contact is frictionless (condim 1) and
+    linear: normal force = stiffness * penetration + damping (harness.plant.environment maps these to
+    MuJoCo solref/solimp).  `plane`: infinite wall through `position` with unit `normal` pointing toward
+    the arm (the free side); `box`: centre `position`, half sizes `size` [X, Z], rotated by `angle` about
+    +y; `sphere`: centre `position`, radius size[0]."""
+
+    name: str = "wall"
+    kind: str = "plane"  # "plane" | "box" | "sphere"
+    position: tuple[float, float] = (0.0, 1.2)  # m, slave task frame [X, Z]
+    normal: tuple[float, float] = (0.0, -1.0)  # plane only: direction toward the free side (normalised)
+    size: tuple[float, float] = (0.05, 0.05)  # m, box half sizes [X, Z]; sphere radius = size[0]
+    angle: float = 0.0  # rad, box rotation about +y
+    stiffness: float = 1.0e4  # N/m, normal contact stiffness, > 0
+    damping_ratio: float = 1.0  # critical-damping fraction against the touching body's mass, >= 0
+
+
+@dataclass(frozen=True)
+class EnvironmentConfig:
+    """Objects the slave's segments and tip can touch (none = the paper's free-space scenario)."""
+
+    objects: tuple[EnvObject, ...] = ()
+
+
+@dataclass(frozen=True)
+class ForceSensingConfig:
+    """What the controller gets as F = [F1, F2] in the laws (13), (17).  `exact`: the plant's true
+    interaction forces (operator force at the master handle, constant + contact force at the slave tip);
+    `sensed`: the same through noise (std, N, per component, seeded) -> first-order low-pass (cutoff
+    Hz; none = no filter) -> pure delay (s, multiple of control_dt); `ignored`: F = 0 in the laws."""
+
+    mode: str = "exact"  # "exact" | "sensed" | "ignored"
+    noise_std: float = 0.0  # N, white noise per component (sensed mode)
+    cutoff: float | None = None  # Hz, first-order low-pass cutoff; None = unfiltered (sensed mode)
+    delay: float = 0.0  # s, multiple of control_dt (sensed mode)
+
+
+@dataclass(frozen=True)
+class SensingConfig:
+    force: ForceSensingConfig = field(default_factory=ForceSensingConfig)
+
+
+@dataclass(frozen=True)
+class OperatorConfig:
+    """The operator's hand on the master handle (MuJoCo plant): a point mass `mass` coupled to the
+    master tip by a grip spring-damper (grip_stiffness, grip_damping) and pulled toward the scripted
+    target by the arm's spring-damper (stiffness, damping).  targets = ((t, X, Z), ...): piecewise-linear
+    target in the master task frame (s, m), held constant outside; empty = the initial tip position."""
+
+    enabled: bool = False
+    mass: float = 0.5  # kg, hand mass
+    stiffness: float = 200.0  # N/m, arm stiffness toward the target
+    damping: float = 20.0  # N s/m, arm damping (absolute hand velocity)
+    grip_stiffness: float = 2000.0  # N/m, hand-handle coupling
+    grip_damping: float = 40.0  # N s/m, hand-handle coupling
+    targets: tuple[tuple[float, float, float], ...] = ()  # (t s, X m, Z m), times increasing
+
+
+@dataclass(frozen=True)
 class Scenario:
     """One fully resolved run."""
 
@@ -105,6 +167,9 @@ class Scenario:
     continuous_control: bool = False  # analytic plant only: evaluate the control law in every RK4 stage
     faults: FaultConfig = field(default_factory=FaultConfig)  # deliberate faults (testing bounds)
     controller: ControllerConfig = field(default_factory=ControllerConfig)  # which control law runs
+    environment: EnvironmentConfig = field(default_factory=EnvironmentConfig)  # contact objects (mujoco)
+    sensing: SensingConfig = field(default_factory=SensingConfig)  # force sensing for the laws
+    operator: OperatorConfig = field(default_factory=OperatorConfig)  # operator hand on the master
 
     @property
     def plant_master(self) -> MasterParams:

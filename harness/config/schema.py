@@ -18,12 +18,19 @@ from controllers.params import Gains, MasterParams, ParameterError, SlaveParams,
 from harness.config.errors import ConfigError, short_repr
 from harness.config.scenario import (
     ACTUATIONS,
+    ENV_KINDS,
+    FORCE_MODES,
     INTEGRATORS,
     PLANTS,
     ControllerConfig,
+    EnvironmentConfig,
+    EnvObject,
     FaultConfig,
+    ForceSensingConfig,
     InitialState,
+    OperatorConfig,
     PlantConfig,
+    SensingConfig,
     TrajectoryConfig,
 )
 
@@ -305,6 +312,66 @@ def _controller(path: str, v: Any) -> ControllerConfig:
 
 
 # ---------------------------------------------------------------------------------------------
+# table-valued top-level keys: [environment], [sensing.force], [operator] (contact issue)
+# ---------------------------------------------------------------------------------------------
+ENV_OBJECT: dict[str, Checker] = {
+    "name": _name, "kind": _choice(ENV_KINDS), "position": _vec(2), "normal": _vec(2),
+    "size": _vec(2, POSITIVE), "angle": _num(), "stiffness": _num(POSITIVE), "damping_ratio": _num(NONNEG),
+}
+FORCE_SENSING: dict[str, Checker] = {
+    "mode": _choice(FORCE_MODES), "noise_std": _num(NONNEG),
+    "cutoff": _optional(_num(POSITIVE), allow_false=True), "delay": _num(NONNEG),
+}
+
+
+def _targets(path: str, v: Any) -> tuple[tuple[float, float, float], ...]:
+    desc = "an array of [t, X, Z] triples (s, m, m) with strictly increasing t >= 0"
+    if not isinstance(v, (list, tuple)):
+        raise ConfigError.field(path, v, f"must be {desc} (got {type_name(v)})")
+    rows = tuple(_vec(3)(path, r) for r in v)
+    ts = [r[0] for r in rows]
+    if any(t < 0 for t in ts) or any(b <= a for a, b in zip(ts, ts[1:], strict=False)):
+        raise ConfigError.field(path, v, f"must be {desc}")
+    return rows
+
+
+OPERATOR: dict[str, Checker] = {
+    "enabled": _bool, "mass": _num(POSITIVE), "stiffness": _num(NONNEG), "damping": _num(NONNEG),
+    "grip_stiffness": _num(POSITIVE), "grip_damping": _num(NONNEG), "targets": _targets,
+}
+
+
+def _environment(path: str, v: Any) -> EnvironmentConfig:
+    """[environment] with [environment.objects.<name>] tables (named, so that a dotted override such as
+    environment.objects.wall.stiffness=1e5 reaches one object)."""
+    tbl = as_table(path, v)
+    check_keys(tbl, path, ["objects"])
+    objs = as_table(f"{path}.objects", tbl.get("objects", {}))
+    out = []
+    for name, ov in objs.items():
+        p = f"{path}.objects.{name}"
+        _name(p, name)
+        spec = {k: c for k, c in ENV_OBJECT.items() if k != "name"}
+        kw = read_fields(as_table(p, ov), p, spec, EnvObject())
+        if kw["kind"] == "plane" and math.hypot(*kw["normal"]) < 1e-9:
+            raise ConfigError.field(f"{p}.normal", list(kw["normal"]), "must be a non-zero vector")
+        out.append(EnvObject(name=name, **kw))
+    return EnvironmentConfig(objects=tuple(out))
+
+
+def _sensing(path: str, v: Any) -> SensingConfig:
+    tbl = as_table(path, v)
+    check_keys(tbl, path, ["force"])
+    p = f"{path}.force"
+    return SensingConfig(force=ForceSensingConfig(**read_fields(as_table(p, tbl.get("force", {})), p,
+                                                                FORCE_SENSING, ForceSensingConfig())))
+
+
+def _operator(path: str, v: Any) -> OperatorConfig:
+    return OperatorConfig(**read_fields(as_table(path, v), path, OPERATOR, OperatorConfig()))
+
+
+# ---------------------------------------------------------------------------------------------
 # schema: section -> {field: checker}; every dataclass field must appear (tests check this)
 # ---------------------------------------------------------------------------------------------
 TOP: dict[str, Checker] = {
@@ -317,7 +384,11 @@ TOP: dict[str, Checker] = {
     "continuous_control": _bool,
     "interaction_forces": _matrix(2, 2),
     "controller": _controller,
+    "environment": _environment,
+    "sensing": _sensing,
+    "operator": _operator,
 }
+TABLE_KEYS = ("environment", "sensing", "operator")  # top-level keys whose value is a table
 
 GAINS: dict[str, Checker] = {f.name: _num(POSITIVE) for f in fields(Gains)}
 
@@ -396,6 +467,7 @@ SECTIONS: dict[str, tuple[type, dict[str, Checker]]] = {
 def schema_paths() -> list[str]:
     """Every settable dotted key (used for suggestions and tests)."""
     out = list(TOP)
+    out += [f"sensing.force.{k}" for k in FORCE_SENSING] + [f"operator.{k}" for k in OPERATOR]
     for sec, (_, spec) in SECTIONS.items():
         out += [f"{sec}.{k}" for k in spec]
     for sub, spec in (("master", MASTER), ("slave", SLAVE)):

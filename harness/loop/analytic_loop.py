@@ -22,7 +22,7 @@ from harness.loop.common import (
     set_outcome,
 )
 from harness.loop.fast import K
-from harness.loop.trajectory import ROW_WIDTH, Trajectory
+from harness.loop.trajectory import ROW_SLICES, ROW_WIDTH, Trajectory
 from harness.plant.analytic import AnalyticPlant
 
 
@@ -38,6 +38,10 @@ def simulate_analytic(scn: Scenario, progress: bool = False,
     noise, scale = noise_table(scn, n)
     a = common_arrays(scn)
     rows = np.zeros((n, ROW_WIDTH))
+    # constant interaction forces: the plant feels a["F"]; the laws get them unless ignored
+    Fc = np.zeros(4) if scn.sensing.force.mode == "ignored" else a["F"]
+    rows[:, ROW_SLICES["F_true"]] = a["F"]
+    rows[:, ROW_SLICES["F_sensed"]] = Fc
     mpk_p = master_model.packed(plant.master)
     spk_p = plant.slave.packed()
     nsub = max(1, scn.substeps)
@@ -50,7 +54,7 @@ def simulate_analytic(scn: Scenario, progress: bool = False,
         while k < n:
             k1 = min(n, k + CHUNK)
             status, m = K.analytic_chunk(state, k, k1, scn.control_dt, nsub, scn.continuous_control,
-                                         a["traj"], noise, scale, a["F"], a["mpk_c"], a["spk_c"], mpk_p,
+                                         a["traj"], noise, scale, Fc, a["F"], a["mpk_c"], a["spk_c"], mpk_p,
                                          spk_p, a["nodes"], a["weights"], a["gains"], a["spec"], rows[k:k1])
             done = k + m
             if bar is not None:

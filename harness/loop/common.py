@@ -19,6 +19,8 @@ from controllers.subtasks import pack_subtask
 from harness.config.scenario import Scenario
 from harness.loop.fast import K
 from harness.loop.trajectory import Trajectory
+from harness.plant.initial import InitialStateError
+from harness.plant.initial import initial_state as _initial_state
 
 STOP = threading.Event()  # set from a signal handler to stop a run cleanly
 CHUNK = 250  # control steps per compiled call between progress/interrupt checks
@@ -65,41 +67,12 @@ def desired_at(scn: Scenario, t: float) -> tuple[np.ndarray, np.ndarray, np.ndar
 
 
 def initial_state(scn: Scenario) -> np.ndarray:
-    """[q1, dq1, q2, dq2] (16,) at t = 0, both arms at rest.
-
-    Master: inverse kinematics of x_d(0) + initial.master_offset (plant master geometry).
-    Slave: initial.slave_q2, or equal section lengths with curvature initial.slave_curvature each,
-    the length chosen (Newton on Z) so that the tip height equals the master tip's.
-    """
-    xd0, _, _ = desired_at(scn, 0.0)
-    x0 = xd0 + np.asarray(scn.initial.master_offset, dtype=float)
-    pm = scn.plant_master
+    """[q1, dq1, q2, dq2] (16,) at t = 0, both arms at rest (`harness.plant.initial.initial_state`);
+    raises SimulationError when the start is impossible."""
     try:
-        q1 = master_model.ik(pm, x0, scn.initial.master_elbow)
-    except ValueError as exc:
-        raise SimulationError(f"initial.master_offset: {exc}") from None
-    x1 = master_model.fk(pm, q1)
-    ps = scn.plant_slave
-    if scn.initial.slave_q2 is not None:
-        q2 = np.asarray(scn.initial.slave_q2, dtype=float)
-    else:
-        kappa = scn.initial.slave_curvature
-        d = float(np.mean(ps.rest_lengths))
-        for _ in range(50):
-            q2 = np.array([d, d, d, kappa, kappa, kappa])
-            z = slave_model.tip_position(ps, q2)[1]
-            dz = slave_model.jacobian(ps, q2)[1, :3].sum()
-            step = (x1[1] - z) / dz
-            d += step
-            if abs(step) < 1e-14:
-                break
-        q2 = np.array([d, d, d, kappa, kappa, kappa])
-        lo, hi = ps.length_range
-        if np.any(q2[:3] < lo - 1e-12) or np.any(q2[:3] > hi + 1e-12):
-            raise SimulationError(
-                f"trajectory.center: the slave cannot start under the master tip (Z = {x1[1]:.3f} m "
-                f"needs section lengths {d:.3f} m outside [{lo.min():.3f}, {hi.max():.3f}] m)")
-    return np.concatenate([q1, np.zeros(2), q2, np.zeros(6)])
+        return _initial_state(scn)
+    except InitialStateError as exc:
+        raise SimulationError(str(exc)) from None
 
 
 def noise_table(scn: Scenario, n: int) -> tuple[np.ndarray, float]:

@@ -184,13 +184,14 @@ def desired(traj, t, xd, dxd, ddxd):
     ddxd[1] = -traj[3] * w * w * c
 
 
-def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale, F,
+def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale, F, Fp,
                    mpk_c, spk_c, mpk_p, spk_p, nodes, weights, gains, spec, rows):
     """Run control steps k0..k1-1 of the closed loop on the analytic plant, in place on state (16,).
 
     Controller uses the nominal packed params (mpk_c, spk_c), the plant its own (mpk_p, spk_p).
     Zero-order hold of the commands over the control step (nsub RK4 steps of dt/nsub) unless
     `continuous`, where both laws are evaluated in every RK4 stage on the true state (no noise).
+    F (4,) = [F1, F2] the laws get (13), (17); Fp (4,) the interaction forces the plant feels (1).
     Returns (status, number of completed steps)."""
     T1 = np.zeros(2)
     T2 = np.zeros(6)
@@ -223,7 +224,7 @@ def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale
                                   T1, T2, u2, deN, minfo, sinfo)
                 if st != 0:
                     return st, k - k0 + 1
-            if not plant_accel(mpk_p, spk_p, nodes, weights, state, T1, T2, F, k1s):
+            if not plant_accel(mpk_p, spk_p, nodes, weights, state, T1, T2, Fp, k1s):
                 return 1, k - k0 + 1
             for i in range(16):
                 tmp[i] = state[i] + 0.5 * h * k1s[i]
@@ -231,14 +232,14 @@ def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale
                 desired(traj, ts + 0.5 * h, xd, dxd, ddxd)
                 control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
                              T1, T2, u2, deN, minfo, sinfo)
-            if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, F, k2s):
+            if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k2s):
                 return 1, k - k0 + 1
             for i in range(16):
                 tmp[i] = state[i] + 0.5 * h * k2s[i]
             if continuous:
                 control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
                              T1, T2, u2, deN, minfo, sinfo)
-            if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, F, k3s):
+            if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k3s):
                 return 1, k - k0 + 1
             for i in range(16):
                 tmp[i] = state[i] + h * k3s[i]
@@ -246,7 +247,7 @@ def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale
                 desired(traj, ts + h, xd, dxd, ddxd)
                 control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
                              T1, T2, u2, deN, minfo, sinfo)
-            if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, F, k4s):
+            if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k4s):
                 return 1, k - k0 + 1
             for i in range(16):
                 state[i] += h / 6.0 * (k1s[i] + 2.0 * k2s[i] + 2.0 * k3s[i] + k4s[i])

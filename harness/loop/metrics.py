@@ -23,6 +23,30 @@ def _rms_max(e: np.ndarray | None, mask: np.ndarray) -> tuple[float, float]:
         return float(np.sqrt(np.mean(n * n))), float(n.max())
 
 
+def contact_metrics(traj: Trajectory, scn: Scenario, mask: np.ndarray) -> dict:
+    """Contact and force-sensing metrics: contact_force_peak (max |true F2|, whole run, N),
+    contact_force_rms (RMS |true F2| after the transient, N), penetration_max (max penetration of any arm
+    geom into any object, whole run, m), contact_time (s with any arm contact), body_contact_time (s with
+    an arm contact away from the tip body), force_tracking_rms (RMS |sensed F2 - true F2| after the
+    transient, N).  Zeros without interaction; NaN after-transient values for runs cut short."""
+    n = len(traj)
+    if not n or traj.F_true is None:
+        return {k: math.nan for k in ("contact_force_peak", "contact_force_rms", "penetration_max",
+                                      "contact_time", "body_contact_time", "force_tracking_rms")}
+    with np.errstate(over="ignore", invalid="ignore"):
+        f2 = np.linalg.norm(traj.F_true[:, 2:4], axis=1)
+        rms, _ = _rms_max(traj.F_true[:, 2:4], mask)
+        ftr, _ = _rms_max(traj.F_sensed[:, 2:4] - traj.F_true[:, 2:4], mask)
+    c = traj.contact
+    return {
+        "contact_force_peak": float(f2.max()), "contact_force_rms": rms,
+        "penetration_max": float(max(0.0, -c[:, 3].min())),
+        "contact_time": float((c[:, 0] > 0).sum() * scn.control_dt),
+        "body_contact_time": float((c[:, 0] > c[:, 4]).sum() * scn.control_dt),
+        "force_tracking_rms": ftr,
+    }
+
+
 def compute_metrics(traj: Trajectory, scn: Scenario) -> dict:
     """Metrics dict: e1_rms, e1_max, e2_rms, e2_max, e2_plant_rms, e2_plant_max (MuJoCo tip; NaN on
     the analytic plant), deN_rms (null-space velocity error (23), mixed units), beta_min, ya_max,
@@ -42,6 +66,7 @@ def compute_metrics(traj: Trajectory, scn: Scenario) -> dict:
                    float(np.max(np.abs(th) - scn.slave.max_bend)), 0.0)
     else:
         viol = math.nan
+    contact = contact_metrics(traj, scn, mask)
     t_end = float(traj.t[-1] + scn.control_dt) if n else 0.0
     wall = float(traj.meta.get("wall_time", math.nan))
     return {
@@ -52,6 +77,7 @@ def compute_metrics(traj: Trajectory, scn: Scenario) -> dict:
         "e1_final": float(np.linalg.norm(traj.e1[-1])) if n else math.nan,
         "e2_final": float(np.linalg.norm(traj.e2[-1])) if n else math.nan,
         "range_violation": viol,
+        **contact,
         "mujoco_warnings": int(traj.meta.get("mujoco_warnings", 0)),
         "status": traj.status, "message": traj.message,
         "sim_time_reached": t_end, "wall_time": wall,

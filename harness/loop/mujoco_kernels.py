@@ -9,7 +9,16 @@ import numpy as np
 
 from controllers.cc import backbone_points
 from controllers.control import MASTER_INFO, SLAVE_INFO
-from harness.loop.kernels import R_E1, R_E2, RUNAWAY, control_step
+from controllers.master import master_kernel
+from harness.loop.force_kernels import (
+    CONTACT_INFO,
+    operator_advance,
+    operator_force,
+    operator_target,
+    read_contact,
+    sense_forces,
+)
+from harness.loop.kernels import R_E1, R_E2, ROW_W, RUNAWAY, control_step
 from harness.plant.chain_map import (
     chain_elastic_correction,
     chain_force_from_T2,
@@ -121,10 +130,29 @@ def mujoco_commands(servo, feedforward, dt, q2s, T2, u2, ref, C, R, L0, kv_over_
             cmd[2 + n + c] = 0.0
 
 
+# record-row columns after the control step's (harness.loop.trajectory.ROW_FIELDS)
+R_FT = ROW_W
+R_FS = R_FT + 4
+R_CI = R_FS + 4
+R_HAND = R_CI + CONTACT_INFO
+
+
+def master_tip_state(mpk, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1):
+    """Master tip position xm and velocity vm = J1 dq1 (task frame) of the plant master (packed mpk)
+    from MuJoCo's joints; J1 (2, 2) is left for J1^T F."""
+    for i in range(2):
+        q1[i] = qpos[m_qadr[i]]
+        dq1[i] = qvel[m_dadr[i]]
+    master_kernel(mpk, q1, dq1, xm, J1, Jd1, M1, N1)
+    for i in range(2):
+        vm[i] = J1[i, 0] * dq1[0] + J1[i, 1] * dq1[1]
+
+
 def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc, m_qadr, m_dadr, m_act,
                  c_qadr, c_dadr, c_act, R, C, L0, eargs,
                  servo, feedforward, kv_over_kp, traj, noise, noise_scale, F, mpk_c, spk_c, nodes,
-                 weights, gains, spec, ref, cmdbuf, delay, rows, qpos_hist, cmd_log, geo_in, geo_out, wnum):
+                 weights, gains, spec, ref, cmdbuf, delay, rows, qpos_hist, cmd_log, geo_in, geo_out, wnum,
+                 fargs):
     """Control steps k0..k1-1 on the MuJoCo plant (model/data pointers mptr, dptr; mjfn = MJ_FUNCS;
     qpos, qvel, ctrl, qfrc are numpy views of the same MjData).  Per step: sense -> noise -> both laws
     -> record -> commands (delayed by `delay` control steps through the ring buffer cmdbuf (delay+1, 2+2n)) ->
@@ -136,8 +164,29 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
     kinematics MuJoCo computed inside the first mj_step of the step (the start state: valid for the
     single-stage integrators, not RK4), geo_in = (xpos, xquat, site_xpos, xanchor, bodies, gids).
     wnum: view of MuJoCo's warning counters (mjData.warning.number), checked after every mj_step.
+    fargs = (sensordata, cadr (ContactMap.adr or empty), Fconst (4,) constant tip forces (F2 is applied by
+    the caller through xfrc_applied, F1 here through qfrc_applied = J1^T F1), fmode, fnoise, fstd, falpha,
+    fdelay, fbuf, ffilt (`sense_forces`), op_on, op, targets, hand (4,), target (2,) (operator, see
+    `harness.loop.force_kernels`), mpk_p (plant master, packed), cpts (k1 - k0, np, 6) contact points or
+    0 rows): the laws get the sensed F (`sense_forces`) instead of F (kept in the signature).
     Returns (status, completed steps); status 6 = non-finite or exploding MuJoCo state, 7 = a MuJoCo
     warning was raised during the last completed step (whose row is recorded)."""
+    (sensordata, cadr, Fconst, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, op_on, op, targets, hand,
+     target, mpk_p, cpts) = fargs
+    F2c = np.zeros(2)
+    F1op = np.zeros(2)
+    Ftrue = np.zeros(4)
+    q1 = np.empty(2)
+    dq1 = np.empty(2)
+    xm = np.empty(2)
+    vm = np.empty(2)
+    J1 = np.empty((2, 2))
+    Jd1 = np.empty((2, 2))
+    M1 = np.empty((2, 2))
+    N1 = np.empty(2)
+    nopts = np.zeros((0, 6))
+    apply1 = op_on or Fconst[0] != 0.0 or Fconst[1] != 0.0
+    hphys = dt / substeps
     n = C.shape[0]
     state = np.empty(16)
     sensed = np.empty(16)
@@ -168,12 +217,25 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
             if state[4 + i] <= 0.0:
                 return 5, k - k0
         t = k * dt
-        st = control_step(t, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, weights, gains, spec, F,
-                          xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, rows[k - k0])
+        r = rows[k - k0]
+        read_contact(sensordata, cadr, F2c, r[R_CI:R_CI + CONTACT_INFO], cpts[k - k0] if cpts.shape[0] > 0
+                     else nopts)
+        if op_on:
+            master_tip_state(mpk_p, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1)
+            operator_force(op, hand, xm, vm, F1op)
+        for i in range(2):
+            Ftrue[i] = Fconst[i] + F1op[i]
+            Ftrue[2 + i] = Fconst[2 + i] + F2c[i]
+        sense_forces(Ftrue, k, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, r[R_FS:R_FS + 4])
+        for i in range(4):
+            r[R_FT + i] = Ftrue[i]
+        r[R_HAND] = hand[0]
+        r[R_HAND + 1] = hand[1]
+        st = control_step(t, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, weights, gains, spec,
+                          r[R_FS:R_FS + 4], xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, r)
         if hist:
             for i in range(qpos.shape[0]):
                 qpos_hist[k - k0, i] = qpos[i]
-        r = rows[k - k0]
         if st == 0 and ((abs(r[R_E1]) + abs(r[R_E1 + 1]) > RUNAWAY)
                         or (abs(r[R_E2]) + abs(r[R_E2 + 1]) > RUNAWAY)):
             st = 4
@@ -193,6 +255,15 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
         for c in range(n):
             ctrl[c_act[c]] = use[2 + c]
         for s in range(substeps):
+            if apply1:  # operator's grip (+ constant F1) on the master handle, J1^T F1
+                master_tip_state(mpk_p, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1)
+                if op_on:
+                    operator_target(targets, t + s * hphys, target)
+                    operator_force(op, hand, xm, vm, F1op)
+                    operator_advance(op, hand, target, F1op, hphys)
+                for i in range(2):
+                    qfrc[m_dadr[i]] = (J1[0, i] * (Fconst[0] + F1op[0])
+                                       + J1[1, i] * (Fconst[1] + F1op[1]))
             for c in range(n):
                 qc[c] = qpos[c_qadr[c]]
             chain_elastic_correction(qc, *eargs, corr)
@@ -226,7 +297,7 @@ def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):
         mj_call(mjfn[MJ_STEP_FN], mptr, dptr)
 
 
-KERNELS = ("sense_mujoco", "mujoco_commands", "mujoco_chunk", "replay_commands")
+KERNELS = ("sense_mujoco", "mujoco_commands", "master_tip_state", "mujoco_chunk", "replay_commands")
 
 
 # =============================================================================================

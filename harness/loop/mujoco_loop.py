@@ -36,6 +36,7 @@ from harness.loop.common import (
     set_outcome,
 )
 from harness.loop.fast import K
+from harness.loop.force_args import ForceArgs
 from harness.loop.mujoco_kernels import MJ_FUNCS
 from harness.loop.trajectory import ROW_WIDTH, Trajectory
 from harness.plant.chain_map import ChainMap
@@ -86,6 +87,8 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     on_chunk: optional callable receiving each finished chunk of steps as a `Trajectory` (with the plant
     geometry when the integrator provides it in the loop, see `_chunk`)."""
     tb = time.perf_counter()
+    if plant is None:
+        plant = MujocoPlant.build(scn)
     m, d, cmap = make_plant(scn, plant)
     build_time = time.perf_counter() - tb
     n = scn.n_steps
@@ -107,6 +110,7 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     ref = np.concatenate([s0[4:10], s0[10:16]])  # servo reference [q_ref, dq_ref]
     delay = int(round(scn.plant.actuation_delay / scn.control_dt))
     cmdbuf = np.zeros((delay + 1, 2 + 2 * nchain))
+    force = ForceArgs(scn, m, d, cmap, plant.contact, n, s0, a["F"])
     captured: list[str] = []
     mujoco.set_mju_user_warning(lambda msg: captured.append(str(msg)))
     bar = progress_bar(progress, n, f"MuJoCo plant (N={cmap.n_segments}, {scn.plant.actuation})")
@@ -125,7 +129,8 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
                 cmap.elastic_args, servo, scn.plant.servo_feedforward, kv_over_kp, a["traj"], noise,
                 scale, a["F"], a["mpk_c"], a["spk_c"], a["nodes"], a["weights"], a["gains"], a["spec"],
                 ref, cmdbuf, delay, rows[k:k1], geo.qpos_hist[k:k1],
-                cmd_log[k * sub:k1 * sub] if log else cmd_log, geo.inputs, geo.outputs(k, k1), wnum)
+                cmd_log[k * sub:k1 * sub] if log else cmd_log, geo.inputs, geo.outputs(k, k1), wnum,
+                force.args(k, k1))
             done = k + mdone
             if bar is not None:
                 bar.update(mdone)
@@ -147,6 +152,8 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
             bar.close()
     wall = time.perf_counter() - t0
     traj = Trajectory.from_rows(rows[:done])
+    if force.cpts.shape[0]:
+        traj.contact_points = force.cpts[:done].copy()
     meta = run_meta(scn, wall)
     traj.meta.update(meta)
     tg = time.perf_counter()

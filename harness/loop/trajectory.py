@@ -19,6 +19,9 @@ ROW_FIELDS: dict[str, int] = {
     "xd": 2, "x1": 2, "x2": 2,  # x2 = analytic tip of the sensed q2
     "e1": 2, "e2": 2, "de1": 2, "de2": 2,
     "beta": 1, "ya": 1, "deN": 6, "T1": 2, "T2": 6, "u2": 6,
+    # interaction (harness.loop.force_kernels): true and controller-side F = [F1x, F1z, F2x, F2z],
+    # contact summary (CONTACT_INFO) and the operator's hand position
+    "F_true": 4, "F_sensed": 4, "contact": 5, "hand": 2,
 }
 ROW_SLICES: dict[str, slice] = {}
 _c = 0
@@ -40,6 +43,12 @@ class Trajectory:
       when the limits part is on; beta_s < 0 (ya > 1) only outside the length/bend ranges
     deN: (n, 6) null-space velocity error (23)
     T1: (n, 2) N m | T2: (n, 6) generalized forces [N, N m^2] | u2: (n, 6) slave auxiliary input (18)
+    F_true: (n, 4) N, interaction forces ON the robots at the tips [F1x, F1z, F2x, F2z] (operator at the
+      master handle + constant; contact on the slave tip body + constant), world X/Z
+    F_sensed: (n, 4) N, what the laws (13), (17) got (sensing.force.mode)
+    contact: (n, 5) [contacts on the arm, arm net contact force X, Z (N, on the arm), min signed
+      distance arm-objects (m, < 0 = penetration; 0 without contact), contacts on the tip body]
+    hand: (n, 2) m, operator hand position (master task frame; 0 when no operator)
     x2_plant: (n, 2) m, MuJoCo tip site (None on the analytic plant)
     body_pos/body_quat: (n, nb, 3) / (n, nb, 4 wxyz) world poses of the plant's slave segment bodies
     master_pos: (n, 3, 3) world positions of master base, elbow, tip (None on the analytic plant)
@@ -63,7 +72,12 @@ class Trajectory:
     T1: np.ndarray
     T2: np.ndarray
     u2: np.ndarray
+    F_true: np.ndarray | None = None
+    F_sensed: np.ndarray | None = None
+    contact: np.ndarray | None = None
+    hand: np.ndarray | None = None
     x2_plant: np.ndarray | None = None
+    contact_points: np.ndarray | None = None  # (n, N_POINTS, 6) [pos xyz world, force on the arm xyz] N
     body_pos: np.ndarray | None = None
     body_quat: np.ndarray | None = None
     master_pos: np.ndarray | None = None

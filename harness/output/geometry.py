@@ -94,3 +94,11 @@ def backbone_points_world(traj: Trajectory, slave_base: np.ndarray) -> np.ndarra
         else:
             return bb
     return task_to_world(cc_backbone(traj.q2), slave_base)
+
+
+def has_interaction(traj: Trajectory) -> bool:
+    """Whether the run had interaction forces or contacts (then forces.png is written)."""
+    if traj.F_true is None or not len(traj):
+        return False
+    return bool(np.any(traj.F_true != 0) or np.any(traj.F_sensed != 0)
+                or (traj.contact is not None and np.any(traj.contact[:, 0] > 0)))

@@ -8,6 +8,8 @@ so it is safe in worker processes and headless machines.
     fig4_beta.png  manipulability beta = sqrt(det J2 J2^T) (eq. 41)                  (paper Fig. 4)
     q2.png         section lengths d_i (m) and curvatures k_i (1/m) with allowed ranges
     shapes.png     master links and slave backbone at ~5 instants, world X-Z plane
+    forces.png     interaction forces, true vs what the laws got (F2 slave tip, F1 master handle), and
+                   the arm's penetration into the environment (only for runs with interaction forces)
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from matplotlib.figure import Figure
 
 from harness.loop.trajectory import Trajectory
 from harness.output.decimate import envelope
+from harness.output.geometry import has_interaction
 
 DPI = 130
 # Time-series lines are drawn from their min/max envelope at this many columns per inch of figure
@@ -282,7 +285,31 @@ def write_figures(traj: Trajectory, outdir: str | Path, *, lengths=(0.6, 0.6)) -
         fig_beta(traj, outdir / "fig4_beta.png"),
         fig_q2(traj, outdir / "q2.png"),
         fig_shapes(traj, outdir / "shapes.png", lengths=lengths),
-    ]
+    ] + ([fig_forces(traj, outdir / "forces.png")] if has_interaction(traj) else [])
 
 
-__all__ = ["fig_beta", "fig_e1", "fig_e2", "fig_q2", "fig_shapes", "write_figures"]
+def fig_forces(traj: Trajectory, path: Path) -> Path:
+    """F2 (slave tip) and F1 (master handle), true (solid) vs what the laws (13), (17) got (thin), and the
+    maximum penetration of the arm into the environment objects (mm)."""
+    fig, axes = _figure(3, figsize=(7.0, 7.5))
+    m = _marker(traj)
+    ft, fs = np.asarray(traj.F_true, dtype=float), np.asarray(traj.F_sensed, dtype=float)
+    for ax, off, who in ((axes[0], 2, "F2 on the slave tip (contact + constant)"),
+                         (axes[1], 0, "F1 on the master handle (operator grip + constant)")):
+        for j, (lab, c) in enumerate((("X", "tab:blue"), ("Z", "tab:orange"))):
+            ax.plot(traj.t, ft[:, off + j], color=c, marker=m, label=f"true {lab}")
+            ax.plot(traj.t, fs[:, off + j], color=c, lw=0.7, alpha=0.6, ls="--", label=f"to the law {lab}")
+        ax.set_title(who, fontsize=10)
+        ax.set_ylabel("force [N]")
+        _finish_time_axis(ax, traj)
+    pen = np.maximum(0.0, -np.asarray(traj.contact, dtype=float)[:, 3]) * 1e3
+    axes[2].plot(traj.t, pen, color="tab:red", marker=m, label="max penetration")
+    axes[2].set_title("Penetration of the arm into the environment", fontsize=10)
+    axes[2].set_ylabel("[mm]")
+    _finish_time_axis(axes[2], traj)
+    _status_note(fig, traj)
+    return _save(fig, path)
+
+
+__all__ = ["fig_beta", "fig_e1", "fig_e2", "fig_forces", "fig_q2", "fig_shapes", "has_interaction",
+           "write_figures"]

@@ -46,10 +46,12 @@ from harness.output.geometry import (
     DEFAULT_MASTER_LENGTHS,
     backbone_points_world,
     cc_backbone,
+    has_interaction,
     master_points,
     task_to_world,
     world_base,
 )
+from harness.output.record_contact import force_series
 from harness.output.scene import (
     C_BACKBONE,
     C_DESIRED,
@@ -116,6 +118,8 @@ def _series(traj: Trajectory) -> list[tuple[str, np.ndarray, list[str], list[tup
         ("plots/T1", traj.T1, ["T1 a", "T1 b"], [C_X, C_Z]),
         ("plots/T2", traj.T2, ["T2 d1", "T2 d2", "T2 d3", "T2 k1", "T2 k2", "T2 k3"], sec + sec),
     ]
+    if has_interaction(traj):
+        out += force_series(traj)
     return [(e, np.asarray(v, dtype=np.float64).reshape(len(traj), len(nm)), nm, c) for e, v, nm, c in out]
 
 

@@ -15,6 +15,7 @@ from harness.loop.trajectory import Trajectory
 from harness.output.geometry import (
     DEFAULT_MASTER_LENGTHS,
     backbone_points_world,
+    has_interaction,
     master_points,
     task_to_world,
     world_base,
@@ -131,6 +132,8 @@ def build_blueprint(traj: Trajectory) -> rrb.Blueprint:
                 ts(origin="plots/q2", name="q2: d (m), k (1/m)"),
                 rrb.Vertical(ts(origin="plots/T1", name="T1 [N m]"),
                              ts(origin="plots/T2", name="T2 [N, N m^2]"), name="Torques"),
+                *([ts(origin="plots/forces", name="Forces [N]: true vs to the law")] if has_interaction(traj)
+                  else []),
                 rrb.TextDocumentView(origin="status", name="Run status"),
             ),
             column_shares=[1, 1],

@@ -30,6 +30,8 @@ def build_plant(scn: Scenario) -> Any:
         try:
             return MujocoPlant.build(scn)
         except PlantModelError as exc:
+            if str(exc).startswith("environment."):
+                raise ConfigError(str(exc), path=str(exc).split(":", 1)[0]) from None
             if scn.plant.scene_xml is not None:
                 raise ConfigError.field("plant.scene_xml", scn.plant.scene_xml,
                                         f"unusable MJCF: {exc}") from None

@@ -89,6 +89,8 @@ from harness.plant.chain_params import (
     joint_stiffness,
     segment_inertias,
 )
+from harness.plant.environment import ContactMap, add_environment, clearance, contact_map
+from harness.plant.initial import InitialStateError, initial_state
 
 MJCF_DIR = Path(__file__).resolve().parents[2] / "mjcf"
 SCENE_XML = MJCF_DIR / "scene.xml"
@@ -300,7 +302,7 @@ def _validate_plant(plant: PlantConfig) -> int:
     return N
 
 
-def _build(master: MasterParams, slave: SlaveParams, plant: PlantConfig, scene=None):
+def _build(master: MasterParams, slave: SlaveParams, plant: PlantConfig, scene=None, environment=None):
     N = _validate_plant(plant)
     if scene is None:
         scene = getattr(plant, "scene_xml", None)
@@ -316,6 +318,12 @@ def _build(master: MasterParams, slave: SlaveParams, plant: PlantConfig, scene=N
     act_names = _add_actuators(spec, joint_names, plant.actuation)
     if plant.enforce_cc:
         _add_cc_equalities(spec, N)
+    if environment is not None and environment.objects:
+        m0 = _compile(spec, "the plant model")
+        invw = {m0.body(b).name: float(m0.body_invweight0[b, 0]) for b in range(m0.nbody)}
+        arm_geoms = [(f"octarm_s{i}_seg{j}_geom", f"octarm_s{i}_seg{j}_body")
+                     for i in range(3) for j in range(N)]
+        add_environment(spec, environment, invw, arm_geoms)
     kp = np.zeros(len(joint_names))
     kv = np.zeros(len(joint_names))
     if plant.actuation == "servo":
@@ -348,10 +356,12 @@ def build_spec(master: MasterParams, slave: SlaveParams, plant: PlantConfig, *,
 
 
 def build_model(master: MasterParams, slave: SlaveParams, plant: PlantConfig, *,
-                scene_xml: str | os.PathLike | None = None) -> tuple[mujoco.MjModel, ChainMap]:
-    """Compiled plant model and its ``ChainMap`` (addresses + constant maps); see ``build_spec``."""
+                scene_xml: str | os.PathLike | None = None,
+                environment=None) -> tuple[mujoco.MjModel, ChainMap]:
+    """Compiled plant model and its ``ChainMap`` (addresses + constant maps); see ``build_spec``.
+    environment: an `EnvironmentConfig` whose objects are added (`harness.plant.environment`)."""
     spec, N, layout, joint_names, act_names, stiff, arm, tip_mass, kp, kv = _build(master, slave, plant,
-                                                                                   scene_xml)
+                                                                                   scene_xml, environment)
     m = _compile(spec, "the plant model")
     Ke = np.asarray(slave.extension_stiffness)
     shape_w = np.where(layout["is_hinge"] == 0, stiff, 0.0)
@@ -401,13 +411,38 @@ class MujocoPlant:
 
     model: mujoco.MjModel
     cmap: ChainMap
+    contact: ContactMap | None = None  # contact sensors and objects (None = no environment)
     kind: ClassVar[str] = "mujoco"
 
     @classmethod
     def build(cls, scn: Scenario) -> MujocoPlant:
-        """Build from the scenario's plant side (raises PlantModelError on bad MJCF or options)."""
-        m, cmap = build_model(scn.plant_master, scn.plant_slave, scn.plant)
-        return cls(m, cmap)
+        """Build from the scenario's plant side (raises PlantModelError on bad MJCF or options, and
+        when an environment object intersects the arm at the initial state)."""
+        m, cmap = build_model(scn.plant_master, scn.plant_slave, scn.plant, environment=scn.environment)
+        if not scn.environment.objects:
+            return cls(m, cmap)
+        cm = contact_map(m)
+        _check_clearance(m, cmap, cm, scn)
+        return cls(m, cmap, cm)
+
+
+def _check_clearance(m: mujoco.MjModel, cmap: ChainMap, cm: ContactMap, scn: Scenario) -> None:
+    """PlantModelError naming the object if it intersects the arm at the scenario's initial state."""
+    try:
+        s0 = initial_state(scn)
+    except InitialStateError:
+        return  # reported by the loop as an impossible start
+    d = mujoco.MjData(m)
+    d.qpos[cmap.master_qpos_adr] = s0[0:2]
+    cmap.set_q2(d, s0[4:10], s0[10:16])
+    mujoco.mj_forward(m, d)
+    hits = clearance(m, d, cm)
+    if hits:
+        g_obj, g_arm, dist = min(hits, key=lambda h: h[2])
+        name = m.geom(g_obj).name[len("env_"):-len("_geom")]
+        raise PlantModelError(
+            f"environment.objects.{name}: intersects the slave at t = 0 ({m.geom(g_arm).name} penetrates "
+            f"{-dist:.4g} m); move the object or the initial state")
 
 
 def stiffness_courant_number(m: mujoco.MjModel, cm: ChainMap) -> float:

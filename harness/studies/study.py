@@ -102,6 +102,8 @@ METRIC_NAMES = (
     "e1_rms", "e1_max", "e2_rms", "e2_max", "e2_plant_rms", "e2_plant_max", "deN_rms", "beta_min",
     "ya_max", "e1_final", "e2_final", "range_violation", "mujoco_warnings", "sim_time_reached",
     "wall_time", "realtime_factor",
+    "contact_force_peak", "contact_force_rms", "penetration_max", "contact_time", "body_contact_time",
+    "force_tracking_rms",
 )
 LOWER_IS_WORSE = frozenset({"beta_min"})
 # axis labels of the summary plots (units as in harness.loop.metrics)
@@ -112,6 +114,9 @@ METRIC_LABELS = {
     "e1_final": "e1_final [m]", "e2_final": "e2_final [m]", "range_violation": "range_violation [m or rad]",
     "mujoco_warnings": "mujoco_warnings [count]", "sim_time_reached": "sim_time_reached [s]",
     "wall_time": "wall_time [s]", "realtime_factor": "realtime_factor [x real time]",
+    "contact_force_peak": "contact_force_peak [N]", "contact_force_rms": "contact_force_rms [N]",
+    "penetration_max": "penetration_max [m]", "contact_time": "contact_time [s]",
+    "body_contact_time": "body_contact_time [s]", "force_tracking_rms": "force_tracking_rms [N]",
 }
 DISTRIBUTIONS = {
     "uniform": ("low", "high"), "loguniform": ("low", "high"), "normal": ("mean", "std"),
@@ -390,6 +395,10 @@ def _level_combinations(study: Study) -> list[tuple]:
 def _get(obj: Any, path: Sequence[str], base: Scenario, where: str) -> Any:
     """Field at `path`; an unset plant.master/plant.slave reads as the base plant model."""
     for i, p in enumerate(path):
+        named = [o for o in obj if getattr(o, "name", None) == p] if isinstance(obj, tuple) else []
+        if named:  # named entries of a tuple, e.g. environment.objects.<name>
+            obj = named[0]
+            continue
         if not dataclasses.is_dataclass(obj) or p not in {f.name for f in dataclasses.fields(obj)}:
             owner = ".".join(path[:i]) or "Scenario"
             known = sorted(f.name for f in dataclasses.fields(obj)) if dataclasses.is_dataclass(obj) else []

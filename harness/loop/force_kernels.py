@@ -1,0 +1,120 @@
+"""Interaction-force kernels (numba-compatible; compiled by `harness.loop.fast`): contact forces read from
+MuJoCo's contact sensors, the force-sensing chain the controller sees, and the operator's hand.
+
+Any loop can call these (the compiled MuJoCo loop does; a Python stepped loop can call them per step).
+Forces are ON the robots, at the tips, in the world X/Z plane, N: F = [F1x, F1z, F2x, F2z] as in the
+dynamics (1) and the laws (13), (17).
+"""
+
+from __future__ import annotations
+
+import math
+
+FORCE_MODES = {"exact": 0, "sensed": 1, "ignored": 2}
+CONTACT_INFO = 5  # [n arm contacts, arm net Fx, Fz (on the arm), min distance (m), n tip contacts]
+POINT_STRIDE = 10  # sensordata per contact point: found, force (contact frame, 3), pos (3), normal (3)
+
+
+def filter_alpha(cutoff: float | None, dt: float) -> float:
+    """Gain of the first-order low-pass y += alpha (x - y) sampled every dt: the exact discretisation
+    alpha = 1 - exp(-2 pi fc dt) of dy/dt = 2 pi fc (x - y) under a held input (1 = no filter)."""
+    return 1.0 if cutoff is None else 1.0 - math.exp(-2.0 * math.pi * cutoff * dt)
+
+
+def read_contact(sensordata, adr, F2c, cinfo, pts):
+    """Contact state from MuJoCo's contact sensors (harness.plant.environment.ContactMap.adr (4,); empty
+    = no environment: zeros).  F2c (2,) <- contact force ON the tip body [X, Z] (the netforce sensor
+    reports the tip's force on the objects: sign flipped); cinfo (CONTACT_INFO,); pts (np, 6) <- the
+    largest contacts [pos xyz, force on the arm xyz] (frictionless: -f_n * normal), zeros if unused."""
+    if adr.shape[0] == 0:
+        F2c[0] = 0.0
+        F2c[1] = 0.0
+        for i in range(CONTACT_INFO):
+            cinfo[i] = 0.0
+        return
+    a = adr[0]
+    F2c[0] = -sensordata[a + 1]
+    F2c[1] = -sensordata[a + 3]
+    cinfo[4] = sensordata[a]
+    b = adr[1]
+    cinfo[0] = sensordata[b]
+    cinfo[1] = -sensordata[b + 1]
+    cinfo[2] = -sensordata[b + 3]
+    c = adr[2]
+    cinfo[3] = sensordata[c + 1] if sensordata[c] > 0.0 else 0.0
+    p0 = adr[3]
+    for r in range(pts.shape[0]):
+        o = p0 + r * POINT_STRIDE
+        found = sensordata[o] > 0.0
+        fn = sensordata[o + 1]
+        for j in range(3):
+            pts[r, j] = sensordata[o + 4 + j] if found else 0.0
+            pts[r, 3 + j] = -fn * sensordata[o + 7 + j] if found else 0.0
+
+
+def sense_forces(Ftrue, k, mode, noise, std, alpha, delay, buf, filt, out):
+    """What the controller gets at control step k from the true forces Ftrue (4,), into out (4,).
+
+    mode 0 exact: out = Ftrue; 2 ignored: out = 0; 1 sensed: x = Ftrue + std * noise[k] (noise (n, 4)
+    standard normal, read only if std > 0) -> first-order low-pass (gain alpha, state filt (4,),
+    started at the first sample at k = 0) -> pure delay of `delay` steps through the ring buffer
+    buf (delay + 1, 4) (before the first delayed sample arrives, the first sample)."""
+    if mode == 0:
+        for i in range(4):
+            out[i] = Ftrue[i]
+        return
+    if mode == 2:
+        for i in range(4):
+            out[i] = 0.0
+        return
+    nb = delay + 1
+    slot = k % nb
+    for i in range(4):
+        x = Ftrue[i] + (std * noise[k, i] if std > 0.0 else 0.0)
+        if k == 0:
+            filt[i] = x
+        else:
+            filt[i] += alpha * (x - filt[i])
+        buf[slot, i] = filt[i]
+    src = (k - delay) % nb if k >= delay else 0
+    for i in range(4):
+        out[i] = buf[src, i]
+
+
+def operator_target(targets, t, out):
+    """Piecewise-linear target (2,) at time t of targets (nt, 3) rows [t, X, Z] (held outside; nt = 0:
+    out unchanged)."""
+    nt = targets.shape[0]
+    if nt == 0:
+        return
+    if t <= targets[0, 0]:
+        out[0] = targets[0, 1]
+        out[1] = targets[0, 2]
+        return
+    for r in range(1, nt):
+        if t <= targets[r, 0]:
+            s = (t - targets[r - 1, 0]) / (targets[r, 0] - targets[r - 1, 0])
+            out[0] = targets[r - 1, 1] + s * (targets[r, 1] - targets[r - 1, 1])
+            out[1] = targets[r - 1, 2] + s * (targets[r, 2] - targets[r - 1, 2])
+            return
+    out[0] = targets[nt - 1, 1]
+    out[1] = targets[nt - 1, 2]
+
+
+def operator_force(op, hand, xm, vm, F1):
+    """Grip force ON the master handle F1 (2,) = kg (x_h - x_m) + cg (v_h - v_m); op = [mass, k, c, kg,
+    cg], hand = [x_h (2), v_h (2)], xm, vm (2,) master tip position/velocity (master task frame)."""
+    for i in range(2):
+        F1[i] = op[3] * (hand[i] - xm[i]) + op[4] * (hand[2 + i] - vm[i])
+
+
+def operator_advance(op, hand, target, F1, h):
+    """One semi-implicit Euler step h of the hand: m a = k (target - x_h) - c v_h - F1 (the grip's
+    reaction; F1 from operator_force)."""
+    for i in range(2):
+        a = (op[1] * (target[i] - hand[i]) - op[2] * hand[2 + i] - F1[i]) / op[0]
+        hand[2 + i] += a * h
+        hand[i] += hand[2 + i] * h
+
+
+KERNELS = ("read_contact", "sense_forces", "operator_target", "operator_force", "operator_advance")

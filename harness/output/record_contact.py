@@ -1,0 +1,49 @@
+"""Contact and interaction-force content of the Rerun recording (issue 16): force time series (true vs
+what the laws got) under ``plots/forces/*`` and, in the 3-D view, the contact points and the contact
+forces ON the arm as arrows (``world/contact/*``, every `CONTACT_EVERY`-th control step, only the
+contacts present at that step), plus the operator's hand.  Called by `harness.output.record` only for
+runs with interaction (`harness.output.plots.has_interaction`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import rerun as rr
+
+from harness.loop.trajectory import Trajectory
+from harness.output.geometry import has_interaction  # noqa: F401 - re-exported
+
+CONTACT_EVERY = 10  # control steps between logged contact arrows
+ARROW_SCALE = 0.005  # m per N of contact force in the 3-D view
+_C_TRUE, _C_SENSED, _C_CONTACT = (200, 40, 40), (60, 120, 220), (230, 60, 30)
+
+
+def force_series(traj: Trajectory) -> list[tuple[str, np.ndarray, list[str], list[tuple[int, int, int]]]]:
+    """(entity, values (n, k), names, colours) of the force series, in `record._series`' format."""
+    ft, fs = np.asarray(traj.F_true, dtype=float), np.asarray(traj.F_sensed, dtype=float)
+    pen = np.maximum(0.0, -np.asarray(traj.contact, dtype=float)[:, 3:4])
+    cols = [_C_TRUE, (240, 150, 40), _C_SENSED, (60, 200, 200)]
+    return [
+        ("plots/forces/F2", np.column_stack([ft[:, 2:4], fs[:, 2:4]]),
+         ["F2 X true", "F2 Z true", "F2 X to law", "F2 Z to law"], cols),
+        ("plots/forces/F1", np.column_stack([ft[:, 0:2], fs[:, 0:2]]),
+         ["F1 X true", "F1 Z true", "F1 X to law", "F1 Z to law"], cols),
+        ("plots/forces/penetration", pen, ["penetration [m]"], [_C_CONTACT]),
+    ]
+
+
+def log_contacts(rec: rr.RecordingStream, traj: Trajectory, timeline: str, master_base: np.ndarray) -> None:
+    """Contact points and force arrows (world frame) and the operator's hand point."""
+    pts = traj.contact_points
+    hand = traj.hand
+    op = hand is not None and np.any(hand != 0)
+    for k in range(0, len(traj), CONTACT_EVERY):
+        rec.set_time(timeline, duration=float(traj.t[k]))
+        if pts is not None:
+            live = np.any(pts[k, :, 3:] != 0, axis=1)
+            p, f = pts[k, live, :3], pts[k, live, 3:]
+            rec.log("world/contact/points", rr.Points3D(p, radii=0.006, colors=_C_CONTACT))
+            rec.log("world/contact/forces",
+                    rr.Arrows3D(origins=p, vectors=f * ARROW_SCALE, colors=_C_CONTACT))
+        if op:
+            x = [master_base[0] + hand[k, 0], master_base[1], master_base[2] + hand[k, 1]]
+            rec.log("world/operator/hand", rr.Points3D([x], radii=0.015, colors=(240, 200, 60)))

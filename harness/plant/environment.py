@@ -1,0 +1,158 @@
+"""Environment objects the Octarm can touch, contact sensing and the t = 0 clearance check (MuJoCo plant).
+
+Geometry.  Each `EnvObject` becomes a world geom in the slave's plane (world = octarm_base + [X, 0, Z]):
+`plane` (MuJoCo plane, local +z = the object's `normal`), `box` (y half size `BOX_DEPTH`) or `sphere`.
+The Octarm gets collision geometry along its whole body: every segment capsule (the rod of rest length,
+radius 0.02 m) and a sphere on the tip body (radius `TIP_RADIUS_FACTOR` x the capsule radius, so that a
+head-on push is carried by the tip body).  Contacts are explicit `<pair>`s (arm geom, object) only:
+the arm does not collide with itself, the master never collides (its geoms stay contype = 0).
+
+Contact law (frictionless, condim 1).  MuJoCo's soft constraint, in static equilibrium (v = 0, a = 0),
+gives the normal force f = k_ref r d / ((1 - d) A) with r the penetration, d the impedance (solimp),
+A the constraint's diagonal approximation (for a body against the world: body_invweight0[b, 0], a
+constant of the model) and, for solref = (-s, -b) < 0, k_ref = s / d.  Hence (measured in
+tests/test_contact.py, exact to the solver tolerance):
+
+    solref = (-k (1 - d) A_b, -c (1 - d) A_b),  solimp = (d, d, 0.001, 0.5, 2)  (constant d)
+    =>  f = k r + c dr/dt,   c = 2 zeta sqrt(k m_b),  m_b = 1 / A_b,
+
+one `<pair>` per (arm geom, object) with the A_b of that arm body.  k = `stiffness` [N/m],
+zeta = `damping_ratio`.  Outside static equilibrium MuJoCo's solution differs from the spring-damper
+by the constraint's dynamics (the soft constraint is solved implicitly against the full inertia).
+
+Sensing (`ContactMap`, all MuJoCo contact sensors, read from d.sensordata by the compiled loop):
+tip netforce (force of the tip body ON the objects, world frame), whole-arm netforce (subtree of the
+first segment), whole-arm minimum distance (penetration = -dist) and the `N_POINTS` largest contacts
+(position, force, normal) for the recordings.  MuJoCo computes them inside mj_step at the step's
+start state.
+
+Solver: the scene's settings (Newton, no warm start, no island discovery) are kept with contacts:
+measured on scenarios/contact.toml (4 s, N = 8, torque), warm start gives the same states to 1e-13
+and no speed-up (loop 1.66 s with, 1.62 s without); `SOLVER_WARMSTART` switches it on.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from harness.config.scenario import EnvironmentConfig, EnvObject
+
+IMPEDANCE = 0.9  # solimp d (constant over the penetration)
+BOX_DEPTH = 0.15  # m, y half size of box obstacles
+TIP_RADIUS_FACTOR = 1.25  # tip sphere radius / segment capsule radius
+N_POINTS = 4  # contact points recorded per control step (largest forces)
+SOLVER_WARMSTART = False  # see the module docstring (measured: no benefit with contacts)
+# contact sensor data bits (mjtConDataField order) and reductions
+_FOUND, _FORCE, _DIST, _POS, _NORMAL = 1, 2, 8, 16, 32
+_MINDIST, _MAXFORCE, _NETFORCE = 1, 2, 3
+# layout of ContactMap.adr: sensordata addresses of the four sensors
+TIP_NET, ARM_NET, ARM_MIN, ARM_PTS = 0, 1, 2, 3
+POINT_WIDTH = 1 + 3 + 3 + 3  # found, force (contact frame), pos, normal
+
+
+@dataclass(frozen=True)
+class ContactMap:
+    """Where the contact sensors live in d.sensordata (adr: int64 (4,) [tip net, arm net, arm mindist,
+    arm points]), the object geom ids, and the tip body id (for constant tip forces)."""
+
+    adr: np.ndarray
+    object_geoms: np.ndarray
+    arm_geoms: np.ndarray
+    tip_body: int
+    n_points: int = N_POINTS
+
+
+def contact_parameters(obj: EnvObject, invweight: float, d: float = IMPEDANCE) -> tuple[list, list]:
+    """solref, solimp of a pair (arm body with translational inverse weight `invweight` [1/kg], obj)."""
+    k = obj.stiffness
+    c = 2.0 * obj.damping_ratio * math.sqrt(k / invweight)
+    return [-k * (1.0 - d) * invweight, -c * (1.0 - d) * invweight], [d, d, 0.001, 0.5, 2.0]
+
+
+def _quat_y(theta: float) -> list[float]:
+    return [math.cos(0.5 * theta), 0.0, math.sin(0.5 * theta), 0.0]
+
+
+def _add_object(spec: mujoco.MjSpec, obj: EnvObject, base: np.ndarray) -> str:
+    pos = [base[0] + obj.position[0], base[1], base[2] + obj.position[1]]
+    name = f"env_{obj.name}_geom"
+    g = spec.worldbody.add_geom(name=name, pos=pos, contype=0, conaffinity=0, condim=1, density=0.0)
+    if obj.kind == "plane":
+        nx, nz = obj.normal
+        g.type = mujoco.mjtGeom.mjGEOM_PLANE
+        g.size = [0.4, BOX_DEPTH, 0.02]
+        g.quat = _quat_y(math.atan2(nx, nz))
+        g.rgba = [0.55, 0.55, 0.6, 0.5]
+    elif obj.kind == "box":
+        g.type = mujoco.mjtGeom.mjGEOM_BOX
+        g.size = [obj.size[0], BOX_DEPTH, obj.size[1]]
+        g.quat = _quat_y(obj.angle)
+        g.rgba = [0.3, 0.6, 0.4, 0.6]
+    else:
+        g.type = mujoco.mjtGeom.mjGEOM_SPHERE
+        g.size = [obj.size[0], 0.0, 0.0]
+        g.rgba = [0.3, 0.6, 0.4, 0.6]
+    return name
+
+
+def _contact_sensor(spec, name, objtype, objname, data, reduce, num):
+    s = spec.add_sensor(name=name, type=mujoco.mjtSensor.mjSENS_CONTACT, objtype=objtype, objname=objname)
+    s.intprm[:3] = [data, reduce, num]
+    return s
+
+
+def add_environment(spec: mujoco.MjSpec, env: EnvironmentConfig, invweight: dict[str, float],
+                    arm_geoms: list[tuple[str, str]]) -> None:
+    """Add the objects, the tip sphere, one pair per (arm geom, object) and the contact sensors to `spec`
+    and enable contacts.  invweight: body name -> body_invweight0[b, 0] of a compiled model without the
+    environment (the pairs' solref needs it); arm_geoms: (geom name, body name) of the segment capsules."""
+    base = np.asarray(spec.body("octarm_base").pos, dtype=float)
+    tip = spec.body("octarm_tip_body")
+    r = float(spec.geom(arm_geoms[0][0]).size[0])
+    tip.add_geom(name="octarm_tip_geom", type=mujoco.mjtGeom.mjGEOM_SPHERE,
+                 size=[TIP_RADIUS_FACTOR * r, 0, 0], contype=0, conaffinity=0, density=0.0, group=2,
+                 rgba=[0.9, 0.2, 0.2, 1.0])
+    geoms = list(arm_geoms) + [("octarm_tip_geom", "octarm_tip_body")]
+    for obj in env.objects:
+        oname = _add_object(spec, obj, base)
+        for gname, bname in geoms:
+            solref, solimp = contact_parameters(obj, invweight[bname])
+            spec.add_pair(name=f"pair_{gname}_{obj.name}", geomname1=gname, geomname2=oname, condim=1,
+                          solref=solref, solimp=solimp, margin=0.0, gap=0.0)
+    body, xbody = mujoco.mjtObj.mjOBJ_BODY, mujoco.mjtObj.mjOBJ_XBODY
+    first = arm_geoms[0][1]
+    _contact_sensor(spec, "tip_contact_net", body, "octarm_tip_body", _FOUND | _FORCE, _NETFORCE, 1)
+    _contact_sensor(spec, "arm_contact_net", xbody, first, _FOUND | _FORCE, _NETFORCE, 1)
+    _contact_sensor(spec, "arm_contact_min", xbody, first, _FOUND | _DIST, _MINDIST, 1)
+    _contact_sensor(spec, "arm_contact_pts", xbody, first, _FOUND | _FORCE | _POS | _NORMAL, _MAXFORCE,
+                    N_POINTS)
+    spec.option.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    if SOLVER_WARMSTART:
+        spec.option.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_WARMSTART)
+
+
+def contact_map(m: mujoco.MjModel) -> ContactMap:
+    names = ("tip_contact_net", "arm_contact_net", "arm_contact_min", "arm_contact_pts")
+    adr = np.array([m.sensor_adr[m.sensor(n).id] for n in names], dtype=np.int64)
+    obj = [g for g in range(m.ngeom) if m.geom(g).name.startswith("env_")]
+    paired = {int(m.pair_geom1[p]) for p in range(m.npair)} | {int(m.pair_geom2[p]) for p in range(m.npair)}
+    arm = sorted(paired - set(obj))  # MuJoCo may store either geom of a pair first
+    return ContactMap(adr=adr, object_geoms=np.array(obj, dtype=np.int64), arm_geoms=np.array(arm, np.int64),
+                      tip_body=int(m.body("octarm_tip_body").id))
+
+
+def clearance(m: mujoco.MjModel, d: mujoco.MjData, cm: ContactMap) -> list[tuple[int, int, float]]:
+    """(object geom, arm geom, signed distance m) of every pair closer than 0 at the current qpos
+    (mj_forward must have run): MuJoCo's own mj_geomDistance."""
+    out = []
+    fromto = np.zeros(6)
+    for g2 in cm.object_geoms:
+        for g1 in cm.arm_geoms:
+            dist = mujoco.mj_geomDistance(m, d, int(g1), int(g2), 0.05, fromto)
+            if dist < 0.0:
+                out.append((int(g2), int(g1), float(dist)))
+    return out
