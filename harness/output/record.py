@@ -51,7 +51,7 @@ from harness.output.geometry import (
     task_to_world,
     world_base,
 )
-from harness.output.record_contact import force_series
+from harness.output.record_contact import force_series, log_contacts
 from harness.output.scene import (
     C_BACKBONE,
     C_DESIRED,
@@ -180,6 +180,8 @@ def write_recording(
         if n:
             log_series(rec, traj, block)
             log_spatial(rec, traj, master_base, slave_base, block, spatial_every)
+            if has_interaction(traj):
+                log_contacts(rec, traj, TIMELINE, master_base)
     finally:
         rec.disconnect()  # completes the file
     return path
