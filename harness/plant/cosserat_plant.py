@@ -5,8 +5,13 @@ rigid 2-link master, as a `harness.plant.stepped.SteppedPlant` for `harness.loop
   rho A = m / L0, GA = shear_factor EA), material damping plant.bending_viscosity (eta_b, N m^2 s)
   and plant.extension_viscosity (eta_a, N s) per section, base clamped, gravity.  Servo actuation:
   q2_ref becomes the rod's rest strains (the section's own stiffness is the servo; dq2_ref is not
-  used: the rod has no velocity servo) plus T2 as internal feed-forward loads if
-  plant.servo_feedforward; torque actuation: T2 as internal section loads.  q2 is sensed by the
+  used: the rod has no velocity servo), plus, if plant.servo_feedforward, the feed-forward
+  T2 - dV/dq2(q2) as internal section loads, with V = sum 1/2 Kb d k^2 + 1/2 Ke (d - L0)^2 the CC
+  elastic energy of the plant slave at the fitted q2 of the last `true_state`: the rest-strain servo
+  replaces the passive stiffness the controller's T2 compensates (eq. 18 includes it in N2), so the
+  feed-forward keeps the inertial, gravity and damping part (feeding the whole T2 cancels the
+  rod's stiffness about q2_ref and makes the closed loop diverge within 25 ms: measured).
+  Torque actuation: T2 as internal section loads.  q2 is sensed by the
   least-squares CC fit of each section (`CosseratSlave.sense`).
 * Master: the analytic master dynamics (paper eq. 1, which MuJoCo's master matches to round-off),
   classical RK4 with steps of at most 1 ms (`master_rk4`, compiled here).
@@ -151,6 +156,12 @@ class CosseratPlant:
         self._T1 = np.zeros(2)
         self._T2 = np.zeros(6)
         self._q_ref = np.zeros(6)
+        self._ff = np.zeros(6)
+        self._el = np.zeros(6)
+        ps = scn.plant_slave
+        self._Kb = np.asarray(ps.bending_stiffness, dtype=float)
+        self._Ke = np.asarray(ps.extension_stiffness, dtype=float)
+        self._L0 = np.asarray(ps.rest_lengths, dtype=float)
         nn = 3 * self.slave.n + 1
         self._geo = {"centreline": np.zeros((nn, 3)), "sections": np.zeros((4, 3)),
                      "master": np.zeros((3, 3))}
@@ -158,6 +169,14 @@ class CosseratPlant:
         self._dq2 = np.zeros(6)
         self._xz = np.zeros((nn, 2))
         self._vxz = np.zeros((nn, 2))
+
+    def _elastic(self, q2: np.ndarray) -> np.ndarray:
+        """dV/dq2 (6,) of the plant slave's CC elastic energy V = sum 1/2 Kb d k^2 + 1/2 Ke (d - L0)^2."""
+        d, k = q2[:3], q2[3:]
+        e = self._el
+        e[:3] = 0.5 * self._Kb * k * k + self._Ke * (d - self._L0)
+        e[3:] = self._Kb * d * k
+        return e
 
     # --- SteppedPlant -------------------------------------------------------------------------------
     def reset(self, state0: np.ndarray) -> None:
@@ -181,7 +200,12 @@ class CosseratPlant:
         if self.actuation == "servo":
             if min(self._q_ref[0], self._q_ref[1], self._q_ref[2]) <= 0.0:
                 return 5
-            ok = self.slave.step(self._q_ref, dt, self._T2 if self.feedforward else None)
+            ff = None
+            if self.feedforward:
+                ff = self._ff
+                self._ff[:] = self._T2
+                self._ff -= self._elastic(self._q2)
+            ok = self.slave.step(self._q_ref, dt, ff)
         else:
             ok = self.slave.step(self._T2, dt)
         return 0 if ok else 8
