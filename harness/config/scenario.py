@@ -73,7 +73,7 @@ class PlantConfig:
     scene_xml: str | None = None  # alternative scene MJCF (must include master + octarm base); None = mjcf/
     # material (Kelvin-Voigt) damping of the slave, per section, shared by the Cosserat rod and the
     # MuJoCo chain (joint damping eta_b / h, eta_a / h for segments of length h)
-    bending_viscosity: tuple[float, float, float] = (0.03, 0.03, 0.03)  # eta_b, N m^2 s
+    bending_viscosity: tuple[float, float, float] = (0.1, 0.1, 0.1)  # eta_b, N m^2 s
     extension_viscosity: tuple[float, float, float] = (3.0, 3.0, 3.0)  # eta_a, N s
     cosserat: CosseratConfig = field(default_factory=CosseratConfig)  # [plant.cosserat]
 
