@@ -87,7 +87,8 @@ def test_stepped_loop_equals_the_compiled_analytic_loop():
 
 @pytest.fixture(scope="module")
 def rod_runs():
-    scn = load_scenario(ROOT / "scenarios" / "paper.toml", ["plant.kind=cosserat", "duration=0.5", "transient=0.1"])
+    scn = load_scenario(ROOT / "scenarios" / "paper.toml",
+                        ["plant.kind=cosserat", "duration=0.5", "transient=0.1"])
     return scn, simulate(scn), simulate(scn)
 
 
@@ -147,8 +148,8 @@ def test_cli_bad_setting_exit_2_one_line(tmp_path):
 
 def test_cli_writes_outputs_with_the_rod_in_the_recording(tmp_path):
     out = tmp_path / "run"
-    r = subprocess.run([sys.executable, "-m", "harness.cli", "run", "--plant", "cosserat", "--duration", "0.2",
-                        "--out", str(out)], capture_output=True, text=True, cwd=ROOT)
+    r = subprocess.run([sys.executable, "-m", "harness.cli", "run", "--plant", "cosserat",
+                        "--duration", "0.2", "--out", str(out)], capture_output=True, text=True, cwd=ROOT)
     assert r.returncode == 0, r.stderr
     for name in ("run.rrd", "metrics.json", "config.toml", "fig3_e2.png", "shapes.png"):
         assert (out / name).is_file(), name
