@@ -162,3 +162,33 @@ def test_cli_writes_outputs_with_the_rod_in_the_recording(tmp_path):
     assert rows.get("/world/slave/rod") == 200  # one centreline strip per control step
     assert rows.get("/world/slave/sections") == 200
     assert load_scenario(out / "config.toml").plant.kind == "cosserat"
+
+
+def test_cosserat_settings_and_viscosities_are_sweep_factors():
+    from harness.studies.executor import run_case
+    from harness.studies.study import expand_cases, load_study
+
+    study = load_study({
+        "study": {"name": "rod", "metrics": ["e2_rms", "sim_time_reached"],
+                  "set": ["plant.kind=cosserat", "duration=0.05"]},
+        "factor": [{"name": "eta_b", "param": "plant.bending_viscosity", "scale": [1.0, 2.0]},
+                   {"name": "n", "param": "plant.cosserat.elements_per_section", "values": [6, 10]}]})
+    cases = expand_cases(study)
+    got = sorted((c.scenario.plant.bending_viscosity[0], c.scenario.plant.cosserat.elements_per_section)
+                 for c in cases)
+    eta = load_scenario(None).plant.bending_viscosity[0]
+    assert got == [(eta, 6), (eta, 10), (2 * eta, 6), (2 * eta, 10)]
+    case = next(c for c in cases if c.scenario.plant.cosserat.elements_per_section == 6)
+    out = run_case({"case_id": case.case_id, "scenario": case.scenario, "metrics": study.metrics})
+    assert out["status"] == "ok", out
+    assert out["metrics"]["sim_time_reached"] == pytest.approx(0.05)
+
+
+def test_cosserat_schema_covers_every_field():
+    import dataclasses
+
+    from harness.config import schema
+    from harness.config.scenario import CosseratConfig
+
+    assert set(schema.COSSERAT) == {f.name for f in dataclasses.fields(CosseratConfig)}
+    assert {"plant.cosserat.dt", "plant.bending_viscosity"} <= set(schema.schema_paths())
