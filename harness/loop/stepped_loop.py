@@ -28,7 +28,9 @@ Controller interface (`Controller`): `reset(scn, state0)` once, then per step
 filling the master torques T1 (N m), the slave generalized forces T2 ([N, N m^2], eq. 18; servo
 plants use it as feed-forward), the slave input u2 (eq. 18, the servo reference's acceleration) and
 the null-space velocity error deN (eq. 23, recorded; zeros if the controller has none); returns 0 or
-a status code.
+a status code.  A controller may also offer `fused_step(t, k, state, traj, noise, scale, xd, dxd,
+ddxd, sensed, T1, T2, u2, deN, row)` doing x_d, noise, its laws and the record row in one call
+(PaperController: the compiled `control_step`); the loop then uses it instead.
 """
 
 from __future__ import annotations
@@ -92,6 +94,14 @@ class PaperController:
         return K.control_laws(mpk, spk, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, self._F,
                               T1, T2, u2, deN, self.minfo, self.sinfo)
 
+    def fused_step(self, t, k, state, traj, noise, scale, xd, dxd, ddxd, sensed, T1, T2, u2, deN, row) -> int:
+        """The loop's fast path: x_d, noise, both laws and the record row in one compiled call
+        (`harness.loop.kernels.control_step`, the compiled loops' own step; same numbers as `step`
+        plus the loop's separate calls)."""
+        mpk, spk, nodes, weights, gains, spec = self._args
+        return K.control_step(t, state, traj, noise, k, scale, mpk, spk, nodes, weights, gains, spec,
+                              self._F, xd, dxd, ddxd, sensed, T1, T2, u2, deN, self.minfo, self.sinfo, row)
+
 
 def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
                      controller: Controller | None = None) -> Trajectory:
@@ -107,6 +117,7 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
     plant.reset(s0)
     ctrl = controller if controller is not None else PaperController()
     ctrl.reset(scn, s0)
+    fused = getattr(ctrl, "fused_step", None)  # optional one-call fast path (the paper controller)
     build_time = time.perf_counter() - tb
     noise, scale = noise_table(scn, n)
     a = common_arrays(scn)
@@ -139,14 +150,17 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
             if min(state[4], state[5], state[6]) <= 0.0:
                 status = 5
                 break
-            K.desired(traj_p, t, xd, dxd, ddxd)
-            if scale > 0.0:
-                K.add_noise(state, noise[k], scale, sensed)
-            else:
-                sensed[:] = state
-            st = ctrl.step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN)
             row = rows[k]
-            K.record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row)
+            if fused is not None:
+                st = fused(t, k, state, traj_p, noise, scale, xd, dxd, ddxd, sensed, T1, T2, u2, deN, row)
+            else:
+                K.desired(traj_p, t, xd, dxd, ddxd)
+                if scale > 0.0:
+                    K.add_noise(state, noise[k], scale, sensed)
+                else:
+                    sensed[:] = state
+                st = ctrl.step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN)
+                K.record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row)
             tips[k] = plant.slave_tip()
             for name, v in plant.geometry().items():
                 geo[name][k] = v
