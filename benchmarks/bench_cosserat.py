@@ -9,7 +9,8 @@ repetitions (the machine is noisy).  Rows, all on the paper scenario (40 dB, ser
   cosserat loop     harness.loop.simulate on plant.kind = "cosserat" at its default resolution
                     (10 elements per section, dt "auto"): the stepped loop's wall time
   cosserat bare     the same plant, reset to the same state, replaying the commands the loop sent
-                    (plant.command + plant.advance per control step, no sensing, no controller)
+                    (plant.command + plant.advance per control step, no sensing, no controller);
+                    loop and bare repetitions are interleaved
   cosserat bare+fit bare + plant.true_state (the CC fit) per step
   mujoco CC on      harness.loop.simulate, plant.kind = "mujoco", N = 8, CC enforced (the default)
   mujoco CC off     the same with plant.enforce_cc = false and the issue's plant bending damping
@@ -86,35 +87,37 @@ def closed_loop(scn, reps: int) -> tuple[float, str]:
 
 
 def cosserat_rows(duration: float, reps: int) -> dict:
+    """Closed loop, bare stepping and bare + CC fit, interleaved repetitions (best of each), so that
+    a change of machine load hits all three alike."""
     scn = scenario(duration, "plant.kind=cosserat")
     plant = _Logging(build_plant(scn))
-    loop_best, status = np.inf, ""
-    for _ in range(reps):
-        plant.log.clear()
-        tr = simulate(scn, plant)
-        loop_best = min(loop_best, float(tr.meta["wall_time"]))
-        status = tr.status if tr.status == "ok" else f"{tr.status}: {tr.message}"
-    cmds = np.array(plant.log)
     s0 = initial_state(scn)
     dt = scn.control_dt
     p = plant.plant
     state = np.zeros(16)
 
-    def bare(fit: bool) -> float:
-        best = np.inf
-        for _ in range(reps):
-            p.reset(s0)
-            t0 = time.perf_counter()
-            for c in cmds:
-                if fit:
-                    p.true_state(state)
-                p.command(c[0:2], c[2:8], c[8:14], c[14:20])
-                p.advance(dt)
-            best = min(best, time.perf_counter() - t0)
-        return best
+    def bare(cmds: np.ndarray, fit: bool) -> float:
+        p.reset(s0)
+        t0 = time.perf_counter()
+        for c in cmds:
+            if fit:
+                p.true_state(state)
+            p.command(c[0:2], c[2:8], c[8:14], c[14:20])
+            p.advance(dt)
+        return time.perf_counter() - t0
 
-    return {"scn": scn, "loop": loop_best, "status": status, "bare": bare(False), "bare_fit": bare(True),
-            "steps": len(cmds), "rod_dt": p.physics_dt, "elements": p.slave.n}
+    best = {"loop": np.inf, "bare": np.inf, "bare_fit": np.inf}
+    status, cmds = "", np.zeros((0, 20))
+    for _ in range(reps):
+        plant.log.clear()
+        tr = simulate(scn, plant)
+        best["loop"] = min(best["loop"], float(tr.meta["wall_time"]))
+        status = tr.status if tr.status == "ok" else f"{tr.status}: {tr.message}"
+        cmds = np.array(plant.log)
+        best["bare"] = min(best["bare"], bare(cmds, False))
+        best["bare_fit"] = min(best["bare_fit"], bare(cmds, True))
+    return {"scn": scn, "status": status, "steps": len(cmds), "rod_dt": p.physics_dt,
+            "elements": p.slave.n, **best}
 
 
 def _pin(cpu: int) -> str:
