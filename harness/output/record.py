@@ -17,6 +17,8 @@ is right-handed, Z up, like MuJoCo):
     world/master/arm, world/master/tip   line strip base-elbow-tip, tip point
     world/slave/segments                 plant bodies: oriented boxes sized like the segment rods (size
                                          static, pose per step; consecutive boxes tile the chain)
+    world/slave/rod, world/slave/sections  Cosserat plant: rod centreline (line strip of the nodes) and
+                                         the section boundaries (points), per step
     world/slave/backbone                 analytic constant-curvature backbone of the sensed q2
     world/slave/tip                      plant tip (x2_plant; analytic x2 on the analytic plant)
     world/desired/master, .../slave      the desired path x_d (static)
@@ -130,11 +132,18 @@ def _status_text(traj: Trajectory) -> str:
         "# Run status", "",
         f"* status: **{traj.status}**",
         f"* steps recorded: {n} ({span})",
-        f"* plant: {'MuJoCo' if traj.x2_plant is not None else 'analytic'}",
+        f"* plant: {_plant_name(traj)}",
     ]
     if traj.message:
         lines += ["", "```", str(traj.message), "```"]
     return "\n".join(lines) + "\n"
+
+
+def _plant_name(traj: Trajectory) -> str:
+    kind = (traj.meta or {}).get("plant")
+    if kind == "cosserat":
+        return "Cosserat rod"
+    return "MuJoCo" if traj.x2_plant is not None else "analytic"
 
 
 def write_recording(
@@ -221,6 +230,10 @@ def log_static(rec: rr.RecordingStream, traj: Trajectory, master_base, slave_bas
     rec.log("world/master/tip", rr.Points3D.from_fields(radii=0.012, colors=C_MASTER), static=True)
     rec.log("world/slave/backbone", rr.LineStrips3D.from_fields(radii=0.004, colors=C_BACKBONE), static=True)
     rec.log("world/slave/tip", rr.Points3D.from_fields(radii=0.012, colors=C_SLAVE), static=True)
+    if "centreline" in (traj.meta or {}).get("geometry", {}):
+        rec.log("world/slave/rod", rr.LineStrips3D.from_fields(radii=0.008, colors=C_SLAVE), static=True)
+        rec.log("world/slave/sections", rr.Points3D.from_fields(radii=0.014, colors=C_SECTIONS[1]),
+                static=True)
     # the master trace drawn larger, under the slave's: both stay visible where they overlap
     rec.log("traces/master", rr.Points2D.from_fields(radii=TRACE_POINT_RADIUS, colors=C_MASTER,
                                                      draw_order=1.0), static=True)
@@ -361,6 +374,13 @@ def log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, ever
                 quat[..., 3] = wxyz[..., 0]
                 boxes += _flat(B.descriptor_quaternions(), C.RotationQuatBatch, quat.reshape(-1, 4), nb)
             _send(rec, "world/slave/segments", t, block, boxes)
+
+    # (b') Cosserat plant: rod centreline (world points of the nodes) and section boundaries
+    geo = meta.get("geometry", {})
+    if "centreline" in geo:
+        _send_strips(rec, "world/slave/rod", t, block, np.asarray(geo["centreline"], dtype=float)[idx])
+    if "sections" in geo:
+        _send(rec, "world/slave/sections", t, block, _points_columns(np.asarray(geo["sections"])[idx]))
 
     # (c) analytic backbone of the sensed q2
     _send_strips(rec, "world/slave/backbone", t, block, backbone_points_world(traj, slave_base)[idx])
