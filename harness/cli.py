@@ -186,7 +186,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scenario_options(models, sim=False)
     models.add_argument("--enforce-cc", action=argparse.BooleanOptionalAction, default=None,
                         help="with / without the equality constraints holding each section at constant "
-                             "curvature (sets plant.enforce_cc). Default: from the scenario (paper: true).")
+                             "curvature (sets plant.enforce_cc). Default: from the scenario (paper: false).")
     models.add_argument("--out", metavar="FILE.xml", type=_path, default=None,
                         help="output MJCF file (parent folders are created). "
                              "Default: mjcf/octarm_<actuation>_n<segments>[_cc].xml.")

@@ -16,6 +16,7 @@ from controllers.params import Gains, MasterParams, SlaveParams, SubtaskSpec
 PLANTS = ("mujoco", "analytic")
 ACTUATIONS = ("servo", "torque")
 INTEGRATORS = ("implicitfast", "implicit", "euler", "rk4")
+NOISE_MODELS = ("per_channel", "per_vector")
 
 
 @dataclass(frozen=True)
@@ -49,7 +50,7 @@ class PlantConfig:
     slave: SlaveParams | None = None  # None = same as the nominal model (no mismatch)
     actuation: str = "servo"  # "servo" | "torque"   (mujoco only)
     segments: int = 8  # rigid segments per section N (mujoco only)
-    enforce_cc: bool = True  # equality constraints holding each section at constant curvature (see README)
+    enforce_cc: bool = False  # CC equality constraints per section (option; README: default plant)
     physics_dt: float = 0.001  # s, MuJoCo timestep (analytic: RK4 step)
     integrator: str = "implicitfast"
     servo_frequency: float = 20.0  # Hz, natural frequency of the segment-joint servos
@@ -58,6 +59,10 @@ class PlantConfig:
     actuation_delay: float = 0.0  # s, pure delay of the commands (multiple of control_dt)
     armature_fraction: float = 0.01  # segment-joint armature as a fraction of the section inertia
     scene_xml: str | None = None  # alternative scene MJCF (must include master + octarm base); None = mjcf/
+    # Material (Kelvin-Voigt) damping of the slave rod, shared by the Cosserat rod and the MuJoCo chain
+    # (hinge damping eta_b / h, slide damping eta_a / h; see harness.plant.chain_params.joint_damping).
+    bending_viscosity: tuple[float, float, float] = (0.01, 0.01, 0.01)  # eta_b, N m^2 s, per section
+    extension_viscosity: tuple[float, float, float] = (0.3, 0.3, 0.3)  # eta_a, N s, per section
 
 
 @dataclass(frozen=True)
@@ -79,6 +84,7 @@ class Scenario:
     duration: float = 20.0  # s
     control_dt: float = 0.001  # s (1 kHz), must be a multiple of plant.physics_dt
     snr_db: float | None = 40.0  # AWGN on fed-back states; None = no noise
+    noise_model: str = "per_channel"  # SNR per signal (running power) | "per_vector" (per-step vector RMS)
     seed: int = 0
     transient: float = 5.0  # s, metrics (RMS/max) are taken after this time
     gains: Gains = field(default_factory=Gains)

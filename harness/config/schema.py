@@ -19,6 +19,7 @@ from harness.config.errors import ConfigError, short_repr
 from harness.config.scenario import (
     ACTUATIONS,
     INTEGRATORS,
+    NOISE_MODELS,
     PLANTS,
     FaultConfig,
     InitialState,
@@ -269,6 +270,7 @@ TOP: dict[str, Checker] = {
     "duration": _num(_Range(0.0, 3600.0, lo_open=True)),
     "control_dt": _num(_Range(0.0, 1.0, lo_open=True)),
     "snr_db": _optional(_num(_Range(0.0, 200.0)), allow_false=True),
+    "noise_model": _choice(NOISE_MODELS),
     "seed": _int(0, 2**63 - 1),
     "transient": _num(_Range(0.0, 3600.0, hi_open=True)),
     "continuous_control": _bool,
@@ -330,6 +332,8 @@ PLANT: dict[str, Checker] = {
     "actuation_delay": _num(NONNEG),
     "armature_fraction": _num(NONNEG),
     "scene_xml": _optional(_mjcf_path),
+    "bending_viscosity": _vec(3, NONNEG),
+    "extension_viscosity": _vec(3, NONNEG),
 }
 FAULTS: dict[str, Checker] = {
     "e2_sign": _int(-1, 1, allowed=(-1, 1)),
