@@ -17,18 +17,22 @@ import numpy as np
 def stability_map(kns, etas, overrides=(), duration: float = 3.0, say=lambda s: None) -> list[dict]:
     """Rows over the k_n x eta_b grid: status, t_end (s, time reached), e2_rms (m, nan if diverged or
     shorter than the transient; the transient is set to duration / 2)."""
-    from harness.api import load_scenario, run
+    from harness.config.load import load_scenario
+    from harness.loop import simulate
+    from harness.loop.metrics import compute_metrics
 
     rows = []
     for kn in kns:
         for eta in etas:
             sets = list(overrides) + [f"duration={duration}", f"transient={duration / 2}",
                                       f"gains.kn={kn}", f"plant.bending_viscosity=[{eta},{eta},{eta}]"]
-            tr = run(load_scenario(None, sets))
+            scn = load_scenario(None, sets)
+            tr = simulate(scn)
+            e2 = compute_metrics(tr, scn).get("e2_rms", np.nan)
             t_end = float(tr.t[-1]) + float(tr.t[1] - tr.t[0]) if len(tr.t) > 1 else 0.0
             rows.append({"kn": float(kn), "eta_b": float(eta), "status": tr.status,
                          "t_end": min(t_end, duration), "message": tr.message,
-                         "e2_rms": float(tr.meta["metrics"].get("e2_rms", np.nan))})
+                         "e2_rms": float(e2)})
             say(f"kn = {kn:g}, eta_b = {eta:g}: {tr.status} at {rows[-1]['t_end']:.3f} s")
     return rows
 
