@@ -86,4 +86,38 @@ def plot_stability_map(maps: dict[str, list[dict]], duration: float, path) -> Pa
     return path
 
 
-__all__ = ["plot_stability_map", "stability_map", "stability_markdown"]
+MAPS = {
+    "chain CC off, servo": ["plant.enforce_cc=false", "plant.actuation=servo"],
+    "chain CC off, torque": ["plant.enforce_cc=false", "plant.actuation=torque"],
+    "chain CC off, torque, no noise": ["plant.enforce_cc=false", "plant.actuation=torque", "snr_db=none"],
+    "chain CC on, torque": ["plant.enforce_cc=true", "plant.actuation=torque"],
+}
+KNS = (1.0, 10.0, 30.0, 100.0, 300.0)
+ETAS = (0.0, 0.001, 0.01, 0.1, 1.0)
+
+
+def main(out="runs/stability_map", duration: float = 3.0) -> int:
+    """``python -m harness.studies.stability_map [OUT]``: the README's maps (MAPS over KNS x ETAS),
+    stability_map.md and stability_map.png in OUT."""
+    import sys
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    maps, text = {}, []
+    for name, ov in MAPS.items():
+        say = lambda s, n=name: print(n, s, file=sys.stderr)  # noqa: E731
+        maps[name] = stability_map(KNS, ETAS, ov, duration, say=say)
+        text.append(f"{name}\n\n" + stability_markdown(maps[name], duration))
+    (out / "stability_map.md").write_text("\n\n".join(text) + "\n")
+    plot_stability_map(maps, duration, out / "stability_map.png")
+    print("\n\n".join(text))
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    raise SystemExit(main(*sys.argv[1:2]))
+
+
+__all__ = ["MAPS", "main", "plot_stability_map", "stability_map", "stability_markdown"]
