@@ -59,7 +59,8 @@ def test_mujoco_warning_stops_the_run_at_the_step_that_raised_it():
     warning and MuJoCo's own text, and the rows up to it are finite."""
     from harness.loop.mujoco_loop import simulate_mujoco
 
-    scn = Scenario(duration=2.0, plant=PlantConfig(integrator="euler", servo_frequency=160.0))
+    scn = Scenario(duration=2.0,
+                   plant=PlantConfig(integrator="euler", servo_frequency=160.0, enforce_cc=True))
     tr = simulate_mujoco(scn)
     assert tr.status == "diverged", tr.message
     assert tr.message.startswith("MuJoCo warning (mjWARN_BADQACC"), tr.message
