@@ -106,8 +106,9 @@ def _add_scenario_options(p: argparse.ArgumentParser, *, sim: bool = True) -> No
              "(the same values as scenarios/paper.toml, which spells every one of them out).")
     if sim:
         p.add_argument("--plant", choices=PLANTS, default=None,
-                       help="plant that is simulated: 'mujoco' (MuJoCo multibody model) or 'analytic' "
-                            "(RK4 on the analytic model). Shortcut for --set plant.kind=... "
+                       help="plant that is simulated: 'mujoco' (MuJoCo multibody model), 'analytic' "
+                            "(RK4 on the analytic model) or 'cosserat' (PyElastica Cosserat rod). "
+                            "Shortcut for --set plant.kind=... "
                             "Default: from the scenario (paper: mujoco).")
     p.add_argument("--actuation", choices=ACTUATIONS, default=None,
                    help="MuJoCo slave actuation: 'servo' (segment-joint position servos) or 'torque' "

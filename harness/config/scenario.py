@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 
 from controllers.params import Gains, MasterParams, SlaveParams, SubtaskSpec
 
-PLANTS = ("mujoco", "analytic")
+PLANTS = ("mujoco", "analytic", "cosserat")
+ELASTIC_LAWS = ("analytic", "linear")
 ACTUATIONS = ("servo", "torque")
 INTEGRATORS = ("implicitfast", "implicit", "euler", "rk4")
 NOISE_MODELS = ("per_channel", "per_vector")
@@ -41,11 +42,23 @@ class InitialState:
 
 
 @dataclass(frozen=True)
+class CosseratConfig:
+    """Resolution and numerics of the Cosserat-rod plant (`plant.kind = "cosserat"`,
+    harness.plant.cosserat): the material comes from [plant.slave] and the viscosities of [plant]."""
+
+    elements_per_section: int = 10  # rod elements per section
+    dt: float | str = "auto"  # s, rod time step; "auto" = largest control_dt / m below the stable step
+    shear_factor: float = 10.0  # shear stiffness GA as a multiple of EA ("shear stiff")
+    rotary_radius: float = 0.04  # m, disc radius of the rotary inertia when slave.slice_inertia = 0
+    elastic_law: str = "analytic"  # "analytic" (CC-consistent energy) | "linear" (textbook rod)
+
+
+@dataclass(frozen=True)
 class PlantConfig:
     """The 'true' plant.  For `kind="mujoco"` the master/slave parameters below are what the MJCF is
     built from; the controller keeps using `Scenario.master` / `Scenario.slave` (nominal)."""
 
-    kind: str = "mujoco"  # "mujoco" | "analytic"
+    kind: str = "mujoco"  # "mujoco" | "analytic" | "cosserat"
     master: MasterParams | None = None  # None = same as the nominal model (no mismatch)
     slave: SlaveParams | None = None  # None = same as the nominal model (no mismatch)
     actuation: str = "servo"  # "servo" | "torque"   (mujoco only)
@@ -59,10 +72,11 @@ class PlantConfig:
     actuation_delay: float = 0.0  # s, pure delay of the commands (multiple of control_dt)
     armature_fraction: float = 0.01  # segment-joint armature as a fraction of the section inertia
     scene_xml: str | None = None  # alternative scene MJCF (must include master + octarm base); None = mjcf/
-    # Material (Kelvin-Voigt) damping of the slave rod, shared by the Cosserat rod and the MuJoCo chain
-    # (hinge damping eta_b / h, slide damping eta_a / h; see harness.plant.chain_params.joint_damping).
-    bending_viscosity: tuple[float, float, float] = (0.01, 0.01, 0.01)  # eta_b, N m^2 s, per section
-    extension_viscosity: tuple[float, float, float] = (0.3, 0.3, 0.3)  # eta_a, N s, per section
+    # material (Kelvin-Voigt) damping of the slave, per section, shared by the Cosserat rod and the
+    # MuJoCo chain (joint damping eta_b / h, eta_a / h for segments of length h)
+    bending_viscosity: tuple[float, float, float] = (0.1, 0.1, 0.1)  # eta_b, N m^2 s
+    extension_viscosity: tuple[float, float, float] = (3.0, 3.0, 3.0)  # eta_a, N s
+    cosserat: CosseratConfig = field(default_factory=CosseratConfig)  # [plant.cosserat]
 
 
 @dataclass(frozen=True)

@@ -18,9 +18,11 @@ from controllers.params import Gains, MasterParams, ParameterError, SlaveParams,
 from harness.config.errors import ConfigError, short_repr
 from harness.config.scenario import (
     ACTUATIONS,
+    ELASTIC_LAWS,
     INTEGRATORS,
     NOISE_MODELS,
     PLANTS,
+    CosseratConfig,
     FaultConfig,
     InitialState,
     PlantConfig,
@@ -332,9 +334,40 @@ PLANT: dict[str, Checker] = {
     "actuation_delay": _num(NONNEG),
     "armature_fraction": _num(NONNEG),
     "scene_xml": _optional(_mjcf_path),
-    "bending_viscosity": _vec(3, NONNEG),
-    "extension_viscosity": _vec(3, NONNEG),
 }
+def _auto_or(inner: Checker) -> Checker:
+    """"auto" or a value accepted by `inner`."""
+
+    def check(path: str, v: Any) -> Any:
+        if isinstance(v, str) and v == "auto":
+            return "auto"
+        try:
+            return inner(path, v)
+        except ConfigError:
+            raise ConfigError.field(path, v, f'must be "auto" or {inner.desc}') from None
+
+    return check
+
+
+COSSERAT: dict[str, Checker] = {
+    "elements_per_section": _int(2, 200),
+    "dt": _auto_or(_num(_Range(0.0, 0.01, lo_open=True))),
+    "shear_factor": _num(_Range(0.0, 1e6, lo_open=True)),
+    "rotary_radius": _num(_Range(0.0, 1.0, lo_open=True)),
+    "elastic_law": _choice(ELASTIC_LAWS),
+}
+
+
+def _cosserat_table(path: str, v: Any) -> CosseratConfig:
+    """The [plant.cosserat] table (missing keys: defaults); its own fields are checked one by one."""
+    tbl = as_table(path, v)
+    return build_section(CosseratConfig, read_fields(tbl, path, COSSERAT, CosseratConfig()), path)
+
+
+PLANT["bending_viscosity"] = _vec(3, NONNEG)  # N m^2 s per section
+PLANT["extension_viscosity"] = _vec(3, NONNEG)  # N s per section
+PLANT["cosserat"] = _cosserat_table
+
 FAULTS: dict[str, Checker] = {
     "e2_sign": _int(-1, 1, allowed=(-1, 1)),
     "null_space_scale": _num(_Range(0.0, 10.0)),
@@ -358,7 +391,7 @@ def schema_paths() -> list[str]:
     out = list(TOP)
     for sec, (_, spec) in SECTIONS.items():
         out += [f"{sec}.{k}" for k in spec]
-    for sub, spec in (("master", MASTER), ("slave", SLAVE)):
+    for sub, spec in (("master", MASTER), ("slave", SLAVE), ("cosserat", COSSERAT)):
         out.append(f"plant.{sub}")
         out += [f"plant.{sub}.{k}" for k in spec]
     return out

@@ -2,7 +2,8 @@
 
 `simulate(scn, plant=None)` is the one entry point: it takes a scenario and a plant
 (`harness.plant.build_plant(scn)` when not given) and returns the in-memory `Trajectory`.  The
-plant-specific loops are `harness.loop.analytic_loop` and `harness.loop.mujoco_loop`; what they
+plant-specific loops are `harness.loop.analytic_loop`, `harness.loop.mujoco_loop` and
+`harness.loop.stepped_loop` (plants stepped from Python, e.g. the Cosserat rod); what they
 share (initial state, noise, status codes, stop flag) is `harness.loop.common`; the compiled
 kernels are `harness.loop.kernels` / `harness.loop.mujoco_kernels`, compiled by `harness.loop.fast`.
 The loop knows nothing of files, recordings or sweeps.
@@ -22,6 +23,10 @@ def simulate(scn, plant: Any = None, progress: bool = False):
         from harness.plant import build_plant
 
         plant = build_plant(scn)
+    if hasattr(plant, "advance"):  # a stepped plant (harness.plant.stepped.SteppedPlant)
+        from harness.loop.stepped_loop import simulate_stepped
+
+        return simulate_stepped(scn, plant, progress=progress)
     if plant.kind == "analytic":
         from harness.loop.analytic_loop import simulate_analytic
 

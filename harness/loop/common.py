@@ -30,6 +30,7 @@ STATUS_TEXT = {
     5: "slave section length <= 0",
     6: "non-finite or exploding MuJoCo state (|x| > 1e6)",
     7: "MuJoCo warning",
+    8: "non-finite or exploding plant state (|x| > 1e6)",
 }
 
 

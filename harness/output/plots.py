@@ -80,8 +80,9 @@ def fig_e2(traj: Trajectory, path: Path) -> Path:
     ax.plot(traj.t, e2[:, 1], color="tab:orange", marker=m, label="e2 Z (analytic x2 of sensed q2)")
     if traj.x2_plant is not None:
         ep = np.asarray(traj.e2_plant, dtype=float).reshape(len(traj), 2)
-        ax.plot(traj.t, ep[:, 0], "--", color="tab:cyan", marker=m, label="X, x1 - x2_plant (MuJoCo tip)")
-        ax.plot(traj.t, ep[:, 1], "--", color="tab:red", marker=m, label="Z, x1 - x2_plant (MuJoCo tip)")
+        tipname = "rod tip" if (traj.meta or {}).get("plant") == "cosserat" else "MuJoCo tip"
+        ax.plot(traj.t, ep[:, 0], "--", color="tab:cyan", marker=m, label=f"X, x1 - x2_plant ({tipname})")
+        ax.plot(traj.t, ep[:, 1], "--", color="tab:red", marker=m, label=f"Z, x1 - x2_plant ({tipname})")
     ax.set_title("Master-slave coordination error e2 = x1 - x2 (eq. 16)")
     ax.set_ylabel("e2 [m]")
     _finish_time_axis(ax, traj)
@@ -216,6 +217,7 @@ def fig_shapes(traj: Trajectory, path: Path, lengths=(0.6, 0.6), instants: int =
         ax.text(0.5, 0.5, "no steps recorded", ha="center", va="center", transform=ax.transAxes)
     idx = np.unique(np.linspace(0, n - 1, min(instants, n)).round().astype(int)) if n else []
     cmap = colormaps["viridis"]
+    rod = meta.get("geometry", {}).get("centreline")  # Cosserat plant: (n, nodes, 3) world
     for j, i in enumerate(idx):
         c = cmap(j / max(1, len(idx) - 1))
         lab = f"t = {traj.t[i]:.3g} s"
@@ -227,6 +229,8 @@ def fig_shapes(traj: Trajectory, path: Path, lengths=(0.6, 0.6), instants: int =
         if traj.body_pos is not None:
             bp = np.asarray(traj.body_pos[i], dtype=float)
             ax.plot(bp[:, 0], bp[:, 2], "o", mfc="none", color=c, ms=3.5)
+        if rod is not None:
+            ax.plot(rod[i][:, 0], rod[i][:, 2], ":", color=c, lw=2.5)
         xd = np.asarray(traj.xd[i], dtype=float)
         ax.plot(*(xd + mb[[0, 2]]), "x", color=c, ms=7)
         ax.plot(*(xd + sb[[0, 2]]), "x", color=c, ms=7)
@@ -235,6 +239,8 @@ def fig_shapes(traj: Trajectory, path: Path, lengths=(0.6, 0.6), instants: int =
         ax.plot([], [], "k-", lw=2.0, label="slave backbone (analytic, sensed q2)")
         if traj.body_pos is not None:
             ax.plot([], [], "ko", mfc="none", ms=3.5, label="plant bodies (MuJoCo)")
+        if rod is not None:
+            ax.plot([], [], "k:", lw=2.5, label="Cosserat rod centreline (plant)")
         ax.plot([], [], "kx", ms=7, label="desired tip x_d (40)")
         ax.plot(*mb[[0, 2]], "ks", ms=7)
         ax.plot(*sb[[0, 2]], "ks", ms=7)

@@ -17,6 +17,8 @@ is right-handed, Z up, like MuJoCo):
     world/master/arm, world/master/tip   line strip base-elbow-tip, tip point
     world/slave/segments                 plant bodies: oriented boxes sized like the segment rods (size
                                          static, pose per step; consecutive boxes tile the chain)
+    world/slave/rod, world/slave/sections  Cosserat plant: rod centreline (line strip of the nodes) and
+                                         the section boundaries (points), per step
     world/slave/backbone                 analytic constant-curvature backbone of the sensed q2
     world/slave/tip                      plant tip (x2_plant; analytic x2 on the analytic plant)
     world/desired/master, .../slave      the desired path x_d (static)
@@ -224,11 +226,18 @@ def _status_text(traj: Trajectory) -> str:
         "# Run status", "",
         f"* status: **{traj.status}**",
         f"* steps recorded: {n} ({span})",
-        f"* plant: {'MuJoCo' if traj.x2_plant is not None else 'analytic'}",
+        f"* plant: {_plant_name(traj)}",
     ]
     if traj.message:
         lines += ["", "```", str(traj.message), "```"]
     return "\n".join(lines) + "\n"
+
+
+def _plant_name(traj: Trajectory) -> str:
+    kind = (traj.meta or {}).get("plant")
+    if kind == "cosserat":
+        return "Cosserat rod"
+    return "MuJoCo" if traj.x2_plant is not None else "analytic"
 
 
 def write_recording(
@@ -286,6 +295,10 @@ def _log_static(rec: rr.RecordingStream, traj: Trajectory, master_base, slave_ba
     rec.log("world/master/tip", rr.Points3D.from_fields(radii=0.012, colors=_C_MASTER), static=True)
     rec.log("world/slave/backbone", rr.LineStrips3D.from_fields(radii=0.004, colors=_C_BACKBONE), static=True)
     rec.log("world/slave/tip", rr.Points3D.from_fields(radii=0.012, colors=_C_SLAVE), static=True)
+    if "centreline" in (traj.meta or {}).get("geometry", {}):
+        rec.log("world/slave/rod", rr.LineStrips3D.from_fields(radii=0.008, colors=_C_SLAVE), static=True)
+        rec.log("world/slave/sections", rr.Points3D.from_fields(radii=0.014, colors=_C_SECTIONS[1]),
+                static=True)
 
 
 class _Arrow:
@@ -408,6 +421,13 @@ def _log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, eve
                 quat[..., 3] = wxyz[..., 0]
                 boxes += _flat(B.descriptor_quaternions(), C.RotationQuatBatch, quat.reshape(-1, 4), nb)
             _send(rec, "world/slave/segments", t, block, boxes)
+
+    # (b') Cosserat plant: rod centreline (world points of the nodes) and section boundaries
+    geo = meta.get("geometry", {})
+    if "centreline" in geo:
+        _send_strips(rec, "world/slave/rod", t, block, np.asarray(geo["centreline"], dtype=float)[idx])
+    if "sections" in geo:
+        _send(rec, "world/slave/sections", t, block, _points_columns(np.asarray(geo["sections"])[idx]))
 
     # (c) analytic backbone of the sensed q2
     _send_strips(rec, "world/slave/backbone", t, block, _backbone_world(traj, slave_base)[idx])

@@ -2,7 +2,9 @@
 
 * `harness.plant.mujoco_model`: the MuJoCo model (MJCF + MjSpec-generated Octarm chain) and
   `harness.plant.chain_map`: the chain <-> q2 maps (sensing, actuation, elastic correction);
-* `harness.plant.analytic`: the paper's analytic models themselves as the plant (RK4).
+* `harness.plant.analytic`: the paper's analytic models themselves as the plant (RK4);
+* `harness.plant.cosserat_plant`: a Cosserat rod (PyElastica) slave + the rigid master, stepped from
+  Python (protocol `harness.plant.stepped.SteppedPlant`).
 
 `build_plant(scn)` builds the plant a scenario asks for; a plant validates its own inputs (scene
 MJCF, compile errors) and reports them as `ConfigError` naming the scenario field, so that
@@ -18,7 +20,8 @@ from harness.config.scenario import Scenario
 
 
 def build_plant(scn: Scenario) -> Any:
-    """The plant of `scn` (`AnalyticPlant` or `MujocoPlant`), built and checked.  Raises ConfigError."""
+    """The plant of `scn` (`AnalyticPlant`, `MujocoPlant` or `CosseratPlant`), built and checked.
+    Raises ConfigError."""
     kind = scn.plant.kind
     if kind == "analytic":
         from harness.plant.analytic import AnalyticPlant
@@ -34,6 +37,10 @@ def build_plant(scn: Scenario) -> Any:
                 raise ConfigError.field("plant.scene_xml", scn.plant.scene_xml,
                                         f"unusable MJCF: {exc}") from None
             raise ConfigError(str(exc), path="plant") from None
+    if kind == "cosserat":
+        from harness.plant.cosserat_plant import CosseratPlant
+
+        return CosseratPlant(scn)
     raise ConfigError.field("plant.kind", kind, "unknown plant")
 
 

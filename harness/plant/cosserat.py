@@ -100,10 +100,10 @@ generalized damping of SlaveParams maps as
 
 A chain of rigid segments of length h discretizing the same rod gets hinge damping eta_b / h
 (N m s/rad, like its hinge stiffness EI / h) and slide damping eta_a / h (N s/m, like Ke L0 / h):
-`hinge_damping`, `slide_damping`.  Default: eta_b = 0.01 N m^2 s and eta_a = 0.3 N s in every
-section (`DEFAULT_ETA_B`, `DEFAULT_ETA_A`), i.e. c_k = 0.003 and c_d = 1 in SlaveParams units:
-small (a free motion of the default arm still rings for several seconds; the modal damping
-ratios are not measured yet).
+`hinge_damping`, `slide_damping`.  Default: eta_b = 0.1 N m^2 s and eta_a = 3 N s in every
+section (`DEFAULT_ETA_B`, `DEFAULT_ETA_A`, = the scenario's plant.bending_viscosity /
+extension_viscosity), i.e. c_k = 0.03 and c_d = 10 in SlaveParams units: first bending mode
+1.27 Hz with a damping ratio of 11 % (`benchmarks/modal_cosserat.py`; README "Cosserat plant").
 
 Actuation
 ---------
@@ -155,8 +155,8 @@ from controllers.params import SlaveParams
 from harness.plant import cosserat_rod as kr
 
 DEFAULT_ELEMENTS = 10
-DEFAULT_ETA_B = 0.01  # N m^2 s, bending viscosity per section
-DEFAULT_ETA_A = 0.3  # N s, extension viscosity per section
+DEFAULT_ETA_B = 0.1  # N m^2 s, bending viscosity per section
+DEFAULT_ETA_A = 3.0  # N s, extension viscosity per section
 DEFAULT_SHEAR_FACTOR = 10.0
 DEFAULT_ROTARY_RADIUS = 0.04  # m
 SAFETY = 0.5

@@ -1,0 +1,178 @@
+"""Real-time factor of the Cosserat-rod plant next to the MuJoCo chain, in one run on one machine.
+
+    .venv/bin/python benchmarks/bench_cosserat.py              # 2 s runs, best of 2
+    .venv/bin/python benchmarks/bench_cosserat.py --duration 5 --reps 3
+    .venv/bin/python benchmarks/bench_cosserat.py --cpu -1     # do not pin to one core
+
+The process is pinned to one core (default: the last CPU).  Every timing is the best of --reps
+repetitions (the machine is noisy).  Rows, all on the paper scenario (40 dB, servo, seed 0):
+  cosserat loop     harness.loop.simulate on plant.kind = "cosserat" at its default resolution
+                    (10 elements per section, dt "auto"): the stepped loop's wall time
+  cosserat bare     the same plant, reset to the same state, replaying the commands the loop sent
+                    (plant.command + plant.advance per control step, no sensing, no controller);
+                    loop and bare repetitions are interleaved
+  cosserat bare+fit bare + plant.true_state (the CC fit) per step
+  mujoco CC on      harness.loop.simulate, plant.kind = "mujoco", N = 8, CC enforced (the default)
+  mujoco CC off     the same with plant.enforce_cc = false and the issue's plant bending damping
+                    (plant.slave.bending_damping = 0.01 per section; the free chain has no material
+                    damping until the MuJoCo chain uses plant.bending_viscosity)
+and the stepped loop's overhead: loop / bare (issue 14 asks <= 1.25).
+Prints a markdown table and writes benchmarks/RESULTS_cosserat.md (unless --no-write).
+This is a benchmark, not a test: it asserts nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from harness.config.load import load_scenario
+from harness.loop import simulate
+from harness.loop.common import initial_state
+from harness.plant import build_plant
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+class _Logging:
+    """Wraps a stepped plant and logs every command of a closed-loop run (for the bare replay)."""
+
+    def __init__(self, plant):
+        self.plant = plant
+        self.log: list[np.ndarray] = []
+        for k in ("kind", "actuation", "physics_dt"):
+            setattr(self, k, getattr(plant, k))
+
+    def reset(self, s0):
+        self.plant.reset(s0)
+
+    def command(self, T1, T2, q, dq):
+        self.log.append(np.concatenate([T1, T2, q, dq]))
+        self.plant.command(T1, T2, q, dq)
+
+    def advance(self, dt):
+        return self.plant.advance(dt)
+
+    def true_state(self, out):
+        self.plant.true_state(out)
+
+    def slave_tip(self):
+        return self.plant.slave_tip()
+
+    def geometry(self):
+        return self.plant.geometry()
+
+    def meta(self):
+        return self.plant.meta()
+
+
+def scenario(duration: float, *extra: str):
+    return load_scenario(ROOT / "scenarios" / "paper.toml", [f"duration={duration}", "transient=0", *extra])
+
+
+def closed_loop(scn, reps: int) -> tuple[float, str]:
+    best, status = np.inf, ""
+    for _ in range(reps):
+        tr = simulate(scn)
+        best = min(best, float(tr.meta["wall_time"]))
+        status = tr.status if tr.status == "ok" else f"{tr.status}: {tr.message}"
+    return best, status
+
+
+def cosserat_rows(duration: float, reps: int) -> dict:
+    """Closed loop, bare stepping and bare + CC fit, interleaved repetitions (best of each), so that
+    a change of machine load hits all three alike."""
+    scn = scenario(duration, "plant.kind=cosserat")
+    plant = _Logging(build_plant(scn))
+    s0 = initial_state(scn)
+    dt = scn.control_dt
+    p = plant.plant
+    state = np.zeros(16)
+
+    def bare(cmds: np.ndarray, fit: bool) -> float:
+        p.reset(s0)
+        t0 = time.perf_counter()
+        for c in cmds:
+            if fit:
+                p.true_state(state)
+            p.command(c[0:2], c[2:8], c[8:14], c[14:20])
+            p.advance(dt)
+        return time.perf_counter() - t0
+
+    best = {"loop": np.inf, "bare": np.inf, "bare_fit": np.inf}
+    status, cmds = "", np.zeros((0, 20))
+    for _ in range(reps):
+        plant.log.clear()
+        tr = simulate(scn, plant)
+        best["loop"] = min(best["loop"], float(tr.meta["wall_time"]))
+        status = tr.status if tr.status == "ok" else f"{tr.status}: {tr.message}"
+        cmds = np.array(plant.log)
+        best["bare"] = min(best["bare"], bare(cmds, False))
+        best["bare_fit"] = min(best["bare_fit"], bare(cmds, True))
+    return {"scn": scn, "status": status, "steps": len(cmds), "rod_dt": p.physics_dt,
+            "elements": p.slave.n, **best}
+
+
+def _pin(cpu: int) -> str:
+    if cpu < 0 or not hasattr(os, "sched_setaffinity"):
+        return "not pinned"
+    cpus = sorted(os.sched_getaffinity(0))
+    c = cpus[cpu] if cpu < len(cpus) else cpus[-1]
+    os.sched_setaffinity(0, {c})
+    return f"pinned to CPU {c}"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--duration", type=float, default=2.0, help="simulated seconds per run (2-5)")
+    ap.add_argument("--reps", type=int, default=2, help="repetitions, best kept")
+    ap.add_argument("--cpu", type=int, default=-1 if (os.cpu_count() or 1) < 2 else 1,
+                    help="index of the CPU to pin to (-1: no pinning)")
+    ap.add_argument("--no-write", action="store_true", help="do not write benchmarks/RESULTS_cosserat.md")
+    args = ap.parse_args()
+    pin = _pin(args.cpu)
+    # warm-up: kernels loaded from numba's cache, plants built once
+    simulate(scenario(0.01, "plant.kind=cosserat"))
+    simulate(scenario(0.01))
+    c = cosserat_rows(args.duration, args.reps)
+    T = args.duration
+    mj_on, st_on = closed_loop(scenario(T), args.reps)
+    mj_off, st_off = closed_loop(scenario(T, "plant.enforce_cc=false",
+                                          "plant.slave.bending_damping=[0.01,0.01,0.01]"), args.reps)
+    n = c["steps"]
+    rows = [
+        ("Cosserat rod, closed loop (stepped loop)", c["loop"], c["status"]),
+        ("Cosserat rod, bare stepping (command + advance)", c["bare"], "-"),
+        ("Cosserat rod, bare stepping + CC fit", c["bare_fit"], "-"),
+        ("MuJoCo chain N = 8, CC on, closed loop", mj_on, st_on),
+        ("MuJoCo chain N = 8, CC off (c_k = 0.01), closed loop", mj_off, st_off),
+    ]
+    lines = [
+        f"# Cosserat plant speed (`benchmarks/bench_cosserat.py --duration {T:g} --reps {args.reps}`)", "",
+        f"{datetime.date.today()}, {platform.processor() or platform.machine()}, Python "
+        f"{sys.version.split()[0]}, {pin}, os.getloadavg() = {tuple(round(x, 1) for x in os.getloadavg())}.",
+        f"Paper scenario, {T:g} s simulated ({n} control steps of {c['scn'].control_dt * 1e3:g} ms), 40 dB, "
+        f"servo, seed 0. Rod: {c['elements']} elements per section, dt = {c['rod_dt'] * 1e6:.1f} us "
+        f"({round(c['scn'].control_dt / c['rod_dt'])} rod steps per control step). Best of {args.reps}.", "",
+        "| run | wall [s] | real-time factor | us / control step | status |",
+        "|---|---:|---:|---:|---|",
+    ]
+    for name, wall, status in rows:
+        lines.append(f"| {name} | {wall:.3f} | {T / wall:.3f} | {wall / n * 1e6:.0f} | {status} |")
+    lines += ["", f"Stepped-loop overhead: loop / bare stepping = {c['loop'] / c['bare']:.3f} "
+              f"(loop / (bare + CC fit) = {c['loop'] / c['bare_fit']:.3f}); issue 14 asks <= 1.25.", ""]
+    text = "\n".join(lines)
+    print(text)
+    if not args.no_write:
+        (ROOT / "benchmarks" / "RESULTS_cosserat.md").write_text(text, encoding="utf-8")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,213 @@
+"""Closed loop on a plant stepped from Python (protocol `harness.plant.stepped.SteppedPlant`).
+
+For plants whose physics is not a MuJoCo model or the analytic model (today: the Cosserat rod,
+`harness.plant.cosserat_plant`), the loop over control steps is Python, and each step is a few
+compiled calls.  Per control step k (t = k control_dt):
+
+    plant.true_state(state)                     noise-free [q1, dq1, q2, dq2] (16,)
+    x_d(t), eq. (40)                            K.desired
+    sensed = state + AWGN                       K.add_noise, the seeded table of noise_table (as the
+                                                other loops: same seed -> same noise)
+    status = controller.step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN)
+                                                default PaperController: the compiled laws (12)-(13),
+                                                (17)-(33) (K.control_laws, as in the compiled loops)
+    record row of the true state                K.record_row (ROW layout of harness.loop.trajectory)
+    servo reference                             dq2_ref += u2 dt, q2_ref += dq2_ref dt (semi-implicit
+                                                Euler, as harness.loop.mujoco_kernels.mujoco_commands)
+    plant.command(T1, T2, q2_ref, dq2_ref)      through a ring buffer of plant.actuation_delay
+    status = plant.advance(control_dt)
+
+Statuses are those of `harness.loop.common.STATUS_TEXT` (1 non-finite command, 2/3 singular, 4
+runaway, 5 section length <= 0, 8 non-finite or exploding plant state, ...); the run stops at the
+first non-zero one, keeps every recorded row and says why (`set_outcome`).  `harness.loop.common.STOP`
+interrupts between steps.  Per-step buffers are preallocated; the plant geometry is copied into
+(n, ...) arrays (`plant.geometry()` returns the same arrays every call).
+
+Controller interface (`Controller`): `reset(scn, state0)` once, then per step
+`step(t, sensed (16,), xd, dxd, ddxd (2,), out_T1 (2,), out_T2 (6,), out_u2 (6,), out_deN (6,)) -> int`
+filling the master torques T1 (N m), the slave generalized forces T2 ([N, N m^2], eq. 18; servo
+plants use it as feed-forward), the slave input u2 (eq. 18, the servo reference's acceleration) and
+the null-space velocity error deN (eq. 23, recorded; zeros if the controller has none); returns 0 or
+a status code.  A controller may also offer `fused_step(t, k, state, traj, noise, scale, xd, dxd,
+ddxd, sensed, T1, T2, u2, deN, row)` doing x_d, noise, its laws and the record row in one call
+(PaperController: the compiled `control_step`); the loop then uses it instead.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Protocol
+
+import numpy as np
+
+from controllers.control import MASTER_INFO, SLAVE_INFO
+from harness.config.scenario import Scenario
+from harness.loop.common import (
+    CHUNK,
+    STOP,
+    common_arrays,
+    initial_state,
+    noise_table,
+    progress_bar,
+    run_meta,
+    set_outcome,
+)
+from harness.loop.fast import K
+from harness.loop.kernels import R_E1, R_E2, RUNAWAY
+from harness.loop.trajectory import ROW_WIDTH, Trajectory
+from harness.plant.stepped import SteppedPlant
+
+EXPLODING = 1e6  # |state| above this is a diverged plant (status 8)
+
+
+class Controller(Protocol):
+    """A controller the stepped loop can run (see the module docstring for shapes and units)."""
+
+    name: str
+
+    def reset(self, scn: Scenario, state0: np.ndarray) -> None: ...
+
+    def step(self, t: float, sensed: np.ndarray, xd: np.ndarray, dxd: np.ndarray, ddxd: np.ndarray,
+             T1: np.ndarray, T2: np.ndarray, u2: np.ndarray, deN: np.ndarray) -> int: ...
+
+
+class PaperController:
+    """The paper's controllers on the nominal analytic models: master feedback linearization
+    (12)-(13), slave (17)-(18) with null-space tracking (23)-(28) and sub-task (29)-(33); one
+    compiled call (`harness.loop.kernels.control_laws`) per step, the kernel the compiled loops use."""
+
+    name = "paper"
+
+    def __init__(self) -> None:
+        self._args: tuple = ()
+        self.minfo = np.empty(MASTER_INFO)
+        self.sinfo = np.empty(SLAVE_INFO)
+
+    def reset(self, scn: Scenario, state0: np.ndarray) -> None:
+        a = common_arrays(scn)
+        self._args = (a["mpk_c"], a["spk_c"], a["nodes"], a["weights"], a["gains"], a["spec"])
+        self._F = a["F"]
+
+    def step(self, t, sensed, xd, dxd, ddxd, T1, T2, u2, deN) -> int:
+        mpk, spk, nodes, weights, gains, spec = self._args
+        return K.control_laws(mpk, spk, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, self._F,
+                              T1, T2, u2, deN, self.minfo, self.sinfo)
+
+    def fused_step(self, t, k, state, traj, noise, scale, xd, dxd, ddxd, sensed, T1, T2, u2, deN, row) -> int:
+        """The loop's fast path: x_d, noise, both laws and the record row in one compiled call
+        (`harness.loop.kernels.control_step`, the compiled loops' own step; same numbers as `step`
+        plus the loop's separate calls)."""
+        mpk, spk, nodes, weights, gains, spec = self._args
+        return K.control_step(t, state, traj, noise, k, scale, mpk, spk, nodes, weights, gains, spec,
+                              self._F, xd, dxd, ddxd, sensed, T1, T2, u2, deN, self.minfo, self.sinfo, row)
+
+
+def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
+                     controller: Controller | None = None) -> Trajectory:
+    """Run the scenario on a stepped plant; returns the Trajectory (possibly cut short).
+
+    traj.x2_plant: the plant's own slave tip (n, 2); traj.master_pos: (n, 3, 3) if the plant's
+    geometry has "master"; every other geometry array goes to traj.meta["geometry"][name] (n, ...).
+    Timings: meta "build_time" (reset), "wall_time" (the loop)."""
+    tb = time.perf_counter()
+    n = scn.n_steps
+    dt = scn.control_dt
+    s0 = initial_state(scn)
+    plant.reset(s0)
+    ctrl = controller if controller is not None else PaperController()
+    ctrl.reset(scn, s0)
+    fused = getattr(ctrl, "fused_step", None)  # optional one-call fast path (the paper controller)
+    build_time = time.perf_counter() - tb
+    noise, scale = noise_table(scn, n)
+    a = common_arrays(scn)
+    traj_p, mpk, gains, spec = a["traj"], a["mpk_c"], a["gains"], a["spec"]
+    rows = np.zeros((n, ROW_WIDTH))
+    tips = np.zeros((n, 2))
+    geo = {name: np.zeros((n, *np.shape(v))) for name, v in plant.geometry().items()}
+    state, sensed = np.zeros(16), np.zeros(16)
+    xd, dxd, ddxd = np.zeros(2), np.zeros(2), np.zeros(2)
+    T1, T2, u2, deN = np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6)
+    ref = np.concatenate([s0[4:10], s0[10:16]])  # servo reference [q2_ref, dq2_ref]
+    q_ref, dq_ref = ref[0:6], ref[6:12]
+    servo = plant.actuation == "servo"
+    delay = int(round(scn.plant.actuation_delay / dt))
+    cmdbuf = np.zeros((delay + 1, 20))  # [T1, T2, q2_ref, dq2_ref] per slot
+    cmdbuf[:, 8:20] = ref
+    bar = progress_bar(progress, n, f"{plant.kind} plant ({plant.actuation})")
+    status, done = 0, 0
+    interrupted = False
+    error = ""
+    t0 = time.perf_counter()
+    try:
+        for k in range(n):
+            t = k * dt
+            plant.true_state(state)
+            total = float(state @ state)  # NaN/inf propagate; no temporary array
+            if not math.isfinite(total) or total > EXPLODING * EXPLODING:
+                status = 8
+                break
+            if min(state[4], state[5], state[6]) <= 0.0:
+                status = 5
+                break
+            row = rows[k]
+            if fused is not None:
+                st = fused(t, k, state, traj_p, noise, scale, xd, dxd, ddxd, sensed, T1, T2, u2, deN, row)
+            else:
+                K.desired(traj_p, t, xd, dxd, ddxd)
+                if scale > 0.0:
+                    K.add_noise(state, noise[k], scale, sensed)
+                else:
+                    sensed[:] = state
+                st = ctrl.step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN)
+                K.record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row)
+            tips[k] = plant.slave_tip()
+            for name, v in plant.geometry().items():
+                geo[name][k] = v
+            done = k + 1
+            if st == 0 and not math.isfinite(float(T1.sum() + T2.sum() + u2.sum())):
+                st = 1
+            if st == 0 and (abs(row[R_E1]) + abs(row[R_E1 + 1]) > RUNAWAY
+                            or abs(row[R_E2]) + abs(row[R_E2 + 1]) > RUNAWAY):
+                st = 4
+            if st != 0:
+                status = int(st)
+                break
+            if servo:
+                dq_ref += u2 * dt
+                q_ref += dq_ref * dt
+            cmd = cmdbuf[k % (delay + 1)]
+            cmd[0:2] = T1
+            cmd[2:8] = T2
+            cmd[8:20] = ref
+            use = cmdbuf[(k - delay) % (delay + 1)] if k >= delay else cmdbuf[0]
+            plant.command(use[0:2], use[2:8], use[8:14], use[14:20])
+            st = plant.advance(dt)
+            if st != 0:
+                status = int(st)
+                break
+            if (k + 1) % CHUNK == 0:
+                if bar is not None:
+                    bar.update(CHUNK)
+                if STOP.is_set():
+                    interrupted = True
+                    break
+    except KeyboardInterrupt:
+        interrupted = True
+    except Exception as exc:  # keep what was computed; report the cause
+        error = f"{type(exc).__name__}: {exc}"
+    finally:
+        if bar is not None:
+            bar.close()
+    wall = time.perf_counter() - t0
+    traj = Trajectory.from_rows(rows[:done])
+    traj.x2_plant = tips[:done].copy()
+    if "master" in geo:
+        traj.master_pos = geo.pop("master")[:done].copy()
+    traj.meta.update(run_meta(scn, wall))
+    traj.meta["build_time"] = build_time
+    traj.meta["controller"] = getattr(ctrl, "name", type(ctrl).__name__)
+    traj.meta["geometry"] = {name: v[:done].copy() for name, v in geo.items()}
+    traj.meta.update(getattr(plant, "meta", lambda: {})())
+    set_outcome(traj, status, interrupted, error)
+    return traj

@@ -1,0 +1,250 @@
+"""The Cosserat-rod plant of a scenario: the rod slave (`harness.plant.cosserat.CosseratSlave`) and the
+rigid 2-link master, as a `harness.plant.stepped.SteppedPlant` for `harness.loop.stepped_loop`.
+
+* Slave: one PyElastica Cosserat rod built from the plant slave parameters (EI = Kb, EA = Ke L0,
+  rho A = m / L0, GA = shear_factor EA), material damping plant.bending_viscosity (eta_b, N m^2 s)
+  and plant.extension_viscosity (eta_a, N s) per section, base clamped, gravity.  Servo actuation:
+  q2_ref becomes the rod's rest strains (the section's own stiffness is the servo; dq2_ref is not
+  used: the rod has no velocity servo), plus, if plant.servo_feedforward, the feed-forward
+  T2 - dV/dq2(q2) as internal section loads, with V = sum 1/2 Kb d k^2 + 1/2 Ke (d - L0)^2 the CC
+  elastic energy of the plant slave at the fitted q2 of the last `true_state`: the rest-strain servo
+  replaces the passive stiffness the controller's T2 compensates (eq. 18 includes it in N2), so the
+  feed-forward keeps the inertial, gravity and damping part (feeding the whole T2 cancels the
+  rod's stiffness about q2_ref and makes the closed loop diverge within 25 ms: measured).
+  Torque actuation: T2 as internal section loads.  q2 is sensed by the
+  least-squares CC fit of each section (`CosseratSlave.sense`).
+* Master: the analytic master dynamics (paper eq. 1, which MuJoCo's master matches to round-off),
+  classical RK4 with steps of at most 1 ms (`master_rk4`, compiled here).
+* Interaction forces: F1 on the master tip (J1^T F1), F2 on the rod's tip node.
+* Time step: plant.cosserat.dt, or "auto" = control_dt / m, the largest below the rod's
+  explicit-stability estimate `stable_dt`; a set dt must be <= stable_dt and divide control_dt.
+* Recording geometry (world frame, bases at (0, -0.3, 0) master and (0, 0.3, 0) slave as in the
+  MJCF scene): "centreline" (3 n + 1, 3) rod nodes, "sections" (4, 3) section boundaries,
+  "master" (3, 3) master base, elbow, tip.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from controllers import master as master_model
+from harness.config.errors import ConfigError
+from harness.config.scenario import Scenario
+from harness.plant import cosserat_rod as kr
+from harness.plant.cosserat import FIT_ITERATIONS, CosseratSlave, stable_dt
+
+MASTER_BASE = np.array([0.0, -0.3, 0.0])  # m, world (as mjcf/master.xml)
+SLAVE_BASE = np.array([0.0, 0.3, 0.0])  # m, world (as mjcf/octarm_base.xml)
+MASTER_MAX_H = 1e-3  # s, largest master RK4 step
+
+_master_kernel = njit(cache=True)(master_model.master_kernel)
+
+
+@njit(cache=True)
+def _master_accel(mpk, s, T1, F1, acc):
+    """d/dt [q1, dq1] (4,) of the master (paper eq. 1): M1 ddq1 = T1 - N1 + J1^T F1 (2x2 solve).
+    False if M1 is singular."""
+    x = np.empty(2)
+    J = np.empty((2, 2))
+    Jd = np.empty((2, 2))
+    M = np.empty((2, 2))
+    N = np.empty(2)
+    _master_kernel(mpk, s[0:2], s[2:4], x, J, Jd, M, N)
+    r0 = T1[0] - N[0] + J[0, 0] * F1[0] + J[1, 0] * F1[1]
+    r1 = T1[1] - N[1] + J[0, 1] * F1[0] + J[1, 1] * F1[1]
+    det = M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
+    if not det > 0.0:
+        return False
+    acc[0] = s[2]
+    acc[1] = s[3]
+    acc[2] = (M[1, 1] * r0 - M[0, 1] * r1) / det
+    acc[3] = (M[0, 0] * r1 - M[1, 0] * r0) / det
+    return True
+
+
+@njit(cache=True)
+def master_rk4(mpk, s, T1, F1, h, nsub):
+    """nsub classical RK4 steps of h (s) of the master, in place on s (4,) = [q1, dq1], T1 (2,) N m and
+    the tip force F1 (2,) N held.  False on a singular mass matrix or a non-finite state."""
+    k1 = np.empty(4)
+    k2 = np.empty(4)
+    k3 = np.empty(4)
+    k4 = np.empty(4)
+    tmp = np.empty(4)
+    for _ in range(nsub):
+        ok = _master_accel(mpk, s, T1, F1, k1)
+        for i in range(4):
+            tmp[i] = s[i] + 0.5 * h * k1[i]
+        ok = _master_accel(mpk, tmp, T1, F1, k2) and ok
+        for i in range(4):
+            tmp[i] = s[i] + 0.5 * h * k2[i]
+        ok = _master_accel(mpk, tmp, T1, F1, k3) and ok
+        for i in range(4):
+            tmp[i] = s[i] + h * k3[i]
+        ok = _master_accel(mpk, tmp, T1, F1, k4) and ok
+        if not ok:
+            return False
+        for i in range(4):
+            s[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+            if not np.isfinite(s[i]):
+                return False
+    return True
+
+
+def _field_of(msg: str, scn: Scenario) -> str:
+    """Scenario field names for CosseratSlave's messages."""
+    slave = "plant.slave." if scn.plant.slave is not None else "slave."
+    msg = msg.replace("plant.cosserat.slave.", slave)
+    msg = msg.replace("plant.cosserat.actuation", "plant.actuation")
+    return msg
+
+
+def rod_dt(scn: Scenario) -> tuple[float, float]:
+    """(rod time step, stable_dt) of the scenario, s; ConfigError naming plant.cosserat.dt if the
+    set step is too large for the elements or does not divide control_dt."""
+    c = scn.plant.cosserat
+    p = scn.plant_slave
+    for name in ("bending_stiffness", "extension_stiffness"):
+        v = getattr(p, name)
+        if min(v) <= 0:
+            field = ("plant.slave." if scn.plant.slave is not None else "slave.") + name
+            raise ConfigError.field(field, list(v), "every entry must be > 0 for the Cosserat plant "
+                                    "(moduli of the rod)")
+    sdt = stable_dt(p, c.elements_per_section, c.shear_factor, c.rotary_radius,
+                    np.asarray(scn.plant.extension_viscosity, dtype=float))
+    cdt = scn.control_dt
+    if c.dt == "auto":
+        return cdt / math.ceil(cdt / sdt - 1e-9), sdt
+    dt = float(c.dt)
+    if dt > sdt:
+        raise ConfigError.field("plant.cosserat.dt", c.dt, f"too large for {c.elements_per_section} "
+                                f"elements per section: must be <= {sdt:.4g} s (or \"auto\")")
+    m = round(cdt / dt)
+    if m < 1 or abs(m * dt - cdt) > 1e-9 * cdt:
+        raise ConfigError.field("plant.cosserat.dt", c.dt,
+                                f"must divide control_dt = {cdt:g} s into an integer number of steps")
+    return dt, sdt
+
+
+class CosseratPlant:
+    """Rod slave + analytic rigid master, stepped from Python (`SteppedPlant`)."""
+
+    kind = "cosserat"
+
+    def __init__(self, scn: Scenario) -> None:
+        c = scn.plant.cosserat
+        dt, self.stable_dt = rod_dt(scn)
+        try:
+            self.slave = CosseratSlave(
+                scn.plant_slave, c.elements_per_section, dt=dt,
+                material_damping=(scn.plant.bending_viscosity, scn.plant.extension_viscosity),
+                shear_factor=c.shear_factor, actuation=scn.plant.actuation,
+                rotary_radius=c.rotary_radius, elastic_law=c.elastic_law)
+        except ValueError as exc:
+            raise ConfigError(_field_of(str(exc), scn), path="plant.cosserat") from None
+        self.actuation = scn.plant.actuation
+        self.physics_dt = self.slave.dt
+        self.feedforward = scn.plant.servo_feedforward
+        self.mpk = master_model.packed(scn.plant_master)
+        F = np.asarray(scn.interaction_forces, dtype=float)
+        self.F1 = F[0].copy()
+        self.F2 = F[1].copy()
+        self._m = np.zeros(4)  # master [q1, dq1]
+        self._T1 = np.zeros(2)
+        self._T2 = np.zeros(6)
+        self._q_ref = np.zeros(6)
+        self._ff = np.zeros(6)
+        self._el = np.zeros(6)
+        ps = scn.plant_slave
+        self._Kb = np.asarray(ps.bending_stiffness, dtype=float)
+        self._Ke = np.asarray(ps.extension_stiffness, dtype=float)
+        self._L0 = np.asarray(ps.rest_lengths, dtype=float)
+        nn = 3 * self.slave.n + 1
+        self._geo = {"centreline": np.zeros((nn, 3)), "sections": np.zeros((4, 3)),
+                     "master": np.zeros((3, 3))}
+        self._q2 = np.zeros(6)
+        self._dq2 = np.zeros(6)
+        self._xz = np.zeros((nn, 2))
+        self._vxz = np.zeros((nn, 2))
+
+    def _elastic(self, q2: np.ndarray) -> np.ndarray:
+        """dV/dq2 (6,) of the plant slave's CC elastic energy V = sum 1/2 Kb d k^2 + 1/2 Ke (d - L0)^2."""
+        d, k = q2[:3], q2[3:]
+        e = self._el
+        e[:3] = 0.5 * self._Kb * k * k + self._Ke * (d - self._L0)
+        e[3:] = self._Kb * d * k
+        return e
+
+    # --- SteppedPlant -------------------------------------------------------------------------------
+    def reset(self, state0: np.ndarray) -> None:
+        state0 = np.asarray(state0, dtype=float)
+        self._m[:] = state0[0:4]
+        self.slave.reset(state0[4:10], state0[10:16])
+        self.slave.external_tip_force(self.F2)
+        self._T1[:] = 0.0
+        self._T2[:] = 0.0
+        self._q_ref[:] = state0[4:10]
+
+    def command(self, T1, T2, q2_ref, dq2_ref) -> None:
+        self._T1[:] = T1
+        self._T2[:] = T2
+        self._q_ref[:] = q2_ref
+
+    def advance(self, dt: float) -> int:
+        nsub = max(1, math.ceil(dt / MASTER_MAX_H - 1e-9))
+        if not master_rk4(self.mpk, self._m, self._T1, self.F1, dt / nsub, nsub):
+            return 1
+        if self.actuation == "servo":
+            if min(self._q_ref[0], self._q_ref[1], self._q_ref[2]) <= 0.0:
+                return 5
+            ff = None
+            if self.feedforward:
+                ff = self._ff
+                self._ff[:] = self._T2
+                self._ff -= self._elastic(self._q2)
+            ok = self.slave.step(self._q_ref, dt, ff)
+        else:
+            ok = self.slave.step(self._T2, dt)
+        return 0 if ok else 8
+
+    def true_state(self, out: np.ndarray) -> None:
+        out[0:4] = self._m
+        b = self.slave._b
+        self._xz[:, 0] = b.position_collection[0]
+        self._xz[:, 1] = b.position_collection[2]
+        self._vxz[:, 0] = b.velocity_collection[0]
+        self._vxz[:, 1] = b.velocity_collection[2]
+        kr.cc_fit(self._xz, self._vxz, self.slave.section_nodes, FIT_ITERATIONS, self._q2, self._dq2)
+        out[4:10] = self._q2
+        out[10:16] = self._dq2
+
+    def slave_tip(self) -> np.ndarray:
+        return self.slave.tip()
+
+    def geometry(self) -> dict[str, np.ndarray]:
+        """The same arrays every call, updated in place (valid until the next advance)."""
+        g = self._geo
+        pos = self.slave._b.position_collection
+        cl = g["centreline"]
+        cl[:] = pos.T
+        cl += SLAVE_BASE
+        g["sections"][:] = cl[self.slave.section_nodes]
+        q = self._m
+        l1, l2 = self.mpk[0], self.mpk[1]
+        mp = g["master"]
+        mp[:] = MASTER_BASE
+        mp[1, 0] += l1 * math.sin(q[0])
+        mp[1, 2] += l1 * math.cos(q[0])
+        mp[2, 0] = mp[1, 0] + l2 * math.sin(q[0] + q[1])
+        mp[2, 2] = mp[1, 2] + l2 * math.cos(q[0] + q[1])
+        return g
+
+    def meta(self) -> dict:
+        """Plant description for the recording and metrics.json."""
+        s = self.slave
+        return {"master_base": tuple(MASTER_BASE.tolist()), "slave_base": tuple(SLAVE_BASE.tolist()),
+                "actuation": self.actuation, "elements_per_section": s.n, "rod_dt": s.dt,
+                "stable_dt": self.stable_dt, "section_nodes": s.section_nodes.tolist()}
