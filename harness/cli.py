@@ -5,7 +5,7 @@
     teleop models [SCENARIO.toml] [--segments N] ...         export the generated MuJoCo model (MJCF)
     teleop sweep STUDY.toml [--out DIR] [--workers N] ...    parameter sweep (local or Dask cluster)
     teleop controllers                                       list the built-in controllers
-    teleop fidelity [--segments 4,8,16,32] [--samples N]     plant-fidelity study over segment counts
+    teleop fidelity [--segments 4,8,16,32] [--samples N] [--reference analytic|cosserat]   plant fidelity
 
 Exit status: 0 success; 1 the run failed (diverged, output not written) or a bound was violated;
 2 invalid input (scenario, bounds, option, output folder); 130 interrupted (SIGINT/SIGTERM).
@@ -223,7 +223,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scenario_options(models, sim=False)
     models.add_argument("--enforce-cc", action=argparse.BooleanOptionalAction, default=None,
                         help="with / without the equality constraints holding each section at constant "
-                             "curvature (sets plant.enforce_cc). Default: from the scenario (paper: true).")
+                             "curvature (sets plant.enforce_cc). Default: from the scenario (paper: false).")
     models.add_argument("--out", metavar="FILE.xml", type=_path, default=None,
                         help="output MJCF file (parent folders are created). "
                              "Default: mjcf/octarm_<actuation>_n<segments>[_cc].xml.")
@@ -286,6 +286,11 @@ def build_parser() -> argparse.ArgumentParser:
                           "Default: 50.")
     fid.add_argument("--seed", metavar="N", type=_nonnegative_int, default=0,
                      help="seed of the random configurations, integer >= 0. Default: 0.")
+    fid.add_argument("--reference", choices=("analytic", "cosserat"), default="analytic",
+                     help="analytic: the discretization and CC tables against the analytic model; cosserat: "
+                          "the analytic CC model and the chain (CC on/off, each N) against the Cosserat rod "
+                          "(statics, small motion, closed loop; harness.studies.fidelity_reference). "
+                          "Default: analytic.")
     fid.add_argument("--out", metavar="DIR", type=_path, default=Path("runs/fidelity"),
                      help="output folder (created; must be writable). Default: runs/fidelity.")
     fid.add_argument("--no-progress", action="store_true",
@@ -544,8 +549,12 @@ def parse_segment_list(text: str) -> list[int]:
 def cmd_fidelity(args: argparse.Namespace) -> int:
     segments = parse_segment_list(args.segments)
     out = prepare_out_dir(args.out)
-    fidelity = _import("harness.studies.fidelity")
-    rc = fidelity.main_fidelity(segments, out, not args.no_progress, args.samples, args.seed)
+    if args.reference == "cosserat":
+        report = _import("harness.studies.fidelity_report")
+        rc = report.main_reference(segments, out, not args.no_progress, args.seed)
+    else:
+        fidelity = _import("harness.studies.fidelity")
+        rc = fidelity.main_fidelity(segments, out, not args.no_progress, args.samples, args.seed)
     return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
 
 

@@ -1,5 +1,8 @@
 """The shipped bounds hold for the paper scenario on the MuJoCo plant (default N, both actuation
-modes) and catch deliberately broken controllers (sign error, dropped null-space term)."""
+modes) and catch deliberately broken controllers (sign error, dropped null-space term).  Servo runs
+the default plant (the free chain with material damping); torque mode runs the chain with the CC
+equalities, as bounds/paper_mujoco_torque.toml says: on the free chain at the default material
+damping the paper's gains diverge in torque mode (README, stability map)."""
 
 from pathlib import Path
 
@@ -15,8 +18,12 @@ BOUNDS = {"servo": ROOT / "bounds" / "paper_mujoco.toml",
           "torque": ROOT / "bounds" / "paper_mujoco_torque.toml"}
 
 
+PLANT = {"servo": (), "torque": ("plant.enforce_cc=true",)}
+
+
 def run(actuation: str, *overrides: str) -> dict:
-    scn = load_scenario(ROOT / "scenarios" / "paper.toml", [f"plant.actuation='{actuation}'", *overrides])
+    scn = load_scenario(ROOT / "scenarios" / "paper.toml",
+                        [f"plant.actuation='{actuation}'", *PLANT[actuation], *overrides])
     assert scn.plant.kind == "mujoco" and scn.plant.segments == 8
     return compute_metrics(simulate(scn), scn)
 
@@ -47,9 +54,9 @@ def test_bounds_catch_a_dropped_null_space_term():
 
 
 def test_torque_bounds_catch_a_dropped_null_space_term():
-    """In torque mode the arm without phi_N drifts along its null space until the run diverges
-    (measured within 0.8 s): the status bound catches it."""
-    metrics = run("torque", "faults.null_space_scale=0", "duration=3.0", "transient=0.5")
+    """In torque mode (CC chain with the default material damping) the arm without phi_N runs through
+    the 20 s, but its null-space velocity error grows 4x (measured deN_rms 0.30 against 0.061-0.072
+    intact): the deN bound catches it.  (Without material damping it drifted until it diverged.)"""
+    metrics = run("torque", "faults.null_space_scale=0")
     violations = {v.bound for v in check_bounds(metrics, load_bounds(BOUNDS["torque"]))}
-    assert metrics["status"] == "diverged" and metrics["sim_time_reached"] < 3.0
-    assert "status_ok" in violations
+    assert "deN_rms_max" in violations

@@ -128,7 +128,7 @@ def test_cold_start_without_islands_solves_the_same_physics(actuation):
     from harness.config.scenario import Scenario
     from harness.loop.mujoco_loop import make_plant, simulate_mujoco
 
-    scn = Scenario(duration=0.3, plant=PlantConfig(actuation=actuation, segments=4))
+    scn = Scenario(duration=0.3, plant=PlantConfig(actuation=actuation, segments=4, enforce_cc=True))
     m, _, _ = make_plant(scn)
     log = np.zeros((scn.n_steps * scn.substeps, m.nu + m.nv))
     assert simulate_mujoco(scn, cmd_log=log).status == "ok"

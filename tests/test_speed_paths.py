@@ -71,7 +71,8 @@ def _qpos_history(scn, cmd_log, n):
 def test_compiled_geometry_matches_python_replay(segments, integrator):
     """Geometry copied inside the loop (single-stage integrators) or replayed by the compiled
     mj_kinematics loop (RK4) = the former Python mj_kinematics replay, bit for bit."""
-    scn = Scenario(duration=0.05, plant=PlantConfig(segments=segments, integrator=integrator))
+    scn = Scenario(duration=0.05,
+                   plant=PlantConfig(segments=segments, integrator=integrator, enforce_cc=True))
     m, _, cmap = make_plant(scn)
     n = scn.n_steps
     cmd_log = np.zeros((n * scn.substeps, m.nu + m.nv))
@@ -90,7 +91,10 @@ def test_compiled_geometry_matches_python_replay(segments, integrator):
 def test_geometry_of_a_run_that_stops_early():
     """A run cut short by the controller (status != 0 after the record row, before stepping) still
     has the geometry of its last recorded step."""
-    scn = Scenario(duration=1.0, plant=PlantConfig(segments=8, enforce_cc=False, actuation="torque"))
+    # the undamped free chain in torque mode stops within ms (README, stability map)
+    undamped = {"bending_viscosity": (0.0,) * 3, "extension_viscosity": (0.0,) * 3}
+    plant = PlantConfig(segments=8, enforce_cc=False, actuation="torque", **undamped)
+    scn = Scenario(duration=1.0, plant=plant)
     m, _, cmap = make_plant(scn)
     cmd_log = np.zeros((scn.n_steps * scn.substeps, m.nu + m.nv))
     tr = simulate_mujoco(scn, cmd_log=cmd_log)

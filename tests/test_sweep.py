@@ -216,7 +216,7 @@ def test_study_file_errors(tmp_path):
 @pytest.mark.parametrize("name", ["mass_mismatch", "stiffness_grid", "segments"])
 def test_shipped_studies_expand(name):
     cases = expand_cases(load_study(ROOT / "studies" / f"{name}.toml"))
-    assert len(cases) == {"mass_mismatch": 5, "stiffness_grid": 9, "segments": 6}[name]
+    assert len(cases) == {"mass_mismatch": 5, "stiffness_grid": 9, "segments": 12}[name]  # 3 N x 2 modes x CC
 
 
 # --- running, resuming, failures -------------------------------------------------------------------

@@ -19,6 +19,7 @@ ACTUATIONS = ("servo", "torque")
 INTEGRATORS = ("implicitfast", "implicit", "euler", "rk4")
 ENV_KINDS = ("plane", "box", "sphere")
 FORCE_MODES = ("exact", "sensed", "ignored")
+NOISE_MODELS = ("per_channel", "per_vector")
 
 
 @dataclass(frozen=True)
@@ -64,7 +65,7 @@ class PlantConfig:
     slave: SlaveParams | None = None  # None = same as the nominal model (no mismatch)
     actuation: str = "servo"  # "servo" | "torque"   (mujoco only)
     segments: int = 8  # rigid segments per section N (mujoco only)
-    enforce_cc: bool = True  # equality constraints holding each section at constant curvature (see README)
+    enforce_cc: bool = False  # CC equality constraints per section (option; README: default plant)
     physics_dt: float = 0.001  # s, MuJoCo timestep (analytic: RK4 step)
     integrator: str = "implicitfast"
     servo_frequency: float = 20.0  # Hz, natural frequency of the segment-joint servos
@@ -172,6 +173,7 @@ class Scenario:
     duration: float = 20.0  # s
     control_dt: float = 0.001  # s (1 kHz), must be a multiple of plant.physics_dt
     snr_db: float | None = 40.0  # AWGN on fed-back states; None = no noise
+    noise_model: str = "per_channel"  # SNR per signal (running power) | "per_vector" (per-step vector RMS)
     seed: int = 0
     transient: float = 5.0  # s, metrics (RMS/max) are taken after this time
     gains: Gains = field(default_factory=Gains)

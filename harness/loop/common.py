@@ -77,11 +77,19 @@ def initial_state(scn: Scenario) -> np.ndarray:
 
 
 def noise_table(scn: Scenario, n: int) -> tuple[np.ndarray, float]:
-    """Standard-normal noise (n, 16), seeded, and the SNR scale 10^(-SNR/20) (0 = no noise)."""
+    """Seeded standard-normal noise and the SNR scale 10^(-SNR/20) (0 = no noise).
+
+    ``noise_model = "per_vector"``: (n, 16).  ``"per_channel"`` (default): (n, 32), the same normals in
+    columns 0:16 and, in row 0, columns 16:32, the running sums of squares of each true signal that
+    `kernels.add_noise_channel` updates (so a fresh table per run).  Same seed -> same normals in both
+    models."""
     if scn.snr_db is None:
         return np.zeros((1, 16)), 0.0
     rng = np.random.default_rng(scn.seed)
-    return rng.standard_normal((n, 16)), float(10.0 ** (-scn.snr_db / 20.0))
+    normals = rng.standard_normal((n, 16))
+    if scn.noise_model == "per_channel":
+        normals = np.concatenate([normals, np.zeros((n, 16))], axis=1)
+    return normals, float(10.0 ** (-scn.snr_db / 20.0))
 
 
 def progress_bar(enabled: bool, total: int, desc: str):

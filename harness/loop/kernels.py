@@ -44,7 +44,9 @@ RUNAWAY = 1.0  # m: |e1| or |e2| beyond this is a runaway (the workspace is ~1 m
 
 def add_noise(state, noise_row, scale, out):
     """AWGN at a given SNR on each fed-back vector (q1, dq1, q2, dq2 = state[0:2], [2:4], [4:10],
-    [10:16]): std = rms(vector) * scale, scale = 10^(-SNR/20) (signal power measured per step)."""
+    [10:16]): std = rms(vector) * scale, scale = 10^(-SNR/20) (signal power measured per step;
+    ``noise_model = "per_vector"``, the model before per-channel SNR: mixed units, so e.g. the curvature
+    noise scales with the section lengths, and a vector at rest gets no noise)."""
     bounds = (0, 2, 4, 10, 16)
     for v in range(4):
         a = bounds[v]
@@ -55,6 +57,19 @@ def add_noise(state, noise_row, scale, out):
         std = np.sqrt(p / (b - a)) * scale
         for i in range(a, b):
             out[i] = state[i] + std * noise_row[i]
+
+
+def add_noise_channel(state, noise, k, scale, out):
+    """AWGN at a given SNR on each fed-back signal separately (``noise_model = "per_channel"``, the
+    default): std_i = sqrt(P_i) * scale with P_i the running mean square of the TRUE signal i over the
+    control steps 0..k (a causal estimate of the channel's power over the run, the power MATLAB's
+    ``awgn(x, SNR, 'measured')`` would measure on that channel's whole time series).
+    noise (n, 32): [:, 0:16] standard normals, noise[0, 16:32] the running sums of squares (updated
+    here, so the table must be fresh for each run and steps visited in order k = 0, 1, ...)."""
+    for i in range(16):
+        noise[0, 16 + i] += state[i] * state[i]
+        std = np.sqrt(noise[0, 16 + i] / (k + 1)) * scale
+        out[i] = state[i] + std * noise[k, i]
 
 
 def control_laws(mpk, spk, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F, T1, T2, u2, deN,
@@ -157,7 +172,9 @@ def control_step(t, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, wei
     sensed; both laws (control_laws); the record row of the true state into row.  Returns
     control_laws' status."""
     desired(traj, t, xd, dxd, ddxd)
-    if noise_scale > 0.0:
+    if noise_scale > 0.0 and noise.shape[1] > 16:
+        add_noise_channel(state, noise, k, noise_scale, sensed)
+    elif noise_scale > 0.0:
         add_noise(state, noise[k], noise_scale, sensed)
     else:
         for i in range(16):
@@ -263,5 +280,5 @@ def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale
     return 0, k1 - k0
 
 
-KERNELS = ("add_noise", "control_laws", "record_row", "record_row_info", "control_step",
+KERNELS = ("add_noise", "add_noise_channel", "control_laws", "record_row", "record_row_info", "control_step",
            "desired", "analytic_chunk")

@@ -85,18 +85,38 @@ def joint_stiffness(slave: SlaveParams, N: int, layout: dict) -> np.ndarray:
             + slide_pattern(slave.extension_stiffness, N, layout))
 
 
-def joint_damping(slave: SlaveParams, N: int, layout: dict) -> np.ndarray:
+def joint_damping(slave: SlaveParams, N: int, layout: dict, bending_viscosity=(0.0, 0.0, 0.0),
+                  extension_viscosity=(0.0, 0.0, 0.0)) -> np.ndarray:
     """MuJoCo joint damping per chain joint (N m s/rad, N s/m), integrated implicitly by MuJoCo.
 
-    The analytic model's viscous damping on q2 rates, dissipating De_i dd_i^2 + Dk_i dk_i^2, mapped
-    like the springs: slides get `_slide_pattern` of De; hinges get N Dk_i / L0_i^2 (at k = 0 and
-    d = L0 a hinge rate is dk d / N, so N hinges dissipate Dk dk^2).  Exact at rest length on the CC
-    manifold; the length dependence is a modelled mismatch.  (Applying -D dq2 as an explicit force
-    instead is unstable on the light distal joints at 1 ms.)
+    Two viscous terms, added:
+
+    * The analytic model's viscous damping on q2 rates (SlaveParams ``bending_damping`` Dk, N m^2 s on
+      k-rates, ``extension_damping`` De, N s/m on d-rates), dissipating De_i dd_i^2 + Dk_i dk_i^2.
+    * The rod's MATERIAL (Kelvin-Voigt) damping, the same as the Cosserat plant's
+      (``harness.plant.cosserat``): bending viscosity eta_b (N m^2 s, moment eta_b dkappa/dt) and
+      extension viscosity eta_a (N s, axial force eta_a d(strain)/dt), per section.  A rigid segment
+      chain of segment length h = L0_i / N discretizing that rod gets, like its springs (hinge EI / h,
+      slide EA / h = Ke L0 / h):  hinge damping eta_b / h,  slide damping eta_a / h
+      (``cosserat.hinge_damping`` / ``slide_damping``), with the springs' half-rod and series rules for
+      the slides (`slide_pattern`: 2 eta_a / h for the first and tip half rods, the two half rods of
+      sections i-1 and i in series at a boundary).
+
+    Both map the same way: eta_b <-> Dk / L0 and eta_a <-> De L0 (``material_damping_from_slave``), so
+    hinges get N (Dk_i / L0_i + eta_b_i) / L0_i and slides `slide_pattern` of De_i + eta_a_i / L0_i.
+    On the CC manifold at rest length a hinge rate is dk d / N, so the N hinges of a section dissipate
+    (Dk + eta_b L0) dk^2 = the rod's eta_b d dk^2 at d = L0 (a uniform bending rate), and uniform
+    extension rates dissipate (De + eta_a / L0) dd^2 (tests/test_fidelity_reference.py checks both with
+    MuJoCo's own dof_damping).  Away from the manifold the material part damps every relative segment
+    motion, i.e. the chain's non-CC modes too (which the q2 damping, defined only on CC rates, says
+    nothing about).  The length dependence (the rod's eta_b d vs eta_b L0) is a modelled mismatch.
+    (Applying -D dq2 as an explicit force instead is unstable on the light distal joints at 1 ms.)
     """
     L0 = np.asarray(slave.rest_lengths)
-    return (hinge_values(N * np.asarray(slave.bending_damping) / L0**2, layout)
-            + slide_pattern(slave.extension_damping, N, layout))
+    eb = np.asarray(bending_viscosity, dtype=float)
+    ea = np.asarray(extension_viscosity, dtype=float)
+    return (hinge_values(N * (np.asarray(slave.bending_damping) / L0 + eb) / L0, layout)
+            + slide_pattern(np.asarray(slave.extension_damping) + ea / L0, N, layout))
 
 
 def joint_armature(slave: SlaveParams, N: int, layout: dict, fraction: float) -> np.ndarray:

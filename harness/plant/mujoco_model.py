@@ -42,9 +42,10 @@ Elasticity: MuJoCo joint springs (hinge N Kb_i / L0_i; slide N Ke_i inside a sec
 combinations for the half/boundary rods) plus ``chain_elastic_correction`` (applied by the harness
 through qfrc_applied at every physics step) give -grad of the exact discrete energy, equal to the
 analytic elastic force on the CC manifold.  Without the correction the springs alone are exact only
-at rest length with equal neighbouring extensions.  Viscous damping of SlaveParams (on q2 rates) is
-MuJoCo joint damping (``chain_params.joint_damping``, integrated implicitly; exact at rest length on
-the manifold).
+at rest length with equal neighbouring extensions.  Viscous damping of SlaveParams (on q2 rates) plus
+the rod's material damping (``plant.bending_viscosity`` eta_b -> hinge eta_b / h,
+``plant.extension_viscosity`` eta_a -> slide eta_a / h, h the segment length) is MuJoCo joint damping
+(``chain_params.joint_damping``, integrated implicitly; exact at rest length on the manifold).
 
 Actuation: ``servo`` = a position actuator per chain joint (force kp (ctrl - q) - kv qdot, ctrl = the
 joint target, e.g. ``joints_from_q2``), kp = M_jj (2 pi f)^2, kv = 2 zeta (2 pi f) M_jj with M_jj the
@@ -190,7 +191,7 @@ def _add_octarm(spec: mujoco.MjSpec, slave: SlaveParams, plant: PlantConfig, N: 
     mass, iyy, tip_mass = segment_inertias(slave, N)
     stiff = joint_stiffness(slave, N, layout)
     arm = joint_armature(slave, N, layout, plant.armature_fraction)
-    damp = joint_damping(slave, N, layout)
+    damp = joint_damping(slave, N, layout, plant.bending_viscosity, plant.extension_viscosity)
     joint_names = []
     parent = base
     c = 0

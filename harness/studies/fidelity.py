@@ -397,6 +397,12 @@ def main_fidelity(segments, out, progress: bool = True, samples: int = 50, seed:
     written = [table.write_markdown(out / "fidelity.md"), table.write_csv(out / "fidelity.csv"),
                plot_fidelity(table, out / "fidelity.png")]
     print(table.to_markdown())
+    say("worst-case tip error by optimization (corners + random starts + Nelder-Mead) ...")
+    worst = worst_case_markdown(segments, seed)
+    (out / "fidelity_worst.md").write_text(worst + "\n")
+    written.append(out / "fidelity_worst.md")
+    print()
+    print(worst)
     say("constant curvature enforced vs free chain (held bends, mj_step cost, closed loop) ...")
     settle, loop = 1500, 2.0
     rows = cc_study(Ns=tuple(segments), n_samples=cc_samples, seed=seed, settle_steps=settle,
@@ -410,6 +416,21 @@ def main_fidelity(segments, out, progress: bool = True, samples: int = 50, seed:
     return 0
 
 
+def worst_case_markdown(segments, seed: int = 0) -> str:
+    """Table of the worst-case relative tip error over the in-range q2 box, by optimization
+    (`fidelity_reference.worst_tip_error`), for each N: error, in mm of sum(L0), and the q2."""
+    from harness.studies.fidelity_reference import worst_tip_error
+
+    slave = SlaveParams()
+    L = float(np.sum(slave.rest_lengths))
+    lines = ["| N | worst tip error (rel.) | mm | at d (m) | at k d (rad) |", "|---:|---:|---:|---|---|"]
+    for N in segments:
+        e, q = worst_tip_error(int(N), slave, seed=seed)
+        lines.append(f"| {int(N)} | {e:.3e} | {e * L * 1e3:.2f} | {np.round(q[:3], 3).tolist()} | "
+                     f"{np.round(q[3:] * q[:3], 3).tolist()} |")
+    return "\n".join(lines)
+
+
 def warning_count(d: mujoco.MjData) -> int:
     """Total number of MuJoCo warnings of every kind recorded in d."""
     return int(sum(d.warning[int(w)].number for name, w in mujoco.mjtWarning.__members__.items()
@@ -418,4 +439,4 @@ def warning_count(d: mujoco.MjData) -> int:
 
 __all__ = ["QUANTITIES", "FidelityTable", "cc_study", "fidelity_study", "main_fidelity", "master_errors",
            "observed_orders", "plot_fidelity", "q2_scales", "sample_q2", "slave_errors",
-           "warning_count"]
+           "warning_count", "worst_case_markdown"]
