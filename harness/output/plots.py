@@ -21,6 +21,7 @@ from matplotlib import colormaps
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from harness.config.textio import write_atomic
 from harness.loop.trajectory import Trajectory
 from harness.output.record import cc_backbone
 
@@ -51,8 +52,8 @@ def _finish_time_axis(ax, traj: Trajectory) -> None:
 
 
 def _save(fig: Figure, path: Path) -> Path:
-    fig.savefig(path, dpi=DPI)
-    return path
+    """Save under a temporary name, renamed into place when complete (harness.config.textio)."""
+    return write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=DPI, format=Path(path).suffix[1:] or "png"))
 
 
 def _marker(traj: Trajectory) -> str | None:
@@ -257,7 +258,7 @@ def write_figures(traj: Trajectory, outdir: str | Path, *, lengths=(0.6, 0.6)) -
     """
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
-    return [
+    return [  # names: FIGURES
         fig_e1(traj, outdir / "fig2_e1.png"),
         fig_e2(traj, outdir / "fig3_e2.png"),
         fig_beta(traj, outdir / "fig4_beta.png"),
@@ -266,4 +267,6 @@ def write_figures(traj: Trajectory, outdir: str | Path, *, lengths=(0.6, 0.6)) -
     ]
 
 
-__all__ = ["fig_beta", "fig_e1", "fig_e2", "fig_q2", "fig_shapes", "write_figures"]
+FIGURES = ("fig2_e1.png", "fig3_e2.png", "fig4_beta.png", "q2.png", "shapes.png")  # what write_figures writes
+
+__all__ = ["FIGURES", "fig_beta", "fig_e1", "fig_e2", "fig_q2", "fig_shapes", "write_figures"]

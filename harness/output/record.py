@@ -37,6 +37,7 @@ import rerun.blueprint as rrb
 from rerun.chunk import RrdReader
 from rerun.encodings import Vec3DBatch
 
+from harness.config.textio import OutputError, atomic_path
 from harness.loop.trajectory import Trajectory
 
 APP_ID = "octarm_teleop"
@@ -251,21 +252,48 @@ def write_recording(
         raise ValueError(f"block ({block}) and spatial_every ({spatial_every}) must be >= 1")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:  # the final name only ever holds a complete, readable file
+        _write(traj, tmp, path, recording_id, block, spatial_every)
+        _check_readable(tmp, path)
+    return path
+
+
+FLUSH_TIMEOUT = 60.0  # s: the file sink must have written everything within this after the last log call
+
+
+def _write(traj: Trajectory, tmp: Path, path: Path, recording_id, block: int, spatial_every: int) -> None:
+    """Write the recording to `tmp`; a file-sink failure is a one-line OutputError naming `path`."""
     n = len(traj)
     meta = traj.meta or {}
     master_base, slave_base = _base(meta, "master_base"), _base(meta, "slave_base")
-
     rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
-    rec.save(path, default_blueprint=build_blueprint(traj))
+    rec.save(tmp, default_blueprint=build_blueprint(traj))
     rec.set_log_time_enabled(False)
     try:
         _log_static(rec, traj, master_base, slave_base)
         if n:
             _log_series(rec, traj, block)
             _log_spatial(rec, traj, master_base, slave_base, block, spatial_every)
+        # the file sink writes from its own thread: a write error (EFBIG, ENOSPC) shows only here
+        try:
+            rec.flush(timeout_sec=FLUSH_TIMEOUT)
+        except RuntimeError as e:
+            raise OutputError(f"cannot write {path}: the Rerun file sink failed ({e}; disk full or "
+                              "file size limit?)", path=str(path)) from None
     finally:
         rec.disconnect()  # completes the file
-    return path
+
+
+def _check_readable(tmp: Path, path: Path) -> None:
+    """Open the written file with Rerun's reader: every frame is checked against the file size and a
+    missing footer (a file that was not completed) is an error too (~2 ms for a 5 MB file)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            RrdReader(tmp).stream()
+    except Exception as e:  # noqa: BLE001 - any reader failure means a bad file
+        raise OutputError(f"cannot write {path}: the written recording does not read back "
+                          f"({' '.join(str(e).split())[:200]})", path=str(path)) from None
 
 
 def _log_static(rec: rr.RecordingStream, traj: Trajectory, master_base, slave_base) -> None:
