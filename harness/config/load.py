@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 
 from controllers.params import MasterParams, SlaveParams, SubtaskSpec
+from harness.config.assets import shipped
 from harness.config.errors import ConfigError, short_repr
 from harness.config.scenario import (
     PlantConfig,
@@ -270,7 +271,7 @@ def _read_source(source: str | Path | Mapping | None) -> tuple[dict, str | None,
         return _plain_copy(source), None, None
     if not isinstance(source, (str, Path)):
         raise ConfigError(f"scenario source must be a path or a table, got {type_name(source)}")
-    path = Path(source)
+    path = shipped(source, "scenarios")  # a shipped name (paper) works from any folder
     raw = read_toml(path, "scenario file")
     stem = path.stem if NAME_RE.match(path.stem) else None
     return raw, str(path), stem
