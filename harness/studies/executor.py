@@ -121,9 +121,9 @@ class Runner:
             try:
                 self._client = Client(self.scheduler, timeout=f"{CONNECT_TIMEOUT}s")
             except Exception as e:  # noqa: BLE001 - OSError/TimeoutError/ValueError/TypeError: all input
-                raise ConfigError(f"{where}: cannot connect to the Dask scheduler within "
-                                  f"{CONNECT_TIMEOUT:g} s "
-                                  f"({type(e).__name__}: {' '.join(str(e).split())[:200]})",
+                why = " ".join(str(e).split())[:200]
+                raise ConfigError(f"{where}: cannot connect to the Dask scheduler "
+                                  f"(timeout {CONNECT_TIMEOUT:g} s; {type(e).__name__}: {why})",
                                   path="scheduler") from None
             try:
                 self._client.wait_for_workers(1, timeout=CONNECT_TIMEOUT)
