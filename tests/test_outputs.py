@@ -24,6 +24,7 @@ import pytest
 from rerun.chunk import RrdReader
 
 from harness.api import load_scenario, run_scenario
+from harness.cli import main
 from harness.config.errors import ConfigError
 from harness.config.textio import MAX_DEPTH, TMP_MARK, OutputError, write_atomic
 from harness.output.guarded import write_in_child
@@ -202,33 +203,30 @@ def test_reused_out_holds_only_the_current_run(tmp_path):
 
 
 # --- guarded writes: one line, exit 2 ---------------------------------------------------------------
-def test_unwritable_config_is_one_line_exit_2(tmp_path):
+def test_unwritable_config_is_one_line_exit_2(tmp_path, capsys):
     out = tmp_path / "o"
     (out / "config.toml").mkdir(parents=True)  # a folder where the file should go
-    res = _teleop(["run", *ANALYTIC, "--duration", "0.2", "--out", out])
-    assert res.returncode == 2
-    assert "config.toml" in _one_error_line(res.stderr)
+    assert main(["run", *ANALYTIC, "--duration", "0.2", "--out", str(out)]) == 2
+    assert "config.toml" in _one_error_line(capsys.readouterr().err)
 
 
-def test_models_out_errors_are_one_line(tmp_path):
+def test_models_out_errors_are_one_line(tmp_path, capsys):
     blocker = tmp_path / "file"
     blocker.write_text("")
-    res = _teleop(["models", "--segments", "2", "--out", blocker / "x.xml"])
-    assert res.returncode == 2 and "file" in _one_error_line(res.stderr)
-    ok = _teleop(["models", "--segments", "2", "--out", tmp_path / "m.xml"])
-    assert ok.returncode == 0, ok.stderr
+    assert main(["models", "--segments", "2", "--out", str(blocker / "x.xml")]) == 2
+    assert "file" in _one_error_line(capsys.readouterr().err)
+    assert main(["models", "--segments", "2", "--out", str(tmp_path / "m.xml")]) == 0
     assert (tmp_path / "m.xml").read_text().lstrip().startswith("<mujoco") and _temps(tmp_path) == []
 
 
-def test_sweep_study_toml_write_failure_is_one_line(tmp_path):
+def test_sweep_study_toml_write_failure_is_one_line(tmp_path, capsys):
     study = tmp_path / "s.toml"
     study.write_text('[study]\nname = "s"\nset = ["plant.kind=\\"analytic\\"", "duration=0.2"]\n'
                      '[[factor]]\nparam = "seed"\nvalues = [1]\n')
     out = tmp_path / "o"
     (out / "study.toml").mkdir(parents=True)
-    res = _teleop(["sweep", study, "--out", out, "--workers", "1", "--no-progress"])
-    assert res.returncode == 2
-    assert "study.toml" in _one_error_line(res.stderr)
+    assert main(["sweep", str(study), "--out", str(out), "--workers", "1", "--no-progress"]) == 2
+    assert "study.toml" in _one_error_line(capsys.readouterr().err)
     assert _temps(out) == []
 
 
@@ -239,14 +237,13 @@ def _deep(depth: int) -> str:
 
 @pytest.mark.parametrize("depth", [MAX_DEPTH + 1, 2000])
 @pytest.mark.parametrize("kind", ["scenario", "bounds", "study", "set"])
-def test_deep_nesting_is_one_line(tmp_path, kind, depth):
+def test_deep_nesting_is_one_line(tmp_path, capsys, kind, depth):
     f = tmp_path / "deep.toml"
     f.write_text(f"x = {_deep(depth)}\n")
     args = {"scenario": ["run", f], "bounds": ["check", "--bounds", f], "study": ["sweep", f],
             "set": ["run", "--set", f"duration={_deep(depth)}"]}[kind]
-    res = _teleop([*args, "--out", tmp_path / "o"], timeout=120)
-    assert res.returncode == 2, res.stderr
-    assert f"nested deeper than {MAX_DEPTH}" in _one_error_line(res.stderr)
+    assert main([*map(str, args), "--out", str(tmp_path / "o")]) == 2
+    assert f"nested deeper than {MAX_DEPTH}" in _one_error_line(capsys.readouterr().err)
     assert not (tmp_path / "o").exists()
 
 
@@ -258,13 +255,12 @@ def test_nesting_at_the_limit_is_not_refused_for_depth():
 
 
 @pytest.mark.parametrize("kind", ["scenario", "bounds", "study"])
-def test_oversized_documents_are_one_line(tmp_path, kind):
+def test_oversized_documents_are_one_line(tmp_path, capsys, kind):
     f = tmp_path / "big.toml"
     f.write_text("# " + "x" * (1 << 20) + "\n")
     args = {"scenario": ["run", f], "bounds": ["check", "--bounds", f], "study": ["sweep", f]}[kind]
-    res = _teleop([*args, "--out", tmp_path / "o"], timeout=120)
-    assert res.returncode == 2
-    assert "larger than the limit of 1048576 bytes" in _one_error_line(res.stderr)
+    assert main([*map(str, args), "--out", str(tmp_path / "o")]) == 2
+    assert "larger than the limit of 1048576 bytes" in _one_error_line(capsys.readouterr().err)
 
 
 # --- plant errors are validation --------------------------------------------------------------------
@@ -276,11 +272,10 @@ def test_oversized_documents_are_one_line(tmp_path, kind):
     ("plant.master.gravity=5.0", "plant.master.gravity = 5 and plant.slave.gravity = [0, -9.81] differ"),
     ("plant.slave.gravity=[0.0,-5.0]", "plant.slave.gravity = [0, -5] differ"),
 ])
-def test_plant_errors_name_the_field_before_anything_is_written(tmp_path, override, expected):
+def test_plant_errors_name_the_field_before_anything_is_written(tmp_path, capsys, override, expected):
     out = tmp_path / "o"
-    res = _teleop(["run", "--set", override, "--duration", "0.2", "--no-progress", "--out", out])
-    assert res.returncode == 2
-    assert expected in _one_error_line(res.stderr)
+    assert main(["run", "--set", override, "--duration", "0.2", "--no-progress", "--out", str(out)]) == 2
+    assert expected in _one_error_line(capsys.readouterr().err)
     assert not out.exists()
 
 
@@ -291,39 +286,39 @@ def _study(tmp_path: Path, body: str) -> Path:
     return p
 
 
-def test_case_cap_is_checked_before_expansion(tmp_path):
+def test_case_cap_is_checked_before_expansion(tmp_path, capsys):
     levels = ", ".join(str(1 + i / 1000) for i in range(100))
     body = "".join(f'[[factor]]\nparam = "plant.slave.masses[{i}]"\nscale = [{levels}]\n' for i in range(3))
     out = tmp_path / "o"
     t0 = time.monotonic()
-    res = _teleop(["sweep", _study(tmp_path, body), "--out", out, "--no-progress"], timeout=120)
-    assert res.returncode == 2
-    assert "1000000 cases, more than the limit of 10000" in _one_error_line(res.stderr)
+    assert main(["sweep", str(_study(tmp_path, body)), "--out", str(out), "--no-progress"]) == 2
+    assert "1000000 cases, more than the limit of 10000" in _one_error_line(capsys.readouterr().err)
     assert not out.exists()
     print(f"refused in {time.monotonic() - t0:.1f} s")
     rand = _study(tmp_path, '[[factor]]\nparam = "seed"\nvalues = {random = "integers", low = 0, high = 9}\n'
                             '[sampling]\nmode = "random"\nn = 100000000\n')
-    res = _teleop(["sweep", rand, "--out", out, "--no-progress"], timeout=120)
-    assert res.returncode == 2 and "100000000 cases" in _one_error_line(res.stderr)
+    assert main(["sweep", str(rand), "--out", str(out), "--no-progress"]) == 2
+    assert "100000000 cases" in _one_error_line(capsys.readouterr().err)
 
 
-def test_max_cases_option_and_table(tmp_path):
+def test_max_cases_option_and_table(tmp_path, capsys):
     body = '[[factor]]\nparam = "seed"\nvalues = [1, 2, 3]\n'
-    res = _teleop(["sweep", _study(tmp_path, body), "--max-cases", "2", "--out", tmp_path / "o",
-                   "--no-progress"], timeout=120)
-    assert res.returncode == 2 and "3 cases, more than the limit of 2" in _one_error_line(res.stderr)
-    res = _teleop(["sweep", _study(tmp_path, body + "[sampling]\nmax_cases = 0\n"), "--no-progress"])
-    assert res.returncode == 2 and "max_cases = 0" in _one_error_line(res.stderr)
+    assert main(["sweep", str(_study(tmp_path, body)), "--max-cases", "2", "--out", str(tmp_path / "o"),
+                 "--no-progress"]) == 2
+    assert "3 cases, more than the limit of 2" in _one_error_line(capsys.readouterr().err)
+    assert main(["sweep", str(_study(tmp_path, body + "[sampling]\nmax_cases = 0\n")), "--no-progress"]) == 2
+    assert "max_cases = 0" in _one_error_line(capsys.readouterr().err)
+    assert not (tmp_path / "o").exists()
 
 
-def test_unreachable_scheduler_is_found_before_any_file(tmp_path):
+def test_unreachable_scheduler_is_found_before_any_file(tmp_path, capsys):
     out = tmp_path / "o"
     t0 = time.monotonic()
-    res = _teleop(["sweep", _study(tmp_path, '[[factor]]\nparam = "seed"\nvalues = [1]\n'), "--out", out,
-                   "--scheduler", "tcp://127.0.0.1:9", "--no-progress"], timeout=120)
+    study = _study(tmp_path, '[[factor]]\nparam = "seed"\nvalues = [1]\n')
+    assert main(["sweep", str(study), "--out", str(out), "--scheduler", "tcp://127.0.0.1:9",
+                 "--no-progress"]) == 2
     took = time.monotonic() - t0
-    assert res.returncode == 2
-    assert "cannot connect to the Dask scheduler" in _one_error_line(res.stderr)
+    assert "cannot connect to the Dask scheduler" in _one_error_line(capsys.readouterr().err)
     assert not out.exists()
     print(f"unreachable scheduler reported in {took:.1f} s")
 
