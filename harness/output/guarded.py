@@ -7,7 +7,10 @@ interrupted by Ctrl-C (Python delivers KeyboardInterrupt only between bytecodes 
 into place only when complete, see `harness.config.textio.atomic_path`); the parent waits in short
 polls, so that
 
-* an error in the child comes back as one line (`OutputError` naming the file and the cause);
+* an error in the child comes back as one line (`OutputError` naming the file and the cause); the
+  child's stderr comes to the parent, and a write error logged by Rerun's file sink there
+  ("Failed to write: File too large (os error 27)") stops the child at once: the sink's writer thread
+  has died, and a flush could otherwise wait for it;
 * a child that stops making progress (its temporary file has not grown for `stall_timeout` s) is
   killed and reported, never a hang;
 * Ctrl-C (KeyboardInterrupt in the parent) kills the child, removes its temporary file and
@@ -21,7 +24,9 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import os
+import re
 import signal
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -33,8 +38,9 @@ STALL_TIMEOUT = 30.0  # s without growth of the temporary file before the writer
 _POLL = 0.05  # s
 
 
-def _child(fn: Callable[[], Any], conn) -> None:
+def _child(fn: Callable[[], Any], conn, err_fd: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the process group: the parent decides
+    os.dup2(err_fd, 2)  # native log lines (Rerun's sink errors) go to the parent, which keeps the cause
     try:
         fn()
         conn.send(("ok", ""))
@@ -46,6 +52,22 @@ def _child(fn: Callable[[], Any], conn) -> None:
         code = 1
     conn.close()
     os._exit(code)  # no atexit handlers (the Rerun SDK's shutdown belongs to the parent)
+
+
+def _drain(fd: int, out: list[bytes]) -> None:
+    with os.fdopen(fd, "rb", buffering=0) as fh:
+        while chunk := fh.read(65536):
+            if sum(map(len, out)) < 1 << 20:
+                out.append(chunk)
+
+
+def _native_cause(text: bytes) -> str:
+    """The cause at the end of the first native ERROR line, e.g. 'File too large (os error 27)'."""
+    for line in text.decode("utf-8", "replace").splitlines():
+        line = re.sub(r"\x1b\[[0-9;]*m", "", line)
+        if "ERROR" in line and ("file_sink" in line or "Failed to write" in line):
+            return line.rsplit(": ", 1)[-1].strip()
+    return ""
 
 
 def _temps(path: Path, pid: int | None) -> list[Path]:
@@ -73,14 +95,37 @@ def write_in_child(fn: Callable[[], Any], path: str | Path, *, stall_timeout: fl
         fn()
         return path
     recv, send = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_child, args=(fn, send), daemon=True)
-    proc.start()
-    send.close()
+    err_r, err_w = os.pipe()
+    proc = ctx.Process(target=_child, args=(fn, send, err_w), daemon=True)
+    # Ctrl-C must not land between the fork and the `try` below (the child would be orphaned): while
+    # starting, SIGINT is only recorded, and handled by the previous handler inside the `try`.
+    got: list[int] = []
+    old = (signal.signal(signal.SIGINT, lambda signum, frame: got.append(signum))
+           if threading.current_thread() is threading.main_thread() else None)
+    try:
+        proc.start()
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
+        send.close()
+        os.close(err_w)
+    stderr: list[bytes] = []
+    drain = threading.Thread(target=_drain, args=(err_r, stderr), daemon=True)
+    drain.start()
     pid = proc.pid
     last_size, last_change = -1, time.monotonic()
     try:
+        if got:
+            if callable(old):
+                old(signal.SIGINT, None)  # default: raises KeyboardInterrupt
+            elif old != signal.SIG_IGN:
+                raise KeyboardInterrupt
         while proc.is_alive():
             proc.join(_POLL)
+            cause = _native_cause(b"".join(stderr))
+            if cause:  # the file sink logged a write error: the data cannot complete, stop now
+                raise OutputError(f"cannot write {path}: the Rerun file sink failed ({cause})",
+                                  path=str(path))
             size = _size(_temps(path, pid))
             now = time.monotonic()
             if size != last_size:
@@ -90,7 +135,11 @@ def write_in_child(fn: Callable[[], Any], path: str | Path, *, stall_timeout: fl
                                   "(stalled; file system full or blocked?)", path=str(path))
         status, msg = recv.recv() if recv.poll(1.0) else ("error", "")
         if proc.exitcode != 0 or status != "ok":
+            drain.join(2.0)
             why = msg or f"the writer process ended with exit code {proc.exitcode}"
+            cause = _native_cause(b"".join(stderr))
+            if cause and cause not in why:
+                why += f" [{cause}]"
             raise OutputError(why if why.startswith("cannot write") else f"cannot write {path}: {why}",
                               path=str(path))
         return path
