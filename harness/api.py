@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from harness.config import load as _load
+from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
 from harness.config.textio import jsonable
 
@@ -86,21 +87,45 @@ def stop_on_signals(stop: threading.Event | None) -> Iterator[list[int]]:
         stop.clear()
 
 
+RUN_OUTPUTS = ("config.toml", "run.rrd", "metrics.json")  # + the figures (harness.output.plots.FIGURES)
+
+
+def clear_run_outputs(out: Path) -> None:
+    """Remove a previous run's outputs from a reused folder (its fixed names, the files listed in its
+    metrics.json, leftover temporary files); other files are left alone.  Raises OutputError."""
+    from harness.config.textio import remove_outputs
+    from harness.output.plots import FIGURES
+
+    names = [*RUN_OUTPUTS, *FIGURES]
+    with contextlib.suppress(OSError, ValueError, TypeError, AttributeError):
+        prev = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
+        names += [n for n in prev.get("outputs", []) if isinstance(n, str) and Path(n).name == n]
+    remove_outputs(out, names)
+
+
 def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False, *, plant: Any = None,
                  handle_signals: bool = False, on_chunk: Callable | None = None,
                  record_rate: float | None = None) -> RunResult:
-    """Build the plant, simulate, compute metrics and (if `out`) write every output that can be written:
-    config.toml first, then metrics.json, run.rrd and the figures.  A failing output is listed in
-    `failures` and the others are still written.  handle_signals: SIGINT/SIGTERM stop the run cleanly;
-    on_chunk: passed to `harness.loop.simulate` (live viewing).  record_rate: Hz of the 3-D geometry in
-    run.rrd (None = record.DEFAULT_GEOMETRY_RATE, math.inf = every control step); the time series are
-    always written at the control rate."""
+    """Build the plant, simulate, compute metrics and (if `out`) write every output that can be written.
+
+    Output folder protocol (README, "What a run guarantees about its output folder"): the previous
+    run's outputs are removed first; config.toml is written before simulating; then run.rrd (in a
+    child process that is killed on Ctrl-C or when it stalls), the figures and LAST metrics.json,
+    which lists the files written ("outputs") and those that could not be ("outputs_failed",
+    "output_errors").  Every file is written under a temporary name and renamed into place when
+    complete.  A failing output is listed in `failures` and the others are still written.
+    Raises OutputError if the folder cannot be cleared or config.toml cannot be written (nothing ran).
+    handle_signals: SIGINT/SIGTERM stop the simulation cleanly; on_chunk: passed to
+    `harness.loop.simulate` (live viewing); record_rate: Hz of the 3-D geometry in run.rrd (None =
+    record.DEFAULT_GEOMETRY_RATE, math.inf = every control step); the time series are always written
+    at the control rate."""
     from harness import loop
     from harness.loop import common
     from harness.plant import build_plant
 
     written: list[Path] = []
     failures: list[str] = []
+    failed: list[str] = []
 
     def attempt(what: str, fn: Callable[[], Any]) -> Any:
         try:
@@ -108,12 +133,15 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
         except Exception as e:  # noqa: BLE001 - write whatever else exists, report below
             if os.environ.get(DEBUG_ENV):
                 traceback.print_exc()
-            failures.append(f"{what}: {type(e).__name__}: {e}")
+            failures.append(f"{what}: {' '.join(str(e).split())}" if isinstance(e, ConfigError)
+                            else f"{what}: {type(e).__name__}: {e}")
+            failed.append(what)
         return None
 
     if plant is None:
         plant = build_plant(scn)
     if out is not None:  # first, so the configuration is on disk whatever happens next
+        clear_run_outputs(out)
         _load.dump_scenario(scn, out / "config.toml")
         written.append(out / "config.toml")
     with stop_on_signals(common.STOP if handle_signals else None) as received:
@@ -126,6 +154,7 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
         return compute_metrics(traj, scn)
 
     metrics = attempt("metrics", metrics_of)
+    failed.clear()  # metrics are not a file
     if metrics is not None:
         metrics = dict(metrics)
         metrics.setdefault("status", traj.status)
@@ -135,30 +164,38 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
         doc = metrics if metrics is not None else {"status": traj.status, "message": traj.message,
                                                     "metrics_error": failures[-1] if failures else ""}
 
-        def write_metrics() -> Path:
-            p = out / "metrics.json"
-            p.write_text(json.dumps(jsonable(doc), indent=2, allow_nan=False) + "\n", encoding="utf-8")
-            return p
-
         def write_recording() -> Path:
-            from harness.output.record import DEFAULT_GEOMETRY_RATE
-            from harness.output.record import write_recording as write
+            from harness.output import record
+            from harness.output.guarded import write_in_child
 
-            traj.meta["geometry_rate"] = DEFAULT_GEOMETRY_RATE if record_rate is None else float(record_rate)
-            return write(traj, out / "run.rrd")
+            traj.meta["geometry_rate"] = (record.DEFAULT_GEOMETRY_RATE if record_rate is None
+                                          else float(record_rate))
+            path = out / "run.rrd"
+            return write_in_child(lambda: record.write_recording(traj, path), path)
 
         def write_figures() -> list[Path]:
             from harness.output.plots import write_figures as write
 
             return write(traj, out)
 
-        for what, fn in (("metrics.json", write_metrics), ("run.rrd", write_recording),
-                         ("figures", write_figures)):
+        for what, fn in (("run.rrd", write_recording), ("figures", write_figures)):
             res = attempt(what, fn)
             if isinstance(res, (str, Path)):
                 written.append(Path(res))
             elif isinstance(res, (list, tuple)):
                 written += [Path(p) for p in res]
+
+        def write_metrics() -> Path:
+            from harness.config.textio import write_atomic
+
+            final = dict(doc, outputs=[p.name for p in written] + ["metrics.json"],
+                         outputs_failed=list(failed), output_errors=list(failures))
+            text = json.dumps(jsonable(final), indent=2, allow_nan=False) + "\n"
+            return write_atomic(out / "metrics.json", text)
+
+        res = attempt("metrics.json", write_metrics)
+        if res is not None:
+            written.append(res)
     return RunResult(traj, metrics, written, failures, interrupted)
 
 

@@ -7,8 +7,9 @@
     teleop controllers                                       list the built-in controllers
     teleop fidelity [--segments 4,8,16,32] [--samples N] [--reference analytic|cosserat]   plant fidelity
 
-Exit status: 0 success; 1 the run failed (diverged, output not written) or a bound was violated;
-2 invalid input (scenario, bounds, option, output folder); 130 interrupted (SIGINT/SIGTERM).
+Exit status: 0 success; 1 the run failed (diverged, an output could not be written) or a bound was
+violated; 2 invalid input (scenario, bounds, option, output folder; a file that cannot be written before
+anything ran); 130 interrupted (SIGINT/SIGTERM).
 Invalid input is reported as a single ``error: ...`` line on stderr, never a traceback.
 
 The simulation back ends are imported lazily so that ``--help`` and input validation are fast.
@@ -254,6 +255,10 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--scheduler", metavar="ADDRESS", default=None,
                        help="address of a running Dask scheduler (e.g. tcp://host:8786) to run on a "
                             "cluster. Default: none (local processes).")
+    sweep.add_argument("--max-cases", metavar="N", type=_positive_int, default=None,
+                       help="refuse a study with more than N cases, checked before the cases are built "
+                            "(replaces the study's [sampling] max_cases). "
+                            "Default: from the study, else 10000.")
     sweep.add_argument("--no-progress", action="store_true",
                        help="do not show the progress bar (default: shown on stderr).")
     sweep.add_argument("--view", metavar="CASE_ID", default=None,
@@ -341,7 +346,7 @@ def load_from_args(args: argparse.Namespace, extra: Sequence[tuple[str, str]] = 
         labels.append(label)
     for text in args.overrides:
         overrides.append(text)
-        labels.append(f"--set {text}")
+        labels.append(f"--set {text if len(text) <= 80 else text[:77] + '...'}")
     return load_scenario(args.scenario, overrides, labels=labels)
 
 
@@ -491,13 +496,16 @@ def cmd_models(args: argparse.Namespace) -> int:
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    study: Path = args.study
+    from harness.config.assets import shipped
+
+    study: Path = shipped(args.study, "studies")
     if not study.is_file():
         raise ConfigError(f"study file not found: {study}", path=str(study))
     if args.view is not None:
         return _view_case(study, args.out, args.view)
     sweep = _import("harness.studies.sweep")  # validates the study, then creates and checks the output folder
-    rc = sweep.main_sweep(study, args.out, args.workers, args.scheduler, not args.no_progress)
+    extra = {"max_cases": args.max_cases} if args.max_cases is not None else {}
+    rc = sweep.main_sweep(study, args.out, args.workers, args.scheduler, not args.no_progress, **extra)
     return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
 
 
@@ -576,6 +584,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except _Unavailable as e:
         _err(e)
         return EXIT_FAIL
+    except OSError as e:  # a file that could not be read or written (bad path, full disk): one line
+        where = f"{e.filename}: " if e.filename else ""
+        _err(f"{where}{e.strerror or e}")
+        return EXIT_USAGE
     except Exception as e:
         if isinstance(e, _user_error_types()):
             _err(e)

@@ -33,6 +33,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
+from harness.config.assets import shipped
 from harness.config.errors import ConfigError, short_repr
 from harness.config.textio import read_toml
 
@@ -189,7 +190,7 @@ def load_bounds(source: str | Path | Mapping) -> Bounds:
     """Read and validate a bounds TOML file (or an already-parsed table).  Raises ConfigError."""
     if isinstance(source, Mapping):
         return bounds_from_dict(source)
-    path = Path(source)
+    path = shipped(source, "bounds")  # a shipped name (paper_mujoco) works from any folder
     raw = read_toml(path, "bounds file")
     return bounds_from_dict(raw, label=str(path))
 

@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 
 from controllers.params import MasterParams, SlaveParams, SubtaskSpec
+from harness.config.assets import shipped
 from harness.config.errors import ConfigError, short_repr
 from harness.config.scenario import (
     EnvironmentConfig,
@@ -73,7 +74,7 @@ from harness.config.schema import (
     read_fields,
     type_name,
 )
-from harness.config.textio import read_toml, toml_literal
+from harness.config.textio import loads_toml, read_toml, toml_literal, write_atomic
 
 REACH_MARGIN = 1e-3  # m, the desired trajectory must stay this far inside the master workspace annulus
 MULTIPLE_RTOL = 1e-9  # relative tolerance for "integer multiple of a time step"
@@ -264,7 +265,7 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     if not raw:
         raise ConfigError(f"override {text!r}: missing value after '='")
     try:
-        value = tomllib.loads(f"v = {raw}")["v"]
+        value = loads_toml(f"v = {raw}", f"override {short_repr(text, 60)}")["v"]
     except tomllib.TOMLDecodeError as e:
         if BARE_WORD_RE.match(raw):
             value = raw
@@ -297,7 +298,7 @@ def _read_source(source: str | Path | Mapping | None) -> tuple[dict, str | None,
         return _plain_copy(source), None, None
     if not isinstance(source, (str, Path)):
         raise ConfigError(f"scenario source must be a path or a table, got {type_name(source)}")
-    path = Path(source)
+    path = shipped(source, "scenarios")  # a shipped name (paper) works from any folder
     raw = read_toml(path, "scenario file")
     stem = path.stem if NAME_RE.match(path.stem) else None
     return raw, str(path), stem
@@ -444,9 +445,7 @@ def dumps_scenario(scn: Scenario) -> str:
 
 def dump_scenario(scn: Scenario, path: str | Path) -> Path:
     """Write the fully resolved scenario as TOML; `load_scenario(path) == scn`."""
-    path = Path(path)
-    path.write_text(dumps_scenario(scn), encoding="utf-8")
-    return path
+    return write_atomic(Path(path), dumps_scenario(scn))
 
 
 __all__ = [

@@ -1,10 +1,18 @@
-"""Small shared readers/writers for the harness' text files (TOML in, TOML/JSON out)."""
+"""Small shared readers/writers for the harness' files (TOML in, TOML/JSON out) and the one way every
+output is written: `atomic_path` / `write_atomic` (a temporary name in the same folder, renamed into
+place only when complete, so that a final name never holds a partial file).
+
+Input limits (every loader: scenario, bounds, study files and `--set` values): documents larger than
+`MAX_DOCUMENT_BYTES` or nested deeper than `MAX_DEPTH` are refused with a one-line ConfigError.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import tomllib
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -13,13 +21,51 @@ import tomli_w
 
 from .errors import ConfigError
 
+MAX_DOCUMENT_BYTES = 1 << 20  # 1 MiB: a scenario, bounds or study file (the shipped ones are < 4 KiB)
+MAX_DEPTH = 32  # nesting of tables and arrays (the scenario schema needs 4)
+TMP_MARK = ".tmp-"  # temporary names: .<final name>.tmp-<pid>-<n>
+
+
+def check_document(doc: Any, what: str) -> Any:
+    """Raise a one-line ConfigError if the parsed `doc` nests tables/arrays deeper than MAX_DEPTH."""
+    stack = [(doc, 1)]
+    while stack:  # iterative: a deep document must not overflow the Python stack here either
+        node, depth = stack.pop()
+        if isinstance(node, dict):
+            children = list(node.values())
+        elif isinstance(node, (list, tuple)):
+            children = list(node)
+        else:
+            continue
+        if depth > MAX_DEPTH:
+            raise ConfigError(f"{what}: nested deeper than {MAX_DEPTH} levels of tables/arrays")
+        stack += [(c, depth + 1) for c in children]
+    return doc
+
+
+def loads_toml(text: str, what: str) -> dict:
+    """`tomllib.loads` within the size and depth limits (RecursionError and oversize are ConfigError;
+    a TOMLDecodeError is left to the caller)."""
+    if len(text) > MAX_DOCUMENT_BYTES:
+        raise ConfigError(f"{what}: {len(text)} characters, more than the limit of {MAX_DOCUMENT_BYTES}")
+    try:
+        doc = tomllib.loads(text)
+    except RecursionError:
+        raise ConfigError(f"{what}: nested deeper than {MAX_DEPTH} levels of tables/arrays") from None
+    return check_document(doc, what)
+
 
 def read_toml(path: str | Path, what: str) -> dict:
-    """Parse a TOML file; every failure is a one-line ConfigError naming `what` ("scenario file"...)."""
+    """Parse a TOML file; every failure is a one-line ConfigError naming `what` ("scenario file"...).
+    Files over MAX_DOCUMENT_BYTES or nested deeper than MAX_DEPTH are refused."""
     path = Path(path)
     try:
         with path.open("rb") as fh:
-            return tomllib.load(fh)
+            data = fh.read(MAX_DOCUMENT_BYTES + 1)
+        if len(data) > MAX_DOCUMENT_BYTES:
+            raise ConfigError(f"{what} {path}: larger than the limit of {MAX_DOCUMENT_BYTES} bytes",
+                              path=str(path))
+        return loads_toml(data.decode("utf-8"), f"{what} {path}")
     except FileNotFoundError:
         raise ConfigError(f"{what} not found: {path}", path=str(path)) from None
     except IsADirectoryError:
@@ -79,3 +125,73 @@ def prepare_out_dir(path: Path, option: str = "--out") -> Path:
         raise ConfigError(f"{option} = '{path}': output folder is not writable ({e.strerror or e})",
                           path=option) from None
     return path
+
+
+# ---------------------------------------------------------------------------------------------
+# atomic outputs
+# ---------------------------------------------------------------------------------------------
+class OutputError(ConfigError):
+    """An output file could not be written: one line naming the file and the cause (CLI exit 2 when
+    it happens before a run; a run lists it in its failures instead)."""
+
+
+def describe_os_error(e: BaseException) -> str:
+    if isinstance(e, OSError):
+        return e.strerror or str(e) or type(e).__name__
+    return f"{type(e).__name__}: {e}"
+
+
+_counter = iter(range(1 << 62))
+
+
+def temp_name(path: Path) -> Path:
+    """A temporary name next to `path` (same folder, so the final rename is atomic)."""
+    return path.with_name(f".{path.name}{TMP_MARK}{os.getpid()}-{next(_counter)}")
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """Yield a temporary path in `path`'s folder; when the block ends without an exception the file
+    is fsynced and renamed to `path` (atomic on POSIX), else the temporary file is removed.  Any
+    OSError becomes a one-line `OutputError` naming `path` and the cause."""
+    path = Path(path)
+    tmp = temp_name(path)
+    try:
+        yield tmp
+        if not tmp.exists():
+            raise OutputError(f"cannot write {path}: the writer produced no file", path=str(path))
+        with open(tmp, "rb") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except OSError as e:
+        raise OutputError(f"cannot write {path}: {describe_os_error(e)}", path=str(path)) from None
+    finally:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+
+
+def write_atomic(path: str | Path, data: bytes | str | Callable[[Path], Any]) -> Path:
+    """Write bytes, text (UTF-8) or whatever `data(tmp_path)` writes to `path` via `atomic_path`."""
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        if callable(data):
+            data(tmp)
+        else:
+            tmp.write_bytes(data.encode("utf-8") if isinstance(data, str) else data)
+    return path
+
+
+def remove_outputs(folder: Path, names: list[str], patterns: tuple[str, ...] = ()) -> None:
+    """Remove the previous run's outputs (`names` and files matching `patterns`) and leftover
+    temporary files from `folder` (only these: other files are left alone)."""
+    victims = {folder / n for n in names}
+    for pat in patterns:
+        victims.update(folder.glob(pat))
+    victims.update(p for p in folder.glob(f".*{TMP_MARK}*") if p.is_file())
+    for p in victims:
+        try:
+            if p.is_file() or p.is_symlink():
+                p.unlink()
+        except OSError as e:
+            raise OutputError(f"cannot remove the previous output {p}: {describe_os_error(e)}",
+                              path=str(p)) from None

@@ -23,6 +23,7 @@ from matplotlib import colormaps
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from harness.config.textio import write_atomic
 from harness.loop.trajectory import Trajectory
 from harness.output.decimate import envelope
 from harness.output.geometry import has_interaction
@@ -68,9 +69,10 @@ def _finish_time_axis(ax, traj: Trajectory) -> None:
 
 
 def _save(fig: Figure, path: Path) -> Path:
-    # zlib level 1: the same pixels, ~10 % larger files, ~10 % less figure time (benchmarks/RESULTS.md)
-    fig.savefig(path, dpi=DPI, pil_kwargs={"compress_level": 1})
-    return path
+    """Save under a temporary name, renamed into place when complete (harness.config.textio).  zlib
+    level 1: the same pixels, ~10 % larger files, ~10 % less figure time (benchmarks/RESULTS.md)."""
+    return write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=DPI, format=Path(path).suffix[1:] or "png",
+                                                      pil_kwargs={"compress_level": 1}))
 
 
 def _marker(traj: Trajectory) -> str | None:
@@ -285,7 +287,7 @@ def write_figures(traj: Trajectory, outdir: str | Path, *, lengths=(0.6, 0.6)) -
     """
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
-    return [
+    return [  # names: FIGURES
         fig_e1(traj, outdir / "fig2_e1.png"),
         fig_e2(traj, outdir / "fig3_e2.png"),
         fig_beta(traj, outdir / "fig4_beta.png"),
@@ -317,5 +319,8 @@ def fig_forces(traj: Trajectory, path: Path) -> Path:
     return _save(fig, path)
 
 
-__all__ = ["fig_beta", "fig_e1", "fig_e2", "fig_forces", "fig_q2", "fig_shapes", "has_interaction",
+# what write_figures writes (forces.png only for runs with interaction)
+FIGURES = ("fig2_e1.png", "fig3_e2.png", "fig4_beta.png", "q2.png", "shapes.png", "forces.png")
+
+__all__ = ["FIGURES", "fig_beta", "fig_e1", "fig_e2", "fig_forces", "fig_q2", "fig_shapes", "has_interaction",
            "write_figures"]

@@ -32,6 +32,7 @@ The blueprint and the scene geometry (colours, arm points, framing of the views)
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterator
 from datetime import timedelta
 from functools import cache
@@ -43,6 +44,7 @@ import rerun as rr
 from rerun.chunk import RrdReader
 from rerun.encodings import Vec3DBatch
 
+from harness.config.textio import OutputError, atomic_path
 from harness.loop.trajectory import Trajectory
 from harness.output.geometry import (
     DEFAULT_MASTER_LENGTHS,
@@ -174,6 +176,17 @@ def write_recording(
         raise ValueError(f"block ({block}) and spatial_every ({spatial_every}) must be >= 1")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:  # the final name only ever holds a complete, readable file
+        _write(traj, tmp, path, recording_id, block, spatial_every)
+        _check_readable(tmp, path)
+    return path
+
+
+FLUSH_TIMEOUT = 60.0  # s: the file sink must have written everything within this after the last log call
+
+
+def _write(traj: Trajectory, tmp: Path, path: Path, recording_id, block: int, spatial_every: int) -> None:
+    """Write the recording to `tmp`; a file-sink failure is a one-line OutputError naming `path`."""
     n = len(traj)
     meta = traj.meta or {}
     master_base, slave_base = world_base(meta, "master_base"), world_base(meta, "slave_base")
@@ -182,7 +195,7 @@ def write_recording(
     # a loaded machine (`rerun rrd compare`)
     rec = rr.RecordingStream(APP_ID, recording_id=recording_id,
                              batcher_config=rr.ChunkBatcherConfig(flush_tick=timedelta(days=1)))
-    rec.save(path, default_blueprint=build_blueprint(traj))
+    rec.save(tmp, default_blueprint=build_blueprint(traj))
     rec.set_log_time_enabled(False)
     try:
         log_static(rec, traj, master_base, slave_base)
@@ -191,9 +204,26 @@ def write_recording(
             log_spatial(rec, traj, master_base, slave_base, block, spatial_every)
             if has_interaction(traj):
                 log_contacts(rec, traj, TIMELINE, master_base)
+        # the file sink writes from its own thread: a write error (EFBIG, ENOSPC) shows only here
+        try:
+            rec.flush(timeout_sec=FLUSH_TIMEOUT)
+        except RuntimeError as e:
+            raise OutputError(f"cannot write {path}: the Rerun file sink failed ({e}; disk full or "
+                              "file size limit?)", path=str(path)) from None
     finally:
         rec.disconnect()  # completes the file
-    return path
+
+
+def _check_readable(tmp: Path, path: Path) -> None:
+    """Open the written file with Rerun's reader: every frame is checked against the file size and a
+    missing footer (a file that was not completed) is an error too (~2 ms for a 5 MB file)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            RrdReader(tmp).stream()
+    except Exception as e:  # noqa: BLE001 - any reader failure means a bad file
+        raise OutputError(f"cannot write {path}: the written recording does not read back "
+                          f"({' '.join(str(e).split())[:200]})", path=str(path)) from None
 
 
 def geometry_every(traj: Trajectory, rate: float) -> int:

@@ -13,10 +13,47 @@ MJCF, compile errors) and reports them as `ConfigError` naming the scenario fiel
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
-from harness.config.errors import ConfigError
+import numpy as np
+
+from harness.config.errors import ConfigError, short_repr
 from harness.config.scenario import Scenario
+
+# MuJoCo body name in a compile error -> (scenario field, index): the plant's mass of that body
+_BODY_FIELDS = (
+    (re.compile(r"'octarm_s(\d+)_"), "plant.slave.masses"),
+    (re.compile(r"'master_upper_link'"), "plant.master.masses", 0),
+    (re.compile(r"'master_fore_link'"), "plant.master.masses", 1),
+)
+
+
+def _field_error(scn: Scenario, exc: Exception) -> ConfigError | None:
+    """A plant-model error rephrased as the scenario field it comes from, if it can be located."""
+    msg = " ".join(str(exc).split())
+    if "mass and inertia" in msg:
+        for rx, field, *idx in _BODY_FIELDS:
+            m = rx.search(msg)
+            if m is None:
+                continue
+            i = idx[0] if idx else int(m.group(1))
+            robot = scn.plant_slave if field.startswith("plant.slave") else scn.plant_master
+            value = np.asarray(robot.masses, dtype=float).reshape(-1)[i]
+            return ConfigError(f"{field}[{i}] = {short_repr(float(value))}: too small for the plant model "
+                               f"(MuJoCo: {msg})", path=field, value=float(value))
+    return None
+
+
+def check_gravity(scn: Scenario) -> None:
+    """Both robots of the MuJoCo plant share one world: plant.slave.gravity = (0, -plant.master.gravity)."""
+    gm = float(scn.plant_master.gravity)
+    gs = tuple(float(v) for v in scn.plant_slave.gravity)
+    if not np.allclose(gs, (0.0, -gm), rtol=1e-12, atol=1e-12):
+        raise ConfigError(f"plant.master.gravity = {gm:g} and plant.slave.gravity = [{gs[0]:g}, {gs[1]:g}] "
+                          f"differ: the MuJoCo plant has one world for both robots, so plant.slave.gravity "
+                          f"must be [0, {-gm:g}] (set both, or neither)", path="plant.slave.gravity",
+                          value=gs)
 
 
 def build_plant(scn: Scenario) -> Any:
@@ -30,15 +67,19 @@ def build_plant(scn: Scenario) -> Any:
     if kind == "mujoco":
         from harness.plant.mujoco_model import MujocoPlant, PlantModelError
 
+        check_gravity(scn)
         try:
             return MujocoPlant.build(scn)
         except PlantModelError as exc:
             if str(exc).startswith("environment."):
                 raise ConfigError(str(exc), path=str(exc).split(":", 1)[0]) from None
+            located = _field_error(scn, exc)
+            if located is not None:
+                raise located from None
             if scn.plant.scene_xml is not None:
                 raise ConfigError.field("plant.scene_xml", scn.plant.scene_xml,
                                         f"unusable MJCF: {exc}") from None
-            raise ConfigError(str(exc), path="plant") from None
+            raise ConfigError(f"plant: cannot build the MuJoCo model: {exc}", path="plant") from None
     if kind == "cosserat":
         from harness.plant.cosserat_plant import CosseratPlant
 

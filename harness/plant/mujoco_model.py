@@ -81,7 +81,9 @@ import mujoco
 import numpy as np
 
 from controllers.params import MasterParams, SlaveParams
+from harness.config.assets import asset_dir
 from harness.config.scenario import ACTUATIONS, PlantConfig, Scenario
+from harness.config.textio import atomic_path
 from harness.plant.chain_map import ChainMap, _ro, chain_layout
 from harness.plant.chain_params import (
     TIP_MASS_FRACTION,
@@ -93,7 +95,7 @@ from harness.plant.chain_params import (
 from harness.plant.environment import ContactMap, add_environment, clearance, contact_map
 from harness.plant.initial import InitialStateError, initial_state
 
-MJCF_DIR = Path(__file__).resolve().parents[2] / "mjcf"
+MJCF_DIR = asset_dir("mjcf")  # the shipped MJCF (package data when installed; harness.config.assets)
 SCENE_XML = MJCF_DIR / "scene.xml"
 
 N_SECTIONS = 3
@@ -477,11 +479,13 @@ def export_mjcf(master: MasterParams, slave: SlaveParams, plant: PlantConfig, pa
     spec = build_spec(master, slave, plant)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(spec.to_xml())
-    try:
-        mujoco.MjModel.from_xml_path(os.fspath(path))
-    except ValueError as exc:
-        raise PlantModelError(f"exported MJCF {path} does not re-load: {exc}") from None
+    xml = spec.to_xml()
+    with atomic_path(path) as tmp:  # renamed into place only once written and re-loaded
+        tmp.write_text(xml, encoding="utf-8")
+        try:
+            mujoco.MjModel.from_xml_string(xml)
+        except ValueError as exc:
+            raise PlantModelError(f"exported MJCF {path} does not re-load: {exc}") from None
     return path
 
 

@@ -13,6 +13,7 @@ import multiprocessing
 import os
 import signal
 import tempfile
+import threading
 import time
 import traceback
 from collections import deque
@@ -71,14 +72,29 @@ def _call(case_fn: Callable[[dict], dict], payload: dict) -> dict:
         return _error_result(e)
 
 
+PARENT_POLL = 0.5  # s: how often a pool worker checks that the main process is still alive
+
+
+def _watch_parent(parent: int) -> None:
+    while True:
+        time.sleep(PARENT_POLL)
+        if os.getppid() != parent:  # re-parented: the main process died (kill -9, crash)
+            os._exit(70)
+
+
 def _worker_init() -> None:
     # Ctrl-C reaches the whole process group: only the parent reacts (it cancels and stops us).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # A killed main process cannot stop its pool: each worker ends itself within PARENT_POLL s.
+    threading.Thread(target=_watch_parent, args=(os.getppid(),), name="parent-watchdog", daemon=True).start()
 
 
 # --- execution --------------------------------------------------------------------------------------
 class SweepError(RuntimeError):
     """The executor failed (not a case): the sweep stops; finished rows are kept, a re-run resumes."""
+
+
+CONNECT_TIMEOUT = 5.0  # s: connecting to a Dask scheduler, and waiting for its first worker
 
 
 class Runner:
@@ -95,16 +111,32 @@ class Runner:
         # Process pool: only `workers` cases in flight, so a dead worker implicates few cases.
         return math.inf if self.scheduler else self.workers
 
+    def connect(self) -> None:
+        """Connect to the Dask scheduler now and check it has a worker (ConfigError within about
+        CONNECT_TIMEOUT s otherwise).  No-op for a process pool."""
+        if self.scheduler and self._client is None:
+            from distributed import Client
+
+            where = f"--scheduler = {self.scheduler!r}"
+            try:
+                self._client = Client(self.scheduler, timeout=f"{CONNECT_TIMEOUT}s")
+            except Exception as e:  # noqa: BLE001 - OSError/TimeoutError/ValueError/TypeError: all input
+                why = " ".join(str(e).split())[:200]
+                raise ConfigError(f"{where}: cannot connect to the Dask scheduler "
+                                  f"(timeout {CONNECT_TIMEOUT:g} s; {type(e).__name__}: {why})",
+                                  path="scheduler") from None
+            try:
+                self._client.wait_for_workers(1, timeout=CONNECT_TIMEOUT)
+            except Exception:  # noqa: BLE001 - TimeoutError (type differs between versions)
+                self._client.close()
+                self._client = None
+                raise ConfigError(f"{where}: the scheduler has no worker (none joined within "
+                                  f"{CONNECT_TIMEOUT:g} s)", path="scheduler") from None
+
     def executor(self) -> cf.Executor:
         if self._ex is None:
             if self.scheduler:
-                from distributed import Client
-
-                try:
-                    self._client = Client(self.scheduler)
-                except (OSError, ValueError) as e:
-                    raise ConfigError(f"scheduler = {self.scheduler!r}: cannot connect to the Dask "
-                                      f"scheduler ({e})", path="scheduler") from None
+                self.connect()
                 self._ex = self._client.get_executor(pure=False)
             else:
                 self._ex = _process_pool(self.workers)

@@ -46,6 +46,7 @@ from controllers import master as master_model
 from controllers import slave as slave_model
 from controllers.params import MasterParams, SlaveParams
 from harness.config.scenario import PlantConfig
+from harness.config.textio import write_atomic
 from harness.plant.mujoco_model import ChainMap, build_model
 
 ROUNDING_LEVEL = 1e-12  # relative errors below this are rounding (no convergence order is shown)
@@ -200,8 +201,7 @@ class FidelityTable:
     def write_markdown(self, path) -> Path:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(self.to_markdown() + "\n")
-        return path
+        return write_atomic(path, self.to_markdown() + "\n")
 
 
 def observed_orders(Ns, errs) -> np.ndarray:
@@ -280,9 +280,10 @@ def plot_fidelity(table: FidelityTable, path) -> Path:
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    try:
+        return write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=120, format=path.suffix[1:] or "png"))
+    finally:
+        plt.close(fig)
 
 
 CC_COLUMNS = ("N", "enforce_cc", "us_per_step", "tip_dev_mm", "hinge_dev_mrad", "closed_loop")
@@ -377,11 +378,14 @@ def cc_markdown(rows: list[dict], n_samples: int, settle_steps: int, loop_durati
 def write_rows_csv(rows: list[dict], path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    return path
+
+    def write(tmp: Path) -> None:
+        with tmp.open("w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+
+    return write_atomic(path, write)
 
 
 def main_fidelity(segments, out, progress: bool = True, samples: int = 50, seed: int = 0,
@@ -408,7 +412,7 @@ def main_fidelity(segments, out, progress: bool = True, samples: int = 50, seed:
     rows = cc_study(Ns=tuple(segments), n_samples=cc_samples, seed=seed, settle_steps=settle,
                     loop_duration=loop)
     text = cc_markdown(rows, cc_samples, settle, loop)
-    (out / "fidelity_cc.md").write_text(text + "\n")
+    write_atomic(out / "fidelity_cc.md", text + "\n")
     written += [out / "fidelity_cc.md", write_rows_csv(rows, out / "fidelity_cc.csv")]
     print()
     print(text)

@@ -94,12 +94,3 @@ class OutputLock:
 
     def release(self) -> None:
         self._fh.close()
-
-
-
-def write_atomic(path: Path, data: bytes) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
-
-

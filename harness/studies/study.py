@@ -35,6 +35,7 @@ Study file (TOML)
     mode = "grid"      # "grid" (default) | "random"
     n = 20             # number of random draws (see below)
     seed = 0           # seed of the draws (default 0)
+    max_cases = 10000  # refuse larger studies before expanding them (default 10000; --max-cases)
 
     [scenario]         # optional inline base scenario (instead of study.scenario); same keys as a
     duration = 5.0     # scenario file.  The `study.toml` written to the output folder uses it.
@@ -88,6 +89,7 @@ from typing import Any
 
 import numpy as np
 
+from harness.config.assets import shipped
 from harness.config.errors import ConfigError
 from harness.config.load import load_scenario, scenario_to_dict
 from harness.config.scenario import Scenario
@@ -123,6 +125,7 @@ DISTRIBUTIONS = {
     "integers": ("low", "high"),
 }
 DEFAULT_OUT_ROOT = Path("runs") / "sweeps"
+DEFAULT_MAX_CASES = 10000  # [sampling] max_cases / --max-cases
 RESULTS = "results.jsonl"
 _PLANT_TABLES = (("plant", "master"), ("plant", "slave"))
 _PARAM_RE = re.compile(r"^([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)(?:\[(\d+)\])?$")
@@ -163,6 +166,7 @@ class Study:
     mode: str  # "grid" | "random"
     n: int | None
     seed: int
+    max_cases: int = 10000  # DEFAULT_MAX_CASES
 
     @property
     def scenario_source(self) -> Path | dict | None:
@@ -264,21 +268,23 @@ def _parse_factor(i: int, t: Any) -> Factor:
     return Factor(name, param, path, index, mode, tuple(spec), None)
 
 
-def load_study(source: str | os.PathLike | dict, base_dir: str | os.PathLike | None = None) -> Study:
+def load_study(source: str | os.PathLike | dict, base_dir: str | os.PathLike | None = None, *,
+               max_cases: int | None = None) -> Study:
     """Parse and check a study (TOML file or the equivalent dict).  Structural errors raise
     `ConfigError` naming the table/factor; values are checked by `expand_cases`.
-    `base_dir` resolves a relative `study.scenario` (default: the study file's folder, or cwd)."""
+    `base_dir` resolves a relative `study.scenario` (default: the study file's folder, or cwd).
+    `max_cases` replaces [sampling] max_cases (the case count is checked here, before expansion)."""
     if isinstance(source, dict):
         doc, stem = source, None
         base = Path(base_dir) if base_dir is not None else Path.cwd()
     else:
-        path = Path(source)
+        path = shipped(source, "studies")  # a shipped name (segments) works from any folder
         doc = read_toml(path, "study file")
         stem = path.stem
         base = Path(base_dir) if base_dir is not None else path.resolve().parent
     study_keys = ("name", "scenario", "set", "metrics", "record", "description")
     belongs = {k: "[study]" for k in study_keys if k != "scenario"}
-    belongs.update({k: "[sampling]" for k in ("mode", "n", "seed")} | {"param": "[[factor]]"})
+    belongs.update({k: "[sampling]" for k in ("mode", "n", "seed", "max_cases")} | {"param": "[[factor]]"})
     _check_keys(doc, ("study", "factor", "sampling", "scenario"),
                 "study file" if stem is None else f"study file {source}", belongs)
     st = doc.get("study", {})
@@ -336,8 +342,10 @@ def load_study(source: str | os.PathLike | dict, base_dir: str | os.PathLike | N
             raise ConfigError(f"[[factor]] {a.name!r} and {b.name!r} both set {a.param!r} / {b.param!r}")
 
     sp = doc.get("sampling", {})
-    _check_keys(sp, ("mode", "n", "seed"), "[sampling]")
+    _check_keys(sp, ("mode", "n", "seed", "max_cases"), "[sampling]")
     mode, n, seed = sp.get("mode", "grid"), sp.get("n"), sp.get("seed", 0)
+    max_cases = (check_max_cases(sp.get("max_cases", DEFAULT_MAX_CASES), "[sampling] max_cases")
+                 if max_cases is None else check_max_cases(max_cases, "--max-cases"))
     if mode not in ("grid", "random"):
         raise ConfigError(f"[sampling] mode = {mode!r}: 'grid' or 'random'")
     if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
@@ -350,7 +358,32 @@ def load_study(source: str | os.PathLike | dict, base_dir: str | os.PathLike | N
     description = st.get("description", "")
     if not isinstance(description, str):
         raise ConfigError(f"[study] description = {description!r}: must be a string")
-    return Study(name, description, scenario, tuple(sets), tuple(metrics), record, factors, mode, n, seed)
+    study = Study(name, description, scenario, tuple(sets), tuple(metrics), record, factors, mode, n, seed,
+                  max_cases)
+    check_case_count(study)
+    return study
+
+
+def check_max_cases(v: Any, where: str) -> int:
+    if not (isinstance(v, int) and not isinstance(v, bool) and v >= 1):
+        raise ConfigError(f"{where} = {v!r}: must be an integer >= 1")
+    return v
+
+
+def case_count(study: Study) -> int:
+    """Number of cases before duplicates are removed, computed without expanding the study."""
+    if study.mode == "random":
+        return int(study.n)
+    count = math.prod(len(f.levels) for f in study.factors if not f.is_random)
+    return count * (study.n if any(f.is_random for f in study.factors) else 1)
+
+
+def check_case_count(study: Study) -> None:
+    """ConfigError (with the count) if the study has more than `study.max_cases` cases."""
+    count = case_count(study)
+    if count > study.max_cases:
+        raise ConfigError(f"study {study.name!r}: {count} cases, more than the limit of {study.max_cases} "
+                          "([sampling] max_cases or --max-cases raise it)", path="[sampling] max_cases")
 
 
 # --- case expansion ---------------------------------------------------------------------------------
@@ -491,8 +524,13 @@ def _in_context(e: ValueError, context: str) -> ConfigError:
 
 
 def load_base(study: Study) -> Scenario:
+    """The base scenario (with `set`), its plant checked too (harness.plant.validate_plant)."""
+    from harness.plant import validate_plant
+
     try:
-        return load_scenario(study.scenario_source, list(study.set))
+        base = load_scenario(study.scenario_source, list(study.set))
+        validate_plant(base)
+        return base
     except ValueError as e:  # ConfigError, or a model's ParameterError
         raise _in_context(e, f"study {study.name!r}: base scenario (with [study] set)") from None
 
@@ -500,6 +538,7 @@ def load_base(study: Study) -> Scenario:
 def expand_cases(study: Study, base: Scenario | None = None) -> list[Case]:
     """All cases of the study, each validated by `load_scenario` (ConfigError naming the factor
     values on the first bad one), duplicates (same resolved scenario) removed."""
+    check_case_count(study)  # before expanding anything
     base = load_base(study) if base is None else base
     cases: dict[str, Case] = {}
     for levels in _level_combinations(study):

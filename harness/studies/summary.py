@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from harness.config.textio import write_atomic
 from harness.studies.study import METRIC_LABELS, Case, Study, canon, is_real
 
 
@@ -42,13 +43,17 @@ def write_summary(study: Study, cases: Sequence[Case], rows: dict[str, dict],
     done = [rows[c.case_id] for c in cases if c.case_id in rows]
     names = [f.name for f in study.factors]
     path = out / "summary.csv"
-    with open(path, "w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh)
-        w.writerow(["case_id", *names, "status", *study.metrics, "case_wall_time", "message"])
-        for r in done:
-            w.writerow([r["case_id"], *(_cell(r["params"].get(n)) for n in names), r["status"],
-                        *(_cell(r["metrics"].get(m)) for m in study.metrics), _cell(r["wall_time"]),
-                        r["message"]])
+
+    def write(tmp: Path) -> None:
+        with open(tmp, "w", newline="", encoding="utf-8") as fh:
+            w = csv.writer(fh)
+            w.writerow(["case_id", *names, "status", *study.metrics, "case_wall_time", "message"])
+            for r in done:
+                w.writerow([r["case_id"], *(_cell(r["params"].get(n)) for n in names), r["status"],
+                            *(_cell(r["metrics"].get(m)) for m in study.metrics), _cell(r["wall_time"]),
+                            r["message"]])
+
+    write_atomic(path, write)  # renamed into place when complete (harness.config.textio)
     return [path, *_plots(study, done, out)]
 
 
@@ -79,8 +84,7 @@ def _plots(study: Study, rows: Sequence[dict], out: Path) -> list[Path]:
     def finish(fig, axes, name):
         for ax in axes[len(metrics):]:
             ax.set_visible(False)
-        p = out / name
-        fig.savefig(p, dpi=110)
+        p = write_atomic(out / name, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
         paths.append(p)
 
     sampled = study.mode == "random"

@@ -46,15 +46,17 @@ from tqdm import tqdm
 
 from harness.config.load import scenario_to_dict
 from harness.config.scenario import Scenario
-from harness.config.textio import prepare_out_dir
+from harness.config.textio import OutputError, describe_os_error, prepare_out_dir, write_atomic
 from harness.studies.executor import Runner, SweepError, run_case, run_cases
-from harness.studies.results import RESULTS, OutputLock, ResultsWriter, make_row, read_results, write_atomic
+from harness.studies.results import RESULTS, OutputLock, ResultsWriter, make_row, read_results
 from harness.studies.study import (
     DEFAULT_OUT_ROOT,
     METRIC_LABELS,
     METRIC_NAMES,
     Case,
     Study,
+    check_case_count,
+    check_max_cases,
     expand_cases,
     is_real,
     load_base,
@@ -115,7 +117,7 @@ def _study_document(study: Study, base: Scenario) -> dict:
     factors = []
     for f in study.factors:
         factors.append({"name": f.name, "param": f.param, f.mode: f.dist if f.is_random else list(f.levels)})
-    sampling: dict[str, Any] = {"mode": study.mode, "seed": study.seed}
+    sampling: dict[str, Any] = {"mode": study.mode, "seed": study.seed, "max_cases": study.max_cases}
     if study.n is not None:
         sampling["n"] = study.n
     return {"study": st, "sampling": sampling, "factor": factors, "scenario": scenario_to_dict(base)}
@@ -124,17 +126,27 @@ def _study_document(study: Study, base: Scenario) -> dict:
 def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | None = None,
               workers: int | None = None, scheduler: str | None = None, progress: bool = True,
               case_fn: Callable[[dict], dict] = run_case,
-              on_row: Callable[[dict], None] | None = None) -> SweepResult:
+              on_row: Callable[[dict], None] | None = None, max_cases: int | None = None) -> SweepResult:
     """Run (or resume) a study.  Every case is built and validated before anything runs.
 
     out: output folder (default runs/sweeps/<name>); workers: process-pool size (default all
     cores); scheduler: Dask scheduler address (then `workers` is ignored); case_fn: the worker
     function (top-level, picklable; default `run_case`); on_row(row): called in the parent after
-    each row is on disk.  Raises ConfigError for a bad study, SweepInterrupted on Ctrl-C/SIGTERM."""
+    each row is on disk.  max_cases: overrides the study's [sampling] max_cases (the case count is
+    checked before expansion).  Raises ConfigError for a bad study, an unreachable scheduler (checked
+    before any file is written) or an unusable output folder; SweepInterrupted on Ctrl-C/SIGTERM."""
+    if max_cases is not None:
+        max_cases = check_max_cases(max_cases, "--max-cases")
     if not isinstance(study, Study):
-        study = load_study(study)
+        study = load_study(study, max_cases=max_cases)
+    if max_cases is not None:
+        study = dataclasses.replace(study, max_cases=max_cases)
+    check_case_count(study)
     base = load_base(study)
     cases = expand_cases(study, base)
+    runner = Runner(workers, scheduler)
+    if scheduler:
+        runner.connect()  # a bad or unreachable scheduler is input: found before anything is written
     if out is not None:
         out = prepare_out_dir(Path(out), "--out")
     else:
@@ -142,7 +154,6 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
     lock = OutputLock(out)
     in_main = threading.current_thread() is threading.main_thread()
     old_term = signal.signal(signal.SIGTERM, _raise_interrupt) if in_main else None
-    runner = Runner(workers, scheduler)
     writer = bar = None
     try:
         header = (f"# Resolved study {study.name!r}, written by harness.studies.sweep "
@@ -211,7 +222,10 @@ def _worst(study: Study, cases: Sequence[Case], rows: dict[str, dict]) -> list[C
 
 def _record_worst(study: Study, result: SweepResult, runner: Runner, case_fn: Callable) -> list[Path]:
     folder = result.out / "recordings"
-    folder.mkdir(exist_ok=True)
+    try:
+        folder.mkdir(exist_ok=True)
+    except OSError as e:
+        raise OutputError(f"cannot create {folder}: {describe_os_error(e)}", path=str(folder)) from None
     worst = _worst(study, result.cases, result.rows)
     todo = [c for c in worst if not (folder / f"{c.case_id}.rrd").exists()]
     written = [folder / f"{c.case_id}.rrd" for c in worst if c not in todo]
@@ -236,12 +250,14 @@ EXIT_INTERRUPTED = 130  # as `teleop run` (harness.cli)
 
 
 def main_sweep(study_path: str | os.PathLike, out: str | os.PathLike | None = None,
-               workers: int | None = None, scheduler: str | None = None, progress: bool = True) -> int:
+               workers: int | None = None, scheduler: str | None = None, progress: bool = True,
+               max_cases: int | None = None) -> int:
     """`teleop sweep`: 0 when every case has a row (diverged/error cases are data), 1 when cases are
     unfinished or the executor failed, 130 when interrupted (SIGINT/SIGTERM; re-run to resume).  A bad
     study or an unusable output folder raises ConfigError before anything runs."""
     try:
-        res = run_sweep(study_path, out=out, workers=workers, scheduler=scheduler, progress=progress)
+        res = run_sweep(study_path, out=out, workers=workers, scheduler=scheduler, progress=progress,
+                        max_cases=max_cases)
     except SweepError as e:
         print(f"error: {e}", file=sys.stderr)
         return 1

@@ -1,0 +1,156 @@
+"""Run an output writer in a child process that the parent can always stop.
+
+Why: the Rerun file sink writes from a thread of its own; when a write fails (full disk, `ulimit -f`)
+the failure only shows when the stream is flushed, and a writer blocked inside native code cannot be
+interrupted by Ctrl-C (Python delivers KeyboardInterrupt only between bytecodes of the main thread).
+`write_in_child` forks a child that runs the writer (which writes to a temporary name and renames it
+into place only when complete, see `harness.config.textio.atomic_path`); the parent waits in short
+polls, so that
+
+* an error in the child comes back as one line (`OutputError` naming the file and the cause); the
+  child's stderr comes to the parent, and a write error logged by Rerun's file sink there
+  ("Failed to write: File too large (os error 27)") stops the child at once: the sink's writer thread
+  has died, and a flush could otherwise wait for it;
+* a child that stops making progress (its temporary file has not grown for `stall_timeout` s) is
+  killed and reported, never a hang;
+* Ctrl-C (KeyboardInterrupt in the parent) kills the child, removes its temporary file and
+  re-raises, so a run always ends.
+
+Platforms without `fork` run the writer in-process (same atomic rename, no stall detection).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing
+import os
+import re
+import signal
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from harness.config.textio import TMP_MARK, OutputError, describe_os_error
+
+STALL_TIMEOUT = 30.0  # s without growth of the temporary file before the writer is declared stuck
+_POLL = 0.05  # s
+
+
+def _child(fn: Callable[[], Any], conn, err_fd: int) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the process group: the parent decides
+    os.dup2(err_fd, 2)  # native log lines (Rerun's sink errors) go to the parent, which keeps the cause
+    try:
+        fn()
+        conn.send(("ok", ""))
+        code = 0
+    except BaseException as e:  # noqa: BLE001 - reported to the parent as one line
+        msg = str(e) if isinstance(e, OutputError) else describe_os_error(e)
+        with contextlib.suppress(Exception):
+            conn.send(("error", " ".join(msg.split())))
+        code = 1
+    conn.close()
+    os._exit(code)  # no atexit handlers (the Rerun SDK's shutdown belongs to the parent)
+
+
+def _drain(fd: int, out: list[bytes]) -> None:
+    with os.fdopen(fd, "rb", buffering=0) as fh:
+        while chunk := fh.read(65536):
+            if sum(map(len, out)) < 1 << 20:
+                out.append(chunk)
+
+
+def _native_cause(text: bytes) -> str:
+    """The cause at the end of the first native ERROR line, e.g. 'File too large (os error 27)'."""
+    for line in text.decode("utf-8", "replace").splitlines():
+        line = re.sub(r"\x1b\[[0-9;]*m", "", line)
+        if "ERROR" in line and ("file_sink" in line or "Failed to write" in line):
+            return line.rsplit(": ", 1)[-1].strip()
+    return ""
+
+
+def _temps(path: Path, pid: int | None) -> list[Path]:
+    pat = f".{path.name}{TMP_MARK}{pid if pid is not None else ''}*"
+    return [p for p in path.parent.glob(pat) if p.is_file()]
+
+
+def _size(paths: list[Path]) -> int:
+    total = 0
+    for p in paths:
+        with contextlib.suppress(OSError):
+            total += p.stat().st_size
+    return total
+
+
+def write_in_child(fn: Callable[[], Any], path: str | Path, *, stall_timeout: float = STALL_TIMEOUT) -> Path:
+    """Run `fn()` (which writes `path` through `atomic_path`) in a forked child and wait for it.
+
+    Returns `path`.  Raises `OutputError` (one line naming `path`) if the child fails, dies or stalls
+    for `stall_timeout` s; KeyboardInterrupt kills the child first.  Never leaves a temporary file."""
+    path = Path(path)
+    try:
+        ctx = multiprocessing.get_context("fork")
+    except ValueError:  # no fork (Windows): in-process
+        fn()
+        return path
+    recv, send = ctx.Pipe(duplex=False)
+    err_r, err_w = os.pipe()
+    proc = ctx.Process(target=_child, args=(fn, send, err_w), daemon=True)
+    # Ctrl-C must not land between the fork and the `try` below (the child would be orphaned): while
+    # starting, SIGINT is only recorded, and handled by the previous handler inside the `try`.
+    got: list[int] = []
+    old = (signal.signal(signal.SIGINT, lambda signum, frame: got.append(signum))
+           if threading.current_thread() is threading.main_thread() else None)
+    try:
+        proc.start()
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
+        send.close()
+        os.close(err_w)
+    stderr: list[bytes] = []
+    drain = threading.Thread(target=_drain, args=(err_r, stderr), daemon=True)
+    drain.start()
+    pid = proc.pid
+    last_size, last_change = -1, time.monotonic()
+    try:
+        if got:
+            if callable(old):
+                old(signal.SIGINT, None)  # default: raises KeyboardInterrupt
+            elif old != signal.SIG_IGN:
+                raise KeyboardInterrupt
+        while proc.is_alive():
+            proc.join(_POLL)
+            cause = _native_cause(b"".join(stderr))
+            if cause:  # the file sink logged a write error: the data cannot complete, stop now
+                raise OutputError(f"cannot write {path}: the Rerun file sink failed ({cause})",
+                                  path=str(path))
+            size = _size(_temps(path, pid))
+            now = time.monotonic()
+            if size != last_size:
+                last_size, last_change = size, now
+            elif now - last_change > stall_timeout:
+                raise OutputError(f"cannot write {path}: the writer made no progress for {stall_timeout:g} s "
+                                  "(stalled; file system full or blocked?)", path=str(path))
+        status, msg = recv.recv() if recv.poll(1.0) else ("error", "")
+        if proc.exitcode != 0 or status != "ok":
+            drain.join(2.0)
+            why = msg or f"the writer process ended with exit code {proc.exitcode}"
+            cause = _native_cause(b"".join(stderr))
+            if cause and cause not in why:
+                why += f" [{cause}]"
+            raise OutputError(why if why.startswith("cannot write") else f"cannot write {path}: {why}",
+                              path=str(path))
+        return path
+    finally:
+        if proc.is_alive():
+            proc.kill()
+            proc.join(5.0)
+        recv.close()
+        for p in _temps(path, pid):
+            with contextlib.suppress(OSError):
+                p.unlink()
+
+
+__all__ = ["STALL_TIMEOUT", "write_in_child"]
