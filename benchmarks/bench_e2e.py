@@ -182,7 +182,8 @@ def _timed_case(payload: dict) -> dict:
 
 
 def sweep_table(cases: int, duration: float, counts: list[int], out) -> None:
-    from harness.studies.study import expand_cases, load_study
+    from harness.studies.cases import expand_cases
+    from harness.studies.study import load_study
     from harness.studies.sweep import run_sweep
 
     doc = make_study(cases, duration, "mujoco")

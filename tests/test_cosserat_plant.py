@@ -171,8 +171,9 @@ def test_cli_writes_outputs_with_the_rod_in_the_recording(tmp_path):
 
 
 def test_cosserat_settings_and_viscosities_are_sweep_factors():
+    from harness.studies.cases import expand_cases
     from harness.studies.executor import run_case
-    from harness.studies.study import expand_cases, load_study
+    from harness.studies.study import load_study
 
     study = load_study({
         "study": {"name": "rod", "metrics": ["e2_rms", "sim_time_reached"],

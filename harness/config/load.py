@@ -48,6 +48,7 @@ import numpy as np
 
 from controllers.params import MasterParams, SlaveParams, SubtaskSpec
 from harness.config.assets import shipped
+from harness.config.checks import BARE_WORD_RE, KEY_RE, NAME_RE, is_none_word, type_name
 from harness.config.errors import ConfigError, short_repr
 from harness.config.scenario import (
     EnvironmentConfig,
@@ -56,10 +57,7 @@ from harness.config.scenario import (
     TrajectoryConfig,
 )
 from harness.config.schema import (
-    BARE_WORD_RE,
-    KEY_RE,
     MASTER,
-    NAME_RE,
     PLANT,
     PLANT_MODELS,
     SECTIONS,
@@ -70,9 +68,7 @@ from harness.config.schema import (
     as_table,
     build_section,
     check_keys,
-    is_none_word,
     read_fields,
-    type_name,
 )
 from harness.config.textio import loads_toml, read_toml, toml_literal, write_atomic
 

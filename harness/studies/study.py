@@ -73,9 +73,7 @@ Running, results and summaries: `harness.studies.sweep`.
 
 from __future__ import annotations
 
-import dataclasses
 import difflib
-import hashlib
 import itertools
 import json
 import logging
@@ -87,14 +85,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from harness.config.assets import shipped
 from harness.config.errors import ConfigError
-from harness.config.load import load_scenario, scenario_to_dict
 from harness.config.scenario import Scenario
-from harness.config.textio import jsonable, read_toml, toml_literal
-from harness.loop.controllers import resolve_controller
+from harness.config.textio import read_toml
 
 log = logging.getLogger(__name__)
 
@@ -126,8 +120,6 @@ DISTRIBUTIONS = {
 }
 DEFAULT_OUT_ROOT = Path("runs") / "sweeps"
 DEFAULT_MAX_CASES = 10000  # [sampling] max_cases / --max-cases
-RESULTS = "results.jsonl"
-_PLANT_TABLES = (("plant", "master"), ("plant", "slave"))
 _PARAM_RE = re.compile(r"^([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)(?:\[(\d+)\])?$")
 
 
@@ -384,182 +376,6 @@ def check_case_count(study: Study) -> None:
     if count > study.max_cases:
         raise ConfigError(f"study {study.name!r}: {count} cases, more than the limit of {study.max_cases} "
                           "([sampling] max_cases or --max-cases raise it)", path="[sampling] max_cases")
-
-
-# --- case expansion ---------------------------------------------------------------------------------
-def _clean(x: float) -> float:
-    """Round to 12 significant digits: 0.35000000000000003 -> 0.35 (stable labels and ids)."""
-    return float(f"{x:.12g}")
-
-
-def _draws(study: Study, f: Factor, n: int) -> list:
-    key = int.from_bytes(hashlib.sha256(f.name.encode()).digest()[:8], "little")
-    rng = np.random.default_rng([study.seed, key])
-    if f.levels is not None:  # list factor in random mode: uniform choice
-        return [f.levels[i] for i in rng.integers(len(f.levels), size=n)]
-    d = f.dist
-    kind = d["random"]
-    if kind == "uniform":
-        x = rng.uniform(d["low"], d["high"], n)
-    elif kind == "loguniform":
-        x = np.exp(rng.uniform(math.log(d["low"]), math.log(d["high"]), n))
-    elif kind == "normal":
-        x = rng.normal(d["mean"], d["std"], n)
-    else:
-        return [int(v) for v in rng.integers(d["low"], d["high"] + 1, size=n)]
-    return [_clean(float(v)) for v in x]
-
-
-def _level_combinations(study: Study) -> list[tuple]:
-    """One tuple of levels (in factor order) per case."""
-    fs = study.factors
-    if study.mode == "random":
-        cols = [_draws(study, f, study.n) for f in fs]
-        return list(zip(*cols, strict=True))
-    grid = [f.levels if not f.is_random else (None,) for f in fs]
-    rand = {i: _draws(study, f, study.n) for i, f in enumerate(fs) if f.is_random}
-    out = []
-    for point in itertools.product(*grid):
-        for j in range(study.n if rand else 1):
-            out.append(tuple(rand[i][j] if i in rand else v for i, v in enumerate(point)))
-    return out
-
-
-def _get(obj: Any, path: Sequence[str], base: Scenario, where: str) -> Any:
-    """Field at `path`; an unset plant.master/plant.slave reads as the base plant model."""
-    for i, p in enumerate(path):
-        named = [o for o in obj if getattr(o, "name", None) == p] if isinstance(obj, tuple) else []
-        if named:  # named entries of a tuple, e.g. environment.objects.<name>
-            obj = named[0]
-            continue
-        if not dataclasses.is_dataclass(obj) or p not in {f.name for f in dataclasses.fields(obj)}:
-            owner = ".".join(path[:i]) or "Scenario"
-            known = sorted(f.name for f in dataclasses.fields(obj)) if dataclasses.is_dataclass(obj) else []
-            hint = f"; fields: {known}" if known else ""
-            raise ConfigError(f"{where}: {owner} has no field {p!r}{hint}")
-        obj = getattr(obj, p)
-        if obj is None and tuple(path[: i + 1]) in _PLANT_TABLES:
-            obj = base.plant_master if p == "master" else base.plant_slave
-    if dataclasses.is_dataclass(obj):
-        raise ConfigError(f"{where}: {'.'.join(path)!r} is a table; name one of its fields")
-    return obj
-
-
-def _pick(v: Any, index: int | None, where: str) -> Any:
-    if index is None:
-        return v
-    if not isinstance(v, tuple | list) or not 0 <= index < len(v):
-        raise ConfigError(f"{where}: index [{index}] out of range for value {v!r}")
-    return v[index]
-
-
-def _scaled(nominal: Any, s: float, where: str) -> Any:
-    if isinstance(nominal, tuple | list):
-        return [_scaled(v, s, where) for v in nominal]
-    if not is_real(nominal):
-        raise ConfigError(f"{where}: cannot scale {nominal!r}; use 'values' for this parameter")
-    x = nominal * s
-    if isinstance(nominal, int):
-        if abs(x - round(x)) > 1e-9:
-            raise ConfigError(f"{where}: scale {s} of the integer {nominal} gives {x}, not an integer")
-        return int(round(x))
-    return _clean(float(x))
-
-
-def _controller_leaf(base: Scenario, f: Factor, level: Any, where: str) -> Any:
-    """Value of a `controller` (the name: the whole [controller] table is replaced, so the params start
-    from the class defaults) or `controller.params.<key>` factor level."""
-    if f.path == ("controller",) or f.path == ("controller", "name"):
-        if f.mode != "values" or not isinstance(level, str):
-            raise ConfigError(f"{where}: give the controllers as values = [\"paper\", \"dls_ik\", ...]")
-        return {"name": level}
-    if len(f.path) != 3 or f.path[1] != "params":
-        raise ConfigError(f"{where}: a controller factor is 'controller' or 'controller.params.<key>'")
-    if f.mode == "values":
-        return level
-    nominal = base.controller.params.get(f.path[2])
-    if nominal is None:
-        raise ConfigError(f"{where}: scale needs controller.params.{f.path[2]} in the base scenario; "
-                          "use values")
-    return _scaled(_pick(nominal, f.index, where), level, where)
-
-
-def _case_overrides(base: Scenario, factors: Sequence[Factor], levels: Sequence) -> list[str]:
-    leaves: dict[tuple[str, ...], Any] = {}
-    # a `controller` factor replaces the whole [controller] table: before any controller.params factor
-    pairs = sorted(zip(factors, levels, strict=True), key=lambda fl: fl[0].path[:1] != ("controller",)
-                   or len(fl[0].path) > 2)
-    for f, level in pairs:
-        where = f"[[factor]] {f.name!r} ({f.param})"
-        if f.path[0] == "controller":
-            path = ("controller",) if f.path[-1] == "name" else f.path
-            leaves[path] = _controller_leaf(base, f, level, where)
-            continue
-        current = leaves.get(f.path, _get(base, f.path, base, where))
-        if f.mode == "scale":
-            nominal_root = {("plant", "master"): base.master, ("plant", "slave"): base.slave}.get(f.path[:2])
-            nominal = current if nominal_root is None else _get(nominal_root, f.path[2:], base, where)
-            value = _scaled(_pick(nominal, f.index, where), level, where)
-        else:
-            value = level
-        if f.index is not None:
-            _pick(current, f.index, where)
-            new = list(current)
-            new[f.index] = value
-            value = new
-        elif isinstance(current, tuple) and is_real(value) and all(is_real(c) for c in current):
-            value = [value] * len(current)  # a scalar for a vector field: every entry
-        leaves[f.path] = value
-    return [f"{'.'.join(path)}={toml_literal(value)}" for path, value in leaves.items()]
-
-
-def scenario_id(scn: Scenario) -> str:
-    """Short stable id of a resolved scenario (its name excluded)."""
-    d = {k: v for k, v in scenario_to_dict(scn).items() if k != "name"}
-    return hashlib.sha256(canon(d).encode()).hexdigest()[:12]
-
-
-def _in_context(e: ValueError, context: str) -> ConfigError:
-    return e.with_context(context) if isinstance(e, ConfigError) else ConfigError(f"{context}: {e}")
-
-
-def load_base(study: Study) -> Scenario:
-    """The base scenario (with `set`), its plant checked too (harness.plant.validate_plant)."""
-    from harness.plant import validate_plant
-
-    try:
-        base = load_scenario(study.scenario_source, list(study.set))
-        validate_plant(base)
-        return base
-    except ValueError as e:  # ConfigError, or a model's ParameterError
-        raise _in_context(e, f"study {study.name!r}: base scenario (with [study] set)") from None
-
-
-def expand_cases(study: Study, base: Scenario | None = None) -> list[Case]:
-    """All cases of the study, each validated by `load_scenario` (ConfigError naming the factor
-    values on the first bad one), duplicates (same resolved scenario) removed."""
-    check_case_count(study)  # before expanding anything
-    base = load_base(study) if base is None else base
-    cases: dict[str, Case] = {}
-    for levels in _level_combinations(study):
-        params = {f.name: jsonable(v) for f, v in zip(study.factors, levels, strict=True)}
-        ovr = _case_overrides(base, study.factors, levels)
-        try:
-            scn = load_scenario(study.scenario_source, [*study.set, *ovr])
-        except ValueError as e:
-            raise _in_context(e, f"study {study.name!r}: case {params}") from None
-        try:
-            scn = resolve_controller(scn)
-        except ValueError as e:
-            raise _in_context(e, f"study {study.name!r}: case {params}") from None
-        cid = scenario_id(scn)
-        if cid not in cases:
-            scn = dataclasses.replace(scn, name=f"{study.name}-{cid}")
-            cases[cid] = Case(cid, params, tuple(ovr), scn)
-        elif cases[cid].params != params:
-            log.warning("study %s: case %s is the same scenario as %s; run once",
-                        study.name, params, cases[cid].params)
-    return list(cases.values())
 
 
 # --- worker -----------------------------------------------------------------------------------------

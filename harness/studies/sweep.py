@@ -47,6 +47,7 @@ from tqdm import tqdm
 from harness.config.load import scenario_to_dict
 from harness.config.scenario import Scenario
 from harness.config.textio import OutputError, describe_os_error, prepare_out_dir, write_atomic
+from harness.studies.cases import expand_cases, load_base
 from harness.studies.executor import Runner, SweepError, run_case, run_cases
 from harness.studies.results import RESULTS, OutputLock, ResultsWriter, make_row, read_results
 from harness.studies.study import (
@@ -57,9 +58,7 @@ from harness.studies.study import (
     Study,
     check_case_count,
     check_max_cases,
-    expand_cases,
     is_real,
-    load_base,
     load_study,
 )
 from harness.studies.summary import write_summary

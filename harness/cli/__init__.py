@@ -1,0 +1,353 @@
+"""`teleop` command-line interface.
+
+    teleop run [SCENARIO.toml] [options]                    simulate one scenario, write outputs
+    teleop check [SCENARIO.toml] --bounds BOUNDS.toml ...    simulate and check acceptance bounds
+    teleop models [SCENARIO.toml] [--segments N] ...         export the generated MuJoCo model (MJCF)
+    teleop sweep STUDY.toml [--out DIR] [--workers N] ...    parameter sweep (local or Dask cluster)
+    teleop controllers                                       list the built-in controllers
+    teleop fidelity [--segments 4,8,16,32] [--samples N] [--reference analytic|cosserat]   plant fidelity
+
+Exit status: 0 success; 1 the run failed (diverged, an output could not be written) or a bound was
+violated; 2 invalid input (scenario, bounds, option, output folder; a file that cannot be written before
+anything ran); 130 interrupted (SIGINT/SIGTERM).
+Invalid input is reported as a single ``error: ...`` line on stderr, never a traceback.
+
+The simulation back ends are imported lazily so that ``--help`` and input validation are fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import importlib
+import json
+import sys
+import threading
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from controllers.params import ParameterError
+from harness.cli.parser import EXIT_FAIL, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, build_parser
+from harness.cli.parser import one_line as _one_line
+from harness.config.errors import ConfigError
+from harness.config.textio import jsonable, prepare_out_dir
+
+# (module, attribute) of exception types that mean "invalid input" (exit 2).  Looked up in
+# sys.modules only: if the module was never imported, its exception cannot have been raised.
+_USER_ERRORS = (
+    ("harness.plant.mujoco_model", "PlantModelError"),
+    ("harness.loop.common", "SimulationError"),
+)
+
+
+def _user_error_types() -> tuple[type[BaseException], ...]:
+    out: list[type[BaseException]] = [ConfigError, ParameterError]
+    for mod_name, attr in _USER_ERRORS:
+        cls = getattr(sys.modules.get(mod_name), attr, None)
+        if isinstance(cls, type) and issubclass(cls, BaseException):
+            out.append(cls)
+    return tuple(out)
+
+
+
+
+def _err(msg: Any) -> None:
+    print(f"error: {_one_line(msg)}", file=sys.stderr)
+
+
+def _warn(msg: Any) -> None:
+    print(f"warning: {_one_line(msg)}", file=sys.stderr)
+
+
+# ---------------------------------------------------------------------------------------------
+# argument parsing
+# ---------------------------------------------------------------------------------------------
+# ---------------------------------------------------------------------------------------------
+# helpers
+# ---------------------------------------------------------------------------------------------
+_SHORTCUTS = (  # (attribute, option, dotted key)
+    ("plant", "--plant", "plant.kind"),
+    ("actuation", "--actuation", "plant.actuation"),
+    ("segments", "--segments", "plant.segments"),
+    ("duration", "--duration", "duration"),
+    ("controller", "--controller", "controller.name"),
+    ("seed", "--seed", "seed"),
+    ("snr", "--snr", "snr_db"),
+)
+
+
+def load_from_args(args: argparse.Namespace, extra: Sequence[tuple[str, str]] = ()):
+    """Scenario from the positional file, the shortcut options, `extra` (key=value, label) and --set."""
+    from harness.api import load_scenario
+
+    overrides: list[str] = []
+    labels: list[str | None] = []
+    for attr, option, key in _SHORTCUTS:
+        value = getattr(args, attr, None)
+        if value is not None:
+            text = str(value).strip()
+            if key in ("plant.kind", "plant.actuation", "controller.name"):
+                text = json.dumps(text)  # always a TOML string
+            overrides.append(f"{key}={text}")
+            labels.append(f"{option} {value}")
+    for text, label in extra:
+        overrides.append(text)
+        labels.append(label)
+    for text in args.overrides:
+        overrides.append(text)
+        labels.append(f"--set {text if len(text) <= 80 else text[:77] + '...'}")
+    return load_scenario(args.scenario, overrides, labels=labels)
+
+
+def _import(name: str):
+    """Import a harness back end lazily; a missing module is reported as one line (exit 1)."""
+    try:
+        return importlib.import_module(name)
+    except ModuleNotFoundError as e:
+        if e.name and (name == e.name or name.startswith(e.name + ".")):
+            raise _Unavailable(f"{name} is not available ({e})") from None
+        raise
+
+
+class _Unavailable(RuntimeError):
+    """A lazily imported back end (simulation, plotting, ...) is missing."""
+
+
+def _fmt_value(v: Any) -> str:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return str(v)
+    if isinstance(v, int):
+        return str(v)
+    return f"{v:.4g}" if v == 0 or 1e-3 <= abs(v) < 1e4 else f"{v:.3e}"
+
+
+_SUMMARY_KEYS = (("e1_rms", "m"), ("e1_max", "m"), ("e2_rms", "m"), ("e2_max", "m"),
+                 ("e2_plant_rms", "m"), ("e2_plant_max", "m"), ("beta_min", ""), ("mujoco_warnings", ""))
+
+
+def _print_summary(scn, traj, metrics: dict | None, out: Path | None, written: list[Path]) -> None:
+    n = len(traj)
+    t_end = float(traj.t[-1]) if n else 0.0
+    plant = scn.plant.kind
+    if plant == "mujoco":
+        plant += f", {scn.plant.segments} segments/section, {scn.plant.actuation}"
+    print(f"run '{scn.name}': status {traj.status} - {n} of {scn.n_steps} steps, t = {t_end:.3f} s "
+          f"(plant {plant})")
+    if traj.message:
+        print(f"  message: {_one_line(traj.message)}")
+    if metrics:
+        items = [f"{k} = {_fmt_value(metrics[k])}{' ' + u if u else ''}"
+                 for k, u in _SUMMARY_KEYS if jsonable(metrics.get(k)) is not None]  # skip None/NaN
+        for i in range(0, len(items), 3):
+            print("  " + "   ".join(items[i:i + 3]))
+    if out is not None:
+        names = ", ".join(p.name if p.parent == out else str(p) for p in written)
+        print(f"  outputs in {out}/: {names or '(none)'}")
+
+
+def _simulate_and_write(scn, out: Path | None, progress: bool, live=None, record_rate: float | None = None):
+    """Simulate, compute metrics and (if out) write every output (`harness.api.run_scenario`), then print
+    the summary.  live: optional harness.output.viewer.LiveView that receives the run chunk by chunk
+    while it is simulated.  Returns (traj, metrics or None, output-writing failures, interrupted flag)."""
+    api = _import("harness.api")
+    res = api.run_scenario(scn, out, progress, handle_signals=True, record_rate=record_rate,
+                           on_chunk=live.on_chunk if live is not None else None)
+    if live is not None:
+        live.finish(res.traj)
+    _print_summary(scn, res.traj, res.metrics, out, res.written)
+    for f in res.failures:
+        _warn(f"could not produce {f}")
+    return res.traj, res.metrics, res.failures, res.interrupted
+
+
+def _run_exit_code(traj, failures: list[str], interrupted: bool, wrote: bool = True) -> int:
+    if interrupted:
+        t_end = float(traj.t[-1]) if len(traj) else 0.0
+        note = "; outputs written for the completed part" if wrote else ""
+        _err(f"run interrupted at t = {t_end:.3f} s{note}")
+        return EXIT_INTERRUPTED
+    if traj.status != "ok":
+        _err(f"run {traj.status}: {traj.message or 'no message'}")
+        return EXIT_FAIL
+    if failures:
+        _err(f"{len(failures)} output(s) could not be produced (see warnings above)")
+        return EXIT_FAIL
+    return EXIT_OK
+
+
+# ---------------------------------------------------------------------------------------------
+# commands
+# ---------------------------------------------------------------------------------------------
+def cmd_run(args: argparse.Namespace) -> int:
+    scn = load_from_args(args)
+    out = prepare_out_dir(args.out if args.out is not None else Path("runs") / scn.name)
+    live = _import("harness.output.viewer").LiveView.open(args.view, scn) if args.view else None
+    if live is not None and live.url:
+        print(f"web viewer: {live.url}", file=sys.stderr)
+    traj, _, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress, live=live,
+                                                         record_rate=args.record_rate)
+    rc = _run_exit_code(traj, failures, interrupted)
+    if live is not None:
+        if live.failed:
+            _warn(f"live view: {live.failed}")
+        if live.url and not interrupted:
+            print(f"serving the web viewer at {live.url} - Ctrl-C to stop", file=sys.stderr)
+            with contextlib.suppress(KeyboardInterrupt):
+                while not threading.Event().wait(0.5):  # short waits: Ctrl-C is handled promptly
+                    pass
+        live.close()
+    return rc
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    from harness.config.bounds import check_bounds, load_bounds
+
+    scn = load_from_args(args)
+    bounds = load_bounds(args.bounds)
+    out = prepare_out_dir(args.out) if args.out is not None else None
+    traj, metrics, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress,
+                                                               record_rate=args.record_rate)
+    if interrupted:
+        return _run_exit_code(traj, failures, interrupted, wrote=out is not None)
+    if metrics is None:
+        _err(f"no metrics could be computed, bounds not checked ({failures[0] if failures else 'unknown'})")
+        return EXIT_FAIL
+    violations = check_bounds(metrics, bounds)
+    if violations:
+        print(f"check against {args.bounds}: {len(violations)} bound(s) violated")
+        for v in violations:
+            print(f"  FAIL {v}")
+        return EXIT_FAIL
+    print(f"check against {args.bounds}: all bounds satisfied")
+    if out is not None and failures:
+        _err(f"{len(failures)} output(s) could not be produced (see warnings above)")
+        return EXIT_FAIL
+    return EXIT_OK
+
+
+def cmd_models(args: argparse.Namespace) -> int:
+    extra = []
+    if args.enforce_cc is not None:
+        flag = "true" if args.enforce_cc else "false"
+        extra.append((f"plant.enforce_cc={flag}", "--enforce-cc" if args.enforce_cc else "--no-enforce-cc"))
+    scn = load_from_args(args, extra)
+    p = scn.plant
+    path = args.out if args.out is not None else Path(
+        "mjcf") / f"octarm_{p.actuation}_n{p.segments}{'_cc' if p.enforce_cc else ''}.xml"
+    if path.is_dir():
+        raise ConfigError(f"--out = '{path}': is a directory, expected a file name", path="--out")
+    prepare_out_dir(path.parent if str(path.parent) else Path("."))
+    plant_model = _import("harness.plant.mujoco_model")
+    result = plant_model.export_mjcf(scn.plant_master, scn.plant_slave, p, path)
+    print(f"wrote {result if isinstance(result, (str, Path)) else path} "
+          f"({p.segments} segments/section, {p.actuation} actuation, enforce_cc={str(p.enforce_cc).lower()})")
+    return EXIT_OK
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from harness.config.assets import shipped
+
+    study: Path = shipped(args.study, "studies")
+    if not study.is_file():
+        raise ConfigError(f"study file not found: {study}", path=str(study))
+    if args.view is not None:
+        return _view_case(study, args.out, args.view)
+    sweep = _import("harness.studies.sweep")  # validates the study, then creates and checks the output folder
+    extra = {"max_cases": args.max_cases} if args.max_cases is not None else {}
+    rc = sweep.main_sweep(study, args.out, args.workers, args.scheduler, not args.no_progress, **extra)
+    return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
+
+
+def cmd_controllers(args: argparse.Namespace) -> int:  # noqa: ARG001
+    registry = _import("harness.loop.controllers")
+    items = registry.describe_builtins()
+    width = max(len(n) for n, _, _ in items)
+    for name, desc, acts in items:
+        print(f"{name:<{width}}  [{'/'.join(acts):<12}]  {desc}")
+    print("your own: --controller path/to/file.py:ClassName or package.module:ClassName "
+          "(see controllers/interface.py)")
+    return EXIT_OK
+
+
+def _view_case(study: Path, out: Path | None, case_id: str) -> int:
+    """`teleop sweep STUDY --view CASE_ID`: open a case's recording in a spawned Rerun viewer."""
+    import subprocess
+
+    if out is None:
+        out = Path("runs") / "sweeps" / _import("harness.studies.sweep").load_study(study).name
+    path = out / "recordings" / f"{case_id}.rrd"
+    if not path.is_file():
+        have = sorted(p.stem for p in (out / "recordings").glob("*.rrd"))
+        raise ConfigError(f"--view {case_id}: no recording {path} (recorded cases: "
+                          f"{', '.join(have) or 'none'}; re-run the case with 'teleop run --view')",
+                          path="--view")
+    cmd = _import("harness.output.viewer").open_recording(path)
+    subprocess.Popen(cmd, start_new_session=True, stdin=subprocess.DEVNULL)
+    print(f"opened {path} ({' '.join(cmd)})")
+    return EXIT_OK
+
+
+def parse_segment_list(text: str) -> list[int]:
+    """'4,8,16,32' -> [4, 8, 16, 32]; each an integer in [1, 64], no duplicates."""
+    items = [s.strip() for s in str(text).split(",")]
+    out: list[int] = []
+    for s in items:
+        try:
+            v = int(s)
+        except ValueError:
+            v = None
+        if v is None or not 1 <= v <= 64 or v in out:
+            raise ConfigError(f"--segments = {text!r}: must be distinct integers in [1, 64] separated by "
+                              f"commas, e.g. 4,8,16,32 (bad entry {s!r})", path="--segments")
+        out.append(v)
+    return out
+
+
+def cmd_fidelity(args: argparse.Namespace) -> int:
+    segments = parse_segment_list(args.segments)
+    out = prepare_out_dir(args.out)
+    if args.reference == "cosserat":
+        report = _import("harness.studies.fidelity_report")
+        rc = report.main_reference(segments, out, not args.no_progress, args.seed)
+    else:
+        fidelity = _import("harness.studies.fidelity")
+        rc = fidelity.main_fidelity(segments, out, not args.no_progress, args.samples, args.seed)
+    return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
+
+
+# ---------------------------------------------------------------------------------------------
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # --help / --version (0) or a usage error (2, already printed)
+        return e.code if isinstance(e.code, int) else (EXIT_OK if e.code is None else EXIT_USAGE)
+    if not getattr(args, "command", None):
+        parser.print_help(sys.stderr)
+        return EXIT_USAGE
+    try:
+        return COMMANDS[args.command](args)
+    except KeyboardInterrupt:
+        _err("interrupted")
+        return EXIT_INTERRUPTED
+    except _Unavailable as e:
+        _err(e)
+        return EXIT_FAIL
+    except OSError as e:  # a file that could not be read or written (bad path, full disk): one line
+        where = f"{e.filename}: " if e.filename else ""
+        _err(f"{where}{e.strerror or e}")
+        return EXIT_USAGE
+    except Exception as e:
+        if isinstance(e, _user_error_types()):
+            _err(e)
+            return EXIT_USAGE
+        raise
+
+
+COMMANDS = {"run": cmd_run, "check": cmd_check, "models": cmd_models, "sweep": cmd_sweep,
+            "controllers": cmd_controllers, "fidelity": cmd_fidelity}
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
