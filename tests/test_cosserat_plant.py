@@ -46,7 +46,7 @@ class AnalyticStepped:
     def reset(self, state0):
         self.s[:] = state0
 
-    def command(self, T1, T2, q2_ref, dq2_ref):
+    def command(self, T1, T2, q2_ref, dq2_ref, q2_sensed):
         self.T1[:] = T1
         self.T2[:] = T2
 
