@@ -2,8 +2,10 @@
 
 `simulate(scn, plant=None)` is the one entry point: it takes a scenario and a plant
 (`harness.plant.build_plant(scn)` when not given) and returns the in-memory `Trajectory`.  The
-plant-specific loops are `harness.loop.analytic_loop`, `harness.loop.mujoco_loop` and
-`harness.loop.stepped_loop` (plants stepped from Python, e.g. the Cosserat rod); what they
+paper's controller on the analytic and MuJoCo plants runs in the compiled loops
+`harness.loop.analytic_loop` / `harness.loop.mujoco_loop`; everything else (a Python controller on any
+plant, any controller on a plant stepped from Python such as the Cosserat rod) runs in the one
+Python-level loop `harness.loop.stepped_loop` (plants: `harness.loop.stepped_plants`); what they
 share (initial state, noise, status codes, stop flag) is `harness.loop.common`; the compiled
 kernels are `harness.loop.kernels` / `harness.loop.mujoco_kernels`, compiled by `harness.loop.fast`.
 The loop knows nothing of files, recordings or sweeps.
@@ -25,14 +27,16 @@ def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None):
         from harness.plant import build_plant
 
         plant = build_plant(scn)
-    if scn.controller.name != "paper":  # a controller through the Python interface (harness.loop.controllers)
-        from harness.loop.interface_loop import simulate_controller
-
-        return simulate_controller(scn, progress=progress, plant=plant, on_chunk=on_chunk)
-    if hasattr(plant, "advance"):  # a stepped plant (harness.plant.stepped.SteppedPlant)
+    python_ctrl = scn.controller.name != "paper"  # a controllers.interface.Controller (loop/controllers.py)
+    if python_ctrl or hasattr(plant, "advance"):  # the one Python-level loop, on a SteppedPlant
         from harness.loop.stepped_loop import simulate_stepped
 
-        return simulate_stepped(scn, plant, progress=progress, on_chunk=on_chunk)
+        if not hasattr(plant, "advance"):  # the MuJoCo / analytic plant: its Python-stepped adapter
+            from harness.loop.stepped_plants import stepped_plant
+
+            plant = stepped_plant(scn, plant)
+        return simulate_stepped(scn, plant, progress=progress,
+                                controller="interface" if python_ctrl else None, on_chunk=on_chunk)
     if plant.kind == "analytic":
         from harness.loop.analytic_loop import simulate_analytic
 

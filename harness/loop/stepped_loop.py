@@ -1,10 +1,15 @@
-"""Closed loop on a plant stepped from Python (protocol `harness.plant.stepped.SteppedPlant`).
+"""The one Python-level closed loop: any controller on any plant stepped from Python (protocol
+`harness.plant.stepped.SteppedPlant`).
 
-For plants whose physics is not a MuJoCo model or the analytic model (today: the Cosserat rod,
-`harness.plant.cosserat_plant`), the loop over control steps is Python, and each step is a few
-compiled calls.  Per control step k (t = k control_dt):
+Plants: the Cosserat rod (`harness.plant.cosserat_plant`) and the Python-stepped adapters of the MuJoCo
+and analytic plants (`harness.loop.stepped_plants`).  Controllers: the paper's (`PaperController`,
+the compiled laws, default) or a `controllers.interface.Controller` through
+`harness.loop.interface_adapter.InterfaceController` (``controller="interface"``).  The paper's
+controller on the MuJoCo / analytic plants runs in the compiled loops instead (`harness.loop.simulate`).
+The loop over control steps is Python, and each step is a few compiled calls.  Per control step k
+(t = k control_dt):
 
-    plant.true_state(state)                     noise-free [q1, dq1, q2, dq2] (16,)
+    status = plant.true_state(state)            noise-free [q1, dq1, q2, dq2] (16,); plant checks
     x_d(t), eq. (40)                            K.desired
     sensed = state + AWGN                       K.add_noise, the seeded table of noise_table (as the
                                                 other loops: same seed -> same noise)
@@ -13,8 +18,10 @@ compiled calls.  Per control step k (t = k control_dt):
                                                 (17)-(33) (K.control_laws, as in the compiled loops)
     record row of the true state                K.record_row (ROW layout of harness.loop.trajectory)
     servo reference                             dq2_ref += u2 dt, q2_ref += dq2_ref dt (semi-implicit
-                                                Euler, as harness.loop.mujoco_kernels.mujoco_commands)
-    plant.command(T1, T2, q2_ref, dq2_ref)      through a ring buffer of plant.actuation_delay
+                                                Euler, as harness.loop.mujoco_kernels.mujoco_commands),
+                                                or the controller's own (Action.use_ref)
+    plant.command(T1, T2, q2_ref, dq2_ref, q2s) through a ring buffer of plant.actuation_delay; q2s
+                                                the sensed q2 of the commanding step (MuJoCo torque map)
     status = plant.advance(control_dt)
 
 Statuses are those of `harness.loop.common.STATUS_TEXT` (1 non-finite command, 2/3 singular, 4
@@ -54,6 +61,7 @@ from harness.loop.common import (
     set_outcome,
 )
 from harness.loop.fast import K
+from harness.loop.interface_adapter import ControllerFailure, InterfaceController
 from harness.loop.kernels import R_E1, R_E2, RUNAWAY
 from harness.loop.trajectory import ROW_WIDTH, Trajectory
 from harness.plant.stepped import SteppedPlant
@@ -106,26 +114,38 @@ class PaperController:
 def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
                      controller: Controller | None = None, on_chunk=None) -> Trajectory:
     """Run the scenario on a stepped plant; returns the Trajectory (possibly cut short).
+    controller: a loop `Controller` (default `PaperController`), or `"interface"` for the scenario's
+    `controllers.interface.Controller` (`harness.loop.interface_adapter.InterfaceController`).
     on_chunk: optional callable receiving every CHUNK steps as a `Trajectory` (time series only).
 
     traj.x2_plant: the plant's own slave tip (n, 2); traj.master_pos: (n, 3, 3) if the plant's
     geometry has "master"; every other geometry array goes to traj.meta["geometry"][name] (n, ...).
-    Timings: meta "build_time" (reset), "wall_time" (the loop)."""
+    A plant with `record(k)` / `finish(traj, done)` (the MuJoCo adapter) records its own geometry instead.
+    Timings: meta "build_time" (controller and plant reset), "wall_time" (the loop)."""
     tb = time.perf_counter()
     n = scn.n_steps
     dt = scn.control_dt
     s0 = initial_state(scn)
-    plant.reset(s0)
+    if controller == "interface":
+        controller = InterfaceController(scn)
     ctrl = controller if controller is not None else PaperController()
-    ctrl.reset(scn, s0)
+    cname = getattr(ctrl, "name", type(ctrl).__name__)
+    error, failed = "", False
+    plant.reset(s0)
+    try:
+        ctrl.reset(scn, s0)
+    except ControllerFailure as exc:
+        error, failed, n = str(exc), True, 0
     fused = getattr(ctrl, "fused_step", None)  # optional one-call fast path (the paper controller)
+    own_ref = hasattr(ctrl, "use_ref")  # the controller may give the servo reference directly
     build_time = time.perf_counter() - tb
-    noise, scale = noise_table(scn, n)
+    noise, scale = noise_table(scn, scn.n_steps)
     a = common_arrays(scn)
     traj_p, mpk, gains, spec = a["traj"], a["mpk_c"], a["gains"], a["spec"]
     rows = np.zeros((n, ROW_WIDTH))
-    tips = np.zeros((n, 2))
-    geo = {name: np.zeros((n, *np.shape(v))) for name, v in plant.geometry().items()}
+    own_geo = hasattr(plant, "finish")
+    tips = np.zeros((0 if own_geo else n, 2))
+    geo = {} if own_geo else {name: np.zeros((n, *np.shape(v))) for name, v in plant.geometry().items()}
     state, sensed = np.zeros(16), np.zeros(16)
     xd, dxd, ddxd = np.zeros(2), np.zeros(2), np.zeros(2)
     T1, T2, u2, deN = np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6)
@@ -133,17 +153,19 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
     q_ref, dq_ref = ref[0:6], ref[6:12]
     servo = plant.actuation == "servo"
     delay = int(round(scn.plant.actuation_delay / dt))
-    cmdbuf = np.zeros((delay + 1, 20))  # [T1, T2, q2_ref, dq2_ref] per slot
+    cmdbuf = np.zeros((delay + 1, 26))  # [T1, T2, q2_ref, dq2_ref, sensed q2] per slot
     cmdbuf[:, 8:20] = ref
-    bar = progress_bar(progress, n, f"{plant.kind} plant ({plant.actuation})")
+    bar = progress_bar(progress, n, f"{plant.kind} plant ({plant.actuation}), controller {cname}")
     status, done = 0, 0
     interrupted = False
-    error = ""
     t0 = time.perf_counter()
     try:
         for k in range(n):
             t = k * dt
-            plant.true_state(state)
+            st = plant.true_state(state)
+            if st:
+                status = int(st)
+                break
             total = float(state @ state)  # NaN/inf propagate; no temporary array
             if not math.isfinite(total) or total > EXPLODING * EXPLODING:
                 status = 8
@@ -164,9 +186,12 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
                     sensed[:] = state
                 st = ctrl.step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN)
                 K.record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row)
-            tips[k] = plant.slave_tip()
-            for name, v in plant.geometry().items():
-                geo[name][k] = v
+            if own_geo:
+                plant.record(k)
+            else:
+                tips[k] = plant.slave_tip()
+                for name, v in plant.geometry().items():
+                    geo[name][k] = v
             done = k + 1
             if st == 0 and not math.isfinite(float(T1.sum() + T2.sum() + u2.sum())):
                 st = 1
@@ -177,14 +202,18 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
                 status = int(st)
                 break
             if servo:
-                dq_ref += u2 * dt
-                q_ref += dq_ref * dt
+                if own_ref and ctrl.use_ref:
+                    ref[:] = ctrl.ref
+                else:
+                    dq_ref += u2 * dt
+                    q_ref += dq_ref * dt
             cmd = cmdbuf[k % (delay + 1)]
             cmd[0:2] = T1
             cmd[2:8] = T2
             cmd[8:20] = ref
+            cmd[20:26] = sensed[4:10]
             use = cmdbuf[(k - delay) % (delay + 1)] if k >= delay else cmdbuf[0]
-            plant.command(use[0:2], use[2:8], use[8:14], use[14:20])
+            plant.command(use[0:2], use[2:8], use[8:14], use[14:20], use[20:26])
             st = plant.advance(dt)
             if st != 0:
                 status = int(st)
@@ -201,6 +230,8 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
                     break
     except KeyboardInterrupt:
         interrupted = True
+    except ControllerFailure as exc:  # one line naming the controller, the step and the time
+        error, failed = str(exc), True
     except Exception as exc:  # keep what was computed; report the cause
         error = f"{type(exc).__name__}: {exc}"
     finally:
@@ -208,13 +239,22 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
             bar.close()
     wall = time.perf_counter() - t0
     traj = Trajectory.from_rows(rows[:done])
-    traj.x2_plant = tips[:done].copy()
-    if "master" in geo:
-        traj.master_pos = geo.pop("master")[:done].copy()
     traj.meta.update(run_meta(scn, wall))
     traj.meta["build_time"] = build_time
-    traj.meta["controller"] = getattr(ctrl, "name", type(ctrl).__name__)
-    traj.meta["geometry"] = {name: v[:done].copy() for name, v in geo.items()}
-    traj.meta.update(getattr(plant, "meta", lambda: {})())
-    set_outcome(traj, status, interrupted, error)
+    traj.meta["controller"] = cname
+    if own_geo:
+        plant.finish(traj, done)
+    else:
+        traj.x2_plant = tips[:done].copy()
+        if "master" in geo:
+            traj.master_pos = geo.pop("master")[:done].copy()
+        traj.meta["geometry"] = {name: v[:done].copy() for name, v in geo.items()}
+        traj.meta.update(getattr(plant, "meta", lambda: {})())
+    if status == -1:  # a controller gave up (ControllerDiverged without a status code)
+        traj.status, traj.message = "diverged", getattr(ctrl, "diverged", "controller gave up")
+    elif failed:
+        traj.status, traj.message = "error", error
+        traj.meta["failed_controller"] = cname
+    else:
+        set_outcome(traj, status, interrupted, error)
     return traj

@@ -1,17 +1,20 @@
-"""Plants stepped from Python, one control step at a time, for controllers that run in Python
-(`harness.loop.interface_loop`).  Each adapter does exactly what the compiled loop does around the
-control law, with the same compiled kernels, so the paper's law through the interface gives the
-compiled loop's numbers bit for bit:
+"""The MuJoCo and analytic plants as `harness.plant.stepped.SteppedPlant`s, stepped from Python by the
+one Python-level loop (`harness.loop.stepped_loop`) for controllers that run in Python.  They live in
+harness/loop because they use the loops' compiled kernels (`harness.loop.fast.K`).  Each adapter does
+exactly what the compiled loop does around the control law, with the same compiled kernels, so the
+paper's law through the interface gives the compiled loop's numbers bit for bit:
 
 * `MujocoStepped`: sensing `sense_mujoco`, the state checks of `mujoco_chunk` (status 6, 5), the command
-  maps `mujoco_commands` (servo reference integration of u2 / torque map of T2 at the sensed q2), the
-  actuation-delay ring buffer, per substep the elastic correction into qfrc_applied and `mujoco.mj_step`
-  (the Python binding of the same C function), MuJoCo warnings (status 7).
+  maps of `mujoco_commands` (servo: chain joints at q2_ref with the velocity feed-forward, T2
+  feed-forward at q2_ref; torque: the map of T2 at the sensed q2), per substep the elastic correction
+  into qfrc_applied and `mujoco.mj_step` (the Python binding of the same C function), MuJoCo warnings
+  (status 7).  The servo reference and the actuation delay are the loop's (as in the compiled loop:
+  the commands of step k - delay, each mapped with its own step's q2).
 * `AnalyticStepped`: RK4 of `harness.plant.analytic.plant_accel` with the commands held over the control
   step (as `analytic_chunk` without continuous control).
 
-Protocol: reset() -> None; true_state(out16) -> status (0 ok); command(k, sensed, action) -> None;
-advance() -> status (0 ok); finish(traj, done) -> None (plant geometry for the recording).
+Both record their own geometry (`record(k)`, `finish(traj, done)`) instead of per-step
+`slave_tip()` / `geometry()`.
 """
 
 from __future__ import annotations
@@ -27,29 +30,27 @@ from harness.loop.mujoco_loop import _Geometry, _plant_geometry, make_plant, war
 
 
 class MujocoStepped:
-    """The MuJoCo plant of `harness.loop.mujoco_loop`, stepped from Python."""
+    """The MuJoCo plant of `harness.loop.mujoco_loop`, stepped from Python (`SteppedPlant`)."""
+
+    kind = "mujoco"
 
     def __init__(self, scn: Scenario, plant=None) -> None:
-        self.scn = scn
         self.m, self.d, self.cmap = make_plant(scn, plant)
         c = self.cmap
         self.n = c.n_chain
-        self.servo = scn.plant.actuation == "servo"
+        self.actuation = scn.plant.actuation
+        self.servo = self.actuation == "servo"
         self.ff = bool(scn.plant.servo_feedforward)
-        self.dt = scn.control_dt
         self.sub = scn.substeps
+        self.physics_dt = scn.control_dt / max(1, self.sub)
         self.kv_over_kp = (np.divide(c.servo_kv, c.servo_kp, out=np.zeros(self.n), where=c.servo_kp > 0)
                            if self.servo else np.zeros(self.n))
-        s0 = initial_state(scn)
-        self.ref = np.concatenate([s0[4:10], s0[10:16]])
-        self.delay = int(round(scn.plant.actuation_delay / scn.control_dt))
-        self.cmdbuf = np.zeros((self.delay + 1, 2 + 2 * self.n))
+        self.cmd = np.zeros(2 + 2 * self.n)  # [master torque, chain ctrl (n), chain feed-forward (n)]
         self.qc, self.vc, self.corr = np.empty(self.n), np.empty(self.n), np.empty(self.n)
         self.geo = _Geometry(self.m, self.d, c, scn.n_steps, live=False)
-        self.k = 0
         self.warned: dict[str, int] = {}
 
-    def reset(self) -> None:
+    def reset(self, state0: np.ndarray) -> None:
         """The plant is at the scenario's initial state after construction (make_plant)."""
 
     def true_state(self, state: np.ndarray) -> int:
@@ -62,31 +63,23 @@ class MujocoStepped:
             return 5
         return 0
 
-    def record_start(self, k: int) -> None:
-        self.geo.qpos_hist[k] = self.d.qpos
-
-    def command(self, k: int, sensed: np.ndarray, action) -> None:
-        c, n = self.cmap, self.n
-        self.k = k
-        cmd = self.cmdbuf[k % (self.delay + 1)]
-        cmd[0] = action.T1[0]
-        cmd[1] = action.T1[1]
-        if self.servo and action.use_ref:  # the reference given directly (no integration of u2)
-            self.ref[0:6] = action.q2_ref
-            self.ref[6:12] = action.dq2_ref
-            K.chain_joints_from_q2(self.ref[0:6], c.C, c.L0, cmd[2:2 + n])
-            K.chain_joints_rate_add(self.ref[0:6], self.ref[6:12], c.C, self.kv_over_kp, cmd[2:2 + n])
+    def command(self, T1, T2, q2_ref, dq2_ref, q2_sensed) -> None:
+        c, n, cmd = self.cmap, self.n, self.cmd
+        cmd[0] = T1[0]
+        cmd[1] = T1[1]
+        if self.servo:
+            K.chain_joints_from_q2(q2_ref, c.C, c.L0, cmd[2:2 + n])
+            K.chain_joints_rate_add(q2_ref, dq2_ref, c.C, self.kv_over_kp, cmd[2:2 + n])
             if self.ff:
-                K.chain_force_from_T2(self.ref[0:6], action.T2, c.R, cmd[2 + n:2 + 2 * n])
+                K.chain_force_from_T2(q2_ref, T2, c.R, cmd[2 + n:2 + 2 * n])
             else:
                 cmd[2 + n:] = 0.0
         else:
-            K.mujoco_commands(self.servo, self.ff, self.dt, sensed[4:10], action.T2, action.u2, self.ref, c.C,
-                              c.R, c.L0, self.kv_over_kp, cmd)
+            K.chain_force_from_T2(q2_sensed, T2, c.R, cmd[2:2 + n])
+            cmd[2 + n:] = 0.0
 
-    def advance(self) -> int:
-        d, c, n, k = self.d, self.cmap, self.n, self.k
-        use = self.cmdbuf[(k - self.delay) % (self.delay + 1)] if k >= self.delay else self.cmdbuf[0]
+    def advance(self, dt: float) -> int:
+        d, c, n, use = self.d, self.cmap, self.n, self.cmd
         d.ctrl[c.master_actuator_ids] = use[0:2]
         d.ctrl[c.chain_actuator_ids] = use[2:2 + n]
         wnum = d.warning.number
@@ -100,6 +93,17 @@ class MujocoStepped:
                 return 7
         return 0
 
+    def slave_tip(self) -> np.ndarray:
+        """Tip site [X, Z] (2,), m, relative to the slave base."""
+        tip, base = self.d.site_xpos[self.cmap.tip_site_id], self.cmap.octarm_base_pos
+        return np.array([tip[0] - base[0], tip[2] - base[2]])
+
+    def geometry(self) -> dict[str, np.ndarray]:
+        return {}
+
+    def record(self, k: int) -> None:
+        self.geo.qpos_hist[k] = self.d.qpos
+
     def finish(self, traj, done: int) -> None:
         traj.meta.update(_plant_geometry(self.m, self.cmap, self.geo, done, traj))
         traj.meta["mujoco_warnings"] = int(sum(self.warned.values()))
@@ -107,7 +111,11 @@ class MujocoStepped:
 
 
 class AnalyticStepped:
-    """The analytic plant (its own parameters) integrated with RK4, commands held over the step."""
+    """The analytic plant (its own parameters) integrated with RK4, commands held over the step
+    (`SteppedPlant`, torque actuation)."""
+
+    kind = "analytic"
+    actuation = "torque"
 
     def __init__(self, scn: Scenario, plant=None) -> None:
         from harness.plant.analytic import AnalyticPlant
@@ -118,32 +126,31 @@ class AnalyticStepped:
         self.mpk = master_model.packed(plant.master)
         self.spk = plant.slave.packed()
         self.nodes, self.weights, self.F = a["nodes"], a["weights"], a["F"]
-        self.h = scn.control_dt / max(1, scn.substeps)
         self.nsub = max(1, scn.substeps)
+        self.physics_dt = scn.control_dt / self.nsub
         self.state = initial_state(scn)
         self.T1, self.T2 = np.zeros(2), np.zeros(6)
         self.ks = [np.empty(16) for _ in range(4)]
         self.tmp = np.empty(16)
 
-    def reset(self) -> None:
-        pass
+    def reset(self, state0: np.ndarray) -> None:
+        self.state[:] = state0
 
     def true_state(self, state: np.ndarray) -> int:
         state[:] = self.state
         return 0
 
-    def record_start(self, k: int) -> None:
-        pass
+    def command(self, T1, T2, q2_ref, dq2_ref, q2_sensed) -> None:
+        self.T1[:] = T1
+        self.T2[:] = T2
 
-    def command(self, k: int, sensed: np.ndarray, action) -> None:
-        self.T1[:] = action.T1
-        self.T2[:] = action.T2
-
-    def advance(self) -> int:
-        s, h, tmp = self.state, self.h, self.tmp
+    def advance(self, dt: float) -> int:
+        s, tmp = self.state, self.tmp
+        nsub = max(1, round(dt / self.physics_dt))
+        h = dt / nsub
         k1, k2, k3, k4 = self.ks
         args = (self.mpk, self.spk, self.nodes, self.weights)
-        for _ in range(self.nsub):
+        for _ in range(nsub):
             for src, scale, out in ((s, 0.0, k1), (k1, 0.5, k2), (k2, 0.5, k3), (k3, 1.0, k4)):
                 if scale == 0.0:
                     tmp[:] = s
@@ -159,12 +166,24 @@ class AnalyticStepped:
             return 5
         return 0
 
+    def slave_tip(self) -> np.ndarray:
+        return np.zeros(2)
+
+    def geometry(self) -> dict[str, np.ndarray]:
+        return {}
+
+    def record(self, k: int) -> None:
+        pass
+
     def finish(self, traj, done: int) -> None:
         pass
 
 
 def stepped_plant(scn: Scenario, plant=None):
-    """The Python-stepped adapter of the scenario's plant."""
+    """The scenario's plant as a `SteppedPlant`: `plant` itself if it is one (the Cosserat rod), else the
+    Python-stepped adapter of the analytic or MuJoCo plant."""
+    if plant is not None and hasattr(plant, "advance"):
+        return plant
     if scn.plant.kind == "analytic":
         return AnalyticStepped(scn, plant)
     if scn.plant.kind == "mujoco":

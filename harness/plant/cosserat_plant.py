@@ -188,7 +188,7 @@ class CosseratPlant:
         self._T2[:] = 0.0
         self._q_ref[:] = state0[4:10]
 
-    def command(self, T1, T2, q2_ref, dq2_ref) -> None:
+    def command(self, T1, T2, q2_ref, dq2_ref, q2_sensed=None) -> None:
         self._T1[:] = T1
         self._T2[:] = T2
         self._q_ref[:] = q2_ref
