@@ -107,11 +107,14 @@ def test_paper_scenario_beta_positive_and_in_range(paper_run):
     assert np.all(np.isfinite(tr.T2))
 
 
-def test_singularity_subtask_raises_the_manipulability(paper_run):
+def test_singularity_subtask_raises_the_manipulability():
     """The sub-task (29)-(33) does something: against the same scenario with the sub-task gain k_s
     practically off (1e-9), the paper run's manipulability (41) ends higher (measured 1.32 vs 0.57),
-    is higher on average (0.79 vs 0.57) and its minimum is not lower."""
-    off = simulate(Scenario(plant=ANALYTIC, gains=Gains(ks=1e-9)))
+    is higher on average (0.79 vs 0.57) and its minimum is not lower.  Measured with the per-vector noise
+    model, pinned here; with the default per-channel noise the same runs give 1.05 vs 0.57 at the end
+    and 0.66 vs 0.57 on average (README, Findings)."""
+    paper_run = simulate(Scenario(plant=ANALYTIC, noise_model="per_vector"))
+    off = simulate(Scenario(plant=ANALYTIC, gains=Gains(ks=1e-9), noise_model="per_vector"))
     assert paper_run.status == off.status == "ok"
     assert paper_run.beta[0] == off.beta[0]  # same start
     assert paper_run.beta[-1] > 1.5 * off.beta[-1]

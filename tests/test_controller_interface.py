@@ -277,8 +277,8 @@ def test_cli_selection_by_name_and_path_writes_resolved_params(tmp_path, capsys)
     assert cfg["controller"] == {"name": "dls_ik", "params": {"gain": 15.0, "damping": 0.01}}
     assert load_scenario(out / "config.toml").controller.params == {"gain": 15.0, "damping": 0.01}
     out2 = tmp_path / "jt"
-    assert main(["run", "--controller", EXAMPLE, "--actuation", "torque", "--duration", "0.1", "--out",
-                 str(out2), "--no-progress"]) == 0
+    assert main(["run", "--controller", EXAMPLE, "--actuation", "torque", "--set", "plant.enforce_cc=true",
+                 "--duration", "0.1", "--out", str(out2), "--no-progress"]) == 0
     cfg = tomllib.loads((out2 / "config.toml").read_text())
     assert cfg["controller"]["name"] == EXAMPLE and set(cfg["controller"]["params"]) == {
         "kp", "kd", "joint_damping", "posture"}

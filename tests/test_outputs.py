@@ -131,7 +131,9 @@ def test_full_disk_is_reported_not_hung(tmp_path):
     assert warm.returncode == 0, warm.stderr
     out = tmp_path / "o"
     t0 = time.monotonic()
-    res = _teleop(["run", *ANALYTIC, "--duration", "2", "--out", out], fsize=1_000_000, timeout=240)
+    # every step's 3-D scene (--record-rate full): a recording larger than the limit
+    res = _teleop(["run", *ANALYTIC, "--duration", "2", "--record-rate", "full", "--out", out],
+                  fsize=1_000_000, timeout=240)
     took = time.monotonic() - t0
     assert res.returncode == 1, res.stderr
     line = _one_error_line(res.stderr)

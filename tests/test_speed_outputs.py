@@ -161,30 +161,37 @@ def test_rrd_scalars_bit_exact_with_geometry_at_display_rate(tmp_path, real_traj
 
 
 def test_run_scenario_writes_geometry_at_the_default_rate(tmp_path, real_traj, monkeypatch):
-    """The api sets the display rate for the recording (traj.meta['geometry_rate'])."""
+    """The api writes run.rrd's 3-D scenes at DEFAULT_GEOMETRY_RATE (every 10th control step of 1 kHz,
+    plus the last one) and at every step with record_rate = inf.  Read back from the written file: the
+    .rrd is written in a child process, so the file is the only witness."""
     from harness import api
     from harness.loop import mujoco_loop
-    from harness.output import record
-
-    seen = {}
-    real_write = record.write_recording
-
-    def spy(traj, path, **kw):
-        seen["rate"] = traj.meta.get("geometry_rate")
-        return real_write(traj, path, **kw)
-
-    monkeypatch.setattr(record, "write_recording", spy)
-    from harness.output import plots
+    from harness.output import plots, record
 
     monkeypatch.setattr(plots, "write_figures", lambda traj, out: [])  # not what this test is about
     monkeypatch.setattr(mujoco_loop, "simulate_mujoco", lambda scn, **kw: real_traj)
-    from harness.config.scenario import Scenario
+    from rerun.chunk import RrdReader
 
-    res = api.run_scenario(Scenario(duration=1.0, transient=0.0), tmp_path, record_rate=None)
+    from harness.config.scenario import Scenario
+    from harness.output.record import TIMELINE
+
+    def scene_times(path):
+        return np.sort(np.concatenate([
+            c.to_record_batch().column(TIMELINE).cast("int64").to_numpy()
+            for c in RrdReader(path).stream().to_chunks() if c.entity_path == "/world/master/arm"
+            and not c.is_static]))
+
+    n = len(real_traj)
+    every = int(round(1.0 / (record.DEFAULT_GEOMETRY_RATE * 0.001)))
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    res = api.run_scenario(Scenario(duration=1.0, transient=0.0), tmp_path / "a", record_rate=None)
     assert not res.failures, res.failures
-    assert seen["rate"] == record.DEFAULT_GEOMETRY_RATE
-    res = api.run_scenario(Scenario(duration=1.0, transient=0.0), tmp_path, record_rate=math.inf)
-    assert seen["rate"] == math.inf
+    want = np.round(real_traj.t[sorted(set(range(0, n, every)) | {n - 1})] * 1e9)
+    np.testing.assert_array_equal(scene_times(tmp_path / "a" / "run.rrd"), want)
+    res = api.run_scenario(Scenario(duration=1.0, transient=0.0), tmp_path / "b", record_rate=math.inf)
+    assert not res.failures, res.failures
+    np.testing.assert_array_equal(scene_times(tmp_path / "b" / "run.rrd"), np.round(real_traj.t * 1e9))
 
 
 @pytest.mark.parametrize("bad", ["0", "-5", "abc", "nan"])
