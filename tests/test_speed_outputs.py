@@ -30,7 +30,7 @@ def _reference_columns(t: np.ndarray, n_columns: int) -> list[np.ndarray]:
     span = t[-1] - t[0]
     cols: dict[int, list[int]] = {}
     for i, ti in enumerate(t):
-        c = 0 if span <= 0 else min(int(math.floor((ti - t[0]) * (n_columns / span))), n_columns - 1)
+        c = 0 if span <= 0 else min(int(math.floor((ti - t[0]) / span * n_columns)), n_columns - 1)
         cols.setdefault(c, []).append(i)
     return [np.array(v) for _, v in sorted(cols.items())]
 
@@ -201,3 +201,15 @@ def test_cli_rejects_bad_record_rate(bad, capsys):
     assert main(["run", "--record-rate", bad, "--no-progress"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--record-rate" in err[0] and bad in err[0]
+
+
+def test_envelope_with_a_subnormal_time_span():
+    """Regression (found by hypothesis): n_columns / span overflowed for a subnormal span, and the
+    column of every sample became garbage; the binning divides by the span first."""
+    from harness.output.decimate import envelope_indices
+
+    t = np.linspace(0.0, 1e-308, 100)
+    y = np.sin(np.arange(100.0))
+    idx = envelope_indices(t, y, 2)
+    assert idx.min() >= 0 and idx.max() <= 99 and len(idx) <= 8
+    assert np.argmin(y) in idx and np.argmax(y) in idx

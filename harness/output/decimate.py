@@ -33,7 +33,8 @@ def envelope_indices(t: np.ndarray, y: np.ndarray, n_columns: int) -> np.ndarray
     if not np.isfinite(span) or span <= 0:
         col = np.zeros(n, dtype=np.int64)
     else:
-        col = np.minimum(((t - t[0]) * (n_columns / span)).astype(np.int64), n_columns - 1)
+        # (t - t0) / span first: in [0, 1], no overflow even for a subnormal span
+        col = np.minimum(((t - t[0]) / span * n_columns).astype(np.int64), n_columns - 1)
     if np.any(np.diff(col) < 0):
         raise ValueError("t must be non-decreasing")
     starts = np.flatnonzero(np.r_[True, col[1:] != col[:-1]])  # first sample of each non-empty column
