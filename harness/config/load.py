@@ -212,8 +212,10 @@ def _contact_checks(scn: Scenario) -> None:
     needs = [("environment.objects", bool(env.objects)), ("operator.enabled", op.enabled),
              ("sensing.force.mode", fs.mode == "sensed")]
     for key, used in needs:
-        if used and scn.plant.kind != "mujoco":
-            raise ConfigError(f"{key}: requires plant.kind = 'mujoco' (got {scn.plant.kind!r})", path=key)
+        if used and scn.plant.kind != "mujoco" and not (key == "environment.objects"
+                                                         and scn.plant.kind == "cosserat"):
+            plants = "'mujoco' or 'cosserat'" if key == "environment.objects" else "'mujoco'"
+            raise ConfigError(f"{key}: requires plant.kind = {plants} (got {scn.plant.kind!r})", path=key)
     names = [o.name for o in env.objects]
     if len(set(names)) != len(names):
         raise ConfigError.field("environment.objects", names, "object names must be distinct")

@@ -63,7 +63,7 @@ from harness.loop.common import (
 from harness.loop.fast import K
 from harness.loop.interface_adapter import ControllerFailure, InterfaceController
 from harness.loop.kernels import R_E1, R_E2, RUNAWAY
-from harness.loop.trajectory import ROW_WIDTH, Trajectory
+from harness.loop.trajectory import ROW_SLICES, ROW_WIDTH, Trajectory
 from harness.plant.stepped import SteppedPlant
 
 EXPLODING = 1e6  # |state| above this is a diverged plant (status 8)
@@ -95,11 +95,11 @@ class PaperController:
     def reset(self, scn: Scenario, state0: np.ndarray) -> None:
         a = common_arrays(scn)
         self._args = (a["mpk_c"], a["spk_c"], a["nodes"], a["weights"], a["gains"], a["spec"])
-        self._F = a["F"]
+        self.F = a["F"]
 
     def step(self, t, sensed, xd, dxd, ddxd, T1, T2, u2, deN) -> int:
         mpk, spk, nodes, weights, gains, spec = self._args
-        return K.control_laws(mpk, spk, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, self._F,
+        return K.control_laws(mpk, spk, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, self.F,
                               T1, T2, u2, deN, self.minfo, self.sinfo)
 
     def fused_step(self, t, k, state, traj, noise, scale, xd, dxd, ddxd, sensed, T1, T2, u2, deN, row) -> int:
@@ -108,7 +108,7 @@ class PaperController:
         plus the loop's separate calls)."""
         mpk, spk, nodes, weights, gains, spec = self._args
         return K.control_step(t, state, traj, noise, k, scale, mpk, spk, nodes, weights, gains, spec,
-                              self._F, xd, dxd, ddxd, sensed, T1, T2, u2, deN, self.minfo, self.sinfo, row)
+                              self.F, xd, dxd, ddxd, sensed, T1, T2, u2, deN, self.minfo, self.sinfo, row)
 
 
 def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
@@ -147,6 +147,14 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
     tips = np.zeros((0 if own_geo else n, 2))
     geo = {} if own_geo else {name: np.zeros((n, *np.shape(v))) for name, v in plant.geometry().items()}
     state, sensed = np.zeros(16), np.zeros(16)
+    # interaction forces: a plant with `forces(F (4,), contact (5,))` (the Cosserat plant's contact) gives
+    # the true tip forces each step, else the constant ones; the paper controller (its `F`) gets them in
+    # `exact` sensing mode, zeros in `ignored` ("sensed" needs the MuJoCo plant: config check)
+    plant_forces = getattr(plant, "forces", None)
+    Ftrue, cinfo = a["F"].copy(), np.zeros(5)
+    Fctl = getattr(ctrl, "F", None)
+    ignored = scn.sensing.force.mode == "ignored"
+    sF, sFs, sC = ROW_SLICES["F_true"], ROW_SLICES["F_sensed"], ROW_SLICES["contact"]
     xd, dxd, ddxd = np.zeros(2), np.zeros(2), np.zeros(2)
     T1, T2, u2, deN = np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6)
     ref = np.concatenate([s0[4:10], s0[10:16]])  # servo reference [q2_ref, dq2_ref]
@@ -174,6 +182,10 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
                 status = 5
                 break
             row = rows[k]
+            if plant_forces is not None:
+                plant_forces(Ftrue, cinfo)
+            if Fctl is not None:
+                Fctl[:] = 0.0 if ignored else Ftrue
             if fused is not None:
                 st = fused(t, k, state, traj_p, noise, scale, xd, dxd, ddxd, sensed, T1, T2, u2, deN, row)
             else:
@@ -186,6 +198,9 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
                     sensed[:] = state
                 st = ctrl.step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN)
                 K.record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row)
+            row[sF] = Ftrue
+            row[sFs] = Fctl if Fctl is not None else Ftrue
+            row[sC] = cinfo
             if own_geo:
                 plant.record(k)
             else:

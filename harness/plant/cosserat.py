@@ -346,6 +346,9 @@ class CosseratSlave:
         self._act_m = np.zeros((3, nv))
         self._act_m_base = np.zeros(3)
         self._law = 1 if self.analytic_law else 0
+        self._objs = np.zeros((0, 6))  # environment contact (`set_contacts`, harness.plant.rod_contact)
+        self._cdamp = np.zeros((0, ne + 2))
+        self.f_contact = np.zeros((3, ne + 1))  # N, contact force on each node (last substep)
         if self.stepper == "pyelastica":
             self._verlet = PositionVerlet()
             b.compute_internal_forces_and_torques = self._compute_loads  # instance override
@@ -357,7 +360,14 @@ class CosseratSlave:
                 b.rest_lengths, b.rest_voronoi_lengths, b.dilatation, b.voronoi_dilatation, b.sigma,
                 b.kappa, b.dilatation_rate, b.rest_sigma, b.rest_kappa, b.shear_matrix, b.bend_matrix,
                 self._eta_e, self._eta_v, self._base_Q, self._base_B, self._base_eta, self._base_kappa0,
-                self._act_n, self._act_m, self._act_m_base, self._node_force, self._tip_force, self._law)
+                self._act_n, self._act_m, self._act_m_base, self._node_force, self._tip_force, self._law,
+                self._objs, self._cdamp, self.f_contact)
+
+    def set_contacts(self, objs: np.ndarray, cdamp: np.ndarray) -> None:
+        """Environment objects acting on the nodes from now on: objs (no, 6), cdamp (no, nn + 1) as in
+        `cosserat_rod.contact_forces`."""
+        self._objs = np.ascontiguousarray(objs, dtype=float)
+        self._cdamp = np.ascontiguousarray(cdamp, dtype=float)
 
     def _compute_loads(self, time=0.0) -> None:
         b = self._b
@@ -439,6 +449,7 @@ class CosseratSlave:
             b.velocity_collection[2] = dx[:, 1]
             b.omega_collection[1] = da
         self._tip_force[:] = 0.0
+        self.f_contact[:] = 0.0
         self._set_active(None)
         self._set_rest(q2 if self.actuation == "servo" else
                        np.concatenate([self.params.rest_lengths, np.zeros(3)]))

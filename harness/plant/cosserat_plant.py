@@ -16,6 +16,9 @@ rigid 2-link master, as a `harness.plant.stepped.SteppedPlant` for `harness.loop
 * Master: the analytic master dynamics (paper eq. 1, which MuJoCo's master matches to round-off),
   classical RK4 with steps of at most 1 ms (`master_rk4`, compiled here).
 * Interaction forces: F1 on the master tip (J1^T F1), F2 on the rod's tip node.
+* Environment (`harness.plant.rod_contact`): plane and sphere objects act on every rod node (PyElastica's
+  penalty law, per node stiffness k); `forces` gives the true tip forces (F2 = constant + contact force
+  on the tip node) and the contact summary for the stepped loop's F_true / contact columns.
 * Time step: plant.cosserat.dt, or "auto" = control_dt / m, the largest below the rod's
   explicit-stability estimate `stable_dt`; a set dt must be <= stable_dt and divide control_dt.
 * Recording geometry (world frame, bases at (0, -0.3, 0) master and (0, 0.3, 0) slave as in the
@@ -34,7 +37,9 @@ from controllers import master as master_model
 from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
 from harness.plant import cosserat_rod as kr
+from harness.plant import rod_contact
 from harness.plant.cosserat import FIT_ITERATIONS, CosseratSlave, stable_dt
+from harness.plant.initial import InitialStateError, initial_state
 
 MASTER_BASE = np.array([0.0, -0.3, 0.0])  # m, world (as mjcf/master.xml)
 SLAVE_BASE = np.array([0.0, 0.3, 0.0])  # m, world (as mjcf/octarm_base.xml)
@@ -169,6 +174,17 @@ class CosseratPlant:
         self._dq2 = np.zeros(6)
         self._xz = np.zeros((nn, 2))
         self._vxz = np.zeros((nn, 2))
+        self._dist = np.zeros(nn)
+        self._objs, cdamp = rod_contact.contact_arrays(scn.environment, self.slave._b.mass)
+        if scn.environment.objects:
+            try:
+                s0 = initial_state(scn)
+            except InitialStateError:
+                s0 = None  # reported by the loop as an impossible start
+            if s0 is not None:
+                self.slave.reset(s0[4:10])
+                rod_contact.check_clearance(scn.environment, self._objs, self.slave._b.position_collection)
+            self.slave.set_contacts(self._objs, cdamp)
 
     def _elastic(self, q2: np.ndarray) -> np.ndarray:
         """dV/dq2 (6,) of the plant slave's CC elastic energy V = sum 1/2 Kb d k^2 + 1/2 Ke (d - L0)^2."""
@@ -220,6 +236,15 @@ class CosseratPlant:
         kr.cc_fit(self._xz, self._vxz, self.slave.section_nodes, FIT_ITERATIONS, self._q2, self._dq2)
         out[4:10] = self._q2
         out[10:16] = self._dq2
+
+    def forces(self, F: np.ndarray, contact: np.ndarray) -> None:
+        """True interaction forces ON the robots F (4,) [F1x, F1z, F2x, F2z] N (F2 = constant + contact force
+        on the tip node, last rod substep) and the contact summary (5,) (`rod_contact.summary`)."""
+        fc = self.slave.f_contact
+        F[0:2] = self.F1
+        F[2] = self.F2[0] + fc[0, -1]
+        F[3] = self.F2[1] + fc[2, -1]
+        rod_contact.summary(fc, self.slave._b.position_collection, self._objs, self._dist, contact)
 
     def slave_tip(self) -> np.ndarray:
         return self.slave.tip()

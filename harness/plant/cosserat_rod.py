@@ -38,14 +38,16 @@ from numba import njit
 def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_lengths, rest_vor,
               dil, vdil, sigma, kappa, dil_rate, rest_sigma, rest_kappa, shear_matrix, bend_matrix,
               eta_e, eta_v, base_Q, base_B, base_eta, base_kappa0, act_n, act_m, act_m_base,
-              node_force, tip_force, analytic_law, dt, f_int, tau_int, f_ext, tau_ext):
+              node_force, tip_force, analytic_law, objs, cdamp, f_contact, dt, f_int, tau_int, f_ext,
+              tau_ext):
     """Loads of one step into f_int (3, nn), tau_int (3, ne), f_ext, tau_ext (see module cosserat).
 
     eta_e (3, ne): Kelvin-Voigt viscosity of [shear, shear, axial] strain rates (N s);
     eta_v (3, nv): of the curvature rates at the hinges (N m^2 s), applied implicitly;
     act_n (ne,): active axial force (N, positive extends); act_m (3, nv), act_m_base (3,): active
     couples at the hinges and the base half-element (N m, positive bends toward +kappa);
-    node_force (3, nn): gravity; tip_force (3,); analytic_law: 1 for the energy
+    node_force (3, nn): gravity; tip_force (3,); objs (no, 6), cdamp (no, nn + 1), f_contact (3, nn) out:
+    environment contact (`contact_forces`); analytic_law: 1 for the energy
     1/2 B (kappa - kappa0)^2 / eps (CC-consistent), 0 for the linear law B (kappa - kappa0).
     """
     ne = lengths.shape[0]
@@ -143,6 +145,12 @@ def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_len
         for k in range(nn):
             f_ext[i, k] = node_force[i, k]
         f_ext[i, nn - 1] += tip_force[i]
+    if objs.shape[0] > 0:
+        contact_forces(pos, vel, objs, cdamp, f_contact)
+        for i in range(3):
+            for k in range(nn):
+                f_ext[i, k] += f_contact[i, k]
+    for i in range(3):
         for k in range(ne):
             tau_ext[i, k] = 0.0
         f_int[i, 0] = -f_ext[i, 0]
@@ -202,7 +210,8 @@ def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_len
 def run_steps(nsteps, dt, pos, vel, Q, omega, acc, alpha, mass, J, invJ, volume, lengths, tangents,
               radius, rest_lengths, rest_vor, dil, vdil, sigma, kappa, dil_rate, rest_sigma, rest_kappa,
               shear_matrix, bend_matrix, eta_e, eta_v, base_Q, base_B, base_eta, base_kappa0, act_n,
-              act_m, act_m_base, node_force, tip_force, analytic_law, f_int, tau_int, f_ext, tau_ext):
+              act_m, act_m_base, node_force, tip_force, analytic_law, objs, cdamp, f_contact, f_int, tau_int,
+              f_ext, tau_ext):
     """`nsteps` position-Verlet steps of size dt (PyElastica's PositionVerlet order); returns False
     as soon as the state is not finite."""
     half = 0.5 * dt
@@ -211,7 +220,8 @@ def run_steps(nsteps, dt, pos, vel, Q, omega, acc, alpha, mass, J, invJ, volume,
         rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_lengths, rest_vor,
                   dil, vdil, sigma, kappa, dil_rate, rest_sigma, rest_kappa, shear_matrix, bend_matrix,
                   eta_e, eta_v, base_Q, base_B, base_eta, base_kappa0, act_n, act_m, act_m_base,
-                  node_force, tip_force, analytic_law, dt, f_int, tau_int, f_ext, tau_ext)
+                  node_force, tip_force, analytic_law, objs, cdamp, f_contact, dt, f_int, tau_int, f_ext,
+                  tau_ext)
         _update_accelerations(acc, f_int, f_ext, mass, alpha, invJ, tau_int, tau_ext, dil)
         for i in range(3):
             for k in range(vel.shape[1]):
@@ -224,6 +234,42 @@ def run_steps(nsteps, dt, pos, vel, Q, omega, acc, alpha, mass, J, invJ, volume,
             if not np.isfinite(pos[i, k]):
                 return False
     return True
+
+
+@njit(cache=True)
+def contact_forces(pos, vel, objs, cdamp, f_contact):
+    """Frictionless penalty contact of the rod's nodes with the environment objects, into f_contact (3, nn)
+    (N, world frame, force ON the rod; the clamped base node 0 gets none).
+
+    objs (no, 6) rows [kind, X, Z, nX, nZ, R]: kind 0 = plane through (X, Z) with unit normal (nX, nZ)
+    toward the free side, 1 = sphere of centre (X, Z) and radius R; the last column of a plane is the
+    node contact radius r, of a sphere R + r.  cdamp (no, nn + 1): [k, c_1 .. c_nn] per object (k N/m,
+    c_j N s/m of node j).  The law of PyElastica's RodPlaneContact / RodSphereContact (Gazzola et al.
+    2018, eq. 4.8): penetration g = r - n . (x_j - X) (plane), g = R + r - |x_j - X| (sphere, n the unit
+    vector from the centre); if g > 0 the force is (k g - c n . v_j) n (not clamped, as PyElastica)."""
+    nn = pos.shape[1]
+    for i in range(3):
+        for j in range(nn):
+            f_contact[i, j] = 0.0
+    for o in range(objs.shape[0]):
+        k = cdamp[o, 0]
+        for j in range(1, nn):
+            dx = pos[0, j] - objs[o, 1]
+            dz = pos[2, j] - objs[o, 2]
+            if objs[o, 0] == 0.0:
+                nx, nz = objs[o, 3], objs[o, 4]
+                g = objs[o, 5] - (nx * dx + nz * dz)
+            else:
+                dist = np.sqrt(dx * dx + dz * dz)
+                g = objs[o, 5] - dist
+                if g <= 0.0 or dist == 0.0:
+                    continue
+                nx, nz = dx / dist, dz / dist
+            if g <= 0.0:
+                continue
+            f = k * g - cdamp[o, j + 1] * (nx * vel[0, j] + nz * vel[2, j])
+            f_contact[0, j] += f * nx
+            f_contact[2, j] += f * nz
 
 
 # --- constant-curvature geometry and its least-squares fit ------------------------------------------------
