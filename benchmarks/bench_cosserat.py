@@ -38,6 +38,9 @@ from harness.loop import simulate
 from harness.loop.common import initial_state
 from harness.plant import build_plant
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_loop import _pin  # noqa: E402 - one CPU-pinning helper for every benchmark
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -118,15 +121,6 @@ def cosserat_rows(duration: float, reps: int) -> dict:
         best["bare_fit"] = min(best["bare_fit"], bare(cmds, True))
     return {"scn": scn, "status": status, "steps": len(cmds), "rod_dt": p.physics_dt,
             "elements": p.slave.n, **best}
-
-
-def _pin(cpu: int) -> str:
-    if cpu < 0 or not hasattr(os, "sched_setaffinity"):
-        return "not pinned"
-    cpus = sorted(os.sched_getaffinity(0))
-    c = cpus[cpu] if cpu < len(cpus) else cpus[-1]
-    os.sched_setaffinity(0, {c})
-    return f"pinned to CPU {c}"
 
 
 def main() -> None:
