@@ -165,13 +165,10 @@ def record_row_info(t, state, xd, dxd, minfo, sinfo, T1, T2, u2, deN, row):
         row[R_U2 + a] = u2[a]
 
 
-def control_step(t, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, weights, gains, spec, F,
-                 xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, row):
-    """One control step at time t on the true state (16,): x_d(t) into xd, dxd, ddxd; the sensed
-    state (true state + AWGN noise_scale * noise[k], noise (n, 16) read only if noise_scale > 0) into
-    sensed; both laws (control_laws); the record row of the true state into row.  Returns
-    control_laws' status."""
-    desired(traj, t, xd, dxd, ddxd)
+def sense_state(state, noise, k, noise_scale, sensed):
+    """The sensed state (16,) at control step k: the true state plus AWGN of either noise model
+    (noise (n, 32) per channel, `add_noise_channel`; (n, 16) per vector, `add_noise`), or the true
+    state itself when noise_scale == 0 (noise is then not read)."""
     if noise_scale > 0.0 and noise.shape[1] > 16:
         add_noise_channel(state, noise, k, noise_scale, sensed)
     elif noise_scale > 0.0:
@@ -179,6 +176,16 @@ def control_step(t, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, wei
     else:
         for i in range(16):
             sensed[i] = state[i]
+
+
+def control_step(t, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, weights, gains, spec, F,
+                 xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, row):
+    """One control step at time t on the true state (16,): x_d(t) into xd, dxd, ddxd; the sensed
+    state (true state + AWGN noise_scale * noise[k], noise (n, 16) read only if noise_scale > 0) into
+    sensed; both laws (control_laws); the record row of the true state into row.  Returns
+    control_laws' status."""
+    desired(traj, t, xd, dxd, ddxd)
+    sense_state(state, noise, k, noise_scale, sensed)
     st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F,
                       T1, T2, u2, deN, minfo, sinfo)
     if noise_scale == 0.0 and st == 0:  # laws ran on the true state: reuse their kinematics
@@ -280,5 +287,5 @@ def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale
     return 0, k1 - k0
 
 
-KERNELS = ("add_noise", "add_noise_channel", "control_laws", "record_row", "record_row_info", "control_step",
-           "desired", "analytic_chunk")
+KERNELS = ("add_noise", "add_noise_channel", "sense_state", "control_laws", "record_row", "record_row_info",
+           "control_step", "desired", "analytic_chunk")

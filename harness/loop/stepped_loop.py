@@ -190,12 +190,7 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
                 st = fused(t, k, state, traj_p, noise, scale, xd, dxd, ddxd, sensed, T1, T2, u2, deN, row)
             else:
                 K.desired(traj_p, t, xd, dxd, ddxd)
-                if scale > 0.0 and noise.shape[1] > 16:  # noise_model = "per_channel"
-                    K.add_noise_channel(state, noise, k, scale, sensed)
-                elif scale > 0.0:
-                    K.add_noise(state, noise[k], scale, sensed)
-                else:
-                    sensed[:] = state
+                K.sense_state(state, noise, k, scale, sensed)
                 st = ctrl.step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN)
                 K.record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row)
             row[sF] = Ftrue

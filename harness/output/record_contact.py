@@ -2,7 +2,7 @@
 what the laws got) under ``plots/forces/*`` and, in the 3-D view, the contact points and the contact
 forces ON the arm as arrows (``world/contact/*``, every `CONTACT_EVERY`-th control step, only the
 contacts present at that step), plus the operator's hand.  Called by `harness.output.record` only for
-runs with interaction (`harness.output.plots.has_interaction`)."""
+runs with interaction (`harness.output.geometry.has_interaction`)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ import numpy as np
 import rerun as rr
 
 from harness.loop.trajectory import Trajectory
-from harness.output.geometry import has_interaction  # noqa: F401 - re-exported
 
 CONTACT_EVERY = 10  # control steps between logged contact arrows
 ARROW_SCALE = 0.005  # m per N of contact force in the 3-D view
