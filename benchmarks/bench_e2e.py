@@ -1,21 +1,24 @@
 """End to end: what a user waits for, against raw MuJoCo (issue: speed end to end).
 
-    .venv/bin/python benchmarks/bench_e2e.py            # paper scenario (20 s), sweep 8 cases x 2 s
+    .venv/bin/python benchmarks/bench_e2e.py            # paper scenario (20 s) x3, sweep 16 cases x 2 s x2
     .venv/bin/python benchmarks/bench_e2e.py --quick    # 5 s scenario, 6 cases x 1 s, 1 repetition
 
 Reports, in one run:
   run     `teleop run` of the scenario with every output, in a fresh process (python -m harness.cli),
-          wall time split into start-up (interpreter, imports, scenario validation), simulate
-          (plant build + numba kernel load + loop + recording geometry), of which the loop, metrics,
-          recording (run.rrd at the default geometry rate), figures (5 PNGs) and the rest; against
-          raw mj_step of the same physics steps (benchmarks/bench_loop.py's compiled replay of the
-          run's logged commands, no Python in the loop).  Each repetition runs raw then e2e back to
-          back; ratios are per pair.
-  sweep   cases/min of the same small mass study (benchmarks/bench_sweep.py's make_study) through
-          `harness.studies.sweep.run_sweep` with 1 and 2 worker processes (wall time includes worker
-          start-up), and per-case wall and CPU time inside the workers for both: wall / CPU > 1 means
-          the worker waited for a core (other processes), CPU growing with 2 workers means the two
-          slow each other (caches, memory, frequency).
+          wall time split into start-up (interpreter, imports, scenario validation, config.toml),
+          simulate (plant build + numba kernel load + loop + recording geometry), of which the loop,
+          metrics, the wait for the rerun/matplotlib imports that run in a thread during simulate,
+          the outputs (run.rrd in a forked child, the figures split between a second child and the
+          process, at the same time; each writer's own wall time is given) and the rest; against raw
+          mj_step of the same physics steps (benchmarks/bench_loop.py's compiled replay of the run's
+          logged commands, no Python in the loop).  Each repetition runs raw then e2e back to back;
+          ratios are per pair.
+  sweep   cases/min of a mass study (benchmarks/bench_sweep.py's make_study) through
+          `harness.studies.sweep.run_sweep` in a fresh process with 1 and 2 worker processes (wall
+          time includes imports, worker start-up and the summary), and per-case wall and CPU time
+          inside the workers: wall / CPU > 1 means the worker waited for a core (other processes),
+          CPU growing with 2 workers means the two slow each other (caches, memory, frequency); the
+          steady-state rate (cases after each worker's first) is what a long sweep approaches.
 Prints markdown; with --write appends the tables to benchmarks/RESULTS.md.  Asserts nothing.
 """
 
@@ -44,83 +47,130 @@ from bench_loop import _machine, logged_run, raw_replay_s  # noqa: E402
 from bench_sweep import make_study  # noqa: E402
 
 # Runs `teleop run` (harness.cli.main) in this fresh process with timers around its phases; prints JSON.
+# Times are perf_counter() stamps relative to the process start (CLOCK_MONOTONIC: comparable between the
+# process and its forked writer children, which append their own stamps to the file $BENCH_E2E_TIMES).
 _CHILD = r"""
-import json, sys, time
-t_start, c_start = time.perf_counter(), time.process_time()
+import json, os, sys, time
+t_start = time.perf_counter()
 import harness.cli as cli
 from harness import api
 import harness.loop as loop_pkg
-t_imported, c_imported = time.perf_counter(), time.process_time()
-phases, cpu = {}, {}
+import harness.output.prefetch as prefetch
+stamps = {"imported": time.perf_counter() - t_start}
+TIMES = os.environ["BENCH_E2E_TIMES"]
 
-def timed(mod, name, key):
+def rel():
+    return time.perf_counter() - t_start
+
+def timed(mod, name, key, to_file=False):
     real = getattr(mod, name)
     def wrapper(*a, **k):
-        t, c = time.perf_counter(), time.process_time()
+        t0 = rel()
         try:
             return real(*a, **k)
         finally:
-            phases[key] = phases.get(key, 0.0) + time.perf_counter() - t
-            cpu[key] = cpu.get(key, 0.0) + time.process_time() - c
+            t1 = rel()
+            if to_file:  # may run in a forked writer child: append to the shared file
+                with open(TIMES, "a") as f:
+                    f.write(json.dumps({"key": key, "pid": os.getpid(), "t0": t0, "t1": t1,
+                                        "names": list(k.get("names") or [])}) + "\n")
+            else:
+                stamps[key + "_t0"], stamps[key + "_t1"] = t0, t1
     setattr(mod, name, wrapper)
 
+real_import_all = prefetch._import_all
+def import_all(names):
+    t0 = rel()
+    real_import_all(names)
+    stamps["prefetch_t0"], stamps["prefetch_t1"] = t0, rel()
+    import harness.output.plots as plots, harness.output.record as record
+    timed(record, "write_recording", "recording", to_file=True)
+    timed(plots, "write_figures", "figures", to_file=True)
+prefetch._import_all = import_all
 timed(loop_pkg, "simulate", "simulate")
 import harness.loop.metrics as metrics_mod
 timed(metrics_mod, "compute_metrics", "metrics")
-real_run_scenario = api.run_scenario
+timed(api, "_write_outputs", "outputs")
 info = {}
+real_run_scenario = api.run_scenario
 def run_scenario(scn, *a, **k):
-    phases["until_run"], cpu["until_run"] = time.perf_counter() - t_start, time.process_time() - c_start
-    t, c = time.perf_counter(), time.process_time()
-    import harness.output.plots as plots, harness.output.record as record  # api imports them anyway
-    phases["output_imports"], cpu["output_imports"] = time.perf_counter() - t, time.process_time() - c
-    timed(record, "write_recording", "recording")
-    timed(plots, "write_figures", "figures")
+    stamps["run_t0"] = rel()
     res = real_run_scenario(scn, *a, **k)
+    stamps["run_t1"] = rel()
     info["loop"] = res.traj.meta["wall_time"]
     info["steps"] = len(res.traj)
     info["status"] = res.traj.status
+    info["failures"] = res.failures
     return res
 api.run_scenario = run_scenario
 rc = cli.main(sys.argv[1:])
-phases["total_in_process"] = time.perf_counter() - t_start
-cpu["total_in_process"] = time.process_time() - c_start
-phases["imports"], cpu["imports"] = t_imported - t_start, c_imported - c_start
-print("E2E-JSON " + json.dumps({"rc": rc, "wall": phases, "cpu": cpu, **info}))
+stamps["end"] = rel()
+print("E2E-JSON " + json.dumps({"rc": rc, "stamps": stamps, **info}))
+cli.fast_exit(rc)  # as `teleop` does (harness.cli.entry)
 """
 
+
 def e2e_once(args_run: list[str]) -> dict:
-    """One `teleop run` in a fresh process: {"wall": {phase: s}, "cpu": {phase: s}, "loop", "steps", ...};
-    "total" = the whole process (wall from outside; CPU from the OS accounting of the reaped child)."""
+    """One `teleop run` in a fresh process: {"stamps": {...}, "writers": [...], "wall", "cpu", "loop", ...};
+    "wall" = the whole process from outside, "cpu" = the OS accounting of it and its writer children."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    t = time.perf_counter()
-    res = subprocess.run([sys.executable, "-c", _CHILD, "run", *args_run], capture_output=True, text=True,
-                         cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
-    wall = time.perf_counter() - t
+    with tempfile.NamedTemporaryFile("w+", suffix=".jsonl", delete=False) as tf:
+        times = tf.name
+    try:
+        t = time.perf_counter()
+        res = subprocess.run([sys.executable, "-c", _CHILD, "run", *args_run], capture_output=True, text=True,
+                             cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT), "BENCH_E2E_TIMES": times})
+        wall = time.perf_counter() - t
+        writers = [json.loads(ln) for ln in Path(times).read_text().splitlines() if ln.strip()]
+    finally:
+        os.unlink(times)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     line = [ln for ln in res.stdout.splitlines() if ln.startswith("E2E-JSON ")]
     if not line:
         raise RuntimeError(f"teleop run failed: {res.stdout[-2000:]}{res.stderr[-2000:]}")
     d = json.loads(line[-1][9:])
-    d["wall"]["total"] = wall
-    d["cpu"]["total"] = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    if d["rc"] != 0 or d.get("failures"):
+        raise RuntimeError(f"teleop run exit code {d['rc']}, failures {d.get('failures')}: "
+                           f"{res.stderr[-2000:]}")
+    d["writers"] = writers
+    d["wall"] = wall
+    d["cpu"] = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     return d
 
 
-KEYS = ["total", "raw", "startup", "simulate", "metrics", "output_imports", "recording", "figures", "rest"]
+KEYS = ["total", "raw", "startup", "simulate", "loop", "metrics", "prefetch", "prefetch_wait", "outputs",
+        "recording", "figures_child", "figures_parent", "rest"]
 LABELS = {"total": "**total (fresh process)**", "raw": "raw mj_step, same physics steps",
-          "startup": "start-up: interpreter, imports, scenario validation",
+          "startup": "start-up: interpreter, imports, scenario validation, config.toml",
           "simulate": "simulate: plant build, numba kernel load, loop, recording geometry",
-          "metrics": "metrics", "output_imports": "imports of rerun + matplotlib (when outputs are written)",
-          "recording": "run.rrd (geometry at the default rate)", "figures": "figures (5 PNGs)",
-          "rest": "rest (config.toml, metrics.json, summary, interpreter exit)"}
+          "loop": "&nbsp;&nbsp;of which the loop",
+          "metrics": "metrics",
+          "prefetch": "(rerun + matplotlib imports, in a thread during simulate)",
+          "prefetch_wait": "waiting for those imports after simulate",
+          "outputs": "outputs: run.rrd and figures at the same time (3 processes)",
+          "recording": "&nbsp;&nbsp;run.rrd, forked child (geometry at the default rate)",
+          "figures_child": "&nbsp;&nbsp;figures, forked child",
+          "figures_parent": "&nbsp;&nbsp;figures, this process",
+          "rest": "rest (metrics.json, summary, interpreter start and exit)"}
+IN_TOTAL = ("startup", "simulate", "metrics", "prefetch_wait", "outputs", "rest")  # these add up to total
 
 
-def _split(d: dict, kind: str) -> dict:
-    x = dict(d[kind])
-    x["startup"] = x["until_run"] + (x["total"] - x["total_in_process"])  # + interpreter start and exit
-    x["rest"] = x["total"] - sum(x.get(k, 0.0) for k in ("startup", "simulate", "metrics", "output_imports",
-                                                           "recording", "figures"))
+def _split(d: dict) -> dict:
+    st = d["stamps"]
+    x = {"total": d["wall"], "startup": st["simulate_t0"], "simulate": st["simulate_t1"] - st["simulate_t0"],
+         "loop": d["loop"], "metrics": st.get("metrics_t1", 0.0) - st.get("metrics_t0", 0.0),
+         "prefetch": st.get("prefetch_t1", 0.0) - st.get("prefetch_t0", 0.0),
+         "prefetch_wait": max(0.0, st.get("prefetch_t1", 0.0) - st["simulate_t1"]),
+         "outputs": st.get("outputs_t1", 0.0) - st.get("outputs_t0", 0.0)}
+    for w in d["writers"]:
+        dur = w["t1"] - w["t0"]
+        if w["key"] == "recording":
+            x["recording"] = dur
+        elif any(n in ("q2.png", "shapes.png") for n in w["names"]):  # api.FIGURES_IN_CHILD: the others
+            x["figures_parent"] = dur
+        else:
+            x["figures_child"] = dur
+    x["rest"] = x["total"] - sum(x.get(k, 0.0) for k in IN_TOTAL)
     return x
 
 
@@ -139,34 +189,33 @@ def run_table(scenario: str, overrides: list[str], reps: int, out) -> dict:
             raw = raw_replay_s(scn, log)
             raw_cpu = time.process_time() - c0  # includes the plant build of the replay (~10 ms)
             d = e2e_once(cli_args)
-            w, c = _split(d, "wall"), _split(d, "cpu")
-            w["raw"], c["raw"] = raw, raw_cpu
-            rows.append({"wall": w, "cpu": c, "loop": d["loop"], "steps": d["steps"], "status": d["status"]})
+            w = _split(d)
+            w["raw"] = raw
+            rows.append({"wall": w, "cpu": d["cpu"], "raw_cpu": raw_cpu, "steps": d["steps"],
+                         "status": d["status"]})
 
-    def stat(kind, k):
-        v = [r[kind].get(k, 0.0) for r in rows]
+    def stat(k):
+        v = [r["wall"].get(k, 0.0) for r in rows]
         return float(np.median(v)), min(v), max(v)
 
     out(f"`teleop run {scenario}`{''.join(' --set ' + o for o in overrides)} ({rows[0]['steps']} steps, "
-        f"status {rows[0]['status']}), {reps} repetition(s), seconds, median [min, max]:\n")
-    out("| phase | wall | CPU | CPU / raw CPU |")
-    out("|---|---|---|---|")
-    raw_c = stat("cpu", "raw")[0]
+        f"status {rows[0]['status']}), {reps} repetition(s), wall seconds, median [min, max]; the rows "
+        f"not in brackets or indented add up to the total:\n")
+    out("| phase | wall s | / raw |")
+    out("|---|---|---|")
+    raw_m = stat("raw")[0]
     for k in KEYS:
-        (wm, wl, wh), (cm, cl, ch) = stat("wall", k), stat("cpu", k)
-        out(f"| {LABELS[k]} | {wm:.2f} [{wl:.2f}, {wh:.2f}] | {cm:.2f} [{cl:.2f}, {ch:.2f}] "
-            f"| {cm / raw_c:.2f}x |")
-        if k == "simulate":
-            lw = [r["loop"] for r in rows]
-            out(f"| &nbsp;&nbsp;of which the loop (wall) | {np.median(lw):.2f} "
-                f"[{min(lw):.2f}, {max(lw):.2f}] | | |")
-    for kind in ("wall", "cpu"):
-        ratio = [r[kind]["total"] / r[kind]["raw"] for r in rows]
-        fixed = [r[kind]["total"] - 1.5 * r[kind]["raw"] for r in rows]
-        out(f"\n{kind}: total / raw per pair {np.median(ratio):.2f}x [{min(ratio):.2f}, {max(ratio):.2f}]; "
-            f"goal total <= 1.5 x raw + 1.5 s: total - 1.5 x raw = {np.median(fixed):.2f} s "
-            f"[{min(fixed):.2f}, {max(fixed):.2f}]")
-    out("")
+        m, lo, hi = stat(k)
+        out(f"| {LABELS[k]} | {m:.2f} [{lo:.2f}, {hi:.2f}] | {m / raw_m:.2f}x |")
+    ratio = [r["wall"]["total"] / r["wall"]["raw"] for r in rows]
+    fixed = [r["wall"]["total"] - 1.5 * r["wall"]["raw"] for r in rows]
+    loop = [r["wall"]["loop"] / r["wall"]["raw"] for r in rows]
+    cpu = [r["cpu"] for r in rows]
+    out(f"\ntotal / raw per pair {np.median(ratio):.2f}x [{min(ratio):.2f}, {max(ratio):.2f}]; loop / raw "
+        f"{np.median(loop):.2f}x [{min(loop):.2f}, {max(loop):.2f}]; goal total <= 1.5 x raw + 1.5 s: "
+        f"total - 1.5 x raw = {np.median(fixed):.2f} s [{min(fixed):.2f}, {max(fixed):.2f}] (goal <= 1.5 s). "
+        f"CPU of the whole command (process + writer children) {np.median(cpu):.2f} s "
+        f"[{min(cpu):.2f}, {max(cpu):.2f}].\n")
     return {"rows": rows}
 
 
@@ -181,26 +230,53 @@ def _timed_case(payload: dict) -> dict:
             "status": res["status"], "t_end": time.time()}
 
 
-def sweep_table(cases: int, duration: float, counts: list[int], out) -> None:
+_SWEEP_CHILD = r"""
+import json, sys, time
+t0 = time.perf_counter()
+from harness.studies.sweep import run_sweep
+res = run_sweep(json.loads(sys.argv[1]), out=sys.argv[2], workers=int(sys.argv[3]), progress=False)
+print("SWEEP-JSON " + json.dumps({"in_process": time.perf_counter() - t0, "n": len(res.rows),
+                                  "statuses": res.counts()}))
+"""
+
+
+def sweep_once(doc: dict, workers: int, n_cases: int) -> float:
+    """Wall time of one sweep in a fresh process (what `teleop sweep` costs: its imports, the pool's
+    start-up, the cases, results.jsonl, summary.csv and the summary plot)."""
+    with tempfile.TemporaryDirectory(prefix="bench-e2e-sweep-") as tmp:
+        t = time.perf_counter()
+        res = subprocess.run([sys.executable, "-c", _SWEEP_CHILD, json.dumps(doc), str(Path(tmp) / "out"),
+                              str(workers)], capture_output=True, text=True, cwd=ROOT,
+                             env={**os.environ, "PYTHONPATH": str(ROOT)})
+        wall = time.perf_counter() - t
+    line = [ln for ln in res.stdout.splitlines() if ln.startswith("SWEEP-JSON ")]
+    if not line or json.loads(line[-1][11:])["statuses"].get("ok") != n_cases:
+        raise RuntimeError(f"sweep failed: {res.stdout[-2000:]}{res.stderr[-2000:]}")
+    return wall
+
+
+def sweep_table(cases: int, duration: float, counts: list[int], reps: int, out) -> None:
     from harness.studies.cases import expand_cases
     from harness.studies.study import load_study
-    from harness.studies.sweep import run_sweep
 
     doc = make_study(cases, duration, "mujoco")
     case_list = expand_cases(load_study(doc))
-    out(f"Sweep: {cases} cases x {duration:g} s (mass study of benchmarks/bench_sweep.py), MuJoCo plant.\n")
+    walls: dict[int, list[float]] = {w: [] for w in counts}
+    for _ in range(reps):  # interleaved: 1, 2, 1, 2, ...
+        for w in counts:
+            walls[w].append(sweep_once(doc, w, len(case_list)))
+    out(f"Sweep: {cases} cases x {duration:g} s (mass study of benchmarks/bench_sweep.py), MuJoCo plant, "
+        f"each sweep in a fresh process (`run_sweep`, the pool's spawn start-up and the summary plot "
+        f"included), {reps} interleaved repetition(s), median [min, max].  'Steady state' = workers / the "
+        f"median wall time of a case that is not its worker's first (a plain spawn pool, same cases).\n")
     out("| workers | wall s | cases/min | vs 1 worker | first case per worker (wall) "
-        "| later cases: wall / CPU per case |")
-    out("|---|---|---|---|---|---|")
-    base = None
+        "| later cases: wall / CPU per case | steady state cases/min | vs 1 worker |")
+    out("|---|---|---|---|---|---|---|---|")
+    base = base_ss = None
     for w in counts:
-        with tempfile.TemporaryDirectory(prefix="bench-e2e-sweep-") as tmp:
-            t0 = time.perf_counter()
-            res = run_sweep(doc, out=Path(tmp) / "out", workers=w, progress=False)
-            wall = time.perf_counter() - t0
-        rate = 60.0 * len(res.cases) / wall
+        wall = float(np.median(walls[w]))
+        rate = 60.0 * len(case_list) / wall
         base = base or rate
-        # diagnostic pass: the same cases through a plain spawn pool, per-case wall and CPU
         payloads = [{"case_id": c.case_id, "scenario": c.scenario, "metrics": ["e2_rms"], "record": False}
                     for c in case_list]
         with cf.ProcessPoolExecutor(w, mp_context=multiprocessing.get_context("spawn")) as ex:
@@ -214,7 +290,10 @@ def sweep_table(cases: int, duration: float, counts: list[int], out) -> None:
         fw = np.median([d["wall"] for d in first.values()])
         lw = np.median([d["wall"] for d in later]) if later else float("nan")
         lc = np.median([d["cpu"] for d in later]) if later else float("nan")
-        out(f"| {w} | {wall:.2f} | {rate:.0f} | {rate / base:.2f}x | {fw:.2f} s | {lw:.3f} s / {lc:.3f} s |")
+        ss = 60.0 * w / lw
+        base_ss = base_ss or ss
+        out(f"| {w} | {wall:.2f} [{min(walls[w]):.2f}, {max(walls[w]):.2f}] | {rate:.0f} "
+            f"| {rate / base:.2f}x | {fw:.2f} s | {lw:.3f} s / {lc:.3f} s | {ss:.0f} | {ss / base_ss:.2f}x |")
     out("")
 
 
@@ -240,8 +319,8 @@ def main() -> None:
     overrides = ["duration=5", "transient=1"] if args.quick else []
     run_table("scenarios/paper.toml", overrides, args.reps or (1 if args.quick else 3), out)
     if not args.no_sweep:
-        sweep_table(args.cases or (6 if args.quick else 8), 1.0 if args.quick else 2.0,
-                    sorted({1, 2, os.cpu_count() or 1}), out)
+        sweep_table(args.cases or (6 if args.quick else 16), 1.0 if args.quick else 2.0,
+                    sorted({1, 2, os.cpu_count() or 1}), 1 if args.quick else 2, out)
     load = os.getloadavg()
     out(f"Load average at the end {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}.\n")
     if args.write:

@@ -87,14 +87,14 @@ def stop_on_signals(stop: threading.Event | None) -> Iterator[list[int]]:
         stop.clear()
 
 
-RUN_OUTPUTS = ("config.toml", "run.rrd", "metrics.json")  # + the figures (harness.output.plots.FIGURES)
+RUN_OUTPUTS = ("config.toml", "run.rrd", "metrics.json")  # + the figures (harness.output.names.FIGURES)
 
 
 def clear_run_outputs(out: Path) -> None:
     """Remove a previous run's outputs from a reused folder (its fixed names, the files listed in its
     metrics.json, leftover temporary files); other files are left alone.  Raises OutputError."""
     from harness.config.textio import remove_outputs
-    from harness.output.plots import FIGURES
+    from harness.output.names import FIGURES
 
     names = [*RUN_OUTPUTS, *FIGURES]
     with contextlib.suppress(OSError, ValueError, TypeError, AttributeError):
@@ -144,8 +144,16 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
         clear_run_outputs(out)
         _load.dump_scenario(scn, out / "config.toml")
         written.append(out / "config.toml")
+    prefetch: list = []  # Rerun and matplotlib are imported on the other core while the loop runs
+
+    def start_prefetch() -> None:
+        from harness.output.prefetch import prefetch_output_imports
+
+        prefetch.append(prefetch_output_imports())
+
     with stop_on_signals(common.STOP if handle_signals else None) as received:
-        traj = loop.simulate(scn, plant=plant, progress=progress, on_chunk=on_chunk)
+        traj = loop.simulate(scn, plant=plant, progress=progress, on_chunk=on_chunk,
+                             on_running=start_prefetch if out is not None else None)
     interrupted = bool(received) or traj.status == "interrupted"
 
     def metrics_of():
@@ -164,32 +172,15 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
         doc = metrics if metrics is not None else {"status": traj.status, "message": traj.message,
                                                     "metrics_error": failures[-1] if failures else ""}
 
-        def write_recording() -> Path:
-            from harness.output import record
-            from harness.output.guarded import write_in_child
-
-            traj.meta["geometry_rate"] = (record.DEFAULT_GEOMETRY_RATE if record_rate is None
-                                          else float(record_rate))
-            path = out / "run.rrd"
-            return write_in_child(lambda: record.write_recording(traj, path), path)
-
-        def write_figures() -> list[Path]:
-            from harness.output.plots import write_figures as write
-
-            return write(traj, out)
-
-        for what, fn in (("run.rrd", write_recording), ("figures", write_figures)):
-            res = attempt(what, fn)
-            if isinstance(res, (str, Path)):
-                written.append(Path(res))
-            elif isinstance(res, (list, tuple)):
-                written += [Path(p) for p in res]
+        for th in prefetch:
+            th.join()  # no import lock may be held by another thread when the writers fork
+        written += _write_outputs(traj, out, record_rate, attempt)
 
         def write_metrics() -> Path:
             from harness.config.textio import write_atomic
 
             final = dict(doc, outputs=[p.name for p in written] + ["metrics.json"],
-                         outputs_failed=list(failed), output_errors=list(failures))
+                         outputs_failed=list(dict.fromkeys(failed)), output_errors=list(failures))
             text = json.dumps(jsonable(final), indent=2, allow_nan=False) + "\n"
             return write_atomic(out / "metrics.json", text)
 
@@ -197,6 +188,77 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
         if res is not None:
             written.append(res)
     return RunResult(traj, metrics, written, failures, interrupted)
+
+
+def _write_outputs(traj: Any, out: Path, record_rate: float | None, attempt: Callable) -> list[Path]:
+    """run.rrd and the figures, written at the same time: the recording in a forked child, the figures
+    split between a second forked child and this process (`harness.output.guarded.start_in_child`;
+    without fork, one after the other here).  Each failure is reported through `attempt` ("run.rrd",
+    "figures") and the other outputs are still written.  Returns the paths written, in the order
+    run.rrd, then the figures in `plots.FIGURES` order.  Ctrl-C kills the children."""
+    from harness.output.guarded import start_in_child
+
+    def start_recording():
+        from harness.output import record
+
+        traj.meta["geometry_rate"] = (record.DEFAULT_GEOMETRY_RATE if record_rate is None
+                                      else float(record_rate))
+        path = out / "run.rrd"
+        return start_in_child(lambda: record.write_recording(traj, path), path)
+
+    def start_figures(group: list[str]):
+        from harness.output.plots import write_figures
+
+        paths = [out / n for n in group]
+        return start_in_child(lambda: write_figures(traj, out, names=group), paths[0], stall_timeout=None,
+                              others=paths[1:])
+
+    def draw_figures(group: list[str]) -> list[Path]:
+        from harness.output.plots import write_figures
+
+        return write_figures(traj, out, names=group)
+
+    def figure_names() -> list[str]:
+        from harness.output.plots import figure_names
+
+        return figure_names(traj)
+
+    children = []
+    written: dict[str, Path] = {}
+    try:
+        rec = attempt("run.rrd", start_recording)
+        if rec is not None:
+            children.append(rec)
+        mine, theirs = _split_figures(attempt("figures", figure_names) or [])
+        fig = attempt("figures", lambda: start_figures(theirs)) if theirs else None
+        if fig is not None:
+            children.append(fig)
+        if mine:
+            for p in attempt("figures", lambda: draw_figures(mine)) or []:
+                written[Path(p).name] = Path(p)
+        if fig is not None and attempt("figures", fig.wait) is not None:  # complete files only (atomic)
+            written.update((n, out / n) for n in theirs if (out / n).is_file())
+        if rec is not None:
+            res = attempt("run.rrd", rec.wait)
+            if res is not None:
+                written["run.rrd"] = Path(res)
+    finally:
+        for child in children:
+            child.kill()
+    from harness.output.names import FIGURES
+
+    return [written[n] for n in ("run.rrd", *FIGURES) if n in written]
+
+
+def _split_figures(names: list[str]) -> tuple[list[str], list[str]]:
+    """The figures this process draws and those a second process draws, about half the drawing each
+    (the measured costs: `benchmarks/bench_e2e.py`)."""
+    theirs = [n for n in names if n in FIGURES_IN_CHILD]
+    return [n for n in names if n not in theirs], theirs
+
+
+# drawn by the forked child while this process draws the rest (and a third process writes run.rrd)
+FIGURES_IN_CHILD = ("fig2_e1.png", "fig3_e2.png", "forces.png")
 
 
 def run(scenario: Scenario | str | os.PathLike | Mapping | None = None, overrides: Iterable[str] = (), *,

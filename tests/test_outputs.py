@@ -27,7 +27,7 @@ from harness.api import load_scenario, run_scenario
 from harness.cli import main
 from harness.config.errors import ConfigError
 from harness.config.textio import MAX_DEPTH, TMP_MARK, OutputError, write_atomic
-from harness.output.guarded import write_in_child
+from harness.output.guarded import start_in_child, write_in_child
 
 ROOT = Path(__file__).resolve().parents[1]
 TELEOP = [sys.executable, "-m", "harness.cli"]
@@ -186,6 +186,52 @@ def test_ctrl_c_ends_a_blocked_writer(tmp_path):
         write_in_child(blocked, tmp_path / "x.rrd", stall_timeout=600)
     child = int(pid_file.read_text())
     assert not _alive(child), Path(f"/proc/{child}/status").read_text()  # killed
+
+
+def test_child_writers_run_at_the_same_time(tmp_path):
+    """start_in_child returns at once: two children that each wait for the other's file can only both
+    finish if they run concurrently (with the parent free meanwhile)."""
+    a, b = tmp_path / "a.txt", tmp_path / "b.txt"
+
+    def writer(mine, other):
+        def fn():
+            mine.write_text("x")
+            deadline = time.time() + 20
+            while not other.exists():
+                if time.time() > deadline:
+                    raise OSError(62, "the other writer never ran")
+                time.sleep(0.01)
+        return fn
+
+    ca = start_in_child(writer(a, b), a, stall_timeout=None)
+    cb = start_in_child(writer(b, a), b, stall_timeout=None)
+    assert ca.wait() == a and cb.wait() == b
+
+
+def test_failed_figure_child_is_reported_and_the_rest_written(tmp_path, monkeypatch):
+    """A figure drawn in the forked figure child fails: 'figures' is reported once, every other output
+    (run.rrd, the figures drawn here) is written and listed; no temporary file is left."""
+    from harness import api
+    from harness.output import plots
+
+    def broken(traj, path):
+        raise RuntimeError("drawing failed on purpose")
+
+    assert "fig3_e2.png" in api.FIGURES_IN_CHILD
+    monkeypatch.setattr(plots, "fig_e2", broken)
+    out = tmp_path / "o"
+    out.mkdir()
+    scn = load_scenario(None, ["plant.kind='analytic'", "duration=0.3", "transient=0"])
+    res = run_scenario(scn, out)
+    assert len(res.failures) == 1 and res.failures[0].startswith("figures: ")
+    assert "drawing failed on purpose" in res.failures[0]
+    doc = json.loads((out / "metrics.json").read_text())
+    assert doc["outputs_failed"] == ["figures"]
+    assert "fig3_e2.png" not in doc["outputs"] and not (out / "fig3_e2.png").exists()
+    for name in ("config.toml", "run.rrd", "fig4_beta.png", "q2.png", "shapes.png", "metrics.json"):
+        assert name in doc["outputs"], name
+    assert all((out / n).exists() for n in doc["outputs"])
+    _check_complete(out)
 
 
 # --- reused output folders --------------------------------------------------------------------------

@@ -168,7 +168,7 @@ def test_run_scenario_writes_geometry_at_the_default_rate(tmp_path, real_traj, m
     from harness.loop import mujoco_loop
     from harness.output import plots, record
 
-    monkeypatch.setattr(plots, "write_figures", lambda traj, out: [])  # not what this test is about
+    monkeypatch.setattr(plots, "write_figures", lambda traj, out, names=None: [])  # not this test's subject
     monkeypatch.setattr(mujoco_loop, "simulate_mujoco", lambda scn, **kw: real_traj)
     from rerun.chunk import RrdReader
 
@@ -213,3 +213,41 @@ def test_envelope_with_a_subnormal_time_span():
     idx = envelope_indices(t, y, 2)
     assert idx.min() >= 0 and idx.max() <= 99 and len(idx) <= 8
     assert np.argmin(y) in idx and np.argmax(y) in idx
+
+
+# ---------------------------------------------------------------------------------------------
+# on_running (the output imports start once the loop runs) and outputs written in parallel
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("overrides", [
+    ["plant.kind='analytic'", "duration=1.2"],                     # compiled analytic loop
+    ["duration=1.2"],                                                # compiled MuJoCo loop
+    ["plant.kind='analytic'", "duration=0.6", "controller.name='paper_interface'"],  # stepped loop
+], ids=["analytic", "mujoco", "stepped"])
+def test_on_running_is_called_once_after_the_first_chunk(overrides):
+    from harness.api import load_scenario
+    from harness.loop import simulate
+
+    scn = load_scenario(None, [*overrides, "transient=0"])
+    seen: list[int] = []
+    chunks: list[int] = []
+    traj = simulate(scn, on_chunk=lambda part: chunks.append(len(part)),
+                    on_running=lambda: seen.append(len(chunks)))
+    assert traj.status == "ok"
+    assert len(chunks) >= 2  # the run has more than one chunk ...
+    assert seen == [1]  # ... and on_running came once, right after the first
+
+
+def test_outputs_written_in_parallel_equal_serial_writes(tmp_path):
+    """run_scenario writes run.rrd and the figures in three processes; the PNGs are byte-identical to
+    those `write_figures` draws alone in this process from the same trajectory."""
+    from harness.api import load_scenario, run_scenario
+    from harness.output import plots
+
+    out = tmp_path / "par"
+    out.mkdir()
+    res = run_scenario(load_scenario(None, ["duration=0.5", "transient=0"]), out)
+    assert res.failures == []
+    serial = plots.write_figures(res.traj, tmp_path / "ser")
+    assert [p.name for p in serial] == [p.name for p in res.written if p.suffix == ".png"]
+    for p in serial:
+        assert (out / p.name).read_bytes() == p.read_bytes(), p.name

@@ -1,7 +1,5 @@
-"""`python -m harness.cli` = `teleop`."""
+"""`python -m harness.cli` = `teleop` (`harness.cli.entry`: `main()` and a fast exit)."""
 
-import sys
+from harness.cli import entry
 
-from harness.cli import main
-
-sys.exit(main())
+entry()

@@ -16,10 +16,13 @@ from __future__ import annotations
 from typing import Any
 
 
-def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None):
+def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None, on_running=None):
     """Run one scenario on `plant` (default: the plant `scn.plant` describes); returns the Trajectory.
     on_chunk: optional callable receiving each finished chunk of control steps as a `Trajectory`
-    (e.g. a live viewer, `harness.output.viewer.LiveView`).
+    (e.g. a live viewer, `harness.output.viewer.LiveView`).  on_running: optional callable called
+    once, without arguments, after the first chunk of steps: the loop's start-up (numba loading its
+    kernels, model set-up) is over, so background work started then (the output imports,
+    `harness.output.prefetch`) does not compete with it for the GIL.
 
     A run that diverges or is interrupted (`harness.loop.common.STOP`) returns everything up to that
     point, with `status` and `message` saying what happened and when."""
@@ -36,11 +39,13 @@ def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None):
 
             plant = stepped_plant(scn, plant)
         return simulate_stepped(scn, plant, progress=progress,
-                                controller="interface" if python_ctrl else None, on_chunk=on_chunk)
+                                controller="interface" if python_ctrl else None, on_chunk=on_chunk,
+                                on_running=on_running)
     if plant.kind == "analytic":
         from harness.loop.analytic_loop import simulate_analytic
 
-        return simulate_analytic(scn, progress=progress, plant=plant, on_chunk=on_chunk)
+        return simulate_analytic(scn, progress=progress, plant=plant, on_chunk=on_chunk,
+                                 on_running=on_running)
     from harness.loop.mujoco_loop import simulate_mujoco
 
-    return simulate_mujoco(scn, progress=progress, plant=plant, on_chunk=on_chunk)
+    return simulate_mujoco(scn, progress=progress, plant=plant, on_chunk=on_chunk, on_running=on_running)

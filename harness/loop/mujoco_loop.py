@@ -79,13 +79,14 @@ def make_plant(scn: Scenario, plant: MujocoPlant | None = None
 
 
 def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray | None = None,
-                    plant: MujocoPlant | None = None, on_chunk=None) -> Trajectory:
+                    plant: MujocoPlant | None = None, on_chunk=None, on_running=None) -> Trajectory:
     """Run the scenario on the MuJoCo plant; returns the Trajectory (possibly cut short).
 
     cmd_log: optional (n_steps * substeps, nu + nv) array that receives, for every mj_step, the
     [ctrl, qfrc_applied] applied before it (to replay the same physics with raw mj_step).
     on_chunk: optional callable receiving each finished chunk of steps as a `Trajectory` (with the plant
-    geometry when the integrator provides it in the loop, see `_chunk`)."""
+    geometry when the integrator provides it in the loop, see `_chunk`).  on_running: called once after
+    the first chunk (`harness.loop.simulate`)."""
     tb = time.perf_counter()
     if plant is None:
         plant = MujocoPlant.build(scn)
@@ -136,6 +137,9 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
                 bar.update(mdone)
             if on_chunk is not None and mdone:
                 on_chunk(_chunk(scn, m, cmap, geo, rows, k, done))
+            if on_running is not None:
+                on_running, start = None, on_running
+                start()
             if wnum.any():
                 warned = warning_counts(d)
                 if status == 0:  # the kernel stops at the step that raised it; never pass silently

@@ -112,11 +112,12 @@ class PaperController:
 
 
 def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
-                     controller: Controller | None = None, on_chunk=None) -> Trajectory:
+                     controller: Controller | None = None, on_chunk=None, on_running=None) -> Trajectory:
     """Run the scenario on a stepped plant; returns the Trajectory (possibly cut short).
     controller: a loop `Controller` (default `PaperController`), or `"interface"` for the scenario's
     `controllers.interface.Controller` (`harness.loop.interface_adapter.InterfaceController`).
     on_chunk: optional callable receiving every CHUNK steps as a `Trajectory` (time series only).
+    on_running: called once after the first CHUNK steps (`harness.loop.simulate`).
 
     traj.x2_plant: the plant's own slave tip (n, 2); traj.master_pos: (n, 3, 3) if the plant's
     geometry has "master"; every other geometry array goes to traj.meta["geometry"][name] (n, ...).
@@ -235,6 +236,9 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
                     part = Trajectory.from_rows(rows[k + 1 - CHUNK:k + 1])
                     part.meta.update(run_meta(scn, 0.0))
                     on_chunk(part)
+                if on_running is not None:
+                    on_running, start = None, on_running
+                    start()
                 if STOP.is_set():
                     interrupted = True
                     break

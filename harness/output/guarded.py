@@ -16,6 +16,9 @@ polls, so that
 * Ctrl-C (KeyboardInterrupt in the parent) kills the child, removes its temporary file and
   re-raises, so a run always ends.
 
+`start_in_child` returns at once (a `ChildWriter` to `wait()` on later), so that several writers (the
+recording, groups of figures) run at the same time on a multi-core machine.
+
 Platforms without `fork` run the writer in-process (same atomic rename, no stall detection).
 """
 
@@ -28,7 +31,7 @@ import re
 import signal
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -83,74 +86,135 @@ def _size(paths: list[Path]) -> int:
     return total
 
 
-def write_in_child(fn: Callable[[], Any], path: str | Path, *, stall_timeout: float = STALL_TIMEOUT) -> Path:
+def write_in_child(fn: Callable[[], Any], path: str | Path, *,
+                   stall_timeout: float | None = STALL_TIMEOUT) -> Path:
     """Run `fn()` (which writes `path` through `atomic_path`) in a forked child and wait for it.
 
     Returns `path`.  Raises `OutputError` (one line naming `path`) if the child fails, dies or stalls
     for `stall_timeout` s; KeyboardInterrupt kills the child first.  Never leaves a temporary file."""
-    path = Path(path)
-    try:
+    return start_in_child(fn, path, stall_timeout=stall_timeout).wait()
+
+
+class ChildWriter:
+    """A writer running in a forked child (`start_in_child`); `wait()` returns its path or raises
+    `OutputError`.  Until `wait()` returns the parent is free to do other work (the child runs on
+    another core if there is one).  `kill()` stops it (idempotent)."""
+
+    def __init__(self, fn: Callable[[], Any], path: Path, stall_timeout: float | None,
+                 others: tuple[Path, ...] = ()):
+        self.path = path
+        self.others = others
+        self.stall_timeout = stall_timeout
+        self.proc = None
         ctx = multiprocessing.get_context("fork")
-    except ValueError:  # no fork (Windows): in-process
-        fn()
-        return path
-    recv, send = ctx.Pipe(duplex=False)
-    err_r, err_w = os.pipe()
-    proc = ctx.Process(target=_child, args=(fn, send, err_w), daemon=True)
-    # Ctrl-C must not land between the fork and the `try` below (the child would be orphaned): while
-    # starting, SIGINT is only recorded, and handled by the previous handler inside the `try`.
-    got: list[int] = []
-    old = (signal.signal(signal.SIGINT, lambda signum, frame: got.append(signum))
-           if threading.current_thread() is threading.main_thread() else None)
-    try:
-        proc.start()
-    finally:
-        if old is not None:
-            signal.signal(signal.SIGINT, old)
-        send.close()
-        os.close(err_w)
-    stderr: list[bytes] = []
-    drain = threading.Thread(target=_drain, args=(err_r, stderr), daemon=True)
-    drain.start()
-    pid = proc.pid
-    last_size, last_change = -1, time.monotonic()
-    try:
+        self.recv, send = ctx.Pipe(duplex=False)
+        err_r, err_w = os.pipe()
+        proc = ctx.Process(target=_child, args=(fn, send, err_w), daemon=True)
+        # Ctrl-C must not land between the fork and the caller's `wait` (the child would be orphaned):
+        # while starting, SIGINT is only recorded, and handled by the previous handler afterwards.
+        got: list[int] = []
+        old = (signal.signal(signal.SIGINT, lambda signum, frame: got.append(signum))
+               if threading.current_thread() is threading.main_thread() else None)
+        try:
+            proc.start()
+            self.proc = proc
+        finally:
+            if old is not None:
+                signal.signal(signal.SIGINT, old)
+            send.close()
+            os.close(err_w)
+            if self.proc is None:
+                os.close(err_r)
+                self.recv.close()
+        self.stderr: list[bytes] = []
+        self._drain = threading.Thread(target=_drain, args=(err_r, self.stderr), daemon=True)
+        self._drain.start()
         if got:
-            if callable(old):
-                old(signal.SIGINT, None)  # default: raises KeyboardInterrupt
-            elif old != signal.SIG_IGN:
-                raise KeyboardInterrupt
-        while proc.is_alive():
-            proc.join(_POLL)
-            cause = _native_cause(b"".join(stderr))
-            if cause:  # the file sink logged a write error: the data cannot complete, stop now
-                raise OutputError(f"cannot write {path}: the Rerun file sink failed ({cause})",
+            try:
+                if callable(old):
+                    old(signal.SIGINT, None)  # default: raises KeyboardInterrupt
+                elif old != signal.SIG_IGN:
+                    raise KeyboardInterrupt
+            except BaseException:
+                self.kill()
+                raise
+
+    def wait(self) -> Path:
+        path, proc, pid = self.path, self.proc, self.proc.pid
+        last_size, last_change = -1, time.monotonic()
+        try:
+            while proc.is_alive():
+                proc.join(_POLL)
+                cause = _native_cause(b"".join(self.stderr))
+                if cause:  # the file sink logged a write error: the data cannot complete, stop now
+                    raise OutputError(f"cannot write {path}: the Rerun file sink failed ({cause})",
+                                      path=str(path))
+                if self.stall_timeout is None:
+                    continue
+                size = _size(_temps(path, pid))
+                now = time.monotonic()
+                if size != last_size:
+                    last_size, last_change = size, now
+                elif now - last_change > self.stall_timeout:
+                    raise OutputError(f"cannot write {path}: the writer made no progress for "
+                                      f"{self.stall_timeout:g} s (stalled; file system full or blocked?)",
+                                      path=str(path))
+            status, msg = self.recv.recv() if self.recv.poll(1.0) else ("error", "")
+            if proc.exitcode != 0 or status != "ok":
+                self._drain.join(2.0)
+                why = msg or f"the writer process ended with exit code {proc.exitcode}"
+                cause = _native_cause(b"".join(self.stderr))
+                if cause and cause not in why:
+                    why += f" [{cause}]"
+                raise OutputError(why if why.startswith("cannot write") else f"cannot write {path}: {why}",
                                   path=str(path))
-            size = _size(_temps(path, pid))
-            now = time.monotonic()
-            if size != last_size:
-                last_size, last_change = size, now
-            elif now - last_change > stall_timeout:
-                raise OutputError(f"cannot write {path}: the writer made no progress for {stall_timeout:g} s "
-                                  "(stalled; file system full or blocked?)", path=str(path))
-        status, msg = recv.recv() if recv.poll(1.0) else ("error", "")
-        if proc.exitcode != 0 or status != "ok":
-            drain.join(2.0)
-            why = msg or f"the writer process ended with exit code {proc.exitcode}"
-            cause = _native_cause(b"".join(stderr))
-            if cause and cause not in why:
-                why += f" [{cause}]"
-            raise OutputError(why if why.startswith("cannot write") else f"cannot write {path}: {why}",
-                              path=str(path))
-        return path
-    finally:
+            return path
+        finally:
+            self.kill()
+
+    def kill(self) -> None:
+        proc = self.proc
+        if proc is None:
+            return
         if proc.is_alive():
             proc.kill()
             proc.join(5.0)
-        recv.close()
-        for p in _temps(path, pid):
-            with contextlib.suppress(OSError):
-                p.unlink()
+        with contextlib.suppress(OSError):
+            self.recv.close()
+        # a killed or failed writer leaves temporary files (atomic_path names them with its pid)
+        for target in (self.path, *self.others):
+            for tmp in _temps(target, proc.pid):
+                with contextlib.suppress(OSError):
+                    tmp.unlink()
 
 
-__all__ = ["STALL_TIMEOUT", "write_in_child"]
+class _InProcess:
+    """`start_in_child` where fork does not exist (Windows): the writer has already run."""
+
+    def __init__(self, path: Path):
+        self.path = path
+
+    def wait(self) -> Path:
+        return self.path
+
+    def kill(self) -> None:
+        pass
+
+
+def start_in_child(fn: Callable[[], Any], path: str | Path, *, stall_timeout: float | None = STALL_TIMEOUT,
+                   others: Sequence[str | Path] = ()) -> ChildWriter | _InProcess:
+    """Start `fn()` (which writes `path` through `atomic_path`) in a forked child and return at once;
+    `.wait()` on the result returns `path` or raises `OutputError` (see `write_in_child`).
+    stall_timeout None: no progress check (for writers that compute long before writing, e.g. figures).
+    others: further files the writer writes atomically (their temporary files are removed too if it
+    fails).  Without fork, `fn` runs here and now."""
+    path = Path(path)
+    try:
+        multiprocessing.get_context("fork")
+    except ValueError:  # no fork (Windows): in-process
+        fn()
+        return _InProcess(path)
+    return ChildWriter(fn, path, stall_timeout, tuple(Path(o) for o in others))
+
+
+__all__ = ["STALL_TIMEOUT", "ChildWriter", "start_in_child", "write_in_child"]

@@ -15,7 +15,7 @@ so it is safe in worker processes and headless machines.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +27,7 @@ from harness.config.textio import write_atomic
 from harness.loop.trajectory import Trajectory
 from harness.output.decimate import envelope
 from harness.output.geometry import has_interaction
+from harness.output.names import FIGURES
 
 DPI = 130
 # Time-series lines are drawn from their min/max envelope at this many columns per inch of figure
@@ -279,21 +280,28 @@ def fig_shapes(traj: Trajectory, path: Path, lengths=(0.6, 0.6), instants: int =
     return _save(fig, path)
 
 
-def write_figures(traj: Trajectory, outdir: str | Path, *, lengths=(0.6, 0.6)) -> list[Path]:
+def figure_names(traj: Trajectory) -> list[str]:
+    """The file names `write_figures` writes for `traj` (FIGURES; forces.png only with interaction)."""
+    return [n for n in FIGURES if n != "forces.png" or has_interaction(traj)]
+
+
+def write_figures(traj: Trajectory, outdir: str | Path, *, lengths=(0.6, 0.6),
+                  names: Sequence[str] | None = None) -> list[Path]:
     """Write the PNG figures of `traj` into `outdir` (created) and return their paths.
 
     lengths: master link lengths (m) used for the shapes figure when neither traj.master_pos nor
-    traj.meta["master_lengths"] is available.
+    traj.meta["master_lengths"] is available.  names: only these files (from FIGURES; default
+    `figure_names(traj)`), written in FIGURES order.
     """
+    bad = [n for n in (names or ()) if n not in FIGURES]
+    if bad:
+        raise ValueError(f"names: unknown figure(s) {bad}; allowed: {', '.join(FIGURES)}")
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
-    return [  # names: FIGURES
-        fig_e1(traj, outdir / "fig2_e1.png"),
-        fig_e2(traj, outdir / "fig3_e2.png"),
-        fig_beta(traj, outdir / "fig4_beta.png"),
-        fig_q2(traj, outdir / "q2.png"),
-        fig_shapes(traj, outdir / "shapes.png", lengths=lengths),
-    ] + ([fig_forces(traj, outdir / "forces.png")] if has_interaction(traj) else [])
+    want = figure_names(traj) if names is None else [n for n in FIGURES if n in set(names)]
+    draw = {"fig2_e1.png": fig_e1, "fig3_e2.png": fig_e2, "fig4_beta.png": fig_beta, "q2.png": fig_q2,
+            "shapes.png": lambda t, p: fig_shapes(t, p, lengths=lengths), "forces.png": fig_forces}
+    return [draw[n](traj, outdir / n) for n in want]
 
 
 def fig_forces(traj: Trajectory, path: Path) -> Path:
@@ -319,8 +327,5 @@ def fig_forces(traj: Trajectory, path: Path) -> Path:
     return _save(fig, path)
 
 
-# what write_figures writes (forces.png only for runs with interaction)
-FIGURES = ("fig2_e1.png", "fig3_e2.png", "fig4_beta.png", "q2.png", "shapes.png", "forces.png")
-
-__all__ = ["FIGURES", "fig_beta", "fig_e1", "fig_e2", "fig_forces", "fig_q2", "fig_shapes", "has_interaction",
-           "write_figures"]
+__all__ = ["FIGURES", "fig_beta", "fig_e1", "fig_e2", "fig_forces", "fig_q2", "fig_shapes", "figure_names",
+           "has_interaction", "write_figures"]
