@@ -94,6 +94,11 @@ INTEGRATOR_ENUM = {"implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST,
                    "rk4": mujoco.mjtIntegrator.mjINT_RK4}
 
 
+def _cc(scn: Scenario) -> str:
+    return ("CC equality constraints on" if scn.plant.enforce_cc
+            else "free chain: CC equality constraints off, material damping (the default plant)")
+
+
 def settings_table(base: Scenario, reps: int, out) -> None:
     """Solver flags and integrator: raw cost of the same physics steps, and closed-loop stability."""
     scn = dataclasses.replace(base, duration=min(base.duration, 2.0))
@@ -106,9 +111,9 @@ def settings_table(base: Scenario, reps: int, out) -> None:
         for v in variants:
             times[v].append(raw_replay_variant_s(scn, log, v[0], v[1])[0])
     ref = min(times[variants[0]])
-    out(f"\nPlant settings (servo, N = {scn.plant.segments}, CC on; raw mj_step replaying the same logged "
-        f"commands of a {scn.duration:g} s run, best of {max(reps, 5)} interleaved; 'closed loop' = the "
-        "harness run with that integrator):\n")
+    out(f"\nPlant settings (servo, N = {scn.plant.segments}, {_cc(scn)}; raw mj_step replaying the same "
+        f"logged commands of a {scn.duration:g} s run, best of {max(reps, 5)} interleaved; 'closed loop' = "
+        "the harness run with that integrator):\n")
     out("| integrator | solver flags | raw mj_step | vs plant setting | closed loop | closed loop, servos at "
         f"{STIFF_SERVO_HZ:g} Hz | note |")
     out("|---|---|---|---|---|---|---|")
@@ -415,7 +420,8 @@ def main() -> None:
     out(f"Machine: {_machine()}; benchmark process {pinned} (one core for everything, including Rerun's "
         f"writer thread); {args.reps} interleaved repetitions.\n")
     out(f"Paper scenario: {dur:g} s at 1 kHz (1 ms physics = control step), N = {base.plant.segments} "
-        f"segments/section, CC equality constraints on, SNR {base.snr_db} dB noise, both controllers with "
+        f"segments/section, servo on the default plant ({_cc(base)}), torque on the CC chain (the free "
+        f"chain diverges in torque mode, README), SNR {base.snr_db} dB noise, both controllers with "
         "the null-space terms, record row every step.  'raw' = the same physics steps (logged commands "
         "replayed from the same initial state, compiled loop calling the C mj_step).  Times are the best "
         "of the repetitions, per control step; ratios are best / best and, in brackets, the median of "
@@ -425,7 +431,8 @@ def main() -> None:
     out("|---|---|---|---|---|---|---|---|")
     results = {}
     for act in ("servo", "torque"):
-        scn = dataclasses.replace(base, plant=dataclasses.replace(base.plant, actuation=act))
+        cc = base.plant.enforce_cc or act == "torque"
+        scn = dataclasses.replace(base, plant=dataclasses.replace(base.plant, actuation=act, enforce_cc=cc))
         r = harness_vs_raw(scn, args.reps, rrd=True)
         results[act] = r
         us = {k: best_us(r, k) for k in ("raw", "loop", "sim", "total", "rrd_write")}
