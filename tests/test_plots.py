@@ -66,3 +66,95 @@ def test_figures_differ_with_data(tmp_path, synthetic_trajectory):
     a = write_figures(synthetic_trajectory(200), tmp_path / "a")[1]
     b = write_figures(synthetic_trajectory(200, plant=False), tmp_path / "b")[1]
     assert a.read_bytes() != b.read_bytes()
+
+
+# --- a subset of the figures (names=) ----------------------------------------------------------------
+def test_names_draws_only_the_named_figures(tmp_path, synthetic_trajectory):
+    from harness.output.plots import FIGURES, figure_names
+
+    traj = synthetic_trajectory(200)
+    assert figure_names(traj) == NAMES  # no interaction forces: no forces.png
+    paths = write_figures(traj, tmp_path, names=["q2.png", "fig2_e1.png", "forces.png"])
+    assert [p.name for p in paths] == ["fig2_e1.png", "q2.png"]  # FIGURES order; forces.png does not apply
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fig2_e1.png", "q2.png"]
+    assert write_figures(traj, tmp_path / "none", names=[]) == []
+    with pytest.raises(ValueError, match="fig9.png") as exc:
+        write_figures(traj, tmp_path / "bad", names=["fig2_e1.png", "fig9.png"])
+    assert all(n in str(exc.value) for n in FIGURES)  # the message names the allowed ones
+    assert not (tmp_path / "bad").exists()  # checked before anything is drawn
+
+
+# --- nothing clipped or overlapping (the fixed layout of harness.output.layout) -----------------------
+@pytest.fixture(scope="module")
+def contact_traj():
+    from harness.api import load_scenario
+    from harness.loop import simulate
+
+    traj = simulate(load_scenario("scenarios/contact.toml", ["duration=0.4", "transient=0"]))
+    assert traj.status == "ok"
+    return traj
+
+
+def _drawn_figures(monkeypatch, traj, outdir):
+    """{name: Figure} of write_figures(traj, outdir), each after it was saved (laid out and drawn)."""
+    from harness.output import plots
+
+    figures, save = {}, plots._save
+
+    def capture(fig, path):
+        out = save(fig, path)
+        figures[path.name] = fig
+        return out
+
+    monkeypatch.setattr(plots, "_save", capture)
+    paths = plots.write_figures(traj, outdir)
+    assert [p.name for p in paths] == plots.figure_names(traj) == list(figures)
+    return figures
+
+
+def _texts(fig):
+    """(kind, Text or Legend) of every text the figure draws: tick labels in view, axis labels, offset
+    texts, titles, legends, suptitle."""
+    out = []
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            lo, hi = sorted(axis.get_view_interval())
+            tol = 1e-9 * (hi - lo)
+            for tick in axis.get_major_ticks():
+                if lo - tol <= tick.get_loc() <= hi + tol:
+                    out += [("tick", t) for t in (tick.label1, tick.label2)
+                            if t.get_visible() and t.get_text()]
+            out += [("label", t) for t in (axis.label, axis.offsetText) if t.get_visible() and t.get_text()]
+        out += [("label", ax.title)] if ax.title.get_text() else []
+        out += [("legend", ax.get_legend())] if ax.get_legend() is not None else []
+    if fig._suptitle is not None and fig._suptitle.get_text():
+        out.append(("label", fig._suptitle))
+    return out
+
+
+def _check_layout(fig, name):
+    renderer = fig.canvas.get_renderer()
+    canvas = fig.bbox
+    texts = [(kind, t, t.get_window_extent(renderer)) for kind, t in _texts(fig)]
+    assert sum(kind == "tick" for kind, _, _ in texts) >= 4, name  # the check saw the tick labels
+    for kind, t, bb in texts:
+        what = getattr(t, "get_text", lambda: "legend")()
+        assert bb.x0 >= canvas.x0 and bb.y0 >= canvas.y0, f"{name}: {kind} {what!r} clipped: {bb} in {canvas}"
+        assert bb.x1 <= canvas.x1 and bb.y1 <= canvas.y1, f"{name}: {kind} {what!r} clipped: {bb} in {canvas}"
+    # labels, titles, offset texts and the suptitle run into no other text (tick labels may touch each other)
+    for i, (ki, ti, bi) in enumerate(texts):
+        for kj, tj, bj in texts[i + 1:]:
+            if "label" in (ki, kj) and "legend" not in (ki, kj):
+                assert not bi.overlaps(bj), f"{name}: {ti.get_text()!r} overlaps {tj.get_text()!r}"
+
+
+@pytest.mark.parametrize("run", ["synthetic", "synthetic_diverged", "contact"])
+def test_no_text_is_clipped_or_overlapping(tmp_path, monkeypatch, request, synthetic_trajectory, run):
+    traj = {"synthetic": lambda: synthetic_trajectory(1200),
+            "synthetic_diverged": lambda: synthetic_trajectory(37, status="diverged", nan_tail=4),
+            "contact": lambda: request.getfixturevalue("contact_traj")}[run]()
+    figures = _drawn_figures(monkeypatch, traj, tmp_path)
+    if run == "contact":
+        assert "forces.png" in figures  # the 3-row figure is checked too
+    for name, fig in figures.items():
+        _check_layout(fig, name)

@@ -15,7 +15,7 @@ so it is safe in worker processes and headless machines.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +27,8 @@ from harness.config.textio import write_atomic
 from harness.loop.trajectory import Trajectory
 from harness.output.decimate import envelope
 from harness.output.geometry import has_interaction
-from harness.output.names import FIGURES
+from harness.output.layout import fix_layout
+from harness.output.names import FIGURES  # what write_figures writes (forces.png only with interaction)
 
 DPI = 130
 # Time-series lines are drawn from their min/max envelope at this many columns per inch of figure
@@ -38,9 +39,16 @@ FULL_RESOLUTION = False  # True: draw every sample (reference for comparisons)
 _SEC_COLORS = ("tab:green", "tab:purple", "tab:brown")
 
 
-def _figure(nrows: int = 1, figsize=(7.0, 3.6)):
-    fig = Figure(figsize=figsize, layout="constrained")
+def _new_figure(figsize) -> Figure:
+    """A Figure on an Agg canvas at the save DPI, without a layout engine: `_save` places the axes
+    with `layout.fix_layout` (margins from measured texts; no tight-bbox pass at save time)."""
+    fig = Figure(figsize=figsize, dpi=DPI)
     FigureCanvasAgg(fig)
+    return fig
+
+
+def _figure(nrows: int = 1, figsize=(7.0, 3.6)):
+    fig = _new_figure(figsize)
     axes = fig.subplots(nrows, 1, sharex=True, squeeze=False)[:, 0]
     return fig, axes
 
@@ -70,8 +78,10 @@ def _finish_time_axis(ax, traj: Trajectory) -> None:
 
 
 def _save(fig: Figure, path: Path) -> Path:
-    """Save under a temporary name, renamed into place when complete (harness.config.textio).  zlib
-    level 1: the same pixels, ~10 % larger files, ~10 % less figure time (benchmarks/RESULTS.md)."""
+    """Lay out (`layout.fix_layout`) and save under a temporary name, renamed into place when complete
+    (harness.config.textio).  zlib level 1: the same pixels, ~10 % larger files, ~10 % less figure time
+    (benchmarks/RESULTS.md)."""
+    fix_layout(fig)
     return write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=DPI, format=Path(path).suffix[1:] or "png",
                                                       pil_kwargs={"compress_level": 1}))
 
@@ -234,8 +244,7 @@ def fig_shapes(traj: Trajectory, path: Path, lengths=(0.6, 0.6), instants: int =
     mb, sb = _base_xz(meta, "master_base"), _base_xz(meta, "slave_base")
     fn = meta.get("backbone_fn")
     fn = fn if callable(fn) else None
-    fig = Figure(figsize=(7.5, 5.0), layout="constrained")
-    FigureCanvasAgg(fig)
+    fig = _new_figure((7.5, 5.0))
     ax = fig.subplots()
     n = len(traj)
     if n == 0:
@@ -280,30 +289,6 @@ def fig_shapes(traj: Trajectory, path: Path, lengths=(0.6, 0.6), instants: int =
     return _save(fig, path)
 
 
-def figure_names(traj: Trajectory) -> list[str]:
-    """The file names `write_figures` writes for `traj` (FIGURES; forces.png only with interaction)."""
-    return [n for n in FIGURES if n != "forces.png" or has_interaction(traj)]
-
-
-def write_figures(traj: Trajectory, outdir: str | Path, *, lengths=(0.6, 0.6),
-                  names: Sequence[str] | None = None) -> list[Path]:
-    """Write the PNG figures of `traj` into `outdir` (created) and return their paths.
-
-    lengths: master link lengths (m) used for the shapes figure when neither traj.master_pos nor
-    traj.meta["master_lengths"] is available.  names: only these files (from FIGURES; default
-    `figure_names(traj)`), written in FIGURES order.
-    """
-    bad = [n for n in (names or ()) if n not in FIGURES]
-    if bad:
-        raise ValueError(f"names: unknown figure(s) {bad}; allowed: {', '.join(FIGURES)}")
-    outdir = Path(outdir)
-    outdir.mkdir(parents=True, exist_ok=True)
-    want = figure_names(traj) if names is None else [n for n in FIGURES if n in set(names)]
-    draw = {"fig2_e1.png": fig_e1, "fig3_e2.png": fig_e2, "fig4_beta.png": fig_beta, "q2.png": fig_q2,
-            "shapes.png": lambda t, p: fig_shapes(t, p, lengths=lengths), "forces.png": fig_forces}
-    return [draw[n](traj, outdir / n) for n in want]
-
-
 def fig_forces(traj: Trajectory, path: Path) -> Path:
     """F2 (slave tip) and F1 (master handle), true (solid) vs what the laws (13), (17) got (thin), and the
     maximum penetration of the arm into the environment objects (mm)."""
@@ -313,18 +298,49 @@ def fig_forces(traj: Trajectory, path: Path) -> Path:
     for ax, off, who in ((axes[0], 2, "F2 on the slave tip (contact + constant)"),
                          (axes[1], 0, "F1 on the master handle (operator grip + constant)")):
         for j, (lab, c) in enumerate((("X", "tab:blue"), ("Z", "tab:orange"))):
-            ax.plot(traj.t, ft[:, off + j], color=c, marker=m, label=f"true {lab}")
-            ax.plot(traj.t, fs[:, off + j], color=c, lw=0.7, alpha=0.6, ls="--", label=f"to the law {lab}")
+            _plot_series(ax, traj.t, ft[:, off + j], color=c, marker=m, label=f"true {lab}")
+            _plot_series(ax, traj.t, fs[:, off + j], color=c, lw=0.7, alpha=0.6, ls="--",
+                         label=f"to the law {lab}")
         ax.set_title(who, fontsize=10)
         ax.set_ylabel("force [N]")
         _finish_time_axis(ax, traj)
     pen = np.maximum(0.0, -np.asarray(traj.contact, dtype=float)[:, 3]) * 1e3
-    axes[2].plot(traj.t, pen, color="tab:red", marker=m, label="max penetration")
+    _plot_series(axes[2], traj.t, pen, color="tab:red", marker=m, label="max penetration")
     axes[2].set_title("Penetration of the arm into the environment", fontsize=10)
     axes[2].set_ylabel("[mm]")
     _finish_time_axis(axes[2], traj)
     _status_note(fig, traj)
     return _save(fig, path)
+
+
+def figure_names(traj: Trajectory) -> list[str]:
+    """The file names `write_figures(traj, ...)` writes by default, in order: FIGURES, without
+    forces.png unless the run has interaction forces."""
+    return [n for n in FIGURES if n != "forces.png" or has_interaction(traj)]
+
+
+def write_figures(traj: Trajectory, outdir: str | Path, *, lengths=(0.6, 0.6),
+                  names: Iterable[str] | None = None) -> list[Path]:
+    """Write the PNG figures of `traj` into `outdir` (created) and return their paths (FIGURES order).
+
+    lengths: master link lengths (m) used for the shapes figure when neither traj.master_pos nor
+    traj.meta["master_lengths"] is available.
+    names: file names from FIGURES to draw (e.g. to draw the figures in two processes); None: all of
+    `figure_names(traj)`.  A name that does not apply to this run (forces.png without interaction) is
+    skipped; a name not in FIGURES raises ValueError.
+    """
+    applicable = figure_names(traj)
+    if names is not None:
+        names = [names] if isinstance(names, str) else list(names)
+        unknown = [n for n in names if n not in FIGURES]
+        if unknown:
+            raise ValueError(f"names = {unknown!r}: unknown figure name(s); allowed: {', '.join(FIGURES)}")
+        applicable = [n for n in applicable if n in names]
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    draw = {"fig2_e1.png": fig_e1, "fig3_e2.png": fig_e2, "fig4_beta.png": fig_beta, "q2.png": fig_q2,
+            "shapes.png": lambda tr, path: fig_shapes(tr, path, lengths=lengths), "forces.png": fig_forces}
+    return [draw[n](traj, outdir / n) for n in applicable]
 
 
 __all__ = ["FIGURES", "fig_beta", "fig_e1", "fig_e2", "fig_forces", "fig_q2", "fig_shapes", "figure_names",

@@ -67,8 +67,13 @@ def _nan_stats(values) -> tuple[float, float, float]:
     return (np.nan, np.nan, np.nan) if a.size == 0 else (a.mean(), a.min(), a.max())
 
 
+_DPI = 110
+
+
 def _plots(study: Study, rows: Sequence[dict], out: Path) -> list[Path]:
     from matplotlib.figure import Figure
+
+    from harness.output.layout import fix_layout
 
     metrics = [m for m in study.metrics if np.isfinite(_metric_array(rows, m)).any()]
     if not rows or not metrics:
@@ -77,14 +82,15 @@ def _plots(study: Study, rows: Sequence[dict], out: Path) -> list[Path]:
     nrow = math.ceil(len(metrics) / ncol)
     paths = []
 
-    def figure():
-        fig = Figure(figsize=(4.6 * ncol, 3.4 * nrow), layout="constrained")
+    def figure():  # no layout engine: fix_layout places the axes once, without a tight-bbox pass
+        fig = Figure(figsize=(4.6 * ncol, 3.4 * nrow), dpi=_DPI)
         return fig, fig.subplots(nrow, ncol, squeeze=False).ravel()
 
     def finish(fig, axes, name):
         for ax in axes[len(metrics):]:
             ax.set_visible(False)
-        p = write_atomic(out / name, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+        fix_layout(fig)
+        p = write_atomic(out / name, lambda tmp: fig.savefig(tmp, dpi=_DPI, format="png"))
         paths.append(p)
 
     sampled = study.mode == "random"
