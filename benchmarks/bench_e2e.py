@@ -1,6 +1,6 @@
 """End to end: what a user waits for, against raw MuJoCo (issue: speed end to end).
 
-    .venv/bin/python benchmarks/bench_e2e.py            # paper scenario (20 s) x3, sweep 16 cases x 2 s x2
+    .venv/bin/python benchmarks/bench_e2e.py            # paper run x3; sweeps of 16 and 64 cases x 2 s, x2
     .venv/bin/python benchmarks/bench_e2e.py --quick    # 5 s scenario, 6 cases x 1 s, 1 repetition
 
 Reports, in one run:
@@ -237,6 +237,8 @@ from harness.studies.sweep import run_sweep
 res = run_sweep(json.loads(sys.argv[1]), out=sys.argv[2], workers=int(sys.argv[3]), progress=False)
 print("SWEEP-JSON " + json.dumps({"in_process": time.perf_counter() - t0, "n": len(res.rows),
                                   "statuses": res.counts()}))
+from harness.cli import fast_exit
+fast_exit(0)  # as `teleop sweep` does (harness.cli.entry)
 """
 
 
@@ -255,6 +257,25 @@ def sweep_once(doc: dict, workers: int, n_cases: int) -> float:
     return wall
 
 
+def _diag(case_list, w: int) -> tuple[float, float, float]:
+    """The same cases through a plain spawn pool of w workers: (median wall of each worker's first case,
+    median wall and CPU of the later cases) in the workers."""
+    payloads = [{"case_id": c.case_id, "scenario": c.scenario, "metrics": ["e2_rms"], "record": False}
+                for c in case_list]
+    with cf.ProcessPoolExecutor(w, mp_context=multiprocessing.get_context("spawn")) as ex:
+        diag = list(ex.map(_timed_case, payloads))
+    first, later = {}, []
+    for d in diag:
+        if d["pid"] not in first:
+            first[d["pid"]] = d
+        else:
+            later.append(d)
+    fw = float(np.median([d["wall"] for d in first.values()]))
+    lw = float(np.median([d["wall"] for d in later])) if later else float("nan")
+    lc = float(np.median([d["cpu"] for d in later])) if later else float("nan")
+    return fw, lw, lc
+
+
 def sweep_table(cases: int, duration: float, counts: list[int], reps: int, out) -> None:
     from harness.studies.cases import expand_cases
     from harness.studies.study import load_study
@@ -262,13 +283,16 @@ def sweep_table(cases: int, duration: float, counts: list[int], reps: int, out) 
     doc = make_study(cases, duration, "mujoco")
     case_list = expand_cases(load_study(doc))
     walls: dict[int, list[float]] = {w: [] for w in counts}
+    diags: dict[int, list[tuple]] = {w: [] for w in counts}
     for _ in range(reps):  # interleaved: 1, 2, 1, 2, ...
         for w in counts:
             walls[w].append(sweep_once(doc, w, len(case_list)))
+            diags[w].append(_diag(case_list, w))
     out(f"Sweep: {cases} cases x {duration:g} s (mass study of benchmarks/bench_sweep.py), MuJoCo plant, "
-        f"each sweep in a fresh process (`run_sweep`, the pool's spawn start-up and the summary plot "
-        f"included), {reps} interleaved repetition(s), median [min, max].  'Steady state' = workers / the "
-        f"median wall time of a case that is not its worker's first (a plain spawn pool, same cases).\n")
+        f"each sweep in a fresh process (`run_sweep`, the pool's spawn start-up, results and the summary "
+        f"plot included), {reps} interleaved repetition(s), median [min, max].  'Steady state' = workers / "
+        f"the median wall time of a case that is not its worker's first (a plain spawn pool, same cases, "
+        f"run after each sweep).\n")
     out("| workers | wall s | cases/min | vs 1 worker | first case per worker (wall) "
         "| later cases: wall / CPU per case | steady state cases/min | vs 1 worker |")
     out("|---|---|---|---|---|---|---|---|")
@@ -277,19 +301,7 @@ def sweep_table(cases: int, duration: float, counts: list[int], reps: int, out) 
         wall = float(np.median(walls[w]))
         rate = 60.0 * len(case_list) / wall
         base = base or rate
-        payloads = [{"case_id": c.case_id, "scenario": c.scenario, "metrics": ["e2_rms"], "record": False}
-                    for c in case_list]
-        with cf.ProcessPoolExecutor(w, mp_context=multiprocessing.get_context("spawn")) as ex:
-            diag = list(ex.map(_timed_case, payloads))
-        first, later = {}, []
-        for d in diag:
-            if d["pid"] not in first:
-                first[d["pid"]] = d
-            else:
-                later.append(d)
-        fw = np.median([d["wall"] for d in first.values()])
-        lw = np.median([d["wall"] for d in later]) if later else float("nan")
-        lc = np.median([d["cpu"] for d in later]) if later else float("nan")
+        fw, lw, lc = (float(np.median([d[i] for d in diags[w]])) for i in range(3))
         ss = 60.0 * w / lw
         base_ss = base_ss or ss
         out(f"| {w} | {wall:.2f} [{min(walls[w]):.2f}, {max(walls[w]):.2f}] | {rate:.0f} "
@@ -301,7 +313,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="5 s scenario, 6 cases x 1 s, 1 repetition")
     ap.add_argument("--reps", type=int, default=None, help="repetitions of the run (default 3; quick 1)")
-    ap.add_argument("--cases", type=int, default=None, help="sweep cases (default 8; quick 6)")
+    ap.add_argument("--cases", default=None, help="sweep sizes, comma-separated (default 16,64; quick 6)")
     ap.add_argument("--no-sweep", action="store_true", help="skip the sweep table")
     ap.add_argument("--write", action="store_true", help="append the tables to benchmarks/RESULTS.md")
     args = ap.parse_args()
@@ -319,8 +331,10 @@ def main() -> None:
     overrides = ["duration=5", "transient=1"] if args.quick else []
     run_table("scenarios/paper.toml", overrides, args.reps or (1 if args.quick else 3), out)
     if not args.no_sweep:
-        sweep_table(args.cases or (6 if args.quick else 16), 1.0 if args.quick else 2.0,
-                    sorted({1, 2, os.cpu_count() or 1}), 1 if args.quick else 2, out)
+        sizes = [int(c) for c in (args.cases or ("6" if args.quick else "16,64")).split(",")]
+        for n in sizes:
+            sweep_table(n, 1.0 if args.quick else 2.0, sorted({1, 2, os.cpu_count() or 1}),
+                        1 if args.quick else 2, out)
     load = os.getloadavg()
     out(f"Load average at the end {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}.\n")
     if args.write:

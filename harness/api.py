@@ -258,7 +258,7 @@ def _split_figures(names: list[str]) -> tuple[list[str], list[str]]:
 
 
 # drawn by the forked child while this process draws the rest (and a third process writes run.rrd)
-FIGURES_IN_CHILD = ("fig2_e1.png", "fig3_e2.png", "forces.png")
+FIGURES_IN_CHILD = ("fig2_e1.png", "fig3_e2.png", "fig4_beta.png", "forces.png")
 
 
 def run(scenario: Scenario | str | os.PathLike | Mapping | None = None, overrides: Iterable[str] = (), *,

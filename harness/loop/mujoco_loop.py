@@ -14,8 +14,9 @@ keeps the qpos history and MuJoCo's C `mj_kinematics` is replayed afterwards fro
 the loop by a compiled loop.  Both give the numbers of a per-step Python `mujoco.mj_kinematics` replay
 bit for bit (tests/test_speed_paths.py).
 
-Timings in traj.meta: "build_time" (plant model build + initial state), "wall_time" (the control
-loop), "geometry_time" (the geometry/backbone work after the loop).
+Timings in traj.meta: "build_time" (plant model build + initial state), "kernel_load_time" (numba
+loading the compiled loop, in a fresh process mostly numba's own initialisation), "wall_time" (the
+control loop), "geometry_time" (the geometry/backbone work after the loop).
 """
 
 from __future__ import annotations
@@ -119,19 +120,25 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     interrupted = False
     warned: dict[str, int] = {}
     wnum = d.warning.number  # view of MuJoCo's warning counters, checked by the kernel after each mj_step
+    def chunk(k: int, k1: int):
+        return K.mujoco_chunk(
+            m._address, d._address, MJ_FUNCS, k, k1, sub, scn.control_dt, d.qpos, d.qvel, d.ctrl,
+            d.qfrc_applied, cmap.master_qpos_adr, cmap.master_dof_adr, cmap.master_actuator_ids,
+            cmap.chain_qpos_adr, cmap.chain_dof_adr, cmap.chain_actuator_ids, cmap.R, cmap.C, cmap.L0,
+            cmap.elastic_args, servo, scn.plant.servo_feedforward, kv_over_kp, a["traj"], noise,
+            scale, a["F"], a["mpk_c"], a["spk_c"], a["nodes"], a["weights"], a["gains"], a["spec"],
+            ref, cmdbuf, delay, rows[k:k1], geo.qpos_hist[k:k1],
+            cmd_log[k * sub:k1 * sub] if log else cmd_log, geo.inputs, geo.outputs(k, k1), wnum,
+            force.args(k, k1))
+
+    tl = time.perf_counter()
+    chunk(0, 0)  # no step: numba loads the kernel (on-disk cache) with the run's argument types
+    load_time = time.perf_counter() - tl
     t0 = time.perf_counter()
     try:
         while k < n:
             k1 = min(n, k + MUJOCO_CHUNK)
-            status, mdone = K.mujoco_chunk(
-                m._address, d._address, MJ_FUNCS, k, k1, sub, scn.control_dt, d.qpos, d.qvel, d.ctrl,
-                d.qfrc_applied, cmap.master_qpos_adr, cmap.master_dof_adr, cmap.master_actuator_ids,
-                cmap.chain_qpos_adr, cmap.chain_dof_adr, cmap.chain_actuator_ids, cmap.R, cmap.C, cmap.L0,
-                cmap.elastic_args, servo, scn.plant.servo_feedforward, kv_over_kp, a["traj"], noise,
-                scale, a["F"], a["mpk_c"], a["spk_c"], a["nodes"], a["weights"], a["gains"], a["spec"],
-                ref, cmdbuf, delay, rows[k:k1], geo.qpos_hist[k:k1],
-                cmd_log[k * sub:k1 * sub] if log else cmd_log, geo.inputs, geo.outputs(k, k1), wnum,
-                force.args(k, k1))
+            status, mdone = chunk(k, k1)
             done = k + mdone
             if bar is not None:
                 bar.update(mdone)
@@ -164,6 +171,7 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     traj.meta.update(_plant_geometry(m, cmap, geo, done, traj))
     traj.meta["geometry_time"] = time.perf_counter() - tg
     traj.meta["build_time"] = build_time
+    traj.meta["kernel_load_time"] = load_time
     traj.meta["mujoco_warnings"] = int(sum(warned.values()))
     traj.meta["mujoco_warning_counts"] = warned
     traj.meta["mujoco_warning_text"] = captured[:20]
