@@ -103,6 +103,8 @@ def run_scenario(scn, *a, **k):
     info["failures"] = res.failures
     return res
 api.run_scenario = run_scenario
+import gc
+gc.set_threshold(*cli.GC_THRESHOLDS)  # as `teleop` does (harness.cli.entry)
 rc = cli.main(sys.argv[1:])
 stamps["end"] = rel()
 print("E2E-JSON " + json.dumps({"rc": rc, "stamps": stamps, **info}))

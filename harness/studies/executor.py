@@ -9,6 +9,7 @@ from __future__ import annotations
 import atexit
 import concurrent.futures as cf
 import contextlib
+import gc
 import logging
 import math
 import multiprocessing
@@ -95,10 +96,16 @@ def _fast_exit() -> None:
     os._exit(0)
 
 
+# fewer garbage collections in a worker, which imports numba and MuJoCo in its first case (the same
+# reasoning and figures as harness.cli.GC_THRESHOLDS)
+WORKER_GC_THRESHOLDS = (10_000, 50, 50)
+
+
 def _worker_init() -> None:
     # Ctrl-C reaches the whole process group: only the parent reacts (it cancels and stops us).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     atexit.register(_fast_exit)
+    gc.set_threshold(*WORKER_GC_THRESHOLDS)
     # A killed main process cannot stop its pool: each worker ends itself within PARENT_POLL s.
     threading.Thread(target=_watch_parent, args=(os.getppid(),), name="parent-watchdog", daemon=True).start()
 
