@@ -236,7 +236,8 @@ def _write_outputs(traj: Any, out: Path, record_rate: float | None, attempt: Cal
         if mine:
             for p in attempt("figures", lambda: draw_figures(mine)) or []:
                 written[Path(p).name] = Path(p)
-        if fig is not None and attempt("figures", fig.wait) is not None:  # complete files only (atomic)
+        if fig is not None:  # what the child wrote, even if it then failed: complete files only (atomic)
+            attempt("figures", fig.wait)
             written.update((n, out / n) for n in theirs if (out / n).is_file())
         if rec is not None:
             res = attempt("run.rrd", rec.wait)
