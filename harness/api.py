@@ -233,10 +233,11 @@ def _write_outputs(traj: Any, out: Path, record_rate: float | None, attempt: Cal
         fig = attempt("figures", lambda: start_figures(theirs)) if theirs else None
         if fig is not None:
             children.append(fig)
+        # what each drawer wrote, even if it then failed: complete files only (atomic renames)
         if mine:
-            for p in attempt("figures", lambda: draw_figures(mine)) or []:
-                written[Path(p).name] = Path(p)
-        if fig is not None:  # what the child wrote, even if it then failed: complete files only (atomic)
+            attempt("figures", lambda: draw_figures(mine))
+            written.update((n, out / n) for n in mine if (out / n).is_file())
+        if fig is not None:
             attempt("figures", fig.wait)
             written.update((n, out / n) for n in theirs if (out / n).is_file())
         if rec is not None:

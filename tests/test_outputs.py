@@ -208,18 +208,20 @@ def test_child_writers_run_at_the_same_time(tmp_path):
     assert ca.wait() == a and cb.wait() == b
 
 
-def test_failed_figure_child_is_reported_and_the_rest_written(tmp_path, monkeypatch):
-    """A figure drawn in the forked figure child fails: 'figures' is reported once, every other output
-    (run.rrd, the figures drawn here, the child's figures before the failing one) is written and
-    listed; no temporary file is left."""
+@pytest.mark.parametrize("broken_fig, name", [("fig_e2", "fig3_e2.png"), ("fig_q2", "q2.png")],
+                         ids=["in-the-child", "in-the-parent"])
+def test_failed_figure_is_reported_and_the_rest_written(tmp_path, monkeypatch, broken_fig, name):
+    """A figure fails, drawn in the forked figure child or in the run's process: 'figures' is reported
+    once; every other output is written and listed (run.rrd, the other drawer's figures, the figures
+    drawn before the failing one in its own group); what metrics.json lists exists; no temporary file
+    is left."""
     from harness import api
     from harness.output import plots
 
-    def broken(traj, path):
+    def broken(*args, **kwargs):
         raise RuntimeError("drawing failed on purpose")
 
-    assert "fig3_e2.png" in api.FIGURES_IN_CHILD
-    monkeypatch.setattr(plots, "fig_e2", broken)
+    monkeypatch.setattr(plots, broken_fig, broken)
     out = tmp_path / "o"
     out.mkdir()
     scn = load_scenario(None, ["plant.kind='analytic'", "duration=0.3", "transient=0"])
@@ -228,13 +230,14 @@ def test_failed_figure_child_is_reported_and_the_rest_written(tmp_path, monkeypa
     assert "drawing failed on purpose" in res.failures[0]
     doc = json.loads((out / "metrics.json").read_text())
     assert doc["outputs_failed"] == ["figures"]
-    assert "fig3_e2.png" not in doc["outputs"] and not (out / "fig3_e2.png").exists()
-    # the parent's figures, and the child's figures drawn before the failing one, are written
-    here = [n for n in ("fig2_e1.png", "fig3_e2.png", "fig4_beta.png", "q2.png", "shapes.png")
-            if n not in api.FIGURES_IN_CHILD]
-    assert here, "the parent draws some figures"
-    for name in ("config.toml", "run.rrd", "fig2_e1.png", *here, "metrics.json"):
-        assert name in doc["outputs"], name
+    assert name not in doc["outputs"] and not (out / name).exists()
+    order = ["fig2_e1.png", "fig3_e2.png", "fig4_beta.png", "q2.png", "shapes.png"]
+    group = [n for n in order if (n in api.FIGURES_IN_CHILD) == (name in api.FIGURES_IN_CHILD)]
+    other = [n for n in order if n not in group]
+    before = group[:group.index(name)]
+    assert other, "both drawers have figures"
+    for n in ("config.toml", "run.rrd", *other, *before, "metrics.json"):
+        assert n in doc["outputs"], n
     assert all((out / n).exists() for n in doc["outputs"])
     _check_complete(out)
 
