@@ -12,10 +12,9 @@ repetitions (the machine is noisy).  Rows, all on the paper scenario (40 dB, ser
                     (plant.command + plant.advance per control step, no sensing, no controller);
                     loop and bare repetitions are interleaved
   cosserat bare+fit bare + plant.true_state (the CC fit) per step
-  mujoco CC on      harness.loop.simulate, plant.kind = "mujoco", N = 8, CC enforced (the default)
-  mujoco CC off     the same with plant.enforce_cc = false and the issue's plant bending damping
-                    (plant.slave.bending_damping = 0.01 per section; the free chain has no material
-                    damping until the MuJoCo chain uses plant.bending_viscosity)
+  mujoco default    harness.loop.simulate, plant.kind = "mujoco", N = 8: the default plant (free chain,
+                    material damping)
+  mujoco CC on      the same with plant.enforce_cc = true
 and the stepped loop's overhead: loop / bare (issue 14 asks <= 1.25).
 Prints a markdown table and writes benchmarks/RESULTS_cosserat.md (unless --no-write).
 This is a benchmark, not a test: it asserts nothing.
@@ -56,9 +55,9 @@ class _Logging:
     def reset(self, s0):
         self.plant.reset(s0)
 
-    def command(self, T1, T2, q, dq):
-        self.log.append(np.concatenate([T1, T2, q, dq]))
-        self.plant.command(T1, T2, q, dq)
+    def command(self, T1, T2, q, dq, q_sensed):
+        self.log.append(np.concatenate([T1, T2, q, dq, q_sensed]))
+        self.plant.command(T1, T2, q, dq, q_sensed)
 
     def advance(self, dt):
         return self.plant.advance(dt)
@@ -105,18 +104,20 @@ def cosserat_rows(duration: float, reps: int) -> dict:
         for c in cmds:
             if fit:
                 p.true_state(state)
-            p.command(c[0:2], c[2:8], c[8:14], c[14:20])
+            p.command(c[0:2], c[2:8], c[8:14], c[14:20], c[20:26])
             p.advance(dt)
         return time.perf_counter() - t0
 
     best = {"loop": np.inf, "bare": np.inf, "bare_fit": np.inf}
-    status, cmds = "", np.zeros((0, 20))
+    status, cmds = "", np.zeros((0, 26))
     for _ in range(reps):
         plant.log.clear()
         tr = simulate(scn, plant)
         best["loop"] = min(best["loop"], float(tr.meta["wall_time"]))
         status = tr.status if tr.status == "ok" else f"{tr.status}: {tr.message}"
         cmds = np.array(plant.log)
+        if len(cmds) != len(tr):  # the wrapper must see every command, or the comparison is void
+            raise RuntimeError(f"logged {len(cmds)} commands for {len(tr)} steps ({status})")
         best["bare"] = min(best["bare"], bare(cmds, False))
         best["bare_fit"] = min(best["bare_fit"], bare(cmds, True))
     return {"scn": scn, "status": status, "steps": len(cmds), "rod_dt": p.physics_dt,
@@ -137,16 +138,15 @@ def main() -> None:
     simulate(scenario(0.01))
     c = cosserat_rows(args.duration, args.reps)
     T = args.duration
-    mj_on, st_on = closed_loop(scenario(T), args.reps)
-    mj_off, st_off = closed_loop(scenario(T, "plant.enforce_cc=false",
-                                          "plant.slave.bending_damping=[0.01,0.01,0.01]"), args.reps)
+    mj_def, st_def = closed_loop(scenario(T), args.reps)
+    mj_on, st_on = closed_loop(scenario(T, "plant.enforce_cc=true"), args.reps)
     n = c["steps"]
     rows = [
         ("Cosserat rod, closed loop (stepped loop)", c["loop"], c["status"]),
         ("Cosserat rod, bare stepping (command + advance)", c["bare"], "-"),
         ("Cosserat rod, bare stepping + CC fit", c["bare_fit"], "-"),
+        ("MuJoCo chain N = 8, default (free, material damping), closed loop", mj_def, st_def),
         ("MuJoCo chain N = 8, CC on, closed loop", mj_on, st_on),
-        ("MuJoCo chain N = 8, CC off (c_k = 0.01), closed loop", mj_off, st_off),
     ]
     lines = [
         f"# Cosserat plant speed (`benchmarks/bench_cosserat.py --duration {T:g} --reps {args.reps}`)", "",
