@@ -45,6 +45,37 @@ def test_reset_then_sense_and_tip_match_cc():
     np.testing.assert_array_equal(plant.section_nodes, [0, 10, 20, 30])
 
 
+def _fresh_fit(plant):
+    b = plant._b
+    xz = np.ascontiguousarray(b.position_collection[[0, 2]].T)
+    vxz = np.ascontiguousarray(b.velocity_collection[[0, 2]].T)
+    q, dq = np.empty(6), np.empty(6)
+    kr.cc_fit(xz, vxz, plant.section_nodes, 16, q, dq)
+    return q, dq
+
+
+def test_cached_fit_follows_every_step_and_reset():
+    """sense() keeps its CC fit until the rod moves: after each step and each reset it equals a fresh
+    fit of the nodes, bit for bit, and it changes when the rod does."""
+    plant = CosseratSlave(SlaveParams())
+    plant.reset(Q2)
+    q_before, _ = plant.sense()
+    for _ in range(3):
+        plant.step(Q2 + np.array([0.01, 0, 0, 0.5, 0, 0]), 0.002)
+        q, dq = plant.sense()
+        fq, fdq = _fresh_fit(plant)
+        np.testing.assert_array_equal(q, fq)
+        np.testing.assert_array_equal(dq, fdq)
+    assert not np.array_equal(q, q_before)
+    q2b = np.array([0.30, 0.34, 0.38, -1.0, 2.0, -2.0])
+    plant.reset(q2b)
+    q, dq = plant.sense()
+    np.testing.assert_array_equal(q, _fresh_fit(plant)[0])
+    np.testing.assert_allclose(q, q2b, atol=1e-12)
+    q[:] = 0.0  # the caller owns what it gets: the cache is not aliased
+    np.testing.assert_allclose(plant.sense()[0], q2b, atol=1e-12)
+
+
 @pytest.mark.parametrize("law", ["analytic", "linear"])
 def test_end_couple_gives_circular_arc(law):
     p = SlaveParams(gravity=(0.0, 0.0), bending_stiffness=(3.0, 3.0, 3.0))

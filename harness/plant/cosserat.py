@@ -349,6 +349,9 @@ class CosseratSlave:
         self._objs = np.zeros((0, 6))  # environment contact (`set_contacts`, harness.plant.rod_contact)
         self._cdamp = np.zeros((0, ne + 2))
         self.f_contact = np.zeros((3, ne + 1))  # N, contact force on each node (last substep)
+        self._fit_valid = False  # `sense_into`: the CC fit of the current rod state is cached
+        self._fit_q2, self._fit_dq2 = np.zeros(6), np.zeros(6)
+        self._fit_xz, self._fit_vxz = np.zeros((ne + 1, 2)), np.zeros((ne + 1, 2))  # node X, Z and rates
         if self.stepper == "pyelastica":
             self._verlet = PositionVerlet()
             b.compute_internal_forces_and_torques = self._compute_loads  # instance override
@@ -410,7 +413,7 @@ class CosseratSlave:
     @staticmethod
     def _vec6(name: str, v) -> np.ndarray:
         a = np.asarray(v, dtype=float).ravel()
-        if a.shape != (6,) or not np.all(np.isfinite(a)):
+        if a.shape != (6,) or not np.isfinite(a).all():
             raise _err(name, v, "must be 6 finite numbers [d1, d2, d3, k1, k2, k3]")
         return a
 
@@ -423,6 +426,7 @@ class CosseratSlave:
             raise _err("q2", tuple(q2), "section lengths must be > 0")
         dq2 = np.zeros(6) if dq2 is None else self._vec6("dq2", dq2)
         b = self._b
+        self._fit_valid = False  # the rod is moved: a cached CC fit is stale
         xz, ang = self._cc(q2)
         b.position_collection[:] = 0.0
         b.position_collection[0] = xz[:, 0]
@@ -478,7 +482,7 @@ class CosseratSlave:
         if not (math.isfinite(duration) and m >= 1 and abs(m * self.dt - duration) <= tol):
             raise _err("duration", duration, f"must be a positive multiple of dt = {self.dt:.6g} s")
         if self.actuation == "servo":
-            if np.any(command[:3] <= 0):
+            if (command[:3] <= 0).any():
                 raise _err("command", tuple(command), "commanded section lengths must be > 0")
             self._set_rest(command)
             self._set_active(None if feedforward is None else self._vec6("feedforward", feedforward))
@@ -496,18 +500,30 @@ class CosseratSlave:
             for _ in range(m):
                 t = self._verlet.step_single_instance(self._b, t, np.float64(self.dt))
             ok = bool(np.all(np.isfinite(self._b.position_collection)))
+        self._fit_valid = False  # the rod has moved: a cached CC fit is stale
         self._steps += m
         self.time = self._steps * self.dt
         return bool(ok)
 
     def sense(self) -> tuple[np.ndarray, np.ndarray]:
         """(q2, dq2): least-squares CC fit of each section's nodes and its first-order rates."""
-        b = self._b
-        xz = np.ascontiguousarray(b.position_collection[[0, 2]].T)
-        vxz = np.ascontiguousarray(b.velocity_collection[[0, 2]].T)
         q2, dq2 = np.empty(6), np.empty(6)
-        kr.cc_fit(xz, vxz, self.section_nodes, FIT_ITERATIONS, q2, dq2)
+        self.sense_into(q2, dq2)
         return q2, dq2
+
+    def sense_into(self, q2: np.ndarray, dq2: np.ndarray) -> None:
+        """`sense` into q2, dq2 (6,).  The fit is kept until the rod moves (`step`, `reset`): the plant's
+        sensing and the servo feed-forward of the next step fit the same state once, not twice."""
+        if not self._fit_valid:
+            b, xz, vxz = self._b, self._fit_xz, self._fit_vxz
+            xz[:, 0] = b.position_collection[0]
+            xz[:, 1] = b.position_collection[2]
+            vxz[:, 0] = b.velocity_collection[0]
+            vxz[:, 1] = b.velocity_collection[2]
+            kr.cc_fit(xz, vxz, self.section_nodes, FIT_ITERATIONS, self._fit_q2, self._fit_dq2)
+            self._fit_valid = True
+        q2[:] = self._fit_q2
+        dq2[:] = self._fit_dq2
 
     def tip(self) -> np.ndarray:
         """Tip node [X, Z] (2,), m."""

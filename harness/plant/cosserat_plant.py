@@ -36,9 +36,8 @@ from numba import njit
 from controllers import master as master_model
 from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
-from harness.plant import cosserat_rod as kr
 from harness.plant import rod_contact
-from harness.plant.cosserat import FIT_ITERATIONS, CosseratSlave, stable_dt
+from harness.plant.cosserat import CosseratSlave, stable_dt
 from harness.plant.initial import InitialStateError, initial_state
 
 MASTER_BASE = np.array([0.0, -0.3, 0.0])  # m, world (as mjcf/master.xml)
@@ -172,8 +171,6 @@ class CosseratPlant:
                      "master": np.zeros((3, 3))}
         self._q2 = np.zeros(6)
         self._dq2 = np.zeros(6)
-        self._xz = np.zeros((nn, 2))
-        self._vxz = np.zeros((nn, 2))
         self._dist = np.zeros(nn)
         self._objs, cdamp = rod_contact.contact_arrays(scn.environment, self.slave._b.mass)
         if scn.environment.objects:
@@ -228,12 +225,7 @@ class CosseratPlant:
 
     def true_state(self, out: np.ndarray) -> None:
         out[0:4] = self._m
-        b = self.slave._b
-        self._xz[:, 0] = b.position_collection[0]
-        self._xz[:, 1] = b.position_collection[2]
-        self._vxz[:, 0] = b.velocity_collection[0]
-        self._vxz[:, 1] = b.velocity_collection[2]
-        kr.cc_fit(self._xz, self._vxz, self.slave.section_nodes, FIT_ITERATIONS, self._q2, self._dq2)
+        self.slave.sense_into(self._q2, self._dq2)  # CC fit, shared with the servo feed-forward
         out[4:10] = self._q2
         out[10:16] = self._dq2
 
