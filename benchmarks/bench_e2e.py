@@ -56,7 +56,7 @@ import harness.cli as cli
 from harness import api
 import harness.loop as loop_pkg
 import harness.output.prefetch as prefetch
-stamps = {"imported": time.perf_counter() - t_start}
+stamps = {"imported": time.perf_counter() - t_start, "pid": os.getpid()}
 TIMES = os.environ["BENCH_E2E_TIMES"]
 
 def rel():
@@ -103,12 +103,12 @@ def run_scenario(scn, *a, **k):
     info["failures"] = res.failures
     return res
 api.run_scenario = run_scenario
-import gc
-gc.set_threshold(*cli.GC_THRESHOLDS)  # as `teleop` does (harness.cli.entry)
+from harness.config import runtime
+runtime.set_gc_thresholds()  # as `teleop` does (harness.cli.entry)
 rc = cli.main(sys.argv[1:])
 stamps["end"] = rel()
 print("E2E-JSON " + json.dumps({"rc": rc, "stamps": stamps, **info}))
-cli.fast_exit(rc)  # as `teleop` does (harness.cli.entry)
+runtime.fast_exit(rc)  # as `teleop` does (harness.cli.entry)
 """
 
 
@@ -168,7 +168,7 @@ def _split(d: dict) -> dict:
         dur = w["t1"] - w["t0"]
         if w["key"] == "recording":
             x["recording"] = dur
-        elif any(n in ("q2.png", "shapes.png") for n in w["names"]):  # api.FIGURES_IN_CHILD: the others
+        elif w["pid"] == st["pid"]:  # drawn by the run's process, the other group by the figure child
             x["figures_parent"] = dur
         else:
             x["figures_child"] = dur
@@ -239,7 +239,7 @@ from harness.studies.sweep import run_sweep
 res = run_sweep(json.loads(sys.argv[1]), out=sys.argv[2], workers=int(sys.argv[3]), progress=False)
 print("SWEEP-JSON " + json.dumps({"in_process": time.perf_counter() - t0, "n": len(res.rows),
                                   "statuses": res.counts()}))
-from harness.cli import fast_exit
+from harness.config.runtime import fast_exit
 fast_exit(0)  # as `teleop sweep` does (harness.cli.entry)
 """
 

@@ -18,12 +18,9 @@ The simulation back ends are imported lazily so that ``--help`` and input valida
 from __future__ import annotations
 
 import argparse
-import atexit
 import contextlib
-import gc
 import importlib
 import json
-import os
 import sys
 import threading
 from collections.abc import Sequence
@@ -34,6 +31,7 @@ from controllers.params import ParameterError
 from harness.cli.parser import EXIT_FAIL, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, build_parser
 from harness.cli.parser import one_line as _one_line
 from harness.config.errors import ConfigError
+from harness.config.runtime import fast_exit, set_gc_thresholds
 from harness.config.textio import jsonable, prepare_out_dir
 
 # (module, attribute) of exception types that mean "invalid input" (exit 2).  Looked up in
@@ -356,31 +354,8 @@ if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())
 
 
-# Python's garbage collector in a command's process: a run imports hundreds of thousands of long-lived
-# objects (numba, MuJoCo, Rerun, matplotlib) and each full collection traverses all of them.  With the
-# default thresholds (700, 10, 10) a `teleop run` spent 0.46-0.51 s in 3 full and ~490 young
-# collections; with these, 0.13-0.18 s in ~34 young ones (benchmarks/RESULTS.md).  Reference cycles are
-# still collected, just in larger batches.
-GC_THRESHOLDS = (10_000, 50, 50)
-
-
 def entry() -> NoReturn:
     """The `teleop` command (console script and `python -m harness.cli`): `main()` with the collector
-    thresholds GC_THRESHOLDS, then `fast_exit`."""
-    gc.set_threshold(*GC_THRESHOLDS)
+    thresholds `harness.config.runtime.GC_THRESHOLDS`, then `fast_exit` (atexit handlers, no teardown)."""
+    set_gc_thresholds()
     fast_exit(main())
-
-
-def fast_exit(rc: int) -> NoReturn:
-    """Run the atexit handlers (Rerun's shutdown, multiprocessing, logging), flush stdout/stderr and end
-    the process with `os._exit(rc)`, skipping the interpreter's module teardown and final garbage
-    collection: with numba, MuJoCo, Rerun and matplotlib loaded that teardown takes about 1 s and
-    writes nothing (measured: benchmarks/bench_e2e.py, "rest").  Every output file is complete and
-    closed before a command returns."""
-    try:
-        atexit._run_exitfuncs()  # CPython's own exit step (the module has had it since Python 2)
-    finally:
-        for stream in (sys.stdout, sys.stderr):
-            with contextlib.suppress(Exception):
-                stream.flush()
-        os._exit(rc)

@@ -256,10 +256,12 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
             ctrl[c_act[c]] = use[2 + c]
         for s in range(substeps):
             if apply1:  # operator's grip (+ constant F1) on the master handle, J1^T F1
-                master_tip_state(mpk_p, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1)
+                if s > 0 or not op_on:  # at s = 0 with the operator: J1 and F1op are the step's own
+                    master_tip_state(mpk_p, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1)
+                    if op_on:
+                        operator_force(op, hand, xm, vm, F1op)
                 if op_on:
                     operator_target(targets, t + s * hphys, target)
-                    operator_force(op, hand, xm, vm, F1op)
                     operator_advance(op, hand, target, F1op, hphys)
                 for i in range(2):
                     qfrc[m_dadr[i]] = (J1[0, i] * (Fconst[0] + F1op[0])

@@ -127,6 +127,19 @@ def chain_force_from_T2(q2, T2, R, out):
         out[c] = acc
 
 
+def chain_extension(qpos_chain, R, section, is_hinge, e, sq):
+    """Section extensions e (3,) = R[:3] qpos_chain (m) and, per section, the sum of its squared hinge
+    angles sq (3,) (rad^2): what the chain's elastic energy and its gradient are built from."""
+    e[:] = 0.0
+    sq[:] = 0.0
+    for c in range(R.shape[1]):
+        q = qpos_chain[c]
+        for i in range(3):
+            e[i] += R[i, c] * q
+        if is_hinge[c] == 1:
+            sq[section[c]] += q * q
+
+
 def chain_elastic_correction(qpos_chain, R, C, L0, section, is_hinge, seg_kb, ke, k_joint, k_shape, out):
     """Generalized elastic force to ADD (through qfrc_applied) to MuJoCo's own joint springs, out (n_chain,).
 
@@ -152,14 +165,9 @@ def chain_elastic_correction(qpos_chain, R, C, L0, section, is_hinge, seg_kb, ke
     (springref 0); k_shape (n,) (0 on hinges); out (n,).
     """
     n = R.shape[1]
-    e = np.zeros(3)
-    sq = np.zeros(3)
-    for c in range(n):
-        q = qpos_chain[c]
-        for i in range(3):
-            e[i] += R[i, c] * q
-        if is_hinge[c] == 1:
-            sq[section[c]] += q * q
+    e = np.empty(3)
+    sq = np.empty(3)
+    chain_extension(qpos_chain, R, section, is_hinge, e, sq)
     dEdd = np.empty(3)
     dinv = np.empty(3)
     for i in range(3):
@@ -193,14 +201,9 @@ def chain_elastic_correction(qpos_chain, R, C, L0, section, is_hinge, seg_kb, ke
 def chain_elastic_energy(qpos_chain, R, C, L0, section, is_hinge, seg_kb, ke, k_shape):
     """The energy E (J) whose negative gradient ``chain_elastic_correction`` completes (see there)."""
     n = R.shape[1]
-    e = np.zeros(3)
-    sq = np.zeros(3)
-    for c in range(n):
-        q = qpos_chain[c]
-        for i in range(3):
-            e[i] += R[i, c] * q
-        if is_hinge[c] == 1:
-            sq[section[c]] += q * q
+    e = np.empty(3)
+    sq = np.empty(3)
+    chain_extension(qpos_chain, R, section, is_hinge, e, sq)
     E = 0.0
     for i in range(3):
         E += 0.5 * seg_kb[i] * sq[i] / (L0[i] + e[i]) + 0.5 * ke[i] * e[i] * e[i]
@@ -406,4 +409,5 @@ class ChainMap:
 
 # kernels compiled by harness.loop.fast (numba) together with controllers/
 KERNELS = ("chain_joints_from_q2", "chain_joints_jacobian", "chain_joints_rate_add", "chain_q2_from_joints",
-           "chain_sense", "chain_force_from_T2", "chain_elastic_correction", "chain_elastic_energy")
+           "chain_sense", "chain_force_from_T2", "chain_extension", "chain_elastic_correction",
+           "chain_elastic_energy")

@@ -8,14 +8,11 @@ from __future__ import annotations
 
 import atexit
 import concurrent.futures as cf
-import contextlib
-import gc
 import logging
 import math
 import multiprocessing
 import os
 import signal
-import sys
 import tempfile
 import threading
 import time
@@ -25,6 +22,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from harness.config.errors import ConfigError
+from harness.config.runtime import end_process, set_gc_thresholds
 from harness.config.textio import jsonable
 from harness.studies.study import Case
 
@@ -86,26 +84,14 @@ def _watch_parent(parent: int) -> None:
             os._exit(70)
 
 
-def _fast_exit() -> None:
-    """Last step of a pool worker (registered last, so the first atexit handler to run): end the
-    process without the interpreter's module teardown (~0.7 s with numba and MuJoCo loaded, during
-    which the pool's shutdown, i.e. the sweep, waits).  Results have all been sent by then."""
-    for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(Exception):
-            stream.flush()
-    os._exit(0)
-
-
-# fewer garbage collections in a worker, which imports numba and MuJoCo in its first case (the same
-# reasoning and figures as harness.cli.GC_THRESHOLDS)
-WORKER_GC_THRESHOLDS = (10_000, 50, 50)
-
-
 def _worker_init() -> None:
     # Ctrl-C reaches the whole process group: only the parent reacts (it cancels and stops us).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    atexit.register(_fast_exit)
-    gc.set_threshold(*WORKER_GC_THRESHOLDS)
+    # registered last, so run first at exit: the worker ends without the interpreter's teardown (~0.7 s
+    # with numba and MuJoCo loaded, which the pool's shutdown, i.e. the sweep, would wait for); every
+    # result has been sent by then
+    atexit.register(end_process, 0)
+    set_gc_thresholds()  # fewer collections while the first case imports numba and MuJoCo
     # A killed main process cannot stop its pool: each worker ends itself within PARENT_POLL s.
     threading.Thread(target=_watch_parent, args=(os.getppid(),), name="parent-watchdog", daemon=True).start()
 

@@ -1,0 +1,45 @@
+"""Process-level settings shared by the `teleop` command and the sweep's pool workers: the garbage
+collector's thresholds and the fast end of a process.  Nothing here knows of plants or runs."""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import gc
+import os
+import sys
+from typing import NoReturn
+
+# Python's garbage collector in a command's or worker's process: a run imports hundreds of thousands
+# of long-lived objects (numba, MuJoCo, Rerun, matplotlib) and each full collection traverses all of
+# them.  With the default thresholds (700, 10, 10) a `teleop run` spent 0.46-0.51 s in 3 full and ~490
+# young collections; with these, 0.13-0.18 s in ~34 young ones (benchmarks/RESULTS.md).  Reference
+# cycles are still collected, just in larger batches.
+GC_THRESHOLDS = (10_000, 50, 50)
+
+
+def set_gc_thresholds() -> None:
+    """Apply GC_THRESHOLDS to this process."""
+    gc.set_threshold(*GC_THRESHOLDS)
+
+
+def end_process(rc: int) -> NoReturn:
+    """Flush stdout/stderr and end the process with `os._exit(rc)`, skipping the interpreter's module
+    teardown and final garbage collection: with numba, MuJoCo, Rerun and matplotlib loaded that teardown
+    takes about 1 s and writes nothing (benchmarks/RESULTS.md).  Callers make sure every file they
+    wrote is complete and closed first."""
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(rc)
+
+
+def fast_exit(rc: int) -> NoReturn:
+    """Run the atexit handlers (Rerun's shutdown, multiprocessing, logging), then `end_process(rc)`."""
+    try:
+        atexit._run_exitfuncs()  # CPython's own exit step (the module has had it since Python 2)
+    finally:
+        end_process(rc)
+
+
+__all__ = ["GC_THRESHOLDS", "end_process", "fast_exit", "set_gc_thresholds"]
