@@ -11,6 +11,7 @@ import numpy as np
 
 from controllers import master as master_model
 from harness.config.scenario import Scenario
+from harness.loop.aot import A
 from harness.loop.common import (
     CHUNK,
     STOP,
@@ -21,7 +22,6 @@ from harness.loop.common import (
     run_meta,
     set_outcome,
 )
-from harness.loop.fast import K
 from harness.loop.trajectory import ROW_SLICES, ROW_WIDTH, Trajectory
 from harness.plant.analytic import AnalyticPlant
 
@@ -54,7 +54,7 @@ def simulate_analytic(scn: Scenario, progress: bool = False,
     try:
         while k < n:
             k1 = min(n, k + CHUNK)
-            status, m = K.analytic_chunk(state, k, k1, scn.control_dt, nsub, scn.continuous_control,
+            status, m = A.analytic_chunk(state, k, k1, scn.control_dt, nsub, scn.continuous_control,
                                          a["traj"], noise, scale, Fc, a["F"], a["mpk_c"], a["spk_c"], mpk_p,
                                          spk_p, a["nodes"], a["weights"], a["gains"], a["spec"], rows[k:k1])
             done = k + m

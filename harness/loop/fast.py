@@ -43,6 +43,33 @@ def _extra_modules():
     return mods
 
 
+def cache_root() -> Path:
+    """Root folder of the compiled kernels: $TELEOP_CACHE_DIR, else $XDG_CACHE_HOME/octarm-teleop, else
+    ~/.cache/octarm-teleop."""
+    root = os.environ.get("TELEOP_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.join(Path.home(), ".cache"), "octarm-teleop")
+    return Path(root)
+
+
+@cache
+def source_digest() -> str:
+    """16 hex digits of a hash of every kernel module's source and the numba, numpy and Python versions
+    (read without importing numba): the cache folders' key, so a code change never runs stale code."""
+    import sys
+    from importlib.metadata import PackageNotFoundError, version
+
+    import numpy
+
+    try:
+        nb = version("numba")
+    except PackageNotFoundError:  # pragma: no cover - numba missing: nothing is compiled
+        nb = "none"
+    h = hashlib.sha256(f"{nb} {numpy.__version__} {sys.version} {sys.platform}".encode())
+    for mod in MODULES + _extra_modules():
+        h.update(inspect.getsource(mod).encode())
+    return h.hexdigest()[:16]
+
+
 @cache
 def kernels(jit: bool | None = None) -> types.SimpleNamespace:
     """Namespace of kernels, compiled with numba unless jit is False (or TELEOP_NO_JIT=1)."""
@@ -58,14 +85,12 @@ def kernels(jit: bool | None = None) -> types.SimpleNamespace:
     if not jit:
         return types.SimpleNamespace(**names)
     import numba
-    import numpy
 
-    h = hashlib.sha256(f"{numba.__version__} {numpy.__version__}".encode())
     for mod in mods:
-        h.update(inspect.getsource(mod).encode())
-    root = os.environ.get("TELEOP_CACHE_DIR") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME") or os.path.join(Path.home(), ".cache"), "octarm-teleop")
-    numba.config.CACHE_DIR = os.path.join(root, "numba-" + h.hexdigest()[:16])
+        register = getattr(mod, "register_numba_extensions", None)
+        if register is not None:
+            register()
+    numba.config.CACHE_DIR = str(cache_root() / ("numba-" + source_digest()))
 
     ns: dict[str, object] = {}
     for mod in mods:

@@ -65,7 +65,16 @@ def mj_call(fn, mptr, dptr):
     ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p)(int(fn))(mptr, dptr)
 
 
-try:  # compiled form of mj_call (numba is optional: without it the kernels run interpreted)
+_registered = False
+
+
+def register_numba_extensions() -> None:
+    """The compiled form of mj_call (called by `harness.loop.fast.kernels` before compiling: importing
+    this module does not import numba)."""
+    global _registered
+    if _registered:
+        return
+    _registered = True
     from llvmlite import ir as _ir
     from numba import types as _nbt
     from numba.extending import intrinsic as _intrinsic
@@ -90,8 +99,6 @@ try:  # compiled form of mj_call (numba is optional: without it the kernels run 
             _mj_call_ptr(fn, mptr, dptr)
 
         return impl
-except ImportError:  # pragma: no cover
-    pass
 
 
 def sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state):

@@ -27,6 +27,7 @@ import mujoco
 import numpy as np
 
 from harness.config.scenario import Scenario
+from harness.loop.aot import A
 from harness.loop.common import (
     STOP,
     common_arrays,
@@ -36,7 +37,6 @@ from harness.loop.common import (
     run_meta,
     set_outcome,
 )
-from harness.loop.fast import K
 from harness.loop.force_args import ForceArgs
 from harness.loop.mujoco_kernels import MJ_FUNCS
 from harness.loop.trajectory import ROW_WIDTH, Trajectory
@@ -121,7 +121,7 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     warned: dict[str, int] = {}
     wnum = d.warning.number  # view of MuJoCo's warning counters, checked by the kernel after each mj_step
     def chunk(k: int, k1: int):
-        return K.mujoco_chunk(
+        return A.mujoco_chunk(
             m._address, d._address, MJ_FUNCS, k, k1, sub, scn.control_dt, d.qpos, d.qvel, d.ctrl,
             d.qfrc_applied, cmap.master_qpos_adr, cmap.master_dof_adr, cmap.master_actuator_ids,
             cmap.chain_qpos_adr, cmap.chain_dof_adr, cmap.chain_actuator_ids, cmap.R, cmap.C, cmap.L0,
@@ -240,7 +240,7 @@ class _Geometry:
 
     def finish(self, m: mujoco.MjModel, done: int) -> None:
         if not self.live:
-            K.kinematics_replay(m._address, self.d._address, MJ_FUNCS, self.d.qpos, self.qpos_hist[:done],
+            A.kinematics_replay(m._address, self.d._address, MJ_FUNCS, self.d.qpos, self.qpos_hist[:done],
                                 self.inputs, self.outputs_all(done))
 
     def outputs_all(self, done: int) -> tuple:
@@ -259,7 +259,7 @@ def _plant_geometry(m: mujoco.MjModel, cmap: ChainMap, geo: _Geometry, done: int
     traj.master_pos = master_pos
     # analytic backbone of the sensed q2, in world coordinates (for the overlay)
     bb = np.zeros((done, 3 * BACKBONE_POINTS + 1, 3))
-    K.backbone_world(np.ascontiguousarray(traj.q2, dtype=float), BACKBONE_POINTS, base, bb)
+    A.backbone_world(np.ascontiguousarray(traj.q2, dtype=float), BACKBONE_POINTS, base, bb)
     return {
         "master_base": tuple(float(v) for v in cmap.master_base_pos),
         "slave_base": tuple(float(v) for v in base),
