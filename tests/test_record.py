@@ -297,3 +297,25 @@ def test_real_mujoco_run_round_trips(tmp_path):
                                   np.asarray(traj.meta["backbone"]).astype(np.float32))
     r = _cli("verify", str(path))
     assert r.returncode == 0, r.stdout + r.stderr
+
+
+@pytest.mark.parametrize("nan_rows", [0, 3])
+def test_scene_bounds_equal_the_finite_points_extent(synthetic_trajectory, nan_rows):
+    """The framed 3-D view's bounds (per-part column reductions, no concatenation) equal the extent of
+    every finite point, padded, also when a diverged run left non-finite rows."""
+    from harness.output.geometry import backbone_points_world, task_to_world, world_base
+    from harness.output.scene import box_half_size, scene_bounds
+
+    traj = synthetic_trajectory(300, nan_tail=nan_rows)
+    meta = traj.meta
+    mb, sb = world_base(meta, "master_base"), world_base(meta, "slave_base")
+    x2 = traj.x2_plant if traj.x2_plant is not None else traj.x2
+    parts = [mb[None], sb[None], np.asarray(traj.master_pos).reshape(-1, 3), task_to_world(x2, sb),
+             task_to_world(traj.xd, mb), task_to_world(traj.xd, sb), np.asarray(traj.body_pos).reshape(-1, 3),
+             backbone_points_world(traj, sb).reshape(-1, 3)]
+    pts = np.concatenate([p.reshape(-1, 3) for p in parts])
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    pad = max(0.02, float(np.max(box_half_size(np.asarray(traj.body_pos), meta))))
+    lo, hi = scene_bounds(traj)
+    np.testing.assert_array_equal(lo, pts.min(axis=0) - pad)
+    np.testing.assert_array_equal(hi, pts.max(axis=0) + pad)

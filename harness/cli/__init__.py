@@ -21,6 +21,7 @@ import argparse
 import contextlib
 import importlib
 import json
+import os
 import sys
 import threading
 from collections.abc import Sequence
@@ -356,6 +357,9 @@ if __name__ == "__main__":  # pragma: no cover
 
 def entry() -> NoReturn:
     """The `teleop` command (console script and `python -m harness.cli`): `main()` with the collector
-    thresholds `harness.config.runtime.GC_THRESHOLDS`, then `fast_exit` (atexit handlers, no teardown)."""
+    thresholds `harness.config.runtime.GC_THRESHOLDS`, then `fast_exit` (atexit handlers, no teardown).
+    MuJoCo's OpenGL rendering is off unless MUJOCO_GL says otherwise: the harness draws with Rerun and
+    matplotlib, and `import mujoco` skips looking for GLFW (~0.1 s)."""
+    os.environ.setdefault("MUJOCO_GL", "disable")
     set_gc_thresholds()
     fast_exit(main())

@@ -48,29 +48,48 @@ def _finite(points: np.ndarray, dim: int) -> np.ndarray:
     return p[np.isfinite(p).all(axis=1)]
 
 
+def _finite_extent(points, dim: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """(lo (dim,), hi (dim,)) of the points whose coordinates are all finite, None if there is none.
+    Same numbers as `_finite(points).min/max`, without copying the points when all are finite (the
+    usual case: the 20-s paper run has 1.5 M body positions and as many backbone points)."""
+    p = np.asarray(points, dtype=float).reshape(-1, dim)
+    if not len(p):
+        return None
+    # per column: 10x faster than p.min(axis=0) on an (n, 3) array (numpy reduces 3-wide rows slowly)
+    lo = np.array([p[:, i].min() for i in range(dim)])
+    hi = np.array([p[:, i].max() for i in range(dim)])
+    if not (np.isfinite(lo).all() and np.isfinite(hi).all()):  # a NaN or inf somewhere: drop those rows
+        p = _finite(p, dim)
+        if not len(p):
+            return None
+        lo, hi = p.min(axis=0), p.max(axis=0)
+    return lo, hi
+
+
 def scene_bounds(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     """World bounding box (lo (3,), hi (3,)) of both arms over the whole run: bases, master base-elbow-tip,
     slave bodies (padded by their box half-size), backbone, tips and the desired paths."""
     meta = traj.meta or {}
     mb, sb = world_base(meta, "master_base"), world_base(meta, "slave_base")
-    parts = [mb[None], sb[None]]
+    parts = [mb, sb]
     pad = 0.02  # the base markers' radius
     if len(traj):
         if traj.master_pos is not None:
-            parts.append(_finite(traj.master_pos, 3))
+            parts.append(traj.master_pos)
         else:
-            parts.append(_finite(master_points(traj.q1, meta.get("master_lengths", DEFAULT_MASTER_LENGTHS),
-                                               mb), 3))
+            parts.append(master_points(traj.q1, meta.get("master_lengths", DEFAULT_MASTER_LENGTHS), mb))
         x2 = traj.x2_plant if traj.x2_plant is not None else traj.x2
-        parts.append(_finite(task_to_world(np.asarray(x2, dtype=float), sb), 3))
+        parts.append(task_to_world(np.asarray(x2, dtype=float), sb))
         for base in (mb, sb):
-            parts.append(_finite(task_to_world(np.asarray(traj.xd, dtype=float), base), 3))
+            parts.append(task_to_world(np.asarray(traj.xd, dtype=float), base))
         if traj.body_pos is not None and np.asarray(traj.body_pos).size:
-            parts.append(_finite(traj.body_pos, 3))
+            parts.append(traj.body_pos)
             pad = max(pad, float(np.max(box_half_size(np.asarray(traj.body_pos), meta))))
-        parts.append(_finite(backbone_points_world(traj, sb), 3))
-    pts = np.concatenate(parts, axis=0)
-    return pts.min(axis=0) - pad, pts.max(axis=0) + pad
+        parts.append(backbone_points_world(traj, sb))
+    ext = [e for e in (_finite_extent(p, 3) for p in parts) if e is not None]
+    lo = np.min([e[0] for e in ext], axis=0)
+    hi = np.max([e[1] for e in ext], axis=0)
+    return lo - pad, hi + pad
 
 
 def frame_eye(traj: Trajectory) -> rrb.EyeControls3D:
