@@ -6,7 +6,8 @@
 Reports, in one run:
   run     `teleop run` of the scenario with every output, in a fresh process (python -m harness.cli),
           wall time split into start-up (interpreter, imports, scenario validation, config.toml),
-          simulate (plant build + numba kernel load + loop + recording geometry), of which the loop,
+          simulate (plant build + kernel load: the ahead-of-time module, harness.loop.aot, + loop + recording
+          geometry), of which the loop,
           metrics, the wait for the rerun/matplotlib imports that run in a thread during simulate,
           the outputs (run.rrd in a forked child, the figures split between a second child and the
           process, at the same time; each writer's own wall time is given) and the rest; against raw
@@ -144,7 +145,7 @@ KEYS = ["total", "raw", "startup", "simulate", "loop", "metrics", "prefetch", "p
         "recording", "figures_child", "figures_parent", "rest"]
 LABELS = {"total": "**total (fresh process)**", "raw": "raw mj_step, same physics steps",
           "startup": "start-up: interpreter, imports, scenario validation, config.toml",
-          "simulate": "simulate: plant build, numba kernel load, loop, recording geometry",
+          "simulate": "simulate: plant build, kernel load, loop, recording geometry",
           "loop": "&nbsp;&nbsp;of which the loop",
           "metrics": "metrics",
           "prefetch": "(rerun + matplotlib imports, in a thread during simulate)",

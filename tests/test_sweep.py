@@ -75,6 +75,17 @@ def slow_stub(case: dict) -> dict:
     return stub_case(case)
 
 
+WARM_ENV = "SWEEP_TEST_WARM"
+
+
+def warm_probe(case: dict) -> dict:
+    """Logs its pid and whether the case found the loop modules already imported (a forked worker
+    inherits them from the parent; a spawned one starts without them), then acts as stub_case."""
+    with open(os.environ[WARM_ENV], "a") as fh:
+        fh.write(f"{os.getpid()} {int('harness.loop.mujoco_loop' in sys.modules)}\n")
+    return stub_case(case)
+
+
 # --- helpers ---------------------------------------------------------------------------------------
 def study(factors: list[dict], sampling: dict | None = None, **st) -> dict:
     doc = {"study": {"name": "t", "metrics": METRICS, **st}, "factor": factors}
@@ -505,3 +516,35 @@ def test_fuzz_study_loader():
 
     random_tables()
     mutated()
+
+
+_WARM_SCRIPT = """
+import sys, threading, json
+sys.path.insert(0, sys.argv[1])
+import test_sweep as t
+from harness.studies.sweep import run_sweep
+if sys.argv[3] == "thread":  # another Python thread alive: the pool must not fork
+    threading.Thread(target=threading.Event().wait, daemon=True).start()
+res = run_sweep(t.study([t.MASS]), out=sys.argv[2], workers=2, progress=False, case_fn=t.warm_probe)
+print(json.dumps({k: v["metrics"] for k, v in sorted(res.rows.items())}))
+"""
+
+
+@pytest.mark.parametrize("threads, warm", [("none", 1), ("thread", 0)])
+def test_workers_are_forked_warm_only_from_a_single_threaded_process(tmp_path, threads, warm):
+    """A sweep started from a process without other threads forks its workers after importing the loop
+    (they start without interpreter start-up or imports); beside another thread it spawns them.  The
+    rows are the same either way."""
+    log = tmp_path / "warm.txt"
+    env = {**os.environ, WARM_ENV: str(log), "PYTHONPATH": str(ROOT)}
+    out = subprocess.run([sys.executable, "-c", _WARM_SCRIPT, str(ROOT / "tests"), str(tmp_path / "o"),
+                          threads], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
+    assert out.returncode == 0, out.stderr
+    lines = [line.split() for line in log.read_text().splitlines()]
+    assert len(lines) == 5 and {w for _, w in lines} == {str(warm)}
+    assert 1 <= len({pid for pid, _ in lines}) <= 2  # the two workers, not the parent
+    rows = json.loads(out.stdout.splitlines()[-1])
+    expected = {c.case_id: stub_case({"case_id": c.case_id, "scenario": c.scenario, "metrics": METRICS,
+                                      "record": False})["metrics"]
+                for c in expand_cases(load_study(study([MASS])))}
+    assert rows == expected

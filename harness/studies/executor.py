@@ -8,11 +8,13 @@ from __future__ import annotations
 
 import atexit
 import concurrent.futures as cf
+import importlib
 import logging
 import math
 import multiprocessing
 import os
 import signal
+import sys
 import tempfile
 import threading
 import time
@@ -87,6 +89,8 @@ def _watch_parent(parent: int) -> None:
 def _worker_init() -> None:
     # Ctrl-C reaches the whole process group: only the parent reacts (it cancels and stops us).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # a forked worker inherits the parent's SIGTERM handler (the sweep's clean stop): not ours
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     # registered last, so run first at exit: the worker ends without the interpreter's teardown (~0.7 s
     # with numba and MuJoCo loaded, which the pool's shutdown, i.e. the sweep, would wait for); every
     # result has been sent by then
@@ -140,6 +144,19 @@ class Runner:
                 raise ConfigError(f"{where}: the scheduler has no worker (none joined within "
                                   f"{CONNECT_TIMEOUT:g} s)", path="scheduler") from None
 
+    def start(self) -> None:
+        """Start the process pool's workers now (no-op for Dask or a started pool): called by the sweep
+        before it starts threads of its own (progress bar, imports), so that the workers can be forked
+        (see `_process_pool`)."""
+        if self.scheduler or self._ex is not None:
+            return
+        ex = self.executor()
+        for _ in range(self.workers):
+            try:  # a fork pool forks every worker at its first submit; spawn: one per submit
+                ex.submit(_probe)
+            except cf.BrokenExecutor:  # a worker died already: run_cases replaces the pool
+                return
+
     def executor(self) -> cf.Executor:
         if self._ex is None:
             if self.scheduler:
@@ -161,10 +178,29 @@ class Runner:
             self._client = None
 
 
+# modules a case needs, imported by the parent before it forks its workers (they then start with them)
+WARM_MODULES = ("harness.loop", "harness.loop.mujoco_loop", "harness.loop.analytic_loop",
+                "harness.loop.metrics", "harness.plant")
+
+
+def start_method() -> str:
+    """How pool workers start: "fork" on Linux when this process runs no other Python thread (the
+    workers inherit the imported harness, numpy and MuJoCo: no interpreter start-up, no imports, about
+    1 s less per worker on the reference machine, `benchmarks/bench_e2e.py`); else "spawn" (fresh
+    interpreters: safe beside threads, and unlike "forkserver" they see the current environment)."""
+    if sys.platform.startswith("linux") and threading.active_count() == 1:
+        return "fork"
+    return "spawn"
+
+
 def _process_pool(workers: int) -> cf.ProcessPoolExecutor:
-    # "spawn": fresh interpreters (safe with the parent's threads), and unlike "forkserver" they see
-    # the parent's current environment, not the one of whenever a fork server was started.
-    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+    method = start_method()
+    if method == "fork":
+        for name in WARM_MODULES:
+            importlib.import_module(name)
+        sys.stdout.flush()  # a forked worker flushes its copy of unwritten output when it ends
+        sys.stderr.flush()
+    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method),
                                   initializer=_worker_init)
 
 

@@ -93,4 +93,10 @@ class OutputLock:
             raise ConfigError(f"{out} is in use by another sweep") from None
 
     def release(self) -> None:
+        try:  # explicitly: a forked worker still holding the descriptor must not keep the lock
+            import fcntl
+
+            fcntl.flock(self._fh, fcntl.LOCK_UN)
+        except (ImportError, OSError, ValueError):
+            pass
         self._fh.close()

@@ -171,6 +171,8 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
         log.info("study %s: %d cases, %d already done, %d to run%s", study.name, len(cases), result.skipped,
                  len(todo), f" ({extra} rows of other cases in the table)" if extra else "")
         writer = ResultsWriter(table)
+        if todo:
+            runner.start()  # before this process starts threads (bar, imports): the workers can be forked
         bar = tqdm(total=len(cases), initial=result.skipped, desc=study.name, unit="case",
                    disable=not progress or not todo, file=sys.stderr)
 
