@@ -59,20 +59,8 @@ class _Logging:
         self.log.append(np.concatenate([T1, T2, q, dq, q_sensed]))
         self.plant.command(T1, T2, q, dq, q_sensed)
 
-    def advance(self, dt):
-        return self.plant.advance(dt)
-
-    def true_state(self, out):
-        self.plant.true_state(out)
-
-    def slave_tip(self):
-        return self.plant.slave_tip()
-
-    def geometry(self):
-        return self.plant.geometry()
-
-    def meta(self):
-        return self.plant.meta()
+    def __getattr__(self, name):  # everything else is the plant's own (advance, true_state, record, ...)
+        return getattr(self.plant, name)
 
 
 def scenario(duration: float, *extra: str):

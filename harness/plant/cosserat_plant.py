@@ -98,6 +98,21 @@ def master_rk4(mpk, s, T1, F1, h, nsub):
     return True
 
 
+@njit(cache=True)
+def master_points(m, l1, l2, base, out):
+    """Master base, elbow and tip (n, 3, 3), world frame, m, of the master states m (n, 4) [q1, dq1]
+    (links l1, l2, m; base (3,)); the arithmetic of `CosseratPlant.geometry`, step by step."""
+    for k in range(m.shape[0]):
+        q0, q1 = m[k, 0], m[k, 1]
+        for i in range(3):
+            for j in range(3):
+                out[k, i, j] = base[j]
+        out[k, 1, 0] += l1 * math.sin(q0)
+        out[k, 1, 2] += l1 * math.cos(q0)
+        out[k, 2, 0] = out[k, 1, 0] + l2 * math.sin(q0 + q1)
+        out[k, 2, 2] = out[k, 1, 2] + l2 * math.cos(q0 + q1)
+
+
 def _field_of(msg: str, scn: Scenario) -> str:
     """Scenario field names for CosseratSlave's messages."""
     slave = "plant.slave." if scn.plant.slave is not None else "slave."
@@ -171,6 +186,10 @@ class CosseratPlant:
                      "master": np.zeros((3, 3))}
         self._q2 = np.zeros(6)
         self._dq2 = np.zeros(6)
+        # recording (`record` / `finish`): per control step the rod nodes and the master state only; the
+        # recorded geometry is computed from them once at the end
+        self._pos_hist = np.zeros((scn.n_steps, 3, nn))
+        self._m_hist = np.zeros((scn.n_steps, 4))
         self._dist = np.zeros(nn)
         self._objs, cdamp = rod_contact.contact_arrays(scn.environment, self.slave._b.mass)
         if scn.environment.objects:
@@ -258,6 +277,24 @@ class CosseratPlant:
         mp[2, 0] = mp[1, 0] + l2 * math.sin(q[0] + q[1])
         mp[2, 2] = mp[1, 2] + l2 * math.cos(q[0] + q[1])
         return g
+
+    def record(self, k: int) -> None:
+        """Keep what the recording of control step k needs (the rod nodes, the master state)."""
+        self._pos_hist[k] = self.slave._b.position_collection
+        self._m_hist[k] = self._m
+
+    def finish(self, traj, done: int) -> None:
+        """The recorded geometry of steps 0..done-1, the numbers `slave_tip` and `geometry` give per step:
+        traj.x2_plant (done, 2) tip node [X, Z], traj.master_pos (done, 3, 3), traj.meta["geometry"]
+        {"centreline": (done, 3 n + 1, 3), "sections": (done, 4, 3)} (world frame, m), and `meta`."""
+        pos = self._pos_hist[:done]
+        cl = np.empty((done, pos.shape[2], 3))
+        np.add(pos.transpose(0, 2, 1), SLAVE_BASE, out=cl)
+        traj.x2_plant = np.ascontiguousarray(pos[:, [0, 2], -1])
+        traj.master_pos = np.empty((done, 3, 3))
+        master_points(self._m_hist[:done], self.mpk[0], self.mpk[1], MASTER_BASE, traj.master_pos)
+        traj.meta["geometry"] = {"centreline": cl, "sections": cl[:, self.slave.section_nodes]}
+        traj.meta.update(self.meta())
 
     def meta(self) -> dict:
         """Plant description for the recording and metrics.json."""
