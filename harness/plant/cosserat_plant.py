@@ -293,7 +293,7 @@ class CosseratPlant:
         traj.x2_plant = np.ascontiguousarray(pos[:, [0, 2], -1])
         traj.master_pos = np.empty((done, 3, 3))
         master_points(self._m_hist[:done], self.mpk[0], self.mpk[1], MASTER_BASE, traj.master_pos)
-        traj.meta["geometry"] = {"centreline": cl, "sections": cl[:, self.slave.section_nodes]}
+        traj.meta["geometry"] = {"centreline": cl, "sections": cl.take(self.slave.section_nodes, axis=1)}
         traj.meta.update(self.meta())
 
     def meta(self) -> dict:
