@@ -27,7 +27,10 @@ The loop over control steps is Python, and each step is a few compiled calls.  P
 Statuses are those of `harness.loop.common.STATUS_TEXT` (1 non-finite command, 2/3 singular, 4
 runaway, 5 section length <= 0, 8 non-finite or exploding plant state, ...); the run stops at the
 first non-zero one, keeps every recorded row and says why (`set_outcome`).  `harness.loop.common.STOP`
-interrupts between steps.  Per-step buffers are preallocated; the plant geometry is copied into
+interrupts between steps.  Per-step buffers are preallocated; the glue around the plant and the
+controller (state checks, sensed force, record columns, command checks, servo reference, delay ring) is
+two compiled calls (`harness.loop.stepped_kernels`); a plant with `record(k)` / `finish(traj, done)` (the
+Cosserat rod, the MuJoCo adapter) keeps its own recording, otherwise the plant geometry is copied into
 (n, ...) arrays (`plant.geometry()` returns the same arrays every call).
 
 Controller interface (`Controller`): `reset(scn, state0)` once, then per step
@@ -120,7 +123,8 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
 
     traj.x2_plant: the plant's own slave tip (n, 2); traj.master_pos: (n, 3, 3) if the plant's
     geometry has "master"; every other geometry array goes to traj.meta["geometry"][name] (n, ...).
-    A plant with `record(k)` / `finish(traj, done)` (the MuJoCo adapter) records its own geometry instead.
+    A plant with `record(k)` / `finish(traj, done)` (the MuJoCo adapter, the Cosserat rod) records its own
+    geometry instead.
     Timings: meta "build_time" (controller and plant reset), "wall_time" (the loop)."""
     tb = time.perf_counter()
     n = scn.n_steps

@@ -23,7 +23,9 @@ rigid 2-link master, as a `harness.plant.stepped.SteppedPlant` for `harness.loop
   explicit-stability estimate `stable_dt`; a set dt must be <= stable_dt and divide control_dt.
 * Recording geometry (world frame, bases at (0, -0.3, 0) master and (0, 0.3, 0) slave as in the
   MJCF scene): "centreline" (3 n + 1, 3) rod nodes, "sections" (4, 3) section boundaries,
-  "master" (3, 3) master base, elbow, tip.
+  "master" (3, 3) master base, elbow, tip.  `geometry()` gives them for the current state; in a run
+  the loop calls `record(k)` (keeps the rod nodes and the master state of step k) and `finish` computes
+  the recorded arrays once at the end (same numbers, no per-step geometry work).
 """
 
 from __future__ import annotations
