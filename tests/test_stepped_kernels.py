@@ -132,3 +132,44 @@ def test_cosserat_deferred_recording_equals_per_step_geometry(extra):
     assert np.array_equal(a.q2, b.q2)
     # the tip is the last centreline node (the slave base is offset along Y only)
     np.testing.assert_array_equal(a.x2_plant, a.meta["geometry"]["centreline"][:, -1, [0, 2]])
+
+
+def test_rod_command_kernels_equal_the_numpy_expressions():
+    """cosserat_rod.rest_strains / active_loads (the servo rest strains and the active loads of
+    harness.plant.cosserat, Actuation) give the numbers of the numpy expressions they replaced, bit for
+    bit."""
+    from harness.plant import cosserat_rod as kr
+
+    rng = np.random.default_rng(5)
+    n = 7
+    L0 = np.array([0.3, 0.25, 0.2])
+    sec = np.repeat(np.arange(3), n)
+    l0 = (L0 / n)[sec]
+    ne = 3 * n
+    for i in range(40):
+        q2 = np.concatenate([L0 * rng.uniform(0.8, 1.4, 3), rng.normal(size=3) * (3.0 if i % 4 else 1e-9)])
+        if i == 0:
+            q2[3:] = 0.0  # straight sections: sinc limit
+        T2 = rng.normal(size=6)
+        # reference: the former numpy code of CosseratSlave._set_rest / _set_active
+        d, k = q2[:3], q2[3:]
+        x = 0.5 * k * (d / n)
+        sinc = np.where(np.abs(x) < 1e-8, 1.0 - x * x / 6.0, np.sin(x) / np.where(x == 0, 1.0, x))
+        sig_ref = np.zeros((3, ne))
+        sig_ref[2] = (d / L0 * sinc - 1.0)[sec]
+        kap = (k * d / L0)[sec]
+        kap_ref = np.zeros((3, ne - 1))
+        kap_ref[1] = (l0[:-1] * kap[:-1] + l0[1:] * kap[1:]) / (l0[:-1] + l0[1:])
+        mu = T2[3:] / d
+        n_ref = (T2[:3] - k * mu)[sec]
+        m_ref = np.zeros((3, ne - 1))
+        mue = mu[sec]
+        m_ref[1] = (l0[:-1] * mue[:-1] + l0[1:] * mue[1:]) / (l0[:-1] + l0[1:])
+        sig, kp, kb = np.full((3, ne), 9.0), np.full((3, ne - 1), 9.0), np.full(3, 9.0)
+        kr.rest_strains(q2, n, L0, sec, l0, sig, kp, kb)
+        an, am, amb = np.full(ne, 9.0), np.full((3, ne - 1), 9.0), np.full(3, 9.0)
+        kr.active_loads(T2, q2, sec, l0, an, am, amb)
+        assert np.array_equal(sig, sig_ref) and np.array_equal(kp, kap_ref)
+        assert np.array_equal(kb, [0.0, kap[0], 0.0])
+        assert np.array_equal(an, n_ref) and np.array_equal(am, m_ref)
+        assert np.array_equal(amb, [0.0, mu[0], 0.0])

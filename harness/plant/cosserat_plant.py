@@ -115,6 +115,18 @@ def master_points(m, l1, l2, base, out):
         out[k, 2, 2] = out[k, 1, 2] + l2 * math.cos(q0 + q1)
 
 
+@njit(cache=True)
+def feedforward(T2, q2, Kb, Ke, L0, out):
+    """Servo feed-forward out (6,) = T2 - dV/dq2 at q2 (6,) = [d, k], V = sum 1/2 Kb d k^2 + 1/2 Ke (d - L0)^2
+    the plant slave's CC elastic energy (Kb N m^2, Ke N/m, L0 m, each (3,)): dV/dd = 1/2 Kb k^2 + Ke (d - L0),
+    dV/dk = Kb d k."""
+    for i in range(3):
+        d = q2[i]
+        k = q2[3 + i]
+        out[i] = T2[i] - (0.5 * Kb[i] * k * k + Ke[i] * (d - L0[i]))
+        out[3 + i] = T2[3 + i] - Kb[i] * d * k
+
+
 def _field_of(msg: str, scn: Scenario) -> str:
     """Scenario field names for CosseratSlave's messages."""
     slave = "plant.slave." if scn.plant.slave is not None else "slave."
@@ -178,7 +190,6 @@ class CosseratPlant:
         self._T2 = np.zeros(6)
         self._q_ref = np.zeros(6)
         self._ff = np.zeros(6)
-        self._el = np.zeros(6)
         ps = scn.plant_slave
         self._Kb = np.asarray(ps.bending_stiffness, dtype=float)
         self._Ke = np.asarray(ps.extension_stiffness, dtype=float)
@@ -203,14 +214,6 @@ class CosseratPlant:
                 self.slave.reset(s0[4:10])
                 rod_contact.check_clearance(scn.environment, self._objs, self.slave._b.position_collection)
             self.slave.set_contacts(self._objs, cdamp)
-
-    def _elastic(self, q2: np.ndarray) -> np.ndarray:
-        """dV/dq2 (6,) of the plant slave's CC elastic energy V = sum 1/2 Kb d k^2 + 1/2 Ke (d - L0)^2."""
-        d, k = q2[:3], q2[3:]
-        e = self._el
-        e[:3] = 0.5 * self._Kb * k * k + self._Ke * (d - self._L0)
-        e[3:] = self._Kb * d * k
-        return e
 
     # --- SteppedPlant -------------------------------------------------------------------------------
     def reset(self, state0: np.ndarray) -> None:
@@ -237,8 +240,7 @@ class CosseratPlant:
             ff = None
             if self.feedforward:
                 ff = self._ff
-                self._ff[:] = self._T2
-                self._ff -= self._elastic(self._q2)
+                feedforward(self._T2, self._q2, self._Kb, self._Ke, self._L0, ff)
             ok = self.slave.step(self._q_ref, dt, ff)
         else:
             ok = self.slave.step(self._T2, dt)
