@@ -498,12 +498,9 @@ class CosseratSlave:
         """`sense` into q2, dq2 (6,).  The fit is kept until the rod moves (`step`, `reset`): the plant's
         sensing and the servo feed-forward of the next step fit the same state once, not twice."""
         if not self._fit_valid:
-            b, xz, vxz = self._b, self._fit_xz, self._fit_vxz
-            xz[:, 0] = b.position_collection[0]
-            xz[:, 1] = b.position_collection[2]
-            vxz[:, 0] = b.velocity_collection[0]
-            vxz[:, 1] = b.velocity_collection[2]
-            kr.cc_fit(xz, vxz, self.section_nodes, FIT_ITERATIONS, self._fit_q2, self._fit_dq2)
+            b = self._b
+            kr.fit_rod(b.position_collection, b.velocity_collection, self._fit_xz, self._fit_vxz,
+                       self.section_nodes, FIT_ITERATIONS, self._fit_q2, self._fit_dq2)
             self._fit_valid = True
         q2[:] = self._fit_q2
         dq2[:] = self._fit_dq2

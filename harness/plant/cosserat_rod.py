@@ -427,6 +427,18 @@ def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
         dq2[3 + s] = dk
 
 
+@njit(cache=True)
+def fit_rod(pos, vel, xz, vxz, bounds, n_iter, q2, dq2):
+    """`cc_fit` of the rod's nodes pos, vel (3, nn) (the plane's X, Z rows copied into the scratch xz, vxz
+    (nn, 2)) into q2, dq2 (6,)."""
+    for j in range(pos.shape[1]):
+        xz[j, 0] = pos[0, j]
+        xz[j, 1] = pos[2, j]
+        vxz[j, 0] = vel[0, j]
+        vxz[j, 1] = vel[2, j]
+    cc_fit(xz, vxz, bounds, n_iter, q2, dq2)
+
+
 # --- commands: rest strains (servo) and active loads (feed-forward / torque) ------------------------------
 
 
