@@ -205,6 +205,7 @@ class CosseratPlant:
         self._m_hist = np.zeros((scn.n_steps, 4))
         self._dist = np.zeros(nn)
         self._objs, cdamp = rod_contact.contact_arrays(scn.environment, self.slave._b.mass)
+        self._F_free = np.concatenate([self.F1, self.F2 + 0.0])  # `forces` without objects
         if scn.environment.objects:
             try:
                 s0 = initial_state(scn)
@@ -255,6 +256,10 @@ class CosseratPlant:
     def forces(self, F: np.ndarray, contact: np.ndarray) -> None:
         """True interaction forces ON the robots F (4,) [F1x, F1z, F2x, F2z] N (F2 = constant + contact force
         on the tip node, last rod substep) and the contact summary (5,) (`rod_contact.summary`)."""
+        if self._objs.shape[0] == 0:  # no environment: f_contact stays 0, F is constant (same sums)
+            F[:] = self._F_free
+            contact[:] = 0.0
+            return
         fc = self.slave.f_contact
         F[0:2] = self.F1
         F[2] = self.F2[0] + fc[0, -1]
