@@ -7,7 +7,8 @@
 The process is pinned to one core (default: the last CPU).  Every timing is the best of --reps
 repetitions (the machine is noisy).  Rows, all on the paper scenario (40 dB, servo, seed 0):
   cosserat loop     harness.loop.simulate on plant.kind = "cosserat" at its default resolution
-                    (10 elements per section, dt "auto"): the stepped loop's wall time
+                    (10 elements per section, dt "auto"): the stepped loop's wall time (the plant seen
+                    through a wrapper that logs each command and forwards the rest of its interface)
   cosserat bare     the same plant, reset to the same state, replaying the commands the loop sent
                     (plant.command + plant.advance per control step, no sensing, no controller);
                     loop and bare repetitions are interleaved
