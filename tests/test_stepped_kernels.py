@@ -173,3 +173,28 @@ def test_rod_command_kernels_equal_the_numpy_expressions():
         assert np.array_equal(kb, [0.0, kap[0], 0.0])
         assert np.array_equal(an, n_ref) and np.array_equal(am, m_ref)
         assert np.array_equal(amb, [0.0, mu[0], 0.0])
+
+
+@pytest.mark.parametrize("extra", [["sensing.force.mode=ignored"], ["plant.actuation=servo", "snr_db=none"]])
+def test_the_three_controller_paths_of_the_stepped_loop_agree(extra):
+    """The paper controller's one-call step (stepped_paper_step), its fused_step (a subclass) and its
+    generic step() give the same rows bit for bit (constant interaction forces, actuation delay)."""
+    from harness.loop.stepped_loop import PaperController
+    from harness.loop.stepped_plants import stepped_plant
+
+    class Fused(PaperController):
+        pass
+
+    class Plain(PaperController):
+        fused_step = None
+
+    scn = load_scenario(None, ["plant.kind=mujoco", "duration=0.3", "plant.actuation_delay=0.002",
+                               "interaction_forces=[[0.5, -1.0], [0.2, 0.4]]", *extra])
+    ctrls = (PaperController, Fused, Plain)
+    runs = [simulate_stepped(scn, stepped_plant(scn), controller=c()) for c in ctrls]
+    assert all(r.status == "ok" and len(r) == scn.n_steps for r in runs)
+    for f in ("q1", "q2", "T1", "T2", "u2", "F_true", "F_sensed", "e2"):
+        for r in runs[1:]:
+            assert np.array_equal(getattr(runs[0], f), getattr(r, f)), f
+    if "sensing.force.mode=ignored" in extra:
+        assert np.all(runs[0].F_sensed == 0.0) and np.any(runs[0].F_true != 0.0)

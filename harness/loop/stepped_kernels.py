@@ -10,6 +10,8 @@ paper's) and these two kernels for everything around them that used to be a doze
 * `stepped_after_control`: the record row's force / contact columns, the command checks (status 1
   non-finite, 4 runaway), the servo reference update (semi-implicit Euler, as
   `harness.loop.mujoco_kernels.mujoco_commands`) and the command slot of the actuation-delay ring.
+* `stepped_paper_step`: for the paper's controller, both of them around its compiled step
+  (`harness.loop.kernels.control_step`) in one call.
 
 Same arithmetic, element by element, as the numpy statements they replace (the servo reference and
 every recorded number are bit-identical; the sums in the checks only decide a status).
@@ -19,7 +21,7 @@ from __future__ import annotations
 
 import math
 
-from harness.loop.kernels import R_E1, R_E2, RUNAWAY
+from harness.loop.kernels import R_E1, R_E2, RUNAWAY, control_step
 
 
 def stepped_state_check(state, exploding, Ftrue, Fctl, ignored):
@@ -86,4 +88,19 @@ def stepped_after_control(st, T1, T2, u2, row, Ftrue, Fsens, cinfo, i_F, i_Fs, i
     return 0
 
 
-KERNELS = ("stepped_state_check", "stepped_after_control")
+def stepped_paper_step(state, exploding, Ftrue, ignored, t, traj, noise, k, scale, mpk_c, spk_c, nodes,
+                       weights, gains, spec, F, xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, row,
+                       cinfo, i_F, i_Fs, i_C, ref_mode, ref, dt, cmd):
+    """`stepped_state_check` (F (4,) is the controller's force input), the paper's `control_step` and
+    `stepped_after_control` (ref_mode 0 or 1) in one call.  Returns (state status, step status): a
+    non-zero state status means the step did not run (nothing recorded)."""
+    s0 = stepped_state_check(state, exploding, Ftrue, F, ignored)
+    if s0 != 0:
+        return s0, 0
+    st = control_step(t, state, traj, noise, k, scale, mpk_c, spk_c, nodes, weights, gains, spec, F, xd, dxd,
+                      ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, row)
+    return 0, stepped_after_control(st, T1, T2, u2, row, Ftrue, F, cinfo, i_F, i_Fs, i_C, ref_mode, ref, ref,
+                                    dt, sensed, cmd)
+
+
+KERNELS = ("stepped_state_check", "stepped_after_control", "stepped_paper_step")

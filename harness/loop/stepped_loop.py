@@ -104,6 +104,11 @@ class PaperController:
         return K.control_laws(mpk, spk, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, self.F,
                               T1, T2, u2, deN, self.minfo, self.sinfo)
 
+    def loop_args(self) -> tuple:
+        """(mpk_c, spk_c, nodes, weights, gains, spec, F, minfo, sinfo): the arrays of the compiled step,
+        for the stepped loop's one-call step (`harness.loop.stepped_kernels.stepped_paper_step`)."""
+        return (*self._args, self.F, self.minfo, self.sinfo)
+
     def fused_step(self, t, k, state, traj, noise, scale, xd, dxd, ddxd, sensed, T1, T2, u2, deN, row) -> int:
         """The loop's fast path: x_d, noise, both laws and the record row in one compiled call
         (`harness.loop.kernels.control_step`, the compiled loops' own step; same numbers as `step`
@@ -176,6 +181,11 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
     no_ref = np.zeros(0)
     ref_mode = 1 if servo else 0
     slots = delay + 1
+    # the paper's controller (its own class, not a subclass that may override `fused_step`): check, laws and
+    # the glue of `after` in one compiled call
+    one = K.stepped_paper_step if type(ctrl) is PaperController and not failed else None
+    if one is not None:
+        mpk_c, spk_c, nodes, weights, gains_c, spec_c, F_c, minfo, sinfo = ctrl.loop_args()
     bar = progress_bar(progress, n, f"{plant.kind} plant ({plant.actuation}), controller {cname}")
     status, done = 0, 0
     interrupted = False
@@ -189,18 +199,34 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
                 break
             if plant_forces is not None:
                 plant_forces(Ftrue, cinfo)
-            st = check(state, EXPLODING, Ftrue, Fsens, ignored)  # status 8 / 5; Fsens <- the sensed F
-            if st:
-                status = st
-                break
             row = rows[k]
-            if fused is not None:
-                st = fused(t, k, state, traj_p, noise, scale, xd, dxd, ddxd, sensed, T1, T2, u2, deN, row)
+            if one is not None:  # the paper's controller: check, laws, row, glue in one compiled call
+                s0, st = one(state, EXPLODING, Ftrue, ignored, t, traj_p, noise, k, scale, mpk_c, spk_c,
+                             nodes, weights, gains_c, spec_c, F_c, xd, dxd, ddxd, sensed, T1, T2, u2, deN,
+                             minfo, sinfo, row, cinfo, iF, iFs, iC, ref_mode, ref, dt, cmdbuf[k % slots])
+                if s0:
+                    status = s0
+                    break
             else:
-                K.desired(traj_p, t, xd, dxd, ddxd)
-                K.sense_state(state, noise, k, scale, sensed)
-                st = int(ctrl.step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN))
-                K.record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row)
+                st = check(state, EXPLODING, Ftrue, Fsens, ignored)  # status 8 / 5; Fsens <- the sensed F
+                if st:
+                    status = st
+                    break
+                if fused is not None:
+                    st = fused(t, k, state, traj_p, noise, scale, xd, dxd, ddxd, sensed, T1, T2, u2, deN, row)
+                else:
+                    K.desired(traj_p, t, xd, dxd, ddxd)
+                    K.sense_state(state, noise, k, scale, sensed)
+                    st = int(ctrl.step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN))
+                    K.record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row)
+                ext = no_ref
+                if servo and own_ref and ctrl.use_ref:
+                    ext, ref_mode = ctrl.ref, 2
+                elif servo:
+                    ref_mode = 1
+                # row's F / contact columns, status 1 / 4, the servo reference, the command slot of step k
+                st = after(st, T1, T2, u2, row, Ftrue, Fsens, cinfo, iF, iFs, iC, ref_mode, ext, ref, dt,
+                           sensed, cmdbuf[k % slots])
             if record is not None:
                 record(k)
             else:
@@ -208,14 +234,6 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
                 for name, v in plant.geometry().items():
                     geo[name][k] = v
             done = k + 1
-            ext = no_ref
-            if servo and own_ref and ctrl.use_ref:
-                ext, ref_mode = ctrl.ref, 2
-            elif servo:
-                ref_mode = 1
-            # row's F / contact columns, status 1 / 4, the servo reference, the command slot of step k
-            st = after(st, T1, T2, u2, row, Ftrue, Fsens, cinfo, iF, iFs, iC, ref_mode, ext, ref, dt, sensed,
-                       cmdbuf[k % slots])
             if st != 0:
                 status = int(st)
                 break
