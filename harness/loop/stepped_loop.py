@@ -27,7 +27,10 @@ The loop over control steps is Python, and each step is a few compiled calls.  P
 Statuses are those of `harness.loop.common.STATUS_TEXT` (1 non-finite command, 2/3 singular, 4
 runaway, 5 section length <= 0, 8 non-finite or exploding plant state, ...); the run stops at the
 first non-zero one, keeps every recorded row and says why (`set_outcome`).  `harness.loop.common.STOP`
-interrupts between steps.  Per-step buffers are preallocated; the plant geometry is copied into
+interrupts between steps.  Per-step buffers are preallocated; the glue around the plant and the
+controller (state checks, sensed force, record columns, command checks, servo reference, delay ring) is
+two compiled calls (`harness.loop.stepped_kernels`); a plant with `record(k)` / `finish(traj, done)` (the
+Cosserat rod, the MuJoCo adapter) keeps its own recording, otherwise the plant geometry is copied into
 (n, ...) arrays (`plant.geometry()` returns the same arrays every call).
 
 Controller interface (`Controller`): `reset(scn, state0)` once, then per step
@@ -42,7 +45,6 @@ ddxd, sensed, T1, T2, u2, deN, row)` doing x_d, noise, its laws and the record r
 
 from __future__ import annotations
 
-import math
 import time
 from typing import Protocol
 
@@ -62,7 +64,6 @@ from harness.loop.common import (
 )
 from harness.loop.fast import K
 from harness.loop.interface_adapter import ControllerFailure, InterfaceController
-from harness.loop.kernels import R_E1, R_E2, RUNAWAY
 from harness.loop.trajectory import ROW_SLICES, ROW_WIDTH, Trajectory
 from harness.plant.stepped import SteppedPlant
 
@@ -96,18 +97,24 @@ class PaperController:
         a = common_arrays(scn)
         self._args = (a["mpk_c"], a["spk_c"], a["nodes"], a["weights"], a["gains"], a["spec"])
         self.F = a["F"]
+        self._control_step = K.control_step  # looked up once, not per step
 
     def step(self, t, sensed, xd, dxd, ddxd, T1, T2, u2, deN) -> int:
         mpk, spk, nodes, weights, gains, spec = self._args
         return K.control_laws(mpk, spk, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, self.F,
                               T1, T2, u2, deN, self.minfo, self.sinfo)
 
+    def loop_args(self) -> tuple:
+        """(mpk_c, spk_c, nodes, weights, gains, spec, F, minfo, sinfo): the arrays of the compiled step,
+        for the stepped loop's one-call step (`harness.loop.stepped_kernels.stepped_paper_step`)."""
+        return (*self._args, self.F, self.minfo, self.sinfo)
+
     def fused_step(self, t, k, state, traj, noise, scale, xd, dxd, ddxd, sensed, T1, T2, u2, deN, row) -> int:
         """The loop's fast path: x_d, noise, both laws and the record row in one compiled call
         (`harness.loop.kernels.control_step`, the compiled loops' own step; same numbers as `step`
         plus the loop's separate calls)."""
         mpk, spk, nodes, weights, gains, spec = self._args
-        return K.control_step(t, state, traj, noise, k, scale, mpk, spk, nodes, weights, gains, spec,
+        return self._control_step(t, state, traj, noise, k, scale, mpk, spk, nodes, weights, gains, spec,
                               self.F, xd, dxd, ddxd, sensed, T1, T2, u2, deN, self.minfo, self.sinfo, row)
 
 
@@ -121,7 +128,8 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
 
     traj.x2_plant: the plant's own slave tip (n, 2); traj.master_pos: (n, 3, 3) if the plant's
     geometry has "master"; every other geometry array goes to traj.meta["geometry"][name] (n, ...).
-    A plant with `record(k)` / `finish(traj, done)` (the MuJoCo adapter) records its own geometry instead.
+    A plant with `record(k)` / `finish(traj, done)` (the MuJoCo adapter, the Cosserat rod) records its own
+    geometry instead.
     Timings: meta "build_time" (controller and plant reset), "wall_time" (the loop)."""
     tb = time.perf_counter()
     n = scn.n_steps
@@ -155,15 +163,29 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
     Ftrue, cinfo = a["F"].copy(), np.zeros(5)
     Fctl = getattr(ctrl, "F", None)
     ignored = scn.sensing.force.mode == "ignored"
-    sF, sFs, sC = ROW_SLICES["F_true"], ROW_SLICES["F_sensed"], ROW_SLICES["contact"]
+    # without a controller F, F_sensed records F_true: the check kernel copies it into a scratch
+    Fsens, ignored = (Fctl, ignored) if Fctl is not None else (np.zeros(4), False)
+    iF, iFs, iC = ROW_SLICES["F_true"].start, ROW_SLICES["F_sensed"].start, ROW_SLICES["contact"].start
     xd, dxd, ddxd = np.zeros(2), np.zeros(2), np.zeros(2)
     T1, T2, u2, deN = np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6)
     ref = np.concatenate([s0[4:10], s0[10:16]])  # servo reference [q2_ref, dq2_ref]
-    q_ref, dq_ref = ref[0:6], ref[6:12]
     servo = plant.actuation == "servo"
     delay = int(round(scn.plant.actuation_delay / dt))
     cmdbuf = np.zeros((delay + 1, 26))  # [T1, T2, q2_ref, dq2_ref, sensed q2] per slot
     cmdbuf[:, 8:20] = ref
+    # the plant.command arguments of each slot, as views made once
+    views = [(c[0:2], c[2:8], c[8:14], c[14:20], c[20:26]) for c in cmdbuf]
+    command, advance, true_state = plant.command, plant.advance, plant.true_state
+    record = plant.record if own_geo else None
+    check, after = K.stepped_state_check, K.stepped_after_control
+    no_ref = np.zeros(0)
+    ref_mode = 1 if servo else 0
+    slots = delay + 1
+    # the paper's controller (its own class, not a subclass that may override `fused_step`): check, laws and
+    # the glue of `after` in one compiled call
+    one = K.stepped_paper_step if type(ctrl) is PaperController and not failed else None
+    if one is not None:
+        mpk_c, spk_c, nodes, weights, gains_c, spec_c, F_c, minfo, sinfo = ctrl.loop_args()
     bar = progress_bar(progress, n, f"{plant.kind} plant ({plant.actuation}), controller {cname}")
     status, done = 0, 0
     interrupted = False
@@ -171,61 +193,52 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
     try:
         for k in range(n):
             t = k * dt
-            st = plant.true_state(state)
+            st = true_state(state)
             if st:
                 status = int(st)
                 break
-            total = float(state @ state)  # NaN/inf propagate; no temporary array
-            if not math.isfinite(total) or total > EXPLODING * EXPLODING:
-                status = 8
-                break
-            if min(state[4], state[5], state[6]) <= 0.0:
-                status = 5
-                break
-            row = rows[k]
             if plant_forces is not None:
                 plant_forces(Ftrue, cinfo)
-            if Fctl is not None:
-                Fctl[:] = 0.0 if ignored else Ftrue
-            if fused is not None:
-                st = fused(t, k, state, traj_p, noise, scale, xd, dxd, ddxd, sensed, T1, T2, u2, deN, row)
+            row = rows[k]
+            if one is not None:  # the paper's controller: check, laws, row, glue in one compiled call
+                s0, st = one(state, EXPLODING, Ftrue, ignored, t, traj_p, noise, k, scale, mpk_c, spk_c,
+                             nodes, weights, gains_c, spec_c, F_c, xd, dxd, ddxd, sensed, T1, T2, u2, deN,
+                             minfo, sinfo, row, cinfo, iF, iFs, iC, ref_mode, ref, dt, cmdbuf[k % slots])
+                if s0:
+                    status = s0
+                    break
             else:
-                K.desired(traj_p, t, xd, dxd, ddxd)
-                K.sense_state(state, noise, k, scale, sensed)
-                st = ctrl.step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN)
-                K.record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row)
-            row[sF] = Ftrue
-            row[sFs] = Fctl if Fctl is not None else Ftrue
-            row[sC] = cinfo
-            if own_geo:
-                plant.record(k)
+                st = check(state, EXPLODING, Ftrue, Fsens, ignored)  # status 8 / 5; Fsens <- the sensed F
+                if st:
+                    status = st
+                    break
+                if fused is not None:
+                    st = fused(t, k, state, traj_p, noise, scale, xd, dxd, ddxd, sensed, T1, T2, u2, deN, row)
+                else:
+                    K.desired(traj_p, t, xd, dxd, ddxd)
+                    K.sense_state(state, noise, k, scale, sensed)
+                    st = int(ctrl.step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN))
+                    K.record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row)
+                ext = no_ref
+                if servo and own_ref and ctrl.use_ref:
+                    ext, ref_mode = ctrl.ref, 2
+                elif servo:
+                    ref_mode = 1
+                # row's F / contact columns, status 1 / 4, the servo reference, the command slot of step k
+                st = after(st, T1, T2, u2, row, Ftrue, Fsens, cinfo, iF, iFs, iC, ref_mode, ext, ref, dt,
+                           sensed, cmdbuf[k % slots])
+            if record is not None:
+                record(k)
             else:
                 tips[k] = plant.slave_tip()
                 for name, v in plant.geometry().items():
                     geo[name][k] = v
             done = k + 1
-            if st == 0 and not math.isfinite(float(T1.sum() + T2.sum() + u2.sum())):
-                st = 1
-            if st == 0 and (abs(row[R_E1]) + abs(row[R_E1 + 1]) > RUNAWAY
-                            or abs(row[R_E2]) + abs(row[R_E2 + 1]) > RUNAWAY):
-                st = 4
             if st != 0:
                 status = int(st)
                 break
-            if servo:
-                if own_ref and ctrl.use_ref:
-                    ref[:] = ctrl.ref
-                else:
-                    dq_ref += u2 * dt
-                    q_ref += dq_ref * dt
-            cmd = cmdbuf[k % (delay + 1)]
-            cmd[0:2] = T1
-            cmd[2:8] = T2
-            cmd[8:20] = ref
-            cmd[20:26] = sensed[4:10]
-            use = cmdbuf[(k - delay) % (delay + 1)] if k >= delay else cmdbuf[0]
-            plant.command(use[0:2], use[2:8], use[8:14], use[14:20], use[20:26])
-            st = plant.advance(dt)
+            command(*views[(k - delay) % slots if k >= delay else 0])
+            st = advance(dt)
             if st != 0:
                 status = int(st)
                 break

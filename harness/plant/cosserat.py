@@ -345,6 +345,8 @@ class CosseratSlave:
         self._act_n = np.zeros(ne)
         self._act_m = np.zeros((3, nv))
         self._act_m_base = np.zeros(3)
+        self._act_q2, self._act_dq2 = np.zeros(6), np.zeros(6)  # the fit `_set_active` works at
+        self._L0 = np.asarray(p.rest_lengths, dtype=float)
         self._law = 1 if self.analytic_law else 0
         self._objs = np.zeros((0, 6))  # environment contact (`set_contacts`, harness.plant.rod_contact)
         self._cdamp = np.zeros((0, ne + 2))
@@ -379,36 +381,17 @@ class CosseratSlave:
 
     # --- commands -----------------------------------------------------------------------------------
     def _set_rest(self, q2c: np.ndarray) -> None:
-        n, b = self.n, self._b
-        d, k = q2c[:3], q2c[3:]
-        L0 = np.asarray(self.params.rest_lengths)
-        h = d / n
-        x = 0.5 * k * h
-        sinc = np.where(np.abs(x) < 1e-8, 1.0 - x * x / 6.0, np.sin(x) / np.where(x == 0, 1.0, x))
-        b.rest_sigma[:] = 0.0
-        b.rest_sigma[2] = (d / L0 * sinc - 1.0)[self._sec]
-        kap = (k * d / L0)[self._sec]
-        l0 = self._l0
-        b.rest_kappa[:] = 0.0
-        b.rest_kappa[1] = (l0[:-1] * kap[:-1] + l0[1:] * kap[1:]) / (l0[:-1] + l0[1:])
-        self._base_kappa0[:] = 0.0
-        self._base_kappa0[1] = kap[0]
+        kr.rest_strains(q2c, self.n, self._L0, self._sec, self._l0, self._b.rest_sigma, self._b.rest_kappa,
+                        self._base_kappa0)
 
     def _set_active(self, T2: np.ndarray | None) -> None:
-        self._act_n[:] = 0.0
-        self._act_m[:] = 0.0
-        self._act_m_base[:] = 0.0
         if T2 is None:
+            self._act_n[:] = 0.0
+            self._act_m[:] = 0.0
+            self._act_m_base[:] = 0.0
             return
-        q2, _ = self.sense()
-        d, k = q2[:3], q2[3:]
-        mu = T2[3:] / d
-        axial = T2[:3] - k * mu
-        self._act_n[:] = axial[self._sec]
-        mue = mu[self._sec]
-        l0 = self._l0
-        self._act_m[1] = (l0[:-1] * mue[:-1] + l0[1:] * mue[1:]) / (l0[:-1] + l0[1:])
-        self._act_m_base[1] = mu[0]
+        self.sense_into(self._act_q2, self._act_dq2)
+        kr.active_loads(T2, self._act_q2, self._sec, self._l0, self._act_n, self._act_m, self._act_m_base)
 
     @staticmethod
     def _vec6(name: str, v) -> np.ndarray:
@@ -515,12 +498,9 @@ class CosseratSlave:
         """`sense` into q2, dq2 (6,).  The fit is kept until the rod moves (`step`, `reset`): the plant's
         sensing and the servo feed-forward of the next step fit the same state once, not twice."""
         if not self._fit_valid:
-            b, xz, vxz = self._b, self._fit_xz, self._fit_vxz
-            xz[:, 0] = b.position_collection[0]
-            xz[:, 1] = b.position_collection[2]
-            vxz[:, 0] = b.velocity_collection[0]
-            vxz[:, 1] = b.velocity_collection[2]
-            kr.cc_fit(xz, vxz, self.section_nodes, FIT_ITERATIONS, self._fit_q2, self._fit_dq2)
+            b = self._b
+            kr.fit_rod(b.position_collection, b.velocity_collection, self._fit_xz, self._fit_vxz,
+                       self.section_nodes, FIT_ITERATIONS, self._fit_q2, self._fit_dq2)
             self._fit_valid = True
         q2[:] = self._fit_q2
         dq2[:] = self._fit_dq2

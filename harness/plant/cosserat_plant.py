@@ -23,7 +23,9 @@ rigid 2-link master, as a `harness.plant.stepped.SteppedPlant` for `harness.loop
   explicit-stability estimate `stable_dt`; a set dt must be <= stable_dt and divide control_dt.
 * Recording geometry (world frame, bases at (0, -0.3, 0) master and (0, 0.3, 0) slave as in the
   MJCF scene): "centreline" (3 n + 1, 3) rod nodes, "sections" (4, 3) section boundaries,
-  "master" (3, 3) master base, elbow, tip.
+  "master" (3, 3) master base, elbow, tip.  `geometry()` gives them for the current state; in a run
+  the loop calls `record(k)` (keeps the rod nodes and the master state of step k) and `finish` computes
+  the recorded arrays once at the end (same numbers, no per-step geometry work).
 """
 
 from __future__ import annotations
@@ -98,6 +100,33 @@ def master_rk4(mpk, s, T1, F1, h, nsub):
     return True
 
 
+@njit(cache=True)
+def master_points(m, l1, l2, base, out):
+    """Master base, elbow and tip (n, 3, 3), world frame, m, of the master states m (n, 4) [q1, dq1]
+    (links l1, l2, m; base (3,)); the arithmetic of `CosseratPlant.geometry`, step by step."""
+    for k in range(m.shape[0]):
+        q0, q1 = m[k, 0], m[k, 1]
+        for i in range(3):
+            for j in range(3):
+                out[k, i, j] = base[j]
+        out[k, 1, 0] += l1 * math.sin(q0)
+        out[k, 1, 2] += l1 * math.cos(q0)
+        out[k, 2, 0] = out[k, 1, 0] + l2 * math.sin(q0 + q1)
+        out[k, 2, 2] = out[k, 1, 2] + l2 * math.cos(q0 + q1)
+
+
+@njit(cache=True)
+def feedforward(T2, q2, Kb, Ke, L0, out):
+    """Servo feed-forward out (6,) = T2 - dV/dq2 at q2 (6,) = [d, k], V = sum 1/2 Kb d k^2 + 1/2 Ke (d - L0)^2
+    the plant slave's CC elastic energy (Kb N m^2, Ke N/m, L0 m, each (3,)): dV/dd = 1/2 Kb k^2 + Ke (d - L0),
+    dV/dk = Kb d k."""
+    for i in range(3):
+        d = q2[i]
+        k = q2[3 + i]
+        out[i] = T2[i] - (0.5 * Kb[i] * k * k + Ke[i] * (d - L0[i]))
+        out[3 + i] = T2[3 + i] - Kb[i] * d * k
+
+
 def _field_of(msg: str, scn: Scenario) -> str:
     """Scenario field names for CosseratSlave's messages."""
     slave = "plant.slave." if scn.plant.slave is not None else "slave."
@@ -161,7 +190,6 @@ class CosseratPlant:
         self._T2 = np.zeros(6)
         self._q_ref = np.zeros(6)
         self._ff = np.zeros(6)
-        self._el = np.zeros(6)
         ps = scn.plant_slave
         self._Kb = np.asarray(ps.bending_stiffness, dtype=float)
         self._Ke = np.asarray(ps.extension_stiffness, dtype=float)
@@ -171,8 +199,13 @@ class CosseratPlant:
                      "master": np.zeros((3, 3))}
         self._q2 = np.zeros(6)
         self._dq2 = np.zeros(6)
+        # recording (`record` / `finish`): per control step the rod nodes and the master state only; the
+        # recorded geometry is computed from them once at the end
+        self._pos_hist = np.zeros((scn.n_steps, 3, nn))
+        self._m_hist = np.zeros((scn.n_steps, 4))
         self._dist = np.zeros(nn)
         self._objs, cdamp = rod_contact.contact_arrays(scn.environment, self.slave._b.mass)
+        self._F_free = np.concatenate([self.F1, self.F2 + 0.0])  # `forces` without objects
         if scn.environment.objects:
             try:
                 s0 = initial_state(scn)
@@ -182,14 +215,6 @@ class CosseratPlant:
                 self.slave.reset(s0[4:10])
                 rod_contact.check_clearance(scn.environment, self._objs, self.slave._b.position_collection)
             self.slave.set_contacts(self._objs, cdamp)
-
-    def _elastic(self, q2: np.ndarray) -> np.ndarray:
-        """dV/dq2 (6,) of the plant slave's CC elastic energy V = sum 1/2 Kb d k^2 + 1/2 Ke (d - L0)^2."""
-        d, k = q2[:3], q2[3:]
-        e = self._el
-        e[:3] = 0.5 * self._Kb * k * k + self._Ke * (d - self._L0)
-        e[3:] = self._Kb * d * k
-        return e
 
     # --- SteppedPlant -------------------------------------------------------------------------------
     def reset(self, state0: np.ndarray) -> None:
@@ -216,8 +241,7 @@ class CosseratPlant:
             ff = None
             if self.feedforward:
                 ff = self._ff
-                self._ff[:] = self._T2
-                self._ff -= self._elastic(self._q2)
+                feedforward(self._T2, self._q2, self._Kb, self._Ke, self._L0, ff)
             ok = self.slave.step(self._q_ref, dt, ff)
         else:
             ok = self.slave.step(self._T2, dt)
@@ -232,6 +256,10 @@ class CosseratPlant:
     def forces(self, F: np.ndarray, contact: np.ndarray) -> None:
         """True interaction forces ON the robots F (4,) [F1x, F1z, F2x, F2z] N (F2 = constant + contact force
         on the tip node, last rod substep) and the contact summary (5,) (`rod_contact.summary`)."""
+        if self._objs.shape[0] == 0:  # no environment: f_contact stays 0, F is constant (same sums)
+            F[:] = self._F_free
+            contact[:] = 0.0
+            return
         fc = self.slave.f_contact
         F[0:2] = self.F1
         F[2] = self.F2[0] + fc[0, -1]
@@ -258,6 +286,24 @@ class CosseratPlant:
         mp[2, 0] = mp[1, 0] + l2 * math.sin(q[0] + q[1])
         mp[2, 2] = mp[1, 2] + l2 * math.cos(q[0] + q[1])
         return g
+
+    def record(self, k: int) -> None:
+        """Keep what the recording of control step k needs (the rod nodes, the master state)."""
+        self._pos_hist[k] = self.slave._b.position_collection
+        self._m_hist[k] = self._m
+
+    def finish(self, traj, done: int) -> None:
+        """The recorded geometry of steps 0..done-1, the numbers `slave_tip` and `geometry` give per step:
+        traj.x2_plant (done, 2) tip node [X, Z], traj.master_pos (done, 3, 3), traj.meta["geometry"]
+        {"centreline": (done, 3 n + 1, 3), "sections": (done, 4, 3)} (world frame, m), and `meta`."""
+        pos = self._pos_hist[:done]
+        cl = np.empty((done, pos.shape[2], 3))
+        np.add(pos.transpose(0, 2, 1), SLAVE_BASE, out=cl)
+        traj.x2_plant = np.ascontiguousarray(pos[:, [0, 2], -1])
+        traj.master_pos = np.empty((done, 3, 3))
+        master_points(self._m_hist[:done], self.mpk[0], self.mpk[1], MASTER_BASE, traj.master_pos)
+        traj.meta["geometry"] = {"centreline": cl, "sections": cl.take(self.slave.section_nodes, axis=1)}
+        traj.meta.update(self.meta())
 
     def meta(self) -> dict:
         """Plant description for the recording and metrics.json."""

@@ -425,3 +425,75 @@ def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
         q2[3 + s] = k
         dq2[s] = dd
         dq2[3 + s] = dk
+
+
+@njit(cache=True)
+def fit_rod(pos, vel, xz, vxz, bounds, n_iter, q2, dq2):
+    """`cc_fit` of the rod's nodes pos, vel (3, nn) (the plane's X, Z rows copied into the scratch xz, vxz
+    (nn, 2)) into q2, dq2 (6,)."""
+    for j in range(pos.shape[1]):
+        xz[j, 0] = pos[0, j]
+        xz[j, 1] = pos[2, j]
+        vxz[j, 0] = vel[0, j]
+        vxz[j, 1] = vel[2, j]
+    cc_fit(xz, vxz, bounds, n_iter, q2, dq2)
+
+
+# --- commands: rest strains (servo) and active loads (feed-forward / torque) ------------------------------
+
+
+@njit(cache=True)
+def rest_strains(q2c, n, L0, sec, l0, rest_sigma, rest_kappa, base_kappa0):
+    """Servo command q2c (6,) = [d, k] -> the rod's rest strains (see `harness.plant.cosserat`,
+    Actuation): rest_sigma (3, ne) <- [0, 0, (d / L0) sinc(k h / 2) - 1] per element (h = d / n),
+    rest_kappa (3, nv) <- [0, k d / L0 (rest-length weighted mean at the hinges), 0], base_kappa0 (3,)
+    <- [0, k_1 d_1 / L0_1, 0].  L0 (3,) m, sec (ne,) section of each element, l0 (ne,) m.
+    Element by element the arithmetic of the former numpy expressions (same numbers)."""
+    sig = np.empty(3)
+    kap = np.empty(3)
+    for i in range(3):
+        d = q2c[i]
+        k = q2c[3 + i]
+        h = d / n
+        x = 0.5 * k * h
+        s = 1.0 - x * x / 6.0 if abs(x) < 1e-8 else np.sin(x) / x
+        sig[i] = d / L0[i] * s - 1.0
+        kap[i] = k * d / L0[i]
+    ne = sec.shape[0]
+    for j in range(ne):
+        rest_sigma[0, j] = 0.0
+        rest_sigma[1, j] = 0.0
+        rest_sigma[2, j] = sig[sec[j]]
+    for j in range(ne - 1):
+        a = kap[sec[j]]
+        b = kap[sec[j + 1]]
+        rest_kappa[0, j] = 0.0
+        rest_kappa[1, j] = (l0[j] * a + l0[j + 1] * b) / (l0[j] + l0[j + 1])
+        rest_kappa[2, j] = 0.0
+    base_kappa0[0] = 0.0
+    base_kappa0[1] = kap[0]
+    base_kappa0[2] = 0.0
+
+
+@njit(cache=True)
+def active_loads(T2, q2, sec, l0, act_n, act_m, act_m_base):
+    """Generalized forces T2 (6,) [T_d N, T_k N m] at the fitted q2 (6,) -> the internal active loads
+    (see `harness.plant.cosserat`, Actuation): mu = T_k / d, act_n (ne,) <- T_d - k mu per element,
+    act_m (3, nv) <- [0, mu (rest-length weighted mean at the hinges), 0], act_m_base (3,) <- [0, mu_1, 0]."""
+    mu = np.empty(3)
+    ax = np.empty(3)
+    for i in range(3):
+        mu[i] = T2[3 + i] / q2[i]
+        ax[i] = T2[i] - q2[3 + i] * mu[i]
+    ne = sec.shape[0]
+    for j in range(ne):
+        act_n[j] = ax[sec[j]]
+    for j in range(ne - 1):
+        a = mu[sec[j]]
+        b = mu[sec[j + 1]]
+        act_m[0, j] = 0.0
+        act_m[1, j] = (l0[j] * a + l0[j + 1] * b) / (l0[j] + l0[j + 1])
+        act_m[2, j] = 0.0
+    act_m_base[0] = 0.0
+    act_m_base[1] = mu[0]
+    act_m_base[2] = 0.0
