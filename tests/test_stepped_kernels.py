@@ -134,6 +134,19 @@ def test_cosserat_deferred_recording_equals_per_step_geometry(extra):
     np.testing.assert_array_equal(a.x2_plant, a.meta["geometry"]["centreline"][:, -1, [0, 2]])
 
 
+def test_cosserat_plant_built_for_a_shorter_run_records_a_longer_one():
+    """The deferred recording's buffers are sized from the scenario the plant was built for; a plant
+    built for 0.02 s and run for 0.05 s records every step, the same numbers as a plant built for it."""
+    short = load_scenario(None, ["duration=0.02", "transient=0", "plant.kind=cosserat"])
+    scn = load_scenario(None, ["duration=0.05", "transient=0", "plant.kind=cosserat"])
+    a = simulate_stepped(scn, build_plant(short))
+    b = simulate_stepped(scn, build_plant(scn))
+    assert a.status == b.status == "ok" and len(a) == len(b) == scn.n_steps
+    assert np.array_equal(a.x2_plant, b.x2_plant)
+    for k in b.meta["geometry"]:
+        assert np.array_equal(a.meta["geometry"][k], b.meta["geometry"][k])
+
+
 def test_rod_command_kernels_equal_the_numpy_expressions():
     """cosserat_rod.rest_strains / active_loads (the servo rest strains and the active loads of
     harness.plant.cosserat, Actuation) give the numbers of the numpy expressions they replaced, bit for

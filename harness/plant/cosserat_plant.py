@@ -288,7 +288,13 @@ class CosseratPlant:
         return g
 
     def record(self, k: int) -> None:
-        """Keep what the recording of control step k needs (the rod nodes, the master state)."""
+        """Keep what the recording of control step k needs (the rod nodes, the master state).  The
+        buffers are sized for the scenario the plant was built for and grow (doubling) for a longer run."""
+        if k >= self._pos_hist.shape[0]:
+            n = max(k + 1, 2 * self._pos_hist.shape[0])
+            self._pos_hist = np.concatenate([self._pos_hist, np.zeros((n - self._pos_hist.shape[0],
+                                                                       *self._pos_hist.shape[1:]))])
+            self._m_hist = np.concatenate([self._m_hist, np.zeros((n - self._m_hist.shape[0], 4))])
         self._pos_hist[k] = self.slave._b.position_collection
         self._m_hist[k] = self._m
 
