@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/bench_e2e.py            # paper run x3; sweeps of 16 and 64 cases x 2 s, x2
     .venv/bin/python benchmarks/bench_e2e.py --quick    # 5 s scenario, 6 cases x 1 s, 1 repetition
+    .venv/bin/python benchmarks/bench_e2e.py --set duration=100 --reps 2 --no-sweep   # a longer run
 
 Reports, in one run:
   run     `teleop run` of the scenario with every output, in a fresh process (python -m harness.cli),
@@ -318,6 +319,8 @@ def main() -> None:
     ap.add_argument("--reps", type=int, default=None, help="repetitions of the run (default 3; quick 1)")
     ap.add_argument("--cases", default=None, help="sweep sizes, comma-separated (default 16,64; quick 6)")
     ap.add_argument("--no-sweep", action="store_true", help="skip the sweep table")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                    help="scenario override for the run (repeatable), e.g. --set duration=100")
     ap.add_argument("--write", action="store_true", help="append the tables to benchmarks/RESULTS.md")
     args = ap.parse_args()
     lines: list[str] = []
@@ -331,7 +334,7 @@ def main() -> None:
     out(f"## End to end: `teleop run` and sweeps ({now})\n")
     out(f"Machine: {_machine()}; load average at start {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} "
         f"(1/5/15 min) on {os.cpu_count()} CPUs: figures measured under that load.\n")
-    overrides = ["duration=5", "transient=1"] if args.quick else []
+    overrides = (["duration=5", "transient=1"] if args.quick else []) + args.overrides
     run_table("scenarios/paper.toml", overrides, args.reps or (1 if args.quick else 3), out)
     if not args.no_sweep:
         sizes = [int(c) for c in (args.cases or ("6" if args.quick else "16,64")).split(",")]
