@@ -54,7 +54,8 @@ def test_type_key_determines_numba_type():
     assert len({keys[i] for i in arrays}) == len({types[i] for i in arrays})
 
 
-@pytest.mark.parametrize("bad", [None, [1.0], {"a": 1}, 2 ** 70, "x"])
+@pytest.mark.parametrize("bad", [None, [1.0], {"a": 1}, 2 ** 70, "x", np.zeros(2, dtype=[("a", "f8")]),
+                                 np.zeros(2, dtype=object)])
 def test_type_key_refuses_other_arguments(bad):
     with pytest.raises(aot.Unsupported):
         aot.type_key((np.zeros(2), bad))

@@ -58,6 +58,8 @@ def type_key(a) -> str:
     float, numpy scalars, nested tuples.
     Raises Unsupported for anything else."""
     if isinstance(a, np.ndarray):
+        if a.dtype.fields is not None or a.dtype.hasobject:  # dtype.str would not tell records apart
+            raise Unsupported(f"array of dtype {a.dtype}")
         f = a.flags
         layout = "C" if f.c_contiguous else ("F" if f.f_contiguous else "A")
         return f"a{a.dtype.str}{a.ndim}{layout}{'w' if f.writeable else 'r'}"
@@ -82,8 +84,27 @@ def aot_dir() -> Path:
     import hashlib
     import inspect
 
-    recipe = hashlib.sha256(inspect.getsource(sys.modules[__name__]).encode()).hexdigest()[:8]
+    recipe = hashlib.sha256((inspect.getsource(sys.modules[__name__]) + _cpu_id()).encode()).hexdigest()[:8]
     return fast.cache_root() / f"aot-{fast.source_digest()}-{recipe}"
+
+
+def _cpu_id() -> str:
+    """The processor's model and instruction-set flags: a cache folder shared by different machines (a
+    network home) never hands one machine's module to another (numba links its jitted callees, compiled
+    for the host processor, into the module)."""
+    import platform
+
+    lines = []
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                if line.startswith(("model name", "flags", "Features", "CPU part")):
+                    lines.append(line)
+                elif not line.strip() and lines:  # the first processor's block is enough
+                    break
+    except OSError:
+        pass
+    return "".join(lines) or f"{platform.machine()} {platform.processor()}"
 
 
 def module_name(entry: str, key: str) -> str:
