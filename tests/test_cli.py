@@ -499,3 +499,11 @@ def test_run_with_real_back_ends(tmp_path):
     assert metrics["status"] == "ok" and metrics["e1_rms"] is not None
     assert load_scenario(out / "config.toml").duration == 0.05
     assert (out / "run.rrd").stat().st_size > 0
+
+
+def test_version_is_printed_and_exits_zero(capsys):
+    """--version prints "teleop <installed version>" on stdout and exits 0 (looked up only when asked)."""
+    from importlib.metadata import version
+
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out == f"teleop {version('octarm-teleop')}\n"

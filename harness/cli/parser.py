@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import NoReturn
@@ -134,8 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
                "2 invalid input; 130 interrupted (SIGINT/SIGTERM). "
                "Set TELEOP_DEBUG=1 to print tracebacks of output-writing failures. "
                "Run 'teleop COMMAND --help' for the options of each command.")
-    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}",
-                        help="print the package version and exit.")
+    parser.add_argument("--version", action=_VersionAction, help="print the package version and exit.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands")
 
     run = sub.add_parser(
@@ -248,6 +248,18 @@ def build_parser() -> argparse.ArgumentParser:
     fid.add_argument("--no-progress", action="store_true",
                      help="do not show progress output (default: shown on stderr when available).")
     return parser
+
+
+class _VersionAction(argparse.Action):
+    """argparse's "version" action, with the version looked up only when asked for (reading the
+    installed package's metadata costs ~40 ms, which every command paid when the parser was built)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, help=None):
+        super().__init__(option_strings=option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        parser._print_message(f"{parser.prog} {_version()}\n", sys.stdout)
+        parser.exit()
 
 
 def _version() -> str:
