@@ -22,6 +22,29 @@ from harness.loop.trajectory import Trajectory
 ROOT = Path(__file__).resolve().parent.parent
 
 
+def _c_toolchain() -> str | None:
+    """Why this machine cannot build the modules (no C compiler or no Python headers), or None.  Only
+    the environment is checked here, so a broken build on a machine that can build still fails."""
+    import shutil
+    import sysconfig
+
+    cc = (os.environ.get("CC") or sysconfig.get_config_var("CC") or "cc").split()[0]
+    if shutil.which(cc) is None:
+        return f"no C compiler ({cc!r} not found)"
+    if not (Path(sysconfig.get_paths()["include"]) / "Python.h").exists():
+        return "no Python headers (Python.h)"
+    return None
+
+
+def _needs_modules() -> None:
+    if os.environ.get("TELEOP_NO_JIT") == "1":
+        pytest.skip("interpreted kernels requested (TELEOP_NO_JIT=1)")
+    why = _c_toolchain()
+    if why:
+        pytest.skip(f"ahead-of-time modules cannot be built here: {why} (the fallback is "
+                    "test_build_failure_falls_back_to_jit)")
+
+
 def _samples() -> list:
     a = np.arange(12.0).reshape(3, 4)
     ro = np.arange(5.0)
@@ -86,8 +109,7 @@ CASES = {
 def test_aot_run_bit_identical_to_jit(name, monkeypatch):
     """Every array of the Trajectory (states, errors, commands, plant geometry) is bit-identical with
     the ahead-of-time modules and with the jitted kernels; the AOT path really ran compiled modules."""
-    if os.environ.get("TELEOP_NO_JIT") == "1":
-        pytest.skip("interpreted kernels requested (TELEOP_NO_JIT=1): nothing compiled to compare")
+    _needs_modules()
     scn = CASES[name]
     a = _run(scn, False, monkeypatch)
     b = _run(scn, True, monkeypatch)
@@ -99,9 +121,8 @@ def test_aot_run_bit_identical_to_jit(name, monkeypatch):
 
 
 def test_aot_path_resolves_extension_modules(monkeypatch):
+    _needs_modules()
     monkeypatch.setenv("TELEOP_NO_AOT", "0")
-    if os.environ.get("TELEOP_NO_JIT") == "1":
-        pytest.skip("interpreted kernels requested (TELEOP_NO_JIT=1)")
     aot.forget()
     simulate(Scenario(duration=0.1), progress=False)
     fns = [fn for e in aot.A._entries.values() for fn in e._fns.values()]  # noqa: SLF001
@@ -112,8 +133,7 @@ def test_aot_path_resolves_extension_modules(monkeypatch):
 def test_run_does_not_import_numba():
     """A MuJoCo run with the modules built imports neither numba nor SciPy (their ~1.2-1.5 s start-up
     is what the modules save)."""
-    if os.environ.get("TELEOP_NO_JIT") == "1":
-        pytest.skip("interpreted kernels requested (TELEOP_NO_JIT=1)")
+    _needs_modules()
     simulate(Scenario(duration=0.05), progress=False)  # builds the modules if missing (in this process)
     code = ("import sys; from harness.loop import simulate; from harness.config.scenario import Scenario; "
             "tr = simulate(Scenario(duration=0.2), progress=False); "
@@ -128,8 +148,7 @@ def test_run_does_not_import_numba():
 def test_aot_kernel_releases_the_gil(monkeypatch):
     """A Python thread keeps running while the compiled chunk runs (the output imports of
     harness.output.prefetch rely on it): one chunk of the whole 1.5-s run, heartbeats counted inside."""
-    if os.environ.get("TELEOP_NO_JIT") == "1":
-        pytest.skip("interpreted kernels hold the GIL by nature")
+    _needs_modules()
     monkeypatch.setenv("TELEOP_NO_AOT", "0")
     monkeypatch.setattr(mujoco_loop, "MUJOCO_CHUNK", 10 ** 9)
     aot.forget()
@@ -209,8 +228,7 @@ def test_build_failure_falls_back_to_jit(tmp_path, monkeypatch, caplog):
 def test_concurrent_builds_compile_once(tmp_path):
     """Two processes needing the same missing module (two sweep workers) build it once, under the lock,
     and both run it (the smallest entry, backbone_world, in an empty cache)."""
-    if os.environ.get("TELEOP_NO_JIT") == "1":
-        pytest.skip("interpreted kernels requested (TELEOP_NO_JIT=1)")
+    _needs_modules()
     code = ("import numpy as np; from harness.loop.aot import A; "
             "q2 = np.tile([0.3, 0.3, 0.3, 1.0, -0.5, 0.2], (3, 1)); out = np.zeros((3, 13, 3)); "
             "A.backbone_world(q2, 4, np.array([1.5, 0.0, 0.0]), out); print(float(out.sum()))")
@@ -237,3 +255,25 @@ def test_forget_rereads_the_environment(monkeypatch):
     fns = [fn for e in aot.A._entries.values() for fn in e._fns.values()]  # noqa: SLF001
     aot.forget()
     assert fns and all(type(fn).__name__ != "builtin_function_or_method" for fn in fns)
+
+
+def test_no_c_compiler_falls_back_without_compiling(tmp_path, monkeypatch, caplog):
+    """Without a C compiler nothing is compiled for a module that could not be linked: the reason is
+    recorded at once and the jitted kernel runs."""
+    if os.environ.get("TELEOP_NO_JIT") == "1":
+        pytest.skip("interpreted kernels requested (TELEOP_NO_JIT=1)")
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-cc"))
+    monkeypatch.setenv("TELEOP_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("TELEOP_NO_AOT", "0")
+
+    def must_not_build(*args, **kwargs):
+        raise AssertionError("tried to build without a compiler")
+
+    monkeypatch.setattr(aot, "build", must_not_build)
+    aot.forget()
+    with caplog.at_level(logging.WARNING, logger="harness.loop.aot"):
+        assert simulate(Scenario(duration=0.05), progress=False).status == "ok"
+    aot.forget()
+    failed = sorted(aot.aot_dir().glob("*.failed"))
+    assert failed and all("no C compiler" in f.read_text() for f in failed)
+    assert "no C compiler" in caplog.text

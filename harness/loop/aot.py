@@ -152,8 +152,24 @@ def _wrapper_releases_gil():
         pcc.Flags = base
 
 
+def toolchain_problem() -> str | None:
+    """Why no module can be built here (no C compiler, no Python headers), or None: checked before
+    numba spends its 20-60 s compiling a module that could not be linked."""
+    import shutil
+
+    cc = (os.environ.get("CC") or sysconfig.get_config_var("CC") or "cc").split()[0]
+    if shutil.which(cc) is None:
+        return f"no C compiler ({cc!r} not found; set CC)"
+    if not (Path(sysconfig.get_paths()["include"]) / "Python.h").exists():
+        return "no Python headers (Python.h; install the Python development package)"
+    return None
+
+
 def build(entry: str, args: tuple, modname: str, path: Path) -> None:
     """Compile `entry` for the types of `args` into the extension module file `path` (atomic)."""
+    problem = toolchain_problem()
+    if problem:
+        raise RuntimeError(problem)
     import numba
 
     disp = getattr(fast.kernels(True), entry)
@@ -206,9 +222,14 @@ class Entry:
                 folder.mkdir(parents=True, exist_ok=True)
                 with _locked(folder / f".{modname}.lock"):
                     if not path.exists() and not failed.exists():
-                        print(f"teleop: compiling the loop kernel {self.name} ahead of time into {folder} "
-                              "(once per code version, about 20-60 s)", file=sys.stderr, flush=True)
+                        problem = toolchain_problem()
+                        if problem is None:
+                            print(f"teleop: compiling the loop kernel {self.name} ahead of time into "
+                                  f"{folder} (once per code version, about 20-60 s)", file=sys.stderr,
+                                  flush=True)
                         try:
+                            if problem is not None:
+                                raise RuntimeError(problem)
                             build(self.name, args, modname, path)
                         except Exception as e:  # noqa: BLE001 - any build failure: the JIT runs instead
                             failed.write_text(f"{type(e).__name__}: {e}\n")
