@@ -206,6 +206,7 @@ def test_build_failure_falls_back_to_jit(tmp_path, monkeypatch, caplog):
         raise RuntimeError("no C compiler here")
 
     monkeypatch.setattr(aot, "build", no_compiler)
+    monkeypatch.setattr(aot, "toolchain_problem", lambda: None)  # the build itself fails, toolchain or not
     aot.forget()
     with caplog.at_level(logging.WARNING, logger="harness.loop.aot"):
         tr = simulate(scn, progress=False)
