@@ -29,6 +29,7 @@ TELEOP_NO_AOT=1: always the jitted kernels.  TELEOP_NO_JIT=1: interpreted kernel
 from __future__ import annotations
 
 import contextlib
+import functools
 import importlib.util
 import logging
 import os
@@ -81,11 +82,15 @@ def type_key(a) -> str:
 def aot_dir() -> Path:
     """Folder of the compiled entry modules for the current kernel sources and versions (and this
     module's build recipe)."""
+    return fast.cache_root() / f"aot-{fast.source_digest()}-{_recipe()}"
+
+
+@functools.cache
+def _recipe() -> str:
     import hashlib
     import inspect
 
-    recipe = hashlib.sha256((inspect.getsource(sys.modules[__name__]) + _cpu_id()).encode()).hexdigest()[:8]
-    return fast.cache_root() / f"aot-{fast.source_digest()}-{recipe}"
+    return hashlib.sha256((inspect.getsource(sys.modules[__name__]) + _cpu_id()).encode()).hexdigest()[:8]
 
 
 def _cpu_id() -> str:
@@ -166,10 +171,8 @@ def toolchain_problem() -> str | None:
 
 
 def build(entry: str, args: tuple, modname: str, path: Path) -> None:
-    """Compile `entry` for the types of `args` into the extension module file `path` (atomic)."""
-    problem = toolchain_problem()
-    if problem:
-        raise RuntimeError(problem)
+    """Compile `entry` for the types of `args` into the extension module file `path` (atomic; needs the
+    C toolchain, `toolchain_problem`)."""
     import numba
 
     disp = getattr(fast.kernels(True), entry)
@@ -221,18 +224,8 @@ class Entry:
             if not path.exists() and not failed.exists():
                 folder.mkdir(parents=True, exist_ok=True)
                 with _locked(folder / f".{modname}.lock"):
-                    if not path.exists() and not failed.exists():
-                        problem = toolchain_problem()
-                        if problem is None:
-                            print(f"teleop: compiling the loop kernel {self.name} ahead of time into "
-                                  f"{folder} (once per code version, about 20-60 s)", file=sys.stderr,
-                                  flush=True)
-                        try:
-                            if problem is not None:
-                                raise RuntimeError(problem)
-                            build(self.name, args, modname, path)
-                        except Exception as e:  # noqa: BLE001 - any build failure: the JIT runs instead
-                            failed.write_text(f"{type(e).__name__}: {e}\n")
+                    if not path.exists() and not failed.exists():  # not built meanwhile by another process
+                        self._build(args, modname, path, failed)
             if path.exists():
                 return getattr(_load(modname, path), self.name)
             reason = failed.read_text().strip() if failed.exists() else "not built"
@@ -240,6 +233,20 @@ class Entry:
             reason = f"{type(e).__name__}: {e}"
         log.warning("ahead-of-time kernel %s unavailable (%s); using the jitted kernel", self.name, reason)
         return getattr(fast.K, self.name)
+
+
+    def _build(self, args: tuple, modname: str, path: Path, failed: Path) -> None:
+        """Build the module, or record in `failed` why it cannot be (then the jitted kernel runs)."""
+        problem = toolchain_problem()
+        if problem is None:
+            print(f"teleop: compiling the loop kernel {self.name} ahead of time into {path.parent} "
+                  "(once per code version, about 20-60 s)", file=sys.stderr, flush=True)
+            try:
+                build(self.name, args, modname, path)
+                return
+            except Exception as e:  # noqa: BLE001 - any build failure: the JIT runs instead
+                problem = f"{type(e).__name__}: {e}"
+        failed.write_text(problem + "\n")
 
 
 class _Entries:

@@ -103,7 +103,7 @@ def master_rk4(mpk, s, T1, F1, h, nsub):
 @njit(cache=True)
 def master_points(m, l1, l2, base, out):
     """Master base, elbow and tip (n, 3, 3), world frame, m, of the master states m (n, 4) [q1, dq1]
-    (links l1, l2, m; base (3,)); the arithmetic of `CosseratPlant.geometry`, step by step."""
+    (links l1, l2, m; base (3,)); `CosseratPlant.geometry` and `finish` use it."""
     for k in range(m.shape[0]):
         q0, q1 = m[k, 0], m[k, 1]
         for i in range(3):
@@ -277,14 +277,7 @@ class CosseratPlant:
         cl[:] = pos.T
         cl += SLAVE_BASE
         g["sections"][:] = cl[self.slave.section_nodes]
-        q = self._m
-        l1, l2 = self.mpk[0], self.mpk[1]
-        mp = g["master"]
-        mp[:] = MASTER_BASE
-        mp[1, 0] += l1 * math.sin(q[0])
-        mp[1, 2] += l1 * math.cos(q[0])
-        mp[2, 0] = mp[1, 0] + l2 * math.sin(q[0] + q[1])
-        mp[2, 2] = mp[1, 2] + l2 * math.cos(q[0] + q[1])
+        master_points(self._m[None], self.mpk[0], self.mpk[1], MASTER_BASE, g["master"][None])
         return g
 
     def record(self, k: int) -> None:

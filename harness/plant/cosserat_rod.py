@@ -443,6 +443,22 @@ def fit_rod(pos, vel, xz, vxz, bounds, n_iter, q2, dq2):
 
 
 @njit(cache=True)
+def _at_hinges(v, sec, l0, out, base):
+    """A per-section value v (3,) as a couple about the binormal at the rod's hinges: out (3, ne - 1) <-
+    [0, rest-length l0 (ne,) weighted mean of v over the two elements of each hinge, 0], base (3,) <-
+    [0, v[0], 0].  sec (ne,): section of each element."""
+    for j in range(sec.shape[0] - 1):
+        a = v[sec[j]]
+        b = v[sec[j + 1]]
+        out[0, j] = 0.0
+        out[1, j] = (l0[j] * a + l0[j + 1] * b) / (l0[j] + l0[j + 1])
+        out[2, j] = 0.0
+    base[0] = 0.0
+    base[1] = v[0]
+    base[2] = 0.0
+
+
+@njit(cache=True)
 def rest_strains(q2c, n, L0, sec, l0, rest_sigma, rest_kappa, base_kappa0):
     """Servo command q2c (6,) = [d, k] -> the rod's rest strains (see `harness.plant.cosserat`,
     Actuation): rest_sigma (3, ne) <- [0, 0, (d / L0) sinc(k h / 2) - 1] per element (h = d / n),
@@ -464,15 +480,7 @@ def rest_strains(q2c, n, L0, sec, l0, rest_sigma, rest_kappa, base_kappa0):
         rest_sigma[0, j] = 0.0
         rest_sigma[1, j] = 0.0
         rest_sigma[2, j] = sig[sec[j]]
-    for j in range(ne - 1):
-        a = kap[sec[j]]
-        b = kap[sec[j + 1]]
-        rest_kappa[0, j] = 0.0
-        rest_kappa[1, j] = (l0[j] * a + l0[j + 1] * b) / (l0[j] + l0[j + 1])
-        rest_kappa[2, j] = 0.0
-    base_kappa0[0] = 0.0
-    base_kappa0[1] = kap[0]
-    base_kappa0[2] = 0.0
+    _at_hinges(kap, sec, l0, rest_kappa, base_kappa0)
 
 
 @njit(cache=True)
@@ -488,12 +496,4 @@ def active_loads(T2, q2, sec, l0, act_n, act_m, act_m_base):
     ne = sec.shape[0]
     for j in range(ne):
         act_n[j] = ax[sec[j]]
-    for j in range(ne - 1):
-        a = mu[sec[j]]
-        b = mu[sec[j + 1]]
-        act_m[0, j] = 0.0
-        act_m[1, j] = (l0[j] * a + l0[j + 1] * b) / (l0[j] + l0[j + 1])
-        act_m[2, j] = 0.0
-    act_m_base[0] = 0.0
-    act_m_base[1] = mu[0]
-    act_m_base[2] = 0.0
+    _at_hinges(mu, sec, l0, act_m, act_m_base)

@@ -95,7 +95,7 @@ def _worker_init() -> None:
     # with numba and MuJoCo loaded, which the pool's shutdown, i.e. the sweep, would wait for); every
     # result has been sent by then
     atexit.register(end_process, 0)
-    set_gc_thresholds()  # fewer collections while the first case imports numba and MuJoCo
+    set_gc_thresholds()  # fewer collections while the first case imports the loop and MuJoCo
     # A killed main process cannot stop its pool: each worker ends itself within PARENT_POLL s.
     threading.Thread(target=_watch_parent, args=(os.getppid(),), name="parent-watchdog", daemon=True).start()
 
@@ -185,8 +185,8 @@ WARM_MODULES = ("harness.loop", "harness.loop.mujoco_loop", "harness.loop.analyt
 
 def start_method() -> str:
     """How pool workers start: "fork" on Linux when this process runs no other Python thread (the
-    workers inherit the imported harness, numpy and MuJoCo: no interpreter start-up, no imports, about
-    1 s less per worker on the reference machine, `benchmarks/bench_e2e.py`); else "spawn" (fresh
+    workers inherit the imported harness, numpy and MuJoCo: no interpreter start-up, no imports, an
+    estimated 0.8 s less per worker on the reference machine, not measured apart); else "spawn" (fresh
     interpreters: safe beside threads, and unlike "forkserver" they see the current environment)."""
     if sys.platform.startswith("linux") and threading.active_count() == 1:
         return "fork"
