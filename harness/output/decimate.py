@@ -40,13 +40,24 @@ def envelope_indices(t: np.ndarray, y: np.ndarray, n_columns: int) -> np.ndarray
     starts = np.flatnonzero(np.r_[True, col[1:] != col[:-1]])  # first sample of each non-empty column
     ends = np.r_[starts[1:], n] - 1  # last sample of each column
     finite = np.isfinite(y)
-    # argmin / argmax per column: sort by (column, value); non-finite values never win
+    # per column: the earliest sample holding its min / its max (non-finite values never win; a
+    # column without a finite value gives its first sample), from reduceat, no sort
     lo_key = np.where(finite, y, np.inf)
     hi_key = np.where(finite, y, -np.inf)
-    by_lo = np.lexsort((np.arange(n), lo_key, col))  # ties: earliest sample
-    by_hi = np.lexsort((-np.arange(n), hi_key, col))  # ties: earliest sample (last of the reversed)
-    keep = np.concatenate([starts, ends, by_lo[starts], by_hi[ends], np.flatnonzero(~finite)])
-    return np.unique(keep)
+    counts = ends - starts + 1
+    first_lo = _first_per_column(lo_key == np.repeat(np.minimum.reduceat(lo_key, starts), counts), col)
+    first_hi = _first_per_column(hi_key == np.repeat(np.maximum.reduceat(hi_key, starts), counts), col)
+    keep = ~finite
+    for idx in (starts, ends, first_lo, first_hi):
+        keep[idx] = True
+    return np.flatnonzero(keep)
+
+
+def _first_per_column(mask: np.ndarray, col: np.ndarray) -> np.ndarray:
+    """Index of the first True of `mask` in each column (every column has one)."""
+    idx = np.flatnonzero(mask)
+    c = col[idx]
+    return idx[np.r_[True, c[1:] != c[:-1]]]
 
 
 def envelope(t: np.ndarray, y: np.ndarray, n_columns: int) -> tuple[np.ndarray, np.ndarray]:
