@@ -40,6 +40,7 @@ OPTIONS = {
     "sweep": ["--out", "--workers", "--scheduler", "--no-progress", "--view", "STUDY.toml"],
     "fidelity": ["--segments", "--out", "--no-progress"],
     "controllers": [],
+    "cache": ["--prune", "--clear"],
 }
 
 
@@ -507,3 +508,78 @@ def test_version_is_printed_and_exits_zero(capsys):
 
     assert main(["--version"]) == 0
     assert capsys.readouterr().out == f"teleop {version('octarm-teleop')}\n"
+
+
+# ---------------------------------------------------------------------------------------------
+# teleop cache: list, prune, clear the compiled-kernel cache
+# ---------------------------------------------------------------------------------------------
+def _fake_cache(root: Path) -> dict[str, Path]:
+    from harness.loop import aot, fast
+
+    names = {"numba_now": f"numba-{fast.source_digest()}", "aot_now": aot.aot_dir().name,
+             "numba_old": "numba-0123456789abcdef", "aot_old": "aot-0123456789abcdef-01234567",
+             "aot_other_cpu": f"aot-{fast.source_digest()}-ffffffff"}
+    paths = {}
+    for key, name in names.items():
+        p = root / name
+        (p / "sub").mkdir(parents=True)
+        (p / "sub" / "blob.bin").write_bytes(b"x" * 3000)
+        paths[key] = p
+    for other in ("notes.txt", "numba-not-a-digest", "mine"):  # not ours: never listed nor removed
+        q = root / other
+        q.mkdir() if other != "notes.txt" else q.write_text("keep")
+        paths[other] = q
+    return paths
+
+
+def test_cache_lists_prunes_and_clears_only_its_folders(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("TELEOP_CACHE_DIR", str(tmp_path / "kc"))
+    assert main(["cache"]) == 0
+    assert "no compiled kernels yet" in capsys.readouterr().out
+    paths = _fake_cache(tmp_path / "kc")
+    assert main(["cache"]) == 0
+    out = capsys.readouterr().out
+    for key in ("numba_now", "aot_now"):
+        assert f"current  {paths[key].name}" in out
+    for key in ("numba_old", "aot_old", "aot_other_cpu"):
+        assert f"stale    {paths[key].name}" in out
+    assert "5 folder(s)" in out and "3 stale" in out
+    assert "notes.txt" not in out and "mine" not in out and "numba-not-a-digest" not in out
+
+    assert main(["cache", "--prune"]) == 0
+    assert "removed 3 of 5 folder(s)" in capsys.readouterr().out
+    assert all(paths[k].exists() for k in ("numba_now", "aot_now", "notes.txt", "mine", "numba-not-a-digest"))
+    assert not any(paths[k].exists() for k in ("numba_old", "aot_old", "aot_other_cpu"))
+
+    assert main(["cache", "--clear"]) == 0
+    assert "removed 2 of 2 folder(s)" in capsys.readouterr().out
+    assert not paths["numba_now"].exists() and not paths["aot_now"].exists()
+    assert all(paths[k].exists() for k in ("notes.txt", "mine", "numba-not-a-digest"))
+
+
+def test_cache_options_and_a_root_that_is_a_file(tmp_path, monkeypatch, capsys):
+    assert main(["cache", "--prune", "--clear"]) == 2  # one or the other
+    assert "not allowed with argument" in capsys.readouterr().err
+    root = tmp_path / "file"
+    root.write_text("")
+    monkeypatch.setenv("TELEOP_CACHE_DIR", str(root))
+    assert main(["cache"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "is not a folder" in err and "Traceback" not in err
+
+
+def test_cache_reports_a_folder_it_cannot_remove(tmp_path, monkeypatch, capsys):
+    from harness.loop import cache_admin
+
+    monkeypatch.setenv("TELEOP_CACHE_DIR", str(tmp_path / "kc"))
+    paths = _fake_cache(tmp_path / "kc")
+
+    def refuse(path, *a, **k):
+        raise PermissionError(13, "Permission denied", str(path))
+
+    monkeypatch.setattr(cache_admin.shutil, "rmtree", refuse)
+    assert main(["cache", "--prune"]) == 1
+    cap = capsys.readouterr()
+    assert cap.err.count("could not remove") == 3 and "Permission denied" in cap.err
+    assert "removed 0 of 5 folder(s), 0.0 MiB freed" in cap.out
+    assert paths["numba_old"].exists()

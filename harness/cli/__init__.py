@@ -6,6 +6,7 @@
     teleop sweep STUDY.toml [--out DIR] [--workers N] ...    parameter sweep (local or Dask cluster)
     teleop controllers                                       list the built-in controllers
     teleop fidelity [--segments 4,8,16,32] [--samples N] [--reference analytic|cosserat]   plant fidelity
+    teleop cache [--prune | --clear]                         the compiled-kernel cache: list, prune
 
 Exit status: 0 success; 1 the run failed (diverged, an output could not be written) or a bound was
 violated; 2 invalid input (scenario, bounds, option, output folder; a file that cannot be written before
@@ -272,6 +273,29 @@ def cmd_controllers(args: argparse.Namespace) -> int:  # noqa: ARG001
     return EXIT_OK
 
 
+def cmd_cache(args: argparse.Namespace) -> int:
+    admin = _import("harness.loop.cache_admin")
+    root = _import("harness.loop.fast").cache_root()
+    items = admin.folders(root)
+    if args.prune or args.clear:
+        gone = [f for f in items if args.clear or not f.current]
+        freed, errors = admin.remove(gone)
+        for e in errors:
+            _err(f"could not remove {e}")
+        print(f"{root}: removed {len(gone) - len(errors)} of {len(items)} folder(s), "
+              f"{admin.mib(freed)} freed")
+        return EXIT_FAIL if errors else EXIT_OK
+    if not items:
+        print(f"{root}: no compiled kernels yet")
+        return EXIT_OK
+    for f in items:
+        print(f"{admin.mib(f.size):>10}  {'current' if f.current else 'stale  '}  {f.path.name}")
+    stale = [f for f in items if not f.current]
+    print(f"{root}: {len(items)} folder(s), {admin.mib(sum(f.size for f in items))}; {len(stale)} stale "
+          f"({admin.mib(sum(f.size for f in stale))}): 'teleop cache --prune' removes them")
+    return EXIT_OK
+
+
 def _view_case(study: Path, out: Path | None, case_id: str) -> int:
     """`teleop sweep STUDY --view CASE_ID`: open a case's recording in a spawned Rerun viewer."""
     import subprocess
@@ -348,7 +372,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 COMMANDS = {"run": cmd_run, "check": cmd_check, "models": cmd_models, "sweep": cmd_sweep,
-            "controllers": cmd_controllers, "fidelity": cmd_fidelity}
+            "controllers": cmd_controllers, "fidelity": cmd_fidelity, "cache": cmd_cache}
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -221,6 +221,23 @@ def build_parser() -> argparse.ArgumentParser:
                     "Your own: --controller path/to/file.py:ClassName (README 'Bring your own controller').",
         epilog="Default controller of every scenario: paper (the paper's laws on the compiled fast path).")
 
+    cache = sub.add_parser(
+        "cache", formatter_class=_Formatter, help="list or prune the compiled-kernel cache",
+        description="List the folders of the compiled-kernel cache ($TELEOP_CACHE_DIR, else "
+                    "$XDG_CACHE_HOME/octarm-teleop, else ~/.cache/octarm-teleop) with their sizes, marking "
+                    "those this installation uses on this machine. Every change of the kernel sources or of "
+                    "numba/numpy/Python starts new folders; the old ones are never read again. "
+                    "Default: list only.",
+        epilog="Removing a folder another installation (or another machine sharing the folder) still uses "
+               "costs that one a single recompilation, 20-60 s, at its next run.")
+    what = cache.add_mutually_exclusive_group()
+    what.add_argument("--prune", action="store_true",
+                      help="remove the folders this installation does not use (other code versions). "
+                           "Default: keep them.")
+    what.add_argument("--clear", action="store_true",
+                      help="remove every cache folder (the next run compiles again, 20-60 s). "
+                           "Default: keep them.")
+
     fid = sub.add_parser(
         "fidelity", formatter_class=_Formatter, help="plant-fidelity study over MuJoCo segment counts",
         description="Compare the generated MuJoCo Octarm with N rigid segments per section against the "
