@@ -291,8 +291,9 @@ def cmd_cache(args: argparse.Namespace) -> int:
     for f in items:
         print(f"{admin.mib(f.size):>10}  {'current' if f.current else 'stale  '}  {f.path.name}")
     stale = [f for f in items if not f.current]
-    print(f"{root}: {len(items)} folder(s), {admin.mib(sum(f.size for f in items))}; {len(stale)} stale "
-          f"({admin.mib(sum(f.size for f in stale))}): 'teleop cache --prune' removes them")
+    hint = f" ({admin.mib(sum(f.size for f in stale))}): 'teleop cache --prune' removes them" if stale else ""
+    total = admin.mib(sum(f.size for f in items))
+    print(f"{root}: {len(items)} folder(s), {total}; {len(stale)} stale{hint}")
     return EXIT_OK
 
 
