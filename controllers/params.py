@@ -11,6 +11,7 @@ curvatures in 1/m, forces in N, moments in N m.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -23,13 +24,18 @@ class ParameterError(ValueError):
 
 
 def _tup(x) -> tuple[float, ...]:
+    if type(x) in (tuple, list) and all(type(v) in (float, int) for v in x):  # the common case, no numpy
+        return tuple(float(v) for v in x)
     return tuple(float(v) for v in np.asarray(x, dtype=float).ravel())
 
 
 def _check_positive(owner: str, name: str, values, allow_zero: bool = False) -> None:
-    arr = np.atleast_1d(np.asarray(values, dtype=float))
-    bad = ~np.isfinite(arr) | ((arr < 0) if allow_zero else (arr <= 0))
-    if np.any(bad):
+    if isinstance(values, tuple) and all(type(v) is float for v in values):  # the dataclasses' own fields
+        bad = any(not math.isfinite(v) or (v < 0.0 if allow_zero else v <= 0.0) for v in values)
+    else:  # scalars, lists, arrays: the same rule through numpy
+        arr = np.atleast_1d(np.asarray(values, dtype=float))
+        bad = bool(np.any(~np.isfinite(arr) | ((arr < 0) if allow_zero else (arr <= 0))))
+    if bad:
         rng = ">= 0" if allow_zero else "> 0"
         raise ParameterError(f"{owner}.{name} = {values!r}: every entry must be finite and {rng}")
 

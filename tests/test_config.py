@@ -7,6 +7,7 @@ import math
 import tomllib
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -471,3 +472,34 @@ def test_scene_xml_is_used_by_the_plant(tmp_path):
     scn = load_scenario({"plant": {"scene_xml": str(scene), "segments": 2}})
     m, _ = build_model(scn.plant_master, scn.plant_slave, scn.plant)
     assert m.light("my_special_light").id >= 0
+
+
+# --- the validation's fast paths (pure Python for plain tuples) agree with the numpy rule ---------
+@pytest.mark.parametrize("values", [(1.0, 2.0), (0.0, 1.0), (-1.0, 1.0), (float("nan"), 1.0), (float("inf"),),
+                                    (1e-300,), (-0.0,), (5,)])
+@pytest.mark.parametrize("allow_zero", [False, True])
+def test_positivity_check_fast_path_matches_numpy(values, allow_zero):
+    from controllers.params import ParameterError, _check_positive
+
+    def outcome(v):
+        try:
+            _check_positive("owner", "field", v, allow_zero=allow_zero)
+            return None
+        except ParameterError as e:
+            return str(e).split(" = ")[0]
+
+    as_tuple = tuple(float(x) for x in values)  # fast path
+    as_array = np.array(values, dtype=float)  # numpy path
+    assert outcome(as_tuple) == outcome(as_array)
+    arr = np.asarray(values, dtype=float)
+    expected_bad = bool(np.any(~np.isfinite(arr) | ((arr < 0) if allow_zero else (arr <= 0))))
+    assert (outcome(as_tuple) is not None) == expected_bad
+
+
+def test_toml_values_are_plain_python():
+    from harness.config.load import _to_toml_value
+
+    out = _to_toml_value((np.float64(1.5), np.int64(2), True, 3, "x", None, [np.float32(0.25)]))
+    assert out == [1.5, 2, True, 3, "x", "none", [0.25]]
+    assert [type(v) for v in out[:5]] == [float, int, bool, int, str]
+    assert type(out[6][0]) is float

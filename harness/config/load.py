@@ -37,6 +37,7 @@ and the allowed range or type.
 from __future__ import annotations
 
 import copy
+import functools
 import math
 import tomllib
 from collections.abc import Iterable, Mapping
@@ -395,14 +396,21 @@ def _scenario_from_dict(raw: Mapping, default_name: str | None) -> Scenario:
     return scn
 
 
+@functools.cache
+def _field_names(cls: type) -> tuple[str, ...]:
+    return tuple(f.name for f in fields(cls))
+
+
 def _to_toml_value(v: Any) -> Any:
     if v is None:
         return "none"
+    if type(v) in (bool, int, float, str):  # exact types: numpy scalars (float subclasses) go to .item()
+        return v
     if isinstance(v, EnvironmentConfig):  # named objects: [environment.objects.<name>]
-        return {"objects": {o.name: {f.name: _to_toml_value(getattr(o, f.name)) for f in fields(o)
-                                     if f.name != "name"} for o in v.objects}}
+        return {"objects": {o.name: {n: _to_toml_value(getattr(o, n)) for n in _field_names(type(o))
+                                     if n != "name"} for o in v.objects}}
     if is_dataclass(v) and not isinstance(v, type):
-        return {f.name: _to_toml_value(getattr(v, f.name)) for f in fields(v)}
+        return {n: _to_toml_value(getattr(v, n)) for n in _field_names(type(v))}
     if isinstance(v, (list, tuple)):
         return [_to_toml_value(x) for x in v]
     if isinstance(v, np.generic):
