@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/bench_sweep.py                      # 8 cases x 2 s, MuJoCo plant
     .venv/bin/python benchmarks/bench_sweep.py --plant analytic --duration 5 --cases 16
+    .venv/bin/python benchmarks/bench_sweep.py --cases 64 --expand   # only: expanding + validating the cases
 
 Each configuration runs the same small mass-mismatch study (plant slave masses scaled 0.8..1.2)
 into a fresh temporary folder through `harness.studies.sweep.run_sweep`, so the wall time includes starting
@@ -39,12 +40,30 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=2.0, help="simulated seconds per case (default 2)")
     ap.add_argument("--plant", choices=("mujoco", "analytic"), default="mujoco",
                     help="plant (default mujoco)")
+    ap.add_argument("--expand", action="store_true",
+                    help="only time expanding and validating the cases (serial in the sweep's process before "
+                         "any case runs): median of 7, ms per case")
     ap.add_argument("--workers", default=None,
                     help="comma-separated worker counts (default: 1 and os.cpu_count())")
     args = ap.parse_args(argv)
     ncpu = os.cpu_count() or 1
     counts = [int(w) for w in args.workers.split(",")] if args.workers else sorted({1, ncpu})
     doc = make_study(args.cases, args.duration, args.plant)
+    if args.expand:
+        from harness.studies.cases import load_base
+
+        study = load_study(doc)
+        base = load_base(study)
+        times = []
+        for _ in range(8):  # the first is a warm-up
+            t0 = time.perf_counter()
+            expand_cases(study, base)
+            times.append(time.perf_counter() - t0)
+        times = sorted(times[1:])
+        per = [t / args.cases * 1e3 for t in times]
+        print(f"expanding + validating {args.cases} cases: {per[len(per) // 2]:.2f} ms per case "
+              f"(median of {len(per)}; min {per[0]:.2f})")
+        return 0
 
     case = expand_cases(load_study(doc))[0]
     t0 = time.perf_counter()
