@@ -25,6 +25,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from bench_loop import logged_run  # noqa: E402  (this folder: the script's own)
+
 from harness.config.load import load_scenario  # noqa: E402
 from harness.loop import mujoco_loop as ML  # noqa: E402
 from harness.loop.aot import A as REAL_A  # noqa: E402
@@ -61,10 +63,8 @@ def main(argv=None) -> int:
     sel = _Select()
     ML.A = sel
     scn = load_scenario(ROOT / "scenarios" / "paper.toml")
-    m, _, _ = ML.make_plant(scn)
-    log = np.zeros((scn.n_steps * scn.substeps, m.nu + m.nv))
     sel.fn = next(iter(fns.values()))
-    ML.simulate_mujoco(scn, cmd_log=log)
+    _, log = logged_run(scn)  # the first build's commands, replayed raw each round
 
     def raw() -> float:
         m, d, _ = ML.make_plant(scn)

@@ -14,8 +14,10 @@ linked in), for the exact argument types of the call, so the numbers are the sam
 bit-identical).  Its Python wrapper releases the GIL like `njit(nogil=True)`, so the output imports
 of `harness.output.prefetch` still run beside the loop.
 
-Where.  One module per entry and argument types: `<cache root>/aot-<digest>/octarm_<entry>_<types>.so`
-(`harness.loop.fast.cache_root`; the digest covers the kernel sources, numba, numpy and Python).
+Where.  One module per entry and argument types:
+`<cache root>/aot-<digest>-<recipe>/octarm_<entry>_<types>.so` (`harness.loop.fast.cache_root`; the
+digest covers the kernel sources, numba, numpy and Python, the recipe this module's build and the
+processor, `aot_dir`).
 The argument types are read in pure Python (dtype, ndim, layout, writeable, nested tuples: what
 `numba.typeof` looks at), so finding the module needs no numba.  A missing module is built on
 first use (about 20-60 s, one line on stderr), under a file lock so that sweep workers build it once.
