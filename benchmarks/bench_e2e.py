@@ -55,6 +55,8 @@ _CHILD = r"""
 import json, os, sys, time
 t_start = time.perf_counter()
 import harness.cli as cli
+assert "mujoco" not in sys.modules  # prepare_process must come first, as in `teleop`
+cli.prepare_process()  # as `teleop` does (harness.cli.entry): MUJOCO_GL, the collector thresholds
 from harness import api
 import harness.loop as loop_pkg
 import harness.output.prefetch as prefetch
@@ -106,7 +108,6 @@ def run_scenario(scn, *a, **k):
     return res
 api.run_scenario = run_scenario
 from harness.config import runtime
-runtime.set_gc_thresholds()  # as `teleop` does (harness.cli.entry)
 rc = cli.main(sys.argv[1:])
 stamps["end"] = rel()
 print("E2E-JSON " + json.dumps({"rc": rc, "stamps": stamps, **info}))
@@ -237,6 +238,8 @@ def _timed_case(payload: dict) -> dict:
 _SWEEP_CHILD = r"""
 import json, sys, time
 t0 = time.perf_counter()
+import harness.cli as cli
+cli.prepare_process()  # as `teleop sweep` does (harness.cli.entry); the workers inherit MUJOCO_GL
 from harness.studies.sweep import run_sweep
 res = run_sweep(json.loads(sys.argv[1]), out=sys.argv[2], workers=int(sys.argv[3]), progress=False)
 print("SWEEP-JSON " + json.dumps({"in_process": time.perf_counter() - t0, "n": len(res.rows),

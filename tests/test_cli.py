@@ -510,6 +510,26 @@ def test_version_is_printed_and_exits_zero(capsys):
     assert capsys.readouterr().out == f"teleop {version('octarm-teleop')}\n"
 
 
+@pytest.mark.parametrize("preset", [None, "egl"])
+def test_prepare_process_turns_mujoco_gl_off_unless_set(preset):
+    """`teleop` (entry -> prepare_process) sets MUJOCO_GL=disable only when the user has not set it, so
+    `import mujoco` skips the GLFW lookup; and applies the collector thresholds.  In a fresh interpreter,
+    because both are process-wide."""
+    from harness.config.runtime import GC_THRESHOLDS
+
+    code = ("import gc, os, sys; import harness.cli as cli; cli.prepare_process(); "
+            "print(os.environ.get('MUJOCO_GL')); print(list(gc.get_threshold())); "
+            "print('mujoco' in sys.modules)")
+    env = {k: v for k, v in os.environ.items() if k != "MUJOCO_GL"}
+    if preset is not None:
+        env["MUJOCO_GL"] = preset
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT,
+                         check=True).stdout.split("\n")
+    assert out[0] == (preset or "disable")
+    assert json.loads(out[1]) == list(GC_THRESHOLDS)
+    assert out[2] == "False"  # importing the CLI does not import MuJoCo: the setting still applies
+
+
 # ---------------------------------------------------------------------------------------------
 # teleop cache: list, prune, clear the compiled-kernel cache
 # ---------------------------------------------------------------------------------------------

@@ -380,11 +380,18 @@ if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())
 
 
-def entry() -> NoReturn:
-    """The `teleop` command (console script and `python -m harness.cli`): `main()` with the collector
-    thresholds `harness.config.runtime.GC_THRESHOLDS`, then `fast_exit` (atexit handlers, no teardown).
-    MuJoCo's OpenGL rendering is off unless MUJOCO_GL says otherwise: the harness draws with Rerun and
-    matplotlib, and `import mujoco` skips looking for GLFW (~0.1 s)."""
+def prepare_process() -> None:
+    """What the `teleop` command sets up before `main()` (also used by benchmarks/bench_e2e.py, so that
+    it measures the command as users run it): the collector thresholds
+    `harness.config.runtime.GC_THRESHOLDS`, and MuJoCo's OpenGL rendering off unless MUJOCO_GL says
+    otherwise (the harness draws with Rerun and matplotlib; `import mujoco` then skips looking for
+    GLFW, ~0.1 s).  Call it before MuJoCo is imported; sweep workers inherit the environment."""
     os.environ.setdefault("MUJOCO_GL", "disable")
     set_gc_thresholds()
+
+
+def entry() -> NoReturn:
+    """The `teleop` command (console script and `python -m harness.cli`): `prepare_process()`, `main()`,
+    then `fast_exit` (atexit handlers, no teardown)."""
+    prepare_process()
     fast_exit(main())
