@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -252,3 +253,61 @@ def test_noise_free_record_rows_equal_recomputed_rows(kind):
         for name, sl in ROW_SLICES.items():
             got = np.atleast_1d(getattr(tr, name)[k])
             np.testing.assert_array_equal(got, row[sl], err_msg=f"{name} at step {k}")
+
+
+def _traj_arrays(tr) -> dict[str, np.ndarray]:
+    """Every array field of a Trajectory (time series, plant geometry, contact points)."""
+    return {f.name: np.asarray(getattr(tr, f.name)) for f in dataclasses.fields(tr)
+            if isinstance(getattr(tr, f.name), np.ndarray)}
+
+
+@pytest.mark.parametrize("case", ["paper_delay", "contact"])
+def test_chunk_boundaries_do_not_change_the_run(monkeypatch, case):
+    """The MuJoCo loop's compiled calls may split a run anywhere (their length follows the measured speed,
+    `mujoco_loop.next_chunk`): one call, calls of 1-97 steps in a seeded random order, and the default
+    give bit-identical trajectories, with a command delay (its ring buffer spans the calls) and with
+    contact and a delayed, filtered force sensor (scenarios/contact.toml)."""
+    from harness.config.load import load_scenario
+    from harness.loop import mujoco_loop
+
+    root = Path(__file__).resolve().parents[1]
+    short = ["duration=0.4", "transient=0", "plant.segments=4"]
+    if case == "contact":
+        scn = load_scenario(root / "scenarios" / "contact.toml", short)
+    else:
+        scn = load_scenario(root / "scenarios" / "paper.toml", [*short, "plant.actuation_delay=0.003"])
+    runs = {}
+    runs["default"] = _traj_arrays(simulate_mujoco(scn))
+    monkeypatch.setattr(mujoco_loop, "MUJOCO_CHUNK", 10 ** 9)
+    runs["one call"] = _traj_arrays(simulate_mujoco(scn))
+    rng = np.random.default_rng(7)
+    sizes = []
+
+    def random_chunk(steps, seconds, on_chunk):
+        sizes.append(int(rng.integers(1, 98)))
+        return sizes[-1]
+
+    monkeypatch.setattr(mujoco_loop, "MUJOCO_CHUNK", 13)
+    monkeypatch.setattr(mujoco_loop, "next_chunk", random_chunk)
+    runs["random"] = _traj_arrays(simulate_mujoco(scn))
+    assert len(sizes) > 5
+    ref = runs.pop("default")
+    assert len(ref["t"]) == scn.n_steps and "body_pos" in ref
+    if case == "contact":
+        assert "contact_points" in ref and np.any(ref["F_true"] != 0.0)
+    for name, arrays in runs.items():
+        assert arrays.keys() == ref.keys(), name
+        for key, v in arrays.items():
+            np.testing.assert_array_equal(v, ref[key], err_msg=f"{name}: {key}")
+
+
+def test_next_chunk_follows_the_measured_speed():
+    """Later calls last about CHUNK_SECONDS, never fewer than MUJOCO_CHUNK steps; with a live view
+    (on_chunk) or no measurement every call is MUJOCO_CHUNK steps."""
+    from harness.loop import mujoco_loop as ml
+
+    assert ml.next_chunk(1000, 0.05, False) == int(1000 * ml.CHUNK_SECONDS / 0.05)
+    assert ml.next_chunk(1000, 10.0, False) == ml.MUJOCO_CHUNK  # slow plant: not below the floor
+    assert ml.next_chunk(1000, 0.05, True) == ml.MUJOCO_CHUNK
+    assert ml.next_chunk(0, 0.05, False) == ml.MUJOCO_CHUNK
+    assert ml.next_chunk(1000, 0.0, False) == ml.MUJOCO_CHUNK

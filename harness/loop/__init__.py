@@ -22,7 +22,9 @@ def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None, on_r
     (e.g. a live viewer, `harness.output.viewer.LiveView`).  on_running: optional callable called
     once, without arguments, after the first chunk of steps: the loop's start-up (numba loading its
     kernels, model set-up) is over, so background work started then (the output imports,
-    `harness.output.prefetch`) does not compete with it for the GIL.
+    `harness.output.prefetch`) does not compete with it for the GIL.  Not called by the Python-stepped
+    loop on plants that release the GIL at every step (`simulate_stepped`): there such work would stall
+    every step.
 
     A run that diverges or is interrupted (`harness.loop.common.STOP`) returns everything up to that
     point, with `status` and `message` saying what happened and when."""

@@ -43,9 +43,23 @@ from harness.loop.trajectory import ROW_WIDTH, Trajectory
 from harness.plant.chain_map import ChainMap
 from harness.plant.mujoco_model import MujocoPlant
 
-# control steps per compiled call between progress/interrupt/warning checks (each call costs ~50 us of
-# numba dispatch; 1000 steps are 50-100 ms at N = 8)
+# Control steps per compiled call between progress/interrupt/warning checks: the first call (after which
+# `on_running` starts the output imports), and every call when `on_chunk` is given (a live view).  1000
+# steps are 50-100 ms at N = 8.
 MUJOCO_CHUNK = 1000
+# Later calls, without on_chunk, last about CHUNK_SECONDS (the steps per second of the previous call): the
+# progress bar and Ctrl-C still answer within ~0.25 s, and there are 4-6 calls in the paper run instead of
+# 20.  Each return from a call needs the GIL back; while `harness.output.prefetch` imports Rerun and
+# matplotlib beside the loop, that wait was 0.10-0.15 s of the paper run's loop (benchmarks/RESULTS.md).
+# The numbers do not depend on where the calls split the run (tests/test_aot.py).
+CHUNK_SECONDS = 0.25
+
+
+def next_chunk(steps: int, seconds: float, on_chunk: bool) -> int:
+    """Control steps for the next compiled call, after a call of `steps` steps that took `seconds`."""
+    if on_chunk or steps <= 0 or seconds <= 0.0:
+        return MUJOCO_CHUNK
+    return max(MUJOCO_CHUNK, int(steps * CHUNK_SECONDS / seconds))
 WARNINGS = [w for name, w in mujoco.mjtWarning.__members__.items() if name != "mjNWARNING"]
 
 
@@ -135,10 +149,13 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     chunk(0, 0)  # no step: numba loads the kernel (on-disk cache) with the run's argument types
     load_time = time.perf_counter() - tl
     t0 = time.perf_counter()
+    size = MUJOCO_CHUNK
     try:
         while k < n:
-            k1 = min(n, k + MUJOCO_CHUNK)
+            k1 = min(n, k + size)
+            tc = time.perf_counter()
             status, mdone = chunk(k, k1)
+            size = next_chunk(mdone, time.perf_counter() - tc, on_chunk is not None)
             done = k + mdone
             if bar is not None:
                 bar.update(mdone)
