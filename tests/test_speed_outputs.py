@@ -263,9 +263,10 @@ def test_envelope_with_a_subnormal_time_span():
     ["plant.kind='analytic'", "duration=0.6", "controller.name='paper_interface'"],  # stepped loop
     ["plant.kind='cosserat'", "duration=0.6"],                       # stepped loop, Cosserat rod
 ], ids=["analytic", "mujoco", "stepped", "cosserat"])
-def test_on_running_is_called_once_after_the_first_chunk(overrides):
-    """Once, after the first chunk; except in the Python-stepped loop on a plant that releases the GIL at
-    every step (here the analytic adapter), where a thread beside the loop would stall every step."""
+def test_on_running_is_called_once_when_the_loop_runs(overrides):
+    """Once, after the first chunk (the compiled MuJoCo loop: before it, once its kernel is loaded); except
+    in the Python-stepped loop on a plant that releases the GIL at every step (here the analytic
+    adapter), where a thread beside the loop would stall every step."""
     from harness.api import load_scenario
     from harness.loop import simulate
 
@@ -278,6 +279,8 @@ def test_on_running_is_called_once_after_the_first_chunk(overrides):
     assert len(chunks) >= 2  # the run has more than one chunk ...
     if "controller.name='paper_interface'" in overrides:
         assert seen == []  # ... the analytic adapter's steps release the GIL: no background work
+    elif overrides == ["duration=1.2"]:
+        assert seen == [0]  # ... the compiled MuJoCo loop: once, its kernel loaded, before any step
     else:
         assert seen == [1]  # ... and on_running came once, right after the first
 

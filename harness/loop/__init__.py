@@ -20,9 +20,10 @@ def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None, on_r
     """Run one scenario on `plant` (default: the plant `scn.plant` describes); returns the Trajectory.
     on_chunk: optional callable receiving each finished chunk of control steps as a `Trajectory`
     (e.g. a live viewer, `harness.output.viewer.LiveView`).  on_running: optional callable called
-    once, without arguments, after the first chunk of steps: the loop's start-up (numba loading its
-    kernels, model set-up) is over, so background work started then (the output imports,
-    `harness.output.prefetch`) does not compete with it for the GIL.  Not called by the Python-stepped
+    once, without arguments, when the loop's start-up (numba loading its kernels, model set-up) is over:
+    after the first chunk of steps, or, in the compiled MuJoCo loop, as soon as its kernel is loaded.
+    Background work started then (the output imports, `harness.output.prefetch`) does not compete with
+    the start-up for the GIL.  Not called by the Python-stepped
     loop on plants that release the GIL at every step (`simulate_stepped`): there such work would stall
     every step.
 

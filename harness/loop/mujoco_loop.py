@@ -43,8 +43,8 @@ from harness.loop.trajectory import ROW_WIDTH, Trajectory
 from harness.plant.chain_map import ChainMap
 from harness.plant.mujoco_model import MujocoPlant
 
-# Control steps per compiled call between progress/interrupt/warning checks: the first call (after which
-# `on_running` starts the output imports), and every call when `on_chunk` is given (a live view).  1000
+# Control steps per compiled call between progress/interrupt/warning checks: the first call, and every
+# call when `on_chunk` is given (a live view).  1000
 # steps are 50-100 ms at N = 8.
 MUJOCO_CHUNK = 1000
 # Later calls, without on_chunk, last about CHUNK_SECONDS (the steps per second of the previous call): the
@@ -100,8 +100,9 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     cmd_log: optional (n_steps * substeps, nu + nv) array that receives, for every mj_step, the
     [ctrl, qfrc_applied] applied before it (to replay the same physics with raw mj_step).
     on_chunk: optional callable receiving each finished chunk of steps as a `Trajectory` (with the plant
-    geometry when the integrator provides it in the loop, see `_chunk`).  on_running: called once after
-    the first chunk (`harness.loop.simulate`)."""
+    geometry when the integrator provides it in the loop, see `_chunk`).  on_running: called once when
+    the kernel is loaded, before the first step (`harness.loop.simulate`): from then on only the compiled
+    loop runs, releasing the GIL ~0.25 s at a time."""
     tb = time.perf_counter()
     if plant is None:
         plant = MujocoPlant.build(scn)
@@ -148,6 +149,8 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     tl = time.perf_counter()
     chunk(0, 0)  # no step: numba loads the kernel (on-disk cache) with the run's argument types
     load_time = time.perf_counter() - tl
+    if on_running is not None:  # the kernel is loaded: nothing but the compiled loop runs from here
+        on_running()
     t0 = time.perf_counter()
     size = MUJOCO_CHUNK
     try:
@@ -161,9 +164,6 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
                 bar.update(mdone)
             if on_chunk is not None and mdone:
                 on_chunk(_chunk(scn, m, cmap, geo, rows, k, done))
-            if on_running is not None:
-                on_running, start = None, on_running
-                start()
             if wnum.any():
                 warned = warning_counts(d)
                 if status == 0:  # the kernel stops at the step that raised it; never pass silently
