@@ -23,9 +23,8 @@ def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None, on_r
     once, without arguments, when the loop's start-up (numba loading its kernels, model set-up) is over:
     after the first chunk of steps, or, in the compiled MuJoCo loop, as soon as its kernel is loaded.
     Background work started then (the output imports, `harness.output.prefetch`) does not compete with
-    the start-up for the GIL.  Not called by the Python-stepped
-    loop on plants that release the GIL at every step (`simulate_stepped`): there such work would stall
-    every step.
+    the start-up for the GIL.  Not called by the Python-stepped loop on plants that release the GIL at
+    every step (`simulate_stepped`): there such work would stall every step.
 
     A run that diverges or is interrupted (`harness.loop.common.STOP`) returns everything up to that
     point, with `status` and `message` saying what happened and when."""

@@ -44,14 +44,14 @@ from harness.plant.chain_map import ChainMap
 from harness.plant.mujoco_model import MujocoPlant
 
 # Control steps per compiled call between progress/interrupt/warning checks: the first call, and every
-# call when `on_chunk` is given (a live view).  1000
-# steps are 50-100 ms at N = 8.
+# call when `on_chunk` is given (a live view).  1000 steps are 50-100 ms at N = 8.
 MUJOCO_CHUNK = 1000
 # Later calls, without on_chunk, last about CHUNK_SECONDS (the steps per second of the previous call): the
 # progress bar and Ctrl-C still answer within ~0.25 s, and there are 4-6 calls in the paper run instead of
 # 20.  Each return from a call needs the GIL back; while `harness.output.prefetch` imports Rerun and
-# matplotlib beside the loop, that wait was 0.10-0.15 s of the paper run's loop (benchmarks/RESULTS.md).
-# The numbers do not depend on where the calls split the run (tests/test_aot.py).
+# matplotlib beside the loop, that wait was 0.10-0.15 s of the paper run's loop (README, End to end).
+# The numbers do not depend on where the calls split the run
+# (tests/test_speed_paths.py::test_chunk_boundaries_do_not_change_the_run).
 CHUNK_SECONDS = 0.25
 
 
@@ -60,6 +60,8 @@ def next_chunk(steps: int, seconds: float, on_chunk: bool) -> int:
     if on_chunk or steps <= 0 or seconds <= 0.0:
         return MUJOCO_CHUNK
     return max(MUJOCO_CHUNK, int(steps * CHUNK_SECONDS / seconds))
+
+
 WARNINGS = [w for name, w in mujoco.mjtWarning.__members__.items() if name != "mjNWARNING"]
 
 
@@ -149,11 +151,11 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     tl = time.perf_counter()
     chunk(0, 0)  # no step: numba loads the kernel (on-disk cache) with the run's argument types
     load_time = time.perf_counter() - tl
-    if on_running is not None:  # the kernel is loaded: nothing but the compiled loop runs from here
-        on_running()
     t0 = time.perf_counter()
     size = MUJOCO_CHUNK
     try:
+        if on_running is not None:  # the kernel is loaded: nothing but the compiled loop runs from here
+            on_running()
         while k < n:
             k1 = min(n, k + size)
             tc = time.perf_counter()
