@@ -23,7 +23,8 @@ repetitions (the machine is noisy).  Rows, all on the paper scenario (40 dB, ser
                     material damping)
   mujoco CC on      the same with plant.enforce_cc = true
 and the stepped loop's overhead: loop / bare (issue 14 asks <= 1.25).
-Prints a markdown table and writes benchmarks/RESULTS_cosserat.md (unless --no-write).
+Prints a markdown table and writes it into its own section of benchmarks/RESULTS_cosserat.md, between
+the `<!-- bench_cosserat.py: begin/end -->` markers, keeping the rest (unless --no-write).
 This is a benchmark, not a test: it asserts nothing.
 """
 
@@ -166,7 +167,9 @@ def main() -> None:
     text = "\n".join(lines)
     print(text)
     if not args.no_write:
-        (ROOT / "benchmarks" / "RESULTS_cosserat.md").write_text(text, encoding="utf-8")
+        from results_sections import write_section
+
+        write_section(ROOT / "benchmarks" / "RESULTS_cosserat.md", text, "bench_cosserat.py")
 
 
 if __name__ == "__main__":

@@ -503,24 +503,11 @@ def main() -> None:
                         note += " (torque: zero commands, chain falls under gravity)"
                     out(f"| {n_seg} | off | {act} | {m.nv} | {raw:.1f} us | - | - | - | {note} |")
     if not args.no_write:
+        from results_sections import write_section
+
         path = ROOT / "benchmarks" / "RESULTS.md"
-        path.write_text(replace_section(path.read_text() if path.exists() else "", "\n".join(lines)))
+        write_section(path, "\n".join(lines), "bench_loop.py")
         print(f"\nwritten to {path} (its bench_loop section; the other sections are kept)")
-
-
-BEGIN, END = "<!-- bench_loop.py: begin -->", "<!-- bench_loop.py: end -->"
-
-
-def replace_section(text: str, section: str) -> str:
-    """`text` with this benchmark's section (between the BEGIN and END markers) replaced by `section`; without
-    the markers, the section goes first and the rest of `text` stays below it (the other benchmarks'
-    tables, e.g. bench_e2e.py's appended runs, are never lost)."""
-    block = f"{BEGIN}\n{section.rstrip()}\n{END}\n"
-    if BEGIN in text and END in text.split(BEGIN, 1)[1]:
-        head, rest = text.split(BEGIN, 1)
-        after = rest.split(END, 1)[1].lstrip("\n")
-        return head + block + ("\n" + after if after else "")
-    return block + ("\n" + text if text.strip() else "")
 
 
 if __name__ == "__main__":
