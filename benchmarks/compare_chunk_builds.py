@@ -25,13 +25,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench_loop import logged_run  # noqa: E402  (this folder: the script's own)
+from bench_loop import logged_run, raw_replay_s  # noqa: E402  (this folder: the script's own)
 
 from harness.config.load import load_scenario  # noqa: E402
 from harness.loop import mujoco_loop as ML  # noqa: E402
 from harness.loop.aot import A as REAL_A  # noqa: E402
-from harness.loop.fast import K  # noqa: E402
-from harness.loop.mujoco_kernels import MJ_FUNCS  # noqa: E402
 
 
 class _Select:
@@ -67,10 +65,7 @@ def main(argv=None) -> int:
     _, log = logged_run(scn)  # the first build's commands, replayed raw each round
 
     def raw() -> float:
-        m, d, _ = ML.make_plant(scn)
-        c = time.process_time()
-        K.replay_commands(m._address, d._address, MJ_FUNCS, d.ctrl, d.qfrc_applied, log)
-        return time.process_time() - c
+        return raw_replay_s(scn, log, clock=time.process_time)
 
     raw()  # loads the replay kernel (numba's cache) outside the timings
     names = list(fns)

@@ -110,3 +110,15 @@ def make_trajectory(n: int = 1200, *, plant: bool = True, nb: int = 25, status: 
 def synthetic_trajectory():
     """Factory: synthetic_trajectory(n=1200, plant=True, nb=25, status="ok", nan_tail=0, ...)."""
     return make_trajectory
+
+
+def trajectory_arrays(tr: Trajectory) -> dict[str, np.ndarray]:
+    """Every array field of a Trajectory (time series, plant geometry, contact points), by name: for
+    bit-identity checks between two runs."""
+    return {k: v for k, v in vars(tr).items() if isinstance(v, np.ndarray)}
+
+
+@pytest.fixture
+def traj_arrays():
+    """trajectory_arrays(tr) -> {field name: array} of every array field of a Trajectory."""
+    return trajectory_arrays

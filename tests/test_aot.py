@@ -84,10 +84,6 @@ def test_type_key_refuses_other_arguments(bad):
         aot.type_key((np.zeros(2), bad))
 
 
-def _arrays(tr: Trajectory) -> dict[str, np.ndarray]:
-    return {k: v for k, v in vars(tr).items() if isinstance(v, np.ndarray)}
-
-
 def _run(scn: Scenario, no_aot: bool, monkeypatch) -> Trajectory:
     monkeypatch.setenv("TELEOP_NO_AOT", "1" if no_aot else "0")
     aot.forget()
@@ -106,7 +102,7 @@ CASES = {
 
 
 @pytest.mark.parametrize("name", sorted(CASES))
-def test_aot_run_bit_identical_to_jit(name, monkeypatch):
+def test_aot_run_bit_identical_to_jit(name, monkeypatch, traj_arrays):
     """Every array of the Trajectory (states, errors, commands, plant geometry) is bit-identical with
     the ahead-of-time modules and with the jitted kernels; the AOT path really ran compiled modules."""
     _needs_modules()
@@ -114,7 +110,7 @@ def test_aot_run_bit_identical_to_jit(name, monkeypatch):
     a = _run(scn, False, monkeypatch)
     b = _run(scn, True, monkeypatch)
     assert a.status == b.status == "ok"
-    fa, fb = _arrays(a), _arrays(b)
+    fa, fb = traj_arrays(a), traj_arrays(b)
     assert fa.keys() == fb.keys() and len(fa) > 10
     for k in fa:
         assert np.array_equal(fa[k], fb[k], equal_nan=True), k
@@ -192,7 +188,7 @@ def test_aot_kernel_releases_the_gil(monkeypatch):
     assert len(inside) >= 5, (t1 - t0, len(inside))
 
 
-def test_build_failure_falls_back_to_jit(tmp_path, monkeypatch, caplog):
+def test_build_failure_falls_back_to_jit(tmp_path, monkeypatch, caplog, traj_arrays):
     """A module that cannot be built (no C compiler, ...): the run uses the jitted kernel with the same
     numbers, says why once, and records the reason so that later processes do not retry."""
     if os.environ.get("TELEOP_NO_JIT") == "1":
@@ -211,7 +207,7 @@ def test_build_failure_falls_back_to_jit(tmp_path, monkeypatch, caplog):
     with caplog.at_level(logging.WARNING, logger="harness.loop.aot"):
         tr = simulate(scn, progress=False)
     assert tr.status == "ok"
-    for k, v in _arrays(ref).items():
+    for k, v in traj_arrays(ref).items():
         assert np.array_equal(v, getattr(tr, k), equal_nan=True), k
     failed = sorted(aot.aot_dir().glob("*.failed"))
     assert failed and all("no C compiler here" in f.read_text() for f in failed)

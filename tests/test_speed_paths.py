@@ -255,14 +255,8 @@ def test_noise_free_record_rows_equal_recomputed_rows(kind):
             np.testing.assert_array_equal(got, row[sl], err_msg=f"{name} at step {k}")
 
 
-def _traj_arrays(tr) -> dict[str, np.ndarray]:
-    """Every array field of a Trajectory (time series, plant geometry, contact points)."""
-    return {f.name: np.asarray(getattr(tr, f.name)) for f in dataclasses.fields(tr)
-            if isinstance(getattr(tr, f.name), np.ndarray)}
-
-
 @pytest.mark.parametrize("case", ["paper_delay", "contact"])
-def test_chunk_boundaries_do_not_change_the_run(monkeypatch, case):
+def test_chunk_boundaries_do_not_change_the_run(monkeypatch, case, traj_arrays):
     """The MuJoCo loop's compiled calls may split a run anywhere (their length follows the measured speed,
     `mujoco_loop.next_chunk`): one call, calls of 1-97 steps in a seeded random order, and the default
     give bit-identical trajectories, with a command delay (its ring buffer spans the calls) and with
@@ -277,9 +271,9 @@ def test_chunk_boundaries_do_not_change_the_run(monkeypatch, case):
     else:
         scn = load_scenario(root / "scenarios" / "paper.toml", [*short, "plant.actuation_delay=0.003"])
     runs = {}
-    runs["default"] = _traj_arrays(simulate_mujoco(scn))
+    runs["default"] = traj_arrays(simulate_mujoco(scn))
     monkeypatch.setattr(mujoco_loop, "MUJOCO_CHUNK", 10 ** 9)
-    runs["one call"] = _traj_arrays(simulate_mujoco(scn))
+    runs["one call"] = traj_arrays(simulate_mujoco(scn))
     rng = np.random.default_rng(7)
     sizes = []
 
@@ -289,7 +283,7 @@ def test_chunk_boundaries_do_not_change_the_run(monkeypatch, case):
 
     monkeypatch.setattr(mujoco_loop, "MUJOCO_CHUNK", 13)
     monkeypatch.setattr(mujoco_loop, "next_chunk", random_chunk)
-    runs["random"] = _traj_arrays(simulate_mujoco(scn))
+    runs["random"] = traj_arrays(simulate_mujoco(scn))
     assert len(sizes) > 5
     ref = runs.pop("default")
     assert len(ref["t"]) == scn.n_steps and "body_pos" in ref
