@@ -141,9 +141,11 @@ def test_run_does_not_import_numba():
     assert out.stdout.split() == ["ok", "False", "False", "False"], out.stdout + out.stderr
 
 
-def test_aot_kernel_releases_the_gil(monkeypatch):
+@pytest.mark.parametrize("overlap", [False, True])
+def test_aot_kernel_releases_the_gil(monkeypatch, overlap):
     """A Python thread keeps running while the compiled chunk runs (the output imports of
-    harness.output.prefetch rely on it): one chunk of the whole 1.5-s run, heartbeats counted inside."""
+    harness.output.prefetch rely on it): one chunk of the whole 3-s run, heartbeats counted inside.  With
+    the physics thread (overlap) the longest call is that thread's kernel, which must release the GIL too."""
     _needs_modules()
     monkeypatch.setenv("TELEOP_NO_AOT", "0")
     monkeypatch.setattr(mujoco_loop, "MUJOCO_CHUNK", 10 ** 9)
@@ -176,12 +178,12 @@ def test_aot_kernel_releases_the_gil(monkeypatch):
     th = threading.Thread(target=heartbeat, daemon=True)
     th.start()
     try:
-        tr = simulate(Scenario(duration=1.5), progress=False)
+        tr = simulate(Scenario(duration=3.0), progress=False, overlap=overlap)
     finally:
         stop.set()
         th.join()
         aot.forget()
-    assert tr.status == "ok"
+    assert tr.status == "ok" and tr.meta["overlap"] is overlap
     t0, t1 = max(calls, key=lambda c: c[1] - c[0])
     assert t1 - t0 > 0.05  # one long native call
     inside = [b for b in beats if t0 + 0.01 < b < t1 - 0.01]

@@ -331,10 +331,10 @@ def test_run_case_never_raises(monkeypatch):
     (case,) = expand_cases(load_study(study([{"param": "seed", "values": [0]}])))
     payload = {"case_id": case.case_id, "scenario": case.scenario, "metrics": METRICS, "record": False}
 
-    def boom(scn, progress=False):
+    def boom(scn, progress=False, **kw):
         raise RuntimeError("solver exploded")
 
-    def diverges(scn, progress=False):
+    def diverges(scn, progress=False, **kw):
         z = np.zeros((0, 2))
         return Trajectory(np.zeros(0), z, z, np.zeros((0, 6)), np.zeros((0, 6)), z, z, z, z, z, z, z,
                           np.zeros(0), np.zeros(0), np.zeros((0, 6)), z, np.zeros((0, 6)), np.zeros((0, 6)),

@@ -16,7 +16,8 @@ from __future__ import annotations
 from typing import Any
 
 
-def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None, on_running=None):
+def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None, on_running=None,
+             overlap: bool | None = None):
     """Run one scenario on `plant` (default: the plant `scn.plant` describes); returns the Trajectory.
     on_chunk: optional callable receiving each finished chunk of control steps as a `Trajectory`
     (e.g. a live viewer, `harness.output.viewer.LiveView`).  on_running: optional callable called
@@ -25,6 +26,9 @@ def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None, on_r
     Background work started then (the output imports, `harness.output.prefetch`) does not compete with
     the start-up for the GIL.  Not called by the Python-stepped loop on plants that release the GIL at
     every step (`simulate_stepped`): there such work would stall every step.
+    overlap: the compiled MuJoCo loop steps MuJoCo in a second thread (same numbers, less time, more CPU;
+    `harness.loop.mujoco_loop.simulate_mujoco`); None = when a core is free for it.  Ignored by the other
+    loops.
 
     A run that diverges or is interrupted (`harness.loop.common.STOP`) returns everything up to that
     point, with `status` and `message` saying what happened and when."""
@@ -50,4 +54,5 @@ def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None, on_r
                                  on_running=on_running)
     from harness.loop.mujoco_loop import simulate_mujoco
 
-    return simulate_mujoco(scn, progress=progress, plant=plant, on_chunk=on_chunk, on_running=on_running)
+    return simulate_mujoco(scn, progress=progress, plant=plant, on_chunk=on_chunk, on_running=on_running,
+                           overlap=overlap)

@@ -48,7 +48,7 @@ from harness.loop import fast
 log = logging.getLogger(__name__)
 
 # Kernels called once per chunk of steps (not per step: finding the module costs ~50 us per call).
-ENTRIES = ("mujoco_chunk", "analytic_chunk", "backbone_world", "kinematics_replay")
+ENTRIES = ("mujoco_chunk", "analytic_chunk", "backbone_world", "kinematics_replay", "physics_server")
 
 
 class Unsupported(TypeError):

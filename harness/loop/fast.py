@@ -33,7 +33,8 @@ def _extra_modules():
     import importlib
 
     names = ("harness.plant.chain_map", "harness.plant.analytic", "harness.loop.kernels",
-             "harness.loop.force_kernels", "harness.loop.mujoco_kernels", "harness.loop.stepped_kernels")
+             "harness.loop.force_kernels", "harness.loop.native", "harness.loop.mujoco_kernels",
+             "harness.loop.stepped_kernels")
     mods = []
     for name in names:
         try:

@@ -1,6 +1,7 @@
 """MuJoCo-plant loop kernels (numba-compatible; compiled by `harness.loop.fast`): the whole control
-loop of the MuJoCo plant in one kernel that calls MuJoCo's C functions by address, plus the sensing
-and command maps it uses and the recording-geometry helpers.  Status codes: `harness.loop.kernels`.
+loop of the MuJoCo plant in one kernel that calls MuJoCo's C functions by address (`harness.loop.native`),
+plus the sensing and command maps it uses and the recording-geometry helpers.  Status codes:
+`harness.loop.kernels`.
 """
 
 from __future__ import annotations
@@ -19,6 +20,21 @@ from harness.loop.force_kernels import (
     sense_forces,
 )
 from harness.loop.kernels import R_E1, R_E2, ROW_W, RUNAWAY, control_step
+from harness.loop.native import (  # noqa: F401 - MJ_FUNCS, physics_server: re-exported for the loop's callers
+    MJ_FUNCS,
+    MJ_KINEMATICS_FN,
+    MJ_STEP_FN,
+    SYNC_GO,
+    SYNC_S1,
+    SYNC_S2,
+    SYNC_WARN,
+    YIELD_FN,
+    mj_call,
+    physics_server,
+    sync_load,
+    sync_store,
+    sync_wait,
+)
 from harness.plant.chain_map import (
     chain_elastic_correction,
     chain_force_from_T2,
@@ -27,80 +43,11 @@ from harness.plant.chain_map import (
     chain_sense,
 )
 
+
 # =============================================================================================
 # MuJoCo plant: the whole control loop compiled, calling MuJoCo's C functions by address
+# (`harness.loop.native`: the addresses, the calls, and the physics thread's synchronisation)
 # =============================================================================================
-# The C functions `void f(const mjModel*, mjData*)` are called through a function pointer passed as
-# an argument (`mjfn` = MJ_FUNCS: [mj_step, mj_kinematics] addresses of this process), not through a
-# ctypes object, so that numba can cache the compiled loop on disk (a ctypes global would bake this
-# process' addresses into the code and make it uncacheable: ~3 s of compilation in every process).
-MJ_STEP_FN, MJ_KINEMATICS_FN = 0, 1
-
-
-def _mj_addresses():
-    import ctypes
-    import glob
-    import os
-
-    import mujoco
-
-    libs = sorted(glob.glob(os.path.join(os.path.dirname(mujoco.__file__), "libmujoco.so*")))
-    if not libs:  # pragma: no cover - other platforms
-        return np.zeros(2, dtype=np.int64)
-    lib = ctypes.CDLL(libs[0])
-    names = ("mj_step", "mj_kinematics")
-    return np.array([ctypes.cast(getattr(lib, f), ctypes.c_void_p).value for f in names], dtype=np.int64)
-
-
-MJ_FUNCS = _mj_addresses()  # pass to the kernels below; never use as a global inside them
-
-
-def mj_call(fn, mptr, dptr):
-    """Call the MuJoCo C function at address fn with (mjModel*, mjData*) (interpreted: ctypes;
-    compiled: a direct indirect call, see the numba overload below)."""
-    import ctypes
-
-    if fn == 0:  # pragma: no cover
-        raise RuntimeError("MuJoCo's shared library was not found (libmujoco.so*)")
-    ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p)(int(fn))(mptr, dptr)
-
-
-_registered = False
-
-
-def register_numba_extensions() -> None:
-    """The compiled form of mj_call (called by `harness.loop.fast.kernels` before compiling: importing
-    this module does not import numba)."""
-    global _registered
-    if _registered:
-        return
-    _registered = True
-    from llvmlite import ir as _ir
-    from numba import types as _nbt
-    from numba.extending import intrinsic as _intrinsic
-    from numba.extending import overload as _overload
-
-    @_intrinsic
-    def _mj_call_ptr(typingctx, fn, mptr, dptr):
-        sig = _nbt.void(fn, mptr, dptr)
-
-        def codegen(context, builder, signature, args):
-            vp = _ir.IntType(8).as_pointer()
-            fnty = _ir.FunctionType(_ir.VoidType(), [vp, vp])
-            f = builder.inttoptr(args[0], fnty.as_pointer())
-            builder.call(f, [builder.inttoptr(args[1], vp), builder.inttoptr(args[2], vp)])
-            return context.get_dummy_value()
-
-        return sig, codegen
-
-    @_overload(mj_call)
-    def _mj_call_overload(fn, mptr, dptr):
-        def impl(fn, mptr, dptr):
-            _mj_call_ptr(fn, mptr, dptr)
-
-        return impl
-
-
 def sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state):
     """True (noise-free) state (16,) [q1, dq1, q2, dq2] from MuJoCo joints; qc, vc (n_chain,) work."""
     for i in range(2):
@@ -159,7 +106,7 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
                  c_qadr, c_dadr, c_act, R, C, L0, eargs,
                  servo, feedforward, kv_over_kp, traj, noise, noise_scale, F, mpk_c, spk_c, nodes,
                  weights, gains, spec, ref, cmdbuf, delay, rows, qpos_hist, cmd_log, geo_in, geo_out, wnum,
-                 fargs):
+                 fargs, sync):
     """Control steps k0..k1-1 on the MuJoCo plant (model/data pointers mptr, dptr; mjfn = MJ_FUNCS;
     qpos, qvel, ctrl, qfrc are numpy views of the same MjData).  Per step: sense -> noise -> both laws
     -> record -> commands (delayed by `delay` control steps through the ring buffer cmdbuf (delay+1, 2+2n)) ->
@@ -176,6 +123,11 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
     fdelay, fbuf, ffilt (`sense_forces`), op_on, op, targets, hand (4,), target (2,) (operator, see
     `harness.loop.force_kernels`), mpk_p (plant master, packed), cpts (k1 - k0, np, 6) contact points or
     0 rows): the laws get the sensed F (`sense_forces`) instead of F (kept in the signature).
+    sync: int64 (0,) = this thread steps MuJoCo (mj_step); (SYNC_SIZE,) = the thread of `physics_server`
+    (same MjData, same sync) steps it in MuJoCo's two phases, mj_step2 when asked (sync[SYNC_GO]) and then at
+    once mj_step1 of the new state, which runs while this thread computes the next control step (mj_step1
+    reads neither ctrl nor qfrc_applied; mj_step1 + mj_step2 = mj_step's numbers).  This thread writes
+    sync[SYNC_GO] only.
     Returns (status, completed steps); status 6 = non-finite or exploding MuJoCo state, 7 = a MuJoCo
     warning was raised during the last completed step (whose row is recorded)."""
     (sensordata, cadr, Fconst, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, op_on, op, targets, hand,
@@ -215,6 +167,9 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
     live = geo_out[0].shape[0] > 0
     nu = ctrl.shape[0]
     nv = qfrc.shape[0]
+    par = sync.shape[0] > 0
+    gen = sync_load(sync, SYNC_GO) if par else 0  # physics steps done in the run
+    yfn = mjfn[YIELD_FN]
     for k in range(k0, k1):
         sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state)
         for i in range(16):
@@ -247,6 +202,8 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
                         or (abs(r[R_E2]) + abs(r[R_E2 + 1]) > RUNAWAY)):
             st = 4
         if st != 0:
+            if par:  # the helper may be in mj_step1 of this state: wait for it to be idle
+                sync_wait(sync, SYNC_S1, gen, yfn)
             if live:  # the last recorded step is not stepped: its kinematics explicitly
                 mj_call(mjfn[MJ_KINEMATICS_FN], mptr, dptr)
                 copy_geometry(geo_in, k - k0, geo_out)
@@ -284,12 +241,22 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
                     lr[i] = ctrl[i]
                 for i in range(nv):
                     lr[nu + i] = qfrc[i]
-            mj_call(mjfn[MJ_STEP_FN], mptr, dptr)
-            if live and s == 0:
-                copy_geometry(geo_in, k - k0, geo_out)
-            for w in range(wnum.shape[0]):
-                if wnum[w] != 0:  # any MuJoCo warning stops the run: it must never pass silently
+            if par:
+                if live and s == 0:  # the start state's kinematics, from the helper's mj_step1
+                    sync_wait(sync, SYNC_S1, gen, yfn)
+                    copy_geometry(geo_in, k - k0, geo_out)
+                gen += 1
+                sync_store(sync, SYNC_GO, gen)
+                sync_wait(sync, SYNC_S2, gen, yfn)
+                if sync_load(sync, SYNC_WARN) != 0:  # MuJoCo's warning counters after that mj_step2
                     return 7, k - k0 + 1
+            else:
+                mj_call(mjfn[MJ_STEP_FN], mptr, dptr)
+                if live and s == 0:
+                    copy_geometry(geo_in, k - k0, geo_out)
+                for w in range(wnum.shape[0]):
+                    if wnum[w] != 0:  # any MuJoCo warning stops the run: it must never pass silently
+                        return 7, k - k0 + 1
     return 0, k1 - k0
 
 

@@ -21,6 +21,8 @@ control loop), "geometry_time" (the geometry/backbone work after the loop).
 
 from __future__ import annotations
 
+import os
+import threading
 import time
 
 import mujoco
@@ -38,7 +40,7 @@ from harness.loop.common import (
     set_outcome,
 )
 from harness.loop.force_args import ForceArgs
-from harness.loop.mujoco_kernels import MJ_FUNCS
+from harness.loop.native import MJ_FUNCS, SYNC_GO, SYNC_LAST, SYNC_S1, SYNC_SIZE, SYNC_STOP
 from harness.loop.trajectory import ROW_WIDTH, Trajectory
 from harness.plant.chain_map import ChainMap
 from harness.plant.mujoco_model import MujocoPlant
@@ -65,13 +67,14 @@ def next_chunk(steps: int, seconds: float, on_chunk: bool) -> int:
 WARNINGS = [w for name, w in mujoco.mjtWarning.__members__.items() if name != "mjNWARNING"]
 
 
-def warning_counts(d: mujoco.MjData) -> dict[str, int]:
-    """Non-zero MuJoCo warning counters by name."""
+def warning_counts(numbers: np.ndarray) -> dict[str, int]:
+    """Non-zero MuJoCo warning counters by name, from the counters (mjData.warning.number, or the copy the
+    physics thread keeps)."""
     out = {}
     for name, w in mujoco.mjtWarning.__members__.items():
         if name == "mjNWARNING":
             continue
-        n = int(d.warning[int(w)].number)
+        n = int(numbers[int(w)])
         if n:
             out[name] = n
     return out
@@ -96,7 +99,8 @@ def make_plant(scn: Scenario, plant: MujocoPlant | None = None
 
 
 def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray | None = None,
-                    plant: MujocoPlant | None = None, on_chunk=None, on_running=None) -> Trajectory:
+                    plant: MujocoPlant | None = None, on_chunk=None, on_running=None,
+                    overlap: bool | None = None) -> Trajectory:
     """Run the scenario on the MuJoCo plant; returns the Trajectory (possibly cut short).
 
     cmd_log: optional (n_steps * substeps, nu + nv) array that receives, for every mj_step, the
@@ -104,7 +108,18 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     on_chunk: optional callable receiving each finished chunk of steps as a `Trajectory` (with the plant
     geometry when the integrator provides it in the loop, see `_chunk`).  on_running: called once when
     the kernel is loaded, before the first step (`harness.loop.simulate`): from then on only the compiled
-    loop runs, releasing the GIL ~0.25 s at a time."""
+    loop runs, releasing the GIL ~0.25 s at a time.
+    overlap: step MuJoCo in a second thread, in its two phases (`harness.loop.native.physics_server`): the
+    first (mj_step1: positions, velocities) of each state runs while this thread computes the control step
+    from it; the same numbers as mj_step.  None = `overlap_default(scn, beside=on_running is not None)`;
+    True for an integrator MuJoCo cannot split (RK4) raises ValueError; interpreted kernels
+    (TELEOP_NO_JIT=1) always run serially."""
+    if overlap is None or os.environ.get("TELEOP_NO_JIT", "0") == "1":  # interpreted kernels: serial
+        overlap = overlap_default(scn, beside=on_running is not None)
+    elif overlap and not two_phase_ok(scn):
+        raise ValueError(f"overlap=True: MuJoCo's two-phase step needs one of the integrators "
+                         f"{', '.join(LIVE_GEOMETRY_INTEGRATORS)} (its mj_step2 integrates RK4 with Euler); "
+                         f"plant.integrator = {scn.plant.integrator!r}")
     tb = time.perf_counter()
     if plant is None:
         plant = MujocoPlant.build(scn)
@@ -137,6 +152,8 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     interrupted = False
     warned: dict[str, int] = {}
     wnum = d.warning.number  # view of MuJoCo's warning counters, checked by the kernel after each mj_step
+    sync = np.zeros(SYNC_SIZE if overlap else 0, dtype=np.int64)
+
     def chunk(k: int, k1: int):
         return A.mujoco_chunk(
             m._address, d._address, MJ_FUNCS, k, k1, sub, scn.control_dt, d.qpos, d.qvel, d.ctrl,
@@ -146,11 +163,17 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
             scale, a["F"], a["mpk_c"], a["spk_c"], a["nodes"], a["weights"], a["gains"], a["spec"],
             ref, cmdbuf, delay, rows[k:k1], geo.qpos_hist[k:k1],
             cmd_log[k * sub:k1 * sub] if log else cmd_log, geo.inputs, geo.outputs(k, k1), wnum,
-            force.args(k, k1))
+            force.args(k, k1), sync)
 
     tl = time.perf_counter()
     chunk(0, 0)  # no step: numba loads the kernel (on-disk cache) with the run's argument types
     load_time = time.perf_counter() - tl
+    # the warning counters of the steps taken: MuJoCo's own, or the physics thread's copy after each mj_step2
+    wseen = wnum.copy() if overlap else wnum
+    helper = None
+    if overlap:  # the loop reads the physics thread's copy of the sensors (d.sensordata changes in mj_step1)
+        force.sensordata = d.sensordata.copy()
+        helper = _start_helper(m, d, sync, n * sub, wnum, wseen, force.sensordata)
     t0 = time.perf_counter()
     size = MUJOCO_CHUNK
     try:
@@ -166,8 +189,8 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
                 bar.update(mdone)
             if on_chunk is not None and mdone:
                 on_chunk(_chunk(scn, m, cmap, geo, rows, k, done))
-            if wnum.any():
-                warned = warning_counts(d)
+            if wseen.any():
+                warned = warning_counts(wseen)
                 if status == 0:  # the kernel stops at the step that raised it; never pass silently
                     status = 7
             if status != 0:
@@ -177,6 +200,9 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
                 interrupted = True
                 break
     finally:
+        if helper is not None:
+            sync[SYNC_GO] = SYNC_STOP
+            helper.join()
         mujoco.set_mju_user_warning(None)
         if bar is not None:
             bar.close()
@@ -191,8 +217,11 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     traj.meta["geometry_time"] = time.perf_counter() - tg
     traj.meta["build_time"] = build_time
     traj.meta["kernel_load_time"] = load_time
+    traj.meta["overlap"] = bool(overlap)
     traj.meta["mujoco_warnings"] = int(sum(warned.values()))
     traj.meta["mujoco_warning_counts"] = warned
+    if overlap:  # MuJoCo says each kind of warning once: a kind first raised after the last step is dropped
+        captured = captured[:len(warned)]
     traj.meta["mujoco_warning_text"] = captured[:20]
     detail = ""
     if warned:
@@ -201,6 +230,46 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
             detail += f"; MuJoCo says: {captured[0].strip()}"
     set_outcome(traj, status, interrupted, detail=detail)
     return traj
+
+
+def two_phase_ok(scn: Scenario) -> bool:
+    """Whether MuJoCo's mj_step1 + mj_step2 give mj_step's numbers for this plant: the single-stage
+    integrators (MuJoCo's mj_step2 integrates RK4 with Euler)."""
+    return scn.plant.integrator in LIVE_GEOMETRY_INTEGRATORS
+
+
+def overlap_default(scn: Scenario, beside: bool = False) -> bool:
+    """Whether the loop steps MuJoCo in a second thread (`simulate_mujoco`'s overlap) by default: when MuJoCo
+    allows it (`two_phase_ok`), the kernels are compiled, and a core is free for it: this process may run on
+    at least 2 CPUs, 3 when other work runs beside the loop (`beside`: the output imports of `teleop run`).
+    The thread trades CPU for time (each thread spin-waits for the other, ~1.3x the CPU of a serial run):
+    worth it only on an idle core.  TELEOP_OVERLAP=1 / 0 forces it on / off (where MuJoCo allows it)."""
+    if not two_phase_ok(scn) or os.environ.get("TELEOP_NO_JIT", "0") == "1":
+        return False
+    env = os.environ.get("TELEOP_OVERLAP", "").strip()
+    if env in ("0", "1"):
+        return env == "1"
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        cpus = os.cpu_count() or 1
+    return cpus >= (3 if beside else 2)
+
+
+def _start_helper(m: mujoco.MjModel, d: mujoco.MjData, sync: np.ndarray, last: int,
+                  wnum: np.ndarray, wsnap: np.ndarray, sens_snap: np.ndarray) -> threading.Thread:
+    """Start the thread that steps MuJoCo for `mujoco_chunk` (`harness.loop.native.physics_server`).
+    The kernel is first called with the stop flag set (returns at once): it is loaded, or built, here."""
+    sync[SYNC_GO] = SYNC_STOP
+    args = (m._address, d._address, MJ_FUNCS, sync, wnum, wsnap, d.sensordata, sens_snap)
+    A.physics_server(*args)
+    sync[:] = 0
+    sync[SYNC_S1] = -2  # no mj_step1 done yet
+    sync[SYNC_LAST] = last
+    t = threading.Thread(target=A.physics_server, args=args,
+                         name="mujoco-physics", daemon=True)
+    t.start()
+    return t
 
 
 def _chunk(scn: Scenario, m: mujoco.MjModel, cmap: ChainMap, geo: _Geometry, rows: np.ndarray, k0: int,

@@ -89,7 +89,7 @@ class MujocoStepped:
             d.qfrc_applied[c.chain_dof_adr] = use[2 + n:2 + 2 * n] + self.corr
             mujoco.mj_step(self.m, d)
             if wnum.any():
-                self.warned = warning_counts(d)
+                self.warned = warning_counts(d.warning.number)
                 return 7
         return 0
 

@@ -50,7 +50,8 @@ def run_case(case: dict) -> dict:
         from harness.loop.metrics import compute_metrics
 
         scn = case["scenario"]
-        traj = simulate(scn, progress=False)
+        # a sweep keeps every core busy with cases: no second thread per case (it would spin-wait for a core)
+        traj = simulate(scn, progress=False, overlap=False)
         metrics = compute_metrics(traj, scn)
         out.update(status=traj.status, message=traj.message,
                    metrics={k: jsonable(metrics.get(k)) for k in case["metrics"]})

@@ -1,0 +1,117 @@
+"""The MuJoCo loop with and without its physics thread, against raw mj_step (issue: speed; a benchmark, it
+asserts nothing).
+
+    .venv/bin/python benchmarks/bench_threads.py            # --reps 7, 20-s paper run + 2-s runs
+    .venv/bin/python benchmarks/bench_threads.py --quick    # 2-s runs only
+
+`simulate_mujoco(overlap=True)` steps MuJoCo in a second thread in its two phases: mj_step1 (positions,
+velocities) of each state runs while the loop's thread computes the control step from that state; the loop
+then asks for mj_step2 (`harness.loop.native.physics_server`).  Same numbers (tests/test_overlap.py).
+Per plant, repeated --reps times in alternating order, in this process on every CPU it may use (not pinned):
+  raw       the compiled replay of the run's logged [ctrl, qfrc_applied] through the C mj_step (one thread)
+  serial    the loop, one thread (overlap=False)
+  threaded  the loop with the physics thread (overlap=True); its CPU time (both threads) as well
+Ratios are medians of the per-repetition ratios (each repetition measures all three back to back).
+Writes its own section of benchmarks/RESULTS.md (`<!-- bench_threads.py: begin/end -->`) unless --no-write.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import datetime
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench_loop import _machine, logged_run, raw_replay_s  # noqa: E402  (this folder: the script's own)
+
+from harness.config.scenario import PlantConfig, Scenario  # noqa: E402
+from harness.loop.mujoco_loop import simulate_mujoco  # noqa: E402
+
+
+def measure(scn: Scenario, reps: int) -> dict:
+    """Seconds per repetition: raw, serial, threaded (wall), threaded_cpu, serial_cpu (process CPU time)."""
+    tr, log = logged_run(scn)
+    keys = ("raw", "serial", "threaded", "serial_cpu", "threaded_cpu")
+    out = {"steps": len(tr), "status": tr.status, **{k: [] for k in keys}}
+    for overlap in (False, True):  # warm
+        simulate_mujoco(scn, overlap=overlap)
+    for rep in range(reps):
+        out["raw"].append(raw_replay_s(scn, log))
+        for overlap in ((False, True) if rep % 2 == 0 else (True, False)):
+            c = time.process_time()
+            tr = simulate_mujoco(scn, overlap=overlap)
+            cpu = time.process_time() - c
+            key = "threaded" if overlap else "serial"
+            out[key].append(tr.meta["wall_time"])
+            out[key + "_cpu"].append(cpu)
+    return {k: (np.array(v) if isinstance(v, list) else v) for k, v in out.items()}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--reps", type=int, default=7)
+    ap.add_argument("--quick", action="store_true", help="2-s runs only")
+    ap.add_argument("--no-write", action="store_true", help="do not write benchmarks/RESULTS.md")
+    args = ap.parse_args(argv)
+    cpus = len(os.sched_getaffinity(0))
+    base = Scenario()
+    plants = []
+    if not args.quick:
+        plants.append(("paper run, 20 s: N = 8, servo, free chain (default plant)", base))
+    short = dataclasses.replace(base, duration=2.0)
+    def cc(**kw):
+        return dataclasses.replace(short, plant=PlantConfig(enforce_cc=True, **kw))
+
+    plants += [("2 s: N = 8, servo, free chain (default plant)", short),
+               ("2 s: N = 8, torque, CC chain", cc(actuation="torque")),
+               ("2 s: N = 4, servo, CC chain", cc(segments=4)),
+               ("2 s: N = 16, servo, CC chain", cc(segments=16))]
+    now = datetime.datetime.now(datetime.UTC)
+    lines = [f"# The MuJoCo loop with its physics thread ({now:%Y-%m-%d %H:%M} UTC, "
+             f"`benchmarks/bench_threads.py --reps {args.reps}{' --quick' if args.quick else ''}`)\n",
+             f"Machine: {_machine()}; {cpus} CPUs for this process.  us per control step, median of "
+             f"{args.reps} repetitions (raw, serial and threaded back to back in each); ratios: median of "
+             "the per-repetition ratios [min, max].\n",
+             "| plant | raw mj_step | serial loop | threaded loop | serial / raw | **threaded / raw** | "
+             "threaded / serial | CPU threaded / serial |",
+             "|---|---|---|---|---|---|---|---|"]
+    print("\n".join(lines), flush=True)
+    for label, scn in plants:
+        r = measure(scn, args.reps)
+
+        def us(key, r=r):
+            return float(np.median(r[key])) / r["steps"] * 1e6
+
+        def ratio(a, b, r=r):
+            v = r[a] / r[b]
+            return f"{np.median(v):.2f}x [{v.min():.2f}, {v.max():.2f}]"
+
+        note = "" if r["status"] == "ok" else f" ({r['status']})"
+        line = (f"| {label}{note} | {us('raw'):.1f} us | {us('serial'):.1f} us | {us('threaded'):.1f} us "
+                f"| {ratio('serial', 'raw')} | **{ratio('threaded', 'raw')}** | "
+                f"{ratio('threaded', 'serial')} | {ratio('threaded_cpu', 'serial_cpu')} |")
+        print(line, flush=True)
+        lines.append(line)
+    lines.append("\nCPU: the process's CPU time over the whole `simulate_mujoco` call (model build and "
+                 "geometry included), both threads.  Each thread spin-waits while the other works, so the "
+                 "threaded loop costs more CPU for less wall time: it is the default only where a core is "
+                 "free for it (`harness.loop.mujoco_loop.overlap_default`), never in sweeps.")
+    if not args.no_write:
+        from results_sections import write_section
+
+        path = ROOT / "benchmarks" / "RESULTS.md"
+        write_section(path, "\n".join(lines), "bench_threads.py")
+        print(f"\nwritten to {path} (its bench_threads section; the other sections are kept)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

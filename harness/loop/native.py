@@ -1,0 +1,270 @@
+"""Native calls from the compiled MuJoCo loop: MuJoCo's C functions by address, and the synchronisation of
+the loop with its physics thread (numba-compatible; compiled by `harness.loop.fast` with the other kernels).
+
+Each helper below is plain Python (interpreted kernels, TELEOP_NO_JIT=1) and has a compiled form registered
+by `register_numba_extensions` (called by `harness.loop.fast.kernels` before compiling; importing this module
+does not import numba).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+# =============================================================================================
+# MuJoCo's C functions by address
+# =============================================================================================
+# The C functions `void f(const mjModel*, mjData*)` are called through a function pointer passed as
+# an argument (`mjfn` = MJ_FUNCS: [mj_step, mj_kinematics, mj_step1, mj_step2, sched_yield] addresses of
+# this process), not through a ctypes object, so that numba can cache the compiled loop on disk (a ctypes
+# global would bake this process' addresses into the code and make it uncacheable: ~3 s of compilation in
+# every process).  sched_yield (libc, `int f(void)`) is 0 where it is not found.
+MJ_STEP_FN, MJ_KINEMATICS_FN, MJ_STEP1_FN, MJ_STEP2_FN, YIELD_FN = 0, 1, 2, 3, 4
+
+
+def _mj_addresses():
+    import ctypes
+    import glob
+    import os
+
+    import mujoco
+
+    libs = sorted(glob.glob(os.path.join(os.path.dirname(mujoco.__file__), "libmujoco.so*")))
+    if not libs:  # pragma: no cover - other platforms
+        return np.zeros(5, dtype=np.int64)
+    lib = ctypes.CDLL(libs[0])
+    names = ("mj_step", "mj_kinematics", "mj_step1", "mj_step2")
+    addr = [ctypes.cast(getattr(lib, f), ctypes.c_void_p).value for f in names]
+    try:
+        addr.append(ctypes.cast(ctypes.CDLL(None).sched_yield, ctypes.c_void_p).value)
+    except (AttributeError, OSError):  # pragma: no cover - no libc sched_yield: waits only spin
+        addr.append(0)
+    return np.array(addr, dtype=np.int64)
+
+
+MJ_FUNCS = _mj_addresses()  # pass to the kernels below; never use as a global inside them
+
+
+def mj_call(fn, mptr, dptr):
+    """Call the MuJoCo C function at address fn with (mjModel*, mjData*) (interpreted: ctypes;
+    compiled: a direct indirect call, see the numba overload below)."""
+    import ctypes
+
+    if fn == 0:  # pragma: no cover
+        raise RuntimeError("MuJoCo's shared library was not found (libmujoco.so*)")
+    ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p)(int(fn))(mptr, dptr)
+
+
+def sync_load(sync, i):
+    """sync[i] (int64 array shared with another thread), read with acquire ordering when compiled."""
+    return sync[i]
+
+
+def sync_store(sync, i, value):
+    """sync[i] = value, written with release ordering when compiled (see sync_load)."""
+    sync[i] = value
+
+
+def cpu_relax():
+    """A spin-wait hint to the processor (x86 `pause`) when compiled; nothing interpreted."""
+
+
+def c_yield(fn):
+    """Call `int sched_yield(void)` at address fn (0: nothing): let another thread have this core."""
+    if fn != 0:
+        import ctypes
+
+        ctypes.CFUNCTYPE(ctypes.c_int)(int(fn))()
+
+
+_registered = False
+
+
+def register_numba_extensions() -> None:
+    """The compiled form of mj_call (called by `harness.loop.fast.kernels` before compiling: importing
+    this module does not import numba)."""
+    global _registered
+    if _registered:
+        return
+    _registered = True
+    from llvmlite import ir as _ir
+    from numba import types as _nbt
+    from numba.extending import intrinsic as _intrinsic
+    from numba.extending import overload as _overload
+
+    @_intrinsic
+    def _mj_call_ptr(typingctx, fn, mptr, dptr):
+        sig = _nbt.void(fn, mptr, dptr)
+
+        def codegen(context, builder, signature, args):
+            vp = _ir.IntType(8).as_pointer()
+            fnty = _ir.FunctionType(_ir.VoidType(), [vp, vp])
+            f = builder.inttoptr(args[0], fnty.as_pointer())
+            builder.call(f, [builder.inttoptr(args[1], vp), builder.inttoptr(args[2], vp)])
+            return context.get_dummy_value()
+
+        return sig, codegen
+
+    @_overload(mj_call)
+    def _mj_call_overload(fn, mptr, dptr):
+        def impl(fn, mptr, dptr):
+            _mj_call_ptr(fn, mptr, dptr)
+
+        return impl
+
+    import platform
+
+    from numba.core import cgutils as _cgutils
+
+    def _item_ptr(context, builder, aryty, ary, idx):
+        arr = context.make_array(aryty)(context, builder, ary)
+        return _cgutils.get_item_pointer(context, builder, aryty, arr, [idx])
+
+    @_intrinsic
+    def _sync_load(typingctx, sync, i):
+        sig = _nbt.int64(sync, i)
+
+        def codegen(context, builder, signature, args):
+            ptr = _item_ptr(context, builder, signature.args[0], args[0], args[1])
+            return builder.load_atomic(ptr, "acquire", 8)
+
+        return sig, codegen
+
+    @_intrinsic
+    def _sync_store(typingctx, sync, i, value):
+        sig = _nbt.void(sync, i, value)
+
+        def codegen(context, builder, signature, args):
+            ptr = _item_ptr(context, builder, signature.args[0], args[0], args[1])
+            val = context.cast(builder, args[2], signature.args[2], _nbt.int64)
+            builder.store_atomic(val, ptr, "release", 8)
+            return context.get_dummy_value()
+
+        return sig, codegen
+
+    pause = platform.machine().lower() in ("x86_64", "amd64", "i686", "x86")
+
+    @_intrinsic
+    def _cpu_relax(typingctx):
+        sig = _nbt.void()
+
+        def codegen(context, builder, signature, args):
+            if pause:  # the intrinsic, not inline assembly (numba's code emitter has no asm parser)
+                fnty = _ir.FunctionType(_ir.VoidType(), [])
+                builder.call(_cgutils.get_or_insert_function(builder.module, fnty, "llvm.x86.sse2.pause"), [])
+            return context.get_dummy_value()
+
+        return sig, codegen
+
+    @_intrinsic
+    def _c_call0(typingctx, fn):
+        sig = _nbt.void(fn)
+
+        def codegen(context, builder, signature, args):
+            fnty = _ir.FunctionType(_ir.IntType(32), [])
+            builder.call(builder.inttoptr(args[0], fnty.as_pointer()), [])
+            return context.get_dummy_value()
+
+        return sig, codegen
+
+    @_overload(sync_load)
+    def _sync_load_overload(sync, i):
+        return lambda sync, i: _sync_load(sync, i)
+
+    @_overload(sync_store)
+    def _sync_store_overload(sync, i, value):
+        return lambda sync, i, value: _sync_store(sync, i, value)
+
+    @_overload(cpu_relax)
+    def _cpu_relax_overload():
+        return lambda: _cpu_relax()
+
+    @_overload(c_yield)
+    def _c_yield_overload(fn):
+        def impl(fn):
+            if fn != 0:
+                _c_call0(fn)
+
+        return impl
+
+
+# =============================================================================================
+# The physics thread
+# =============================================================================================
+# The physics thread of `mujoco_chunk` (its sync): int64 [go, state, step1, warn, last, spare]
+#   go    (written by the loop): physics steps the loop asks for (mj_step2 of the current state, then of
+#         the next, ...);
+#   state (physics thread): physics steps done; qpos, qvel, sensordata hold that state;
+#   step1 (physics thread): the state whose mj_step1 is done (kinematics, ... in MjData);
+#   warn  (physics thread): 1 if any MuJoCo warning counter is non-zero after the last mj_step2;
+#   last  (set before the thread starts): no mj_step1 after the state of this many steps (the run's end).
+SYNC_GO, SYNC_S2, SYNC_S1, SYNC_WARN, SYNC_LAST, SYNC_SIZE = 0, 1, 2, 3, 4, 6
+SYNC_STOP = -1  # sync[SYNC_GO] = SYNC_STOP ends physics_server
+# Spin-wait iterations (x86 `pause`, ~20-40 ns each) before each sched_yield while waiting for the other
+# thread: a wait within a step (a few us) never yields; a descheduled partner or a long pause between
+# calls (Python between chunks, the end of the run) gives the core away.
+SPIN = 2000
+
+
+def sync_wait(sync, slot, value, yfn):
+    """Wait until sync[slot] == value (acquire)."""
+    spins = 0
+    while sync_load(sync, slot) != value:
+        spins += 1
+        if spins < SPIN:
+            cpu_relax()
+        else:
+            c_yield(yfn)
+            spins = 0
+
+
+def physics_server(mptr, dptr, mjfn, sync, wnum, wsnap, sens, sens_snap):
+    """Physics thread of `mujoco_chunk` with a sync array (layout above): mj_step1 of the current state,
+    then, each time the loop asks for the next step (sync[SYNC_GO] = state + 1), mj_step2, publish the new
+    state and MuJoCo's warning counters (wnum, a view of mjData.warning.number, copied into wsnap) and
+    mj_step1 of it (not past sync[SYNC_LAST]).  The loop reads the sensors from sens_snap, a copy of
+    sensordata (sens) after each mj_step2: mj_step1 rewrites the position and velocity sensors (e.g. a
+    contact distance).  wsnap holds the counters of the steps the loop asked for:
+    an mj_step1 of a state the loop then does not step (it stopped) may warn too, as mj_step would not
+    have.  Returns when sync[SYNC_GO] == SYNC_STOP (at once if it is already): the number of mj_step2
+    calls."""
+    g = sync_load(sync, SYNC_S2)
+    last = sync_load(sync, SYNC_LAST)
+    yfn = mjfn[YIELD_FN]
+    calls = 0
+    if sync_load(sync, SYNC_GO) == SYNC_STOP:
+        return calls
+    if g < last:
+        mj_call(mjfn[MJ_STEP1_FN], mptr, dptr)
+        sync_store(sync, SYNC_S1, g)
+    while True:
+        spins = 0
+        go = sync_load(sync, SYNC_GO)
+        while go == g:
+            spins += 1
+            if spins < SPIN:
+                cpu_relax()
+            else:
+                c_yield(yfn)
+                spins = 0
+            go = sync_load(sync, SYNC_GO)
+        if go == SYNC_STOP:
+            break
+        mj_call(mjfn[MJ_STEP2_FN], mptr, dptr)
+        calls += 1
+        g += 1
+        for i in range(sens.shape[0]):
+            sens_snap[i] = sens[i]
+        w = 0
+        for i in range(wnum.shape[0]):
+            wsnap[i] = wnum[i]
+            if wnum[i] != 0:
+                w = 1
+        sync_store(sync, SYNC_WARN, w)
+        sync_store(sync, SYNC_S2, g)
+        if g < last:
+            mj_call(mjfn[MJ_STEP1_FN], mptr, dptr)
+            sync_store(sync, SYNC_S1, g)
+    return calls
+
+
+KERNELS = ("sync_wait", "physics_server")
