@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from harness.config.errors import ConfigError
 from harness.config.load import load_scenario
 from harness.config.scenario import PlantConfig, Scenario
 from harness.loop import mujoco_loop
@@ -139,6 +140,9 @@ def test_overlap_default_needs_a_free_core(monkeypatch):
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})
     monkeypatch.setenv("TELEOP_OVERLAP", "1")
     assert overlap_default(scn) is True
+    monkeypatch.setenv("TELEOP_OVERLAP", "yes")
+    with pytest.raises(ConfigError, match=r"TELEOP_OVERLAP = 'yes'.*1 \(physics thread on\), 0 \(off\)"):
+        overlap_default(scn)
     monkeypatch.setenv("TELEOP_NO_JIT", "1")
     assert overlap_default(scn) is False
 
@@ -157,3 +161,16 @@ def test_sweep_cases_run_serially(monkeypatch):
     monkeypatch.setattr(harness.loop, "simulate", fake_simulate)
     out = run_case({"case_id": "c", "scenario": Scenario(duration=0.01), "metrics": []})
     assert out["status"] == "error" and seen.get("overlap") is False
+
+
+def test_a_bad_overlap_switch_is_an_input_error(monkeypatch, tmp_path, capsys):
+    """`teleop` checks TELEOP_OVERLAP before any command runs: exit 2, one line naming the variable and its
+    values, nothing written."""
+    from harness.cli import main
+
+    monkeypatch.setenv("TELEOP_OVERLAP", "yes")
+    out = tmp_path / "run"
+    assert main(["run", "--duration", "0.01", "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "TELEOP_OVERLAP = 'yes': 1 (physics thread on), 0 (off), or unset" in err
+    assert not out.exists()

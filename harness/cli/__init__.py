@@ -33,7 +33,7 @@ from controllers.params import ParameterError
 from harness.cli.parser import EXIT_FAIL, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, build_parser
 from harness.cli.parser import one_line as _one_line
 from harness.config.errors import ConfigError
-from harness.config.runtime import fast_exit, set_gc_thresholds
+from harness.config.runtime import fast_exit, overlap_setting, set_gc_thresholds
 from harness.config.textio import jsonable, prepare_out_dir
 
 # (module, attribute) of exception types that mean "invalid input" (exit 2).  Looked up in
@@ -354,6 +354,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help(sys.stderr)
         return EXIT_USAGE
     try:
+        overlap_setting()  # a bad TELEOP_OVERLAP is an input error before anything runs
         return COMMANDS[args.command](args)
     except KeyboardInterrupt:
         _err("interrupted")

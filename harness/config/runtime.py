@@ -1,5 +1,6 @@
 """Process-level settings shared by the `teleop` command and the sweep's pool workers: the garbage
-collector's thresholds and the fast end of a process.  Nothing here knows of plants or runs."""
+collector's thresholds, the fast end of a process and the TELEOP_OVERLAP switch.  Nothing here knows of
+plants or runs."""
 
 from __future__ import annotations
 
@@ -43,3 +44,21 @@ def fast_exit(rc: int) -> NoReturn:
 
 
 __all__ = ["GC_THRESHOLDS", "end_process", "fast_exit", "set_gc_thresholds"]
+
+
+OVERLAP_ENV = "TELEOP_OVERLAP"
+
+
+def overlap_setting() -> bool | None:
+    """$TELEOP_OVERLAP: True ("1": the MuJoCo loop's physics thread on), False ("0": off) or None (unset or
+    empty: on when a core is free, `harness.loop.mujoco_loop.overlap_default`).  Anything else raises
+    ConfigError naming the variable and its values (checked by `teleop` before any command runs)."""
+    from harness.config.errors import ConfigError
+
+    env = os.environ.get(OVERLAP_ENV, "").strip()
+    if env in ("0", "1"):
+        return env == "1"
+    if env:
+        raise ConfigError.field(OVERLAP_ENV, env, "1 (physics thread on), 0 (off), or unset (on when a core "
+                                "is free)")
+    return None

@@ -29,6 +29,7 @@ from harness.loop.native import (  # noqa: F401 - MJ_FUNCS, physics_server: re-e
     SYNC_S2,
     SYNC_WARN,
     YIELD_FN,
+    copy_geometry,
     mj_call,
     physics_server,
     sync_load,
@@ -202,7 +203,7 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
                         or (abs(r[R_E2]) + abs(r[R_E2 + 1]) > RUNAWAY)):
             st = 4
         if st != 0:
-            if par:  # the helper may be in mj_step1 of this state: wait for it to be idle
+            if par:  # the physics thread may be in mj_step1 of this state: wait for it to be idle
                 sync_wait(sync, SYNC_S1, gen, yfn)
             if live:  # the last recorded step is not stepped: its kinematics explicitly
                 mj_call(mjfn[MJ_KINEMATICS_FN], mptr, dptr)
@@ -241,10 +242,7 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
                     lr[i] = ctrl[i]
                 for i in range(nv):
                     lr[nu + i] = qfrc[i]
-            if par:
-                if live and s == 0:  # the start state's kinematics, from the helper's mj_step1
-                    sync_wait(sync, SYNC_S1, gen, yfn)
-                    copy_geometry(geo_in, k - k0, geo_out)
+            if par:  # (the physics thread copies the geometry rows, from its mj_step1)
                 gen += 1
                 sync_store(sync, SYNC_GO, gen)
                 sync_wait(sync, SYNC_S2, gen, yfn)
@@ -279,26 +277,6 @@ KERNELS = ("sense_mujoco", "mujoco_commands", "master_tip_state", "mujoco_chunk"
 # =============================================================================================
 # Recording geometry, after the loop: MuJoCo kinematics replay and analytic backbone, compiled
 # =============================================================================================
-def copy_geometry(geo_in, row, geo_out):
-    """Row `row` of the recording geometry from MuJoCo's current kinematics: geo_in = (xpos, xquat,
-    site_xpos, xanchor (views of the MjData), bodies (nb,) chain body ids, gids = [elbow body, shoulder
-    joint, master tip site, slave tip site]); geo_out = (body_pos (n, nb, 3), body_quat (n, nb, 4) wxyz,
-    master_pos (n, 3, 3) = shoulder anchor, elbow, master tip; tip (n, 3) slave tip site)."""
-    xpos, xquat, site_xpos, xanchor, bodies, gids = geo_in
-    body_pos, body_quat, master_pos, tip = geo_out
-    for b in range(bodies.shape[0]):
-        src = bodies[b]
-        for j in range(3):
-            body_pos[row, b, j] = xpos[src, j]
-        for j in range(4):
-            body_quat[row, b, j] = xquat[src, j]
-    for j in range(3):
-        master_pos[row, 0, j] = xanchor[gids[1], j]
-        master_pos[row, 1, j] = xpos[gids[0], j]
-        master_pos[row, 2, j] = site_xpos[gids[2], j]
-        tip[row, j] = site_xpos[gids[3], j]
-
-
 def kinematics_replay(mptr, dptr, mjfn, qpos, qpos_hist, geo_in, geo_out):
     """For each row of qpos_hist (n, nq): qpos <- row, MuJoCo's C mj_kinematics, `copy_geometry`
     (qpos and geo_in views of the MjData at dptr)."""
@@ -323,4 +301,4 @@ def backbone_world(q2, n_per_section, base, out):
             out[k, r, 2] = base[2] + pts[r, 1]
 
 
-KERNELS = KERNELS + ("copy_geometry", "kinematics_replay", "backbone_world")
+KERNELS = KERNELS + ("kinematics_replay", "backbone_world")

@@ -28,6 +28,7 @@ import time
 import mujoco
 import numpy as np
 
+from harness.config.runtime import overlap_setting
 from harness.config.scenario import Scenario
 from harness.loop.aot import A
 from harness.loop.common import (
@@ -173,7 +174,7 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     helper = None
     if overlap:  # the loop reads the physics thread's copy of the sensors (d.sensordata changes in mj_step1)
         force.sensordata = d.sensordata.copy()
-        helper = _start_helper(m, d, sync, n * sub, wnum, wseen, force.sensordata)
+        helper = _start_helper(m, d, sync, n * sub, wnum, wseen, force.sensordata, sub, geo)
     t0 = time.perf_counter()
     size = MUJOCO_CHUNK
     try:
@@ -246,9 +247,9 @@ def overlap_default(scn: Scenario, beside: bool = False) -> bool:
     worth it only on an idle core.  TELEOP_OVERLAP=1 / 0 forces it on / off (where MuJoCo allows it)."""
     if not two_phase_ok(scn) or os.environ.get("TELEOP_NO_JIT", "0") == "1":
         return False
-    env = os.environ.get("TELEOP_OVERLAP", "").strip()
-    if env in ("0", "1"):
-        return env == "1"
+    forced = overlap_setting()  # TELEOP_OVERLAP (ConfigError if it is not 0 or 1)
+    if forced is not None:
+        return forced
     try:
         cpus = len(os.sched_getaffinity(0))
     except AttributeError:  # pragma: no cover - not Linux
@@ -256,12 +257,14 @@ def overlap_default(scn: Scenario, beside: bool = False) -> bool:
     return cpus >= (3 if beside else 2)
 
 
-def _start_helper(m: mujoco.MjModel, d: mujoco.MjData, sync: np.ndarray, last: int,
-                  wnum: np.ndarray, wsnap: np.ndarray, sens_snap: np.ndarray) -> threading.Thread:
+def _start_helper(m: mujoco.MjModel, d: mujoco.MjData, sync: np.ndarray, last: int, wnum: np.ndarray,
+                  wsnap: np.ndarray, sens_snap: np.ndarray, substeps: int,
+                  geo: _Geometry) -> threading.Thread:
     """Start the thread that steps MuJoCo for `mujoco_chunk` (`harness.loop.native.physics_server`).
     The kernel is first called with the stop flag set (returns at once): it is loaded, or built, here."""
     sync[SYNC_GO] = SYNC_STOP
-    args = (m._address, d._address, MJ_FUNCS, sync, wnum, wsnap, d.sensordata, sens_snap)
+    args = (m._address, d._address, MJ_FUNCS, sync, wnum, wsnap, d.sensordata, sens_snap, substeps,
+            geo.inputs, geo.outputs(0, geo.tip.shape[0]))
     A.physics_server(*args)
     sync[:] = 0
     sync[SYNC_S1] = -2  # no mj_step1 done yet

@@ -217,13 +217,16 @@ def sync_wait(sync, slot, value, yfn):
             spins = 0
 
 
-def physics_server(mptr, dptr, mjfn, sync, wnum, wsnap, sens, sens_snap):
+def physics_server(mptr, dptr, mjfn, sync, wnum, wsnap, sens, sens_snap, substeps, geo_in, geo_out):
     """Physics thread of `mujoco_chunk` with a sync array (layout above): mj_step1 of the current state,
     then, each time the loop asks for the next step (sync[SYNC_GO] = state + 1), mj_step2, publish the new
     state and MuJoCo's warning counters (wnum, a view of mjData.warning.number, copied into wsnap) and
     mj_step1 of it (not past sync[SYNC_LAST]).  The loop reads the sensors from sens_snap, a copy of
     sensordata (sens) after each mj_step2: mj_step1 rewrites the position and velocity sensors (e.g. a
-    contact distance).  wsnap holds the counters of the steps the loop asked for:
+    contact distance).  The recording geometry of control step k (`copy_geometry`, geo_in, geo_out: the
+    whole run's rows) is copied here from the kinematics of mj_step1 of the state of physics step
+    k * substeps, so that MuJoCo's data stays in this thread's core.  wsnap holds the counters of the steps
+    the loop asked for:
     an mj_step1 of a state the loop then does not step (it stopped) may warn too, as mj_step would not
     have.  Returns when sync[SYNC_GO] == SYNC_STOP (at once if it is already): the number of mj_step2
     calls."""
@@ -233,8 +236,11 @@ def physics_server(mptr, dptr, mjfn, sync, wnum, wsnap, sens, sens_snap):
     calls = 0
     if sync_load(sync, SYNC_GO) == SYNC_STOP:
         return calls
+    live = geo_out[0].shape[0] > 0
     if g < last:
         mj_call(mjfn[MJ_STEP1_FN], mptr, dptr)
+        if live and g % substeps == 0:
+            copy_geometry(geo_in, g // substeps, geo_out)
         sync_store(sync, SYNC_S1, g)
     while True:
         spins = 0
@@ -263,8 +269,30 @@ def physics_server(mptr, dptr, mjfn, sync, wnum, wsnap, sens, sens_snap):
         sync_store(sync, SYNC_S2, g)
         if g < last:
             mj_call(mjfn[MJ_STEP1_FN], mptr, dptr)
+            if live and g % substeps == 0:
+                copy_geometry(geo_in, g // substeps, geo_out)
             sync_store(sync, SYNC_S1, g)
     return calls
 
 
-KERNELS = ("sync_wait", "physics_server")
+def copy_geometry(geo_in, row, geo_out):
+    """Row `row` of the recording geometry from MuJoCo's current kinematics: geo_in = (xpos, xquat,
+    site_xpos, xanchor (views of the MjData), bodies (nb,) chain body ids, gids = [elbow body, shoulder
+    joint, master tip site, slave tip site]); geo_out = (body_pos (n, nb, 3), body_quat (n, nb, 4) wxyz,
+    master_pos (n, 3, 3) = shoulder anchor, elbow, master tip; tip (n, 3) slave tip site)."""
+    xpos, xquat, site_xpos, xanchor, bodies, gids = geo_in
+    body_pos, body_quat, master_pos, tip = geo_out
+    for b in range(bodies.shape[0]):
+        src = bodies[b]
+        for j in range(3):
+            body_pos[row, b, j] = xpos[src, j]
+        for j in range(4):
+            body_quat[row, b, j] = xquat[src, j]
+    for j in range(3):
+        master_pos[row, 0, j] = xanchor[gids[1], j]
+        master_pos[row, 1, j] = xpos[gids[0], j]
+        master_pos[row, 2, j] = site_xpos[gids[2], j]
+        tip[row, j] = site_xpos[gids[3], j]
+
+
+KERNELS = ("sync_wait", "physics_server", "copy_geometry")
