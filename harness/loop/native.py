@@ -205,16 +205,30 @@ SYNC_STOP = -1  # sync[SYNC_GO] = SYNC_STOP ends physics_server
 SPIN = 2000
 
 
+def backoff(spins, yfn):
+    """One iteration of a spin-wait: the processor's pause hint, or sched_yield (libc address yfn) once
+    every SPIN iterations.  Returns the new iteration count."""
+    if spins < SPIN:
+        cpu_relax()
+        return spins + 1
+    c_yield(yfn)
+    return 0
+
+
 def sync_wait(sync, slot, value, yfn):
     """Wait until sync[slot] == value (acquire)."""
     spins = 0
     while sync_load(sync, slot) != value:
-        spins += 1
-        if spins < SPIN:
-            cpu_relax()
-        else:
-            c_yield(yfn)
-            spins = 0
+        spins = backoff(spins, yfn)
+
+
+def step1_published(mptr, dptr, mjfn, sync, g, substeps, geo_in, geo_out):
+    """The physics thread's mj_step1 of the state of physics step g, the recording-geometry row of that
+    state's control step (when g starts one and geo_out has rows), then sync[SYNC_S1] = g."""
+    mj_call(mjfn[MJ_STEP1_FN], mptr, dptr)
+    if geo_out[0].shape[0] > 0 and g % substeps == 0:
+        copy_geometry(geo_in, g // substeps, geo_out)
+    sync_store(sync, SYNC_S1, g)
 
 
 def physics_server(mptr, dptr, mjfn, sync, wnum, wsnap, sens, sens_snap, substeps, geo_in, geo_out):
@@ -226,32 +240,22 @@ def physics_server(mptr, dptr, mjfn, sync, wnum, wsnap, sens, sens_snap, substep
     contact distance).  The recording geometry of control step k (`copy_geometry`, geo_in, geo_out: the
     whole run's rows) is copied here from the kinematics of mj_step1 of the state of physics step
     k * substeps, so that MuJoCo's data stays in this thread's core.  wsnap holds the counters of the steps
-    the loop asked for:
-    an mj_step1 of a state the loop then does not step (it stopped) may warn too, as mj_step would not
-    have.  Returns when sync[SYNC_GO] == SYNC_STOP (at once if it is already): the number of mj_step2
-    calls."""
+    the loop asked for: an mj_step1 of a state the loop then does not step (it stopped) may warn too, as
+    mj_step would not have.  Returns when sync[SYNC_GO] == SYNC_STOP (at once if it is already): the
+    number of mj_step2 calls."""
     g = sync_load(sync, SYNC_S2)
     last = sync_load(sync, SYNC_LAST)
     yfn = mjfn[YIELD_FN]
     calls = 0
     if sync_load(sync, SYNC_GO) == SYNC_STOP:
         return calls
-    live = geo_out[0].shape[0] > 0
     if g < last:
-        mj_call(mjfn[MJ_STEP1_FN], mptr, dptr)
-        if live and g % substeps == 0:
-            copy_geometry(geo_in, g // substeps, geo_out)
-        sync_store(sync, SYNC_S1, g)
+        step1_published(mptr, dptr, mjfn, sync, g, substeps, geo_in, geo_out)
     while True:
         spins = 0
         go = sync_load(sync, SYNC_GO)
         while go == g:
-            spins += 1
-            if spins < SPIN:
-                cpu_relax()
-            else:
-                c_yield(yfn)
-                spins = 0
+            spins = backoff(spins, yfn)
             go = sync_load(sync, SYNC_GO)
         if go == SYNC_STOP:
             break
@@ -268,10 +272,7 @@ def physics_server(mptr, dptr, mjfn, sync, wnum, wsnap, sens, sens_snap, substep
         sync_store(sync, SYNC_WARN, w)
         sync_store(sync, SYNC_S2, g)
         if g < last:
-            mj_call(mjfn[MJ_STEP1_FN], mptr, dptr)
-            if live and g % substeps == 0:
-                copy_geometry(geo_in, g // substeps, geo_out)
-            sync_store(sync, SYNC_S1, g)
+            step1_published(mptr, dptr, mjfn, sync, g, substeps, geo_in, geo_out)
     return calls
 
 
@@ -295,4 +296,4 @@ def copy_geometry(geo_in, row, geo_out):
         tip[row, j] = site_xpos[gids[3], j]
 
 
-KERNELS = ("sync_wait", "physics_server", "copy_geometry")
+KERNELS = ("backoff", "sync_wait", "step1_published", "physics_server", "copy_geometry")
