@@ -77,13 +77,19 @@ def test_physics_thread_stops_at_the_warning_step(traj_arrays):
 
 def test_physics_thread_with_any_chunk_boundaries(monkeypatch, traj_arrays):
     """Compiled calls of 1-97 steps in a seeded random order (the physics thread runs on between them)
-    give the serial run."""
+    give the serial run, and each chunk handed to on_chunk (a live view) already holds its plant geometry
+    (copied by the physics thread)."""
     scn = load_scenario(ROOT / "scenarios" / "contact.toml", SHORT)
     ref = simulate_mujoco(scn, overlap=False)
     rng = np.random.default_rng(11)
     monkeypatch.setattr(mujoco_loop, "MUJOCO_CHUNK", 13)
     monkeypatch.setattr(mujoco_loop, "next_chunk", lambda steps, seconds, on_chunk: int(rng.integers(1, 98)))
-    _same(ref, simulate_mujoco(scn, overlap=True), traj_arrays, "random chunks")
+    parts = []
+    _same(ref, simulate_mujoco(scn, overlap=True, on_chunk=parts.append), traj_arrays, "random chunks")
+    assert len(parts) > 5
+    for key in ("body_pos", "body_quat", "master_pos", "x2_plant"):
+        np.testing.assert_array_equal(np.concatenate([getattr(c, key) for c in parts]), getattr(ref, key),
+                                      err_msg=key)
 
 
 def test_the_command_log_replays_the_threaded_run():
