@@ -28,7 +28,6 @@ from harness.loop.native import (  # noqa: F401 - MJ_FUNCS, physics_server: re-e
     SYNC_S1,
     SYNC_S2,
     SYNC_WARN,
-    YIELD_FN,
     copy_geometry,
     mj_call,
     physics_server,
@@ -170,7 +169,6 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
     nv = qfrc.shape[0]
     par = sync.shape[0] > 0
     gen = sync_load(sync, SYNC_GO) if par else 0  # physics steps done in the run
-    yfn = mjfn[YIELD_FN]
     for k in range(k0, k1):
         sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state)
         for i in range(16):
@@ -204,7 +202,7 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
             st = 4
         if st != 0:
             if par:  # the physics thread may be in mj_step1 of this state: wait for it to be idle
-                sync_wait(sync, SYNC_S1, gen, yfn)
+                sync_wait(sync, SYNC_S1, gen, mjfn)
             if live:  # the last recorded step is not stepped: its kinematics explicitly
                 mj_call(mjfn[MJ_KINEMATICS_FN], mptr, dptr)
                 copy_geometry(geo_in, k - k0, geo_out)
@@ -245,7 +243,7 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
             if par:  # (the physics thread copies the geometry rows, from its mj_step1)
                 gen += 1
                 sync_store(sync, SYNC_GO, gen)
-                sync_wait(sync, SYNC_S2, gen, yfn)
+                sync_wait(sync, SYNC_S2, gen, mjfn)
                 if sync_load(sync, SYNC_WARN) != 0:  # MuJoCo's warning counters after that mj_step2
                     return 7, k - k0 + 1
             else:

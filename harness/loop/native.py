@@ -14,11 +14,12 @@ import numpy as np
 # MuJoCo's C functions by address
 # =============================================================================================
 # The C functions `void f(const mjModel*, mjData*)` are called through a function pointer passed as
-# an argument (`mjfn` = MJ_FUNCS: [mj_step, mj_kinematics, mj_step1, mj_step2, sched_yield] addresses of
-# this process), not through a ctypes object, so that numba can cache the compiled loop on disk (a ctypes
-# global would bake this process' addresses into the code and make it uncacheable: ~3 s of compilation in
-# every process).  sched_yield (libc, `int f(void)`) is 0 where it is not found.
-MJ_STEP_FN, MJ_KINEMATICS_FN, MJ_STEP1_FN, MJ_STEP2_FN, YIELD_FN = 0, 1, 2, 3, 4
+# an argument (`mjfn` = MJ_FUNCS: [mj_step, mj_kinematics, mj_step1, mj_step2, sched_yield, usleep]
+# addresses of this process), not through a ctypes object, so that numba can cache the compiled loop on disk
+# (a ctypes global would bake this process' addresses into the code and make it uncacheable: ~3 s of
+# compilation in every process).  sched_yield (`int f(void)`) and usleep (`int f(unsigned)`) are libc's,
+# 0 where they are not found.
+MJ_STEP_FN, MJ_KINEMATICS_FN, MJ_STEP1_FN, MJ_STEP2_FN, YIELD_FN, SLEEP_FN = 0, 1, 2, 3, 4, 5
 
 
 def _mj_addresses():
@@ -30,14 +31,15 @@ def _mj_addresses():
 
     libs = sorted(glob.glob(os.path.join(os.path.dirname(mujoco.__file__), "libmujoco.so*")))
     if not libs:  # pragma: no cover - other platforms
-        return np.zeros(5, dtype=np.int64)
+        return np.zeros(6, dtype=np.int64)
     lib = ctypes.CDLL(libs[0])
     names = ("mj_step", "mj_kinematics", "mj_step1", "mj_step2")
     addr = [ctypes.cast(getattr(lib, f), ctypes.c_void_p).value for f in names]
-    try:
-        addr.append(ctypes.cast(ctypes.CDLL(None).sched_yield, ctypes.c_void_p).value)
-    except (AttributeError, OSError):  # pragma: no cover - no libc sched_yield: waits only spin
-        addr.append(0)
+    for f in ("sched_yield", "usleep"):
+        try:
+            addr.append(ctypes.cast(getattr(ctypes.CDLL(None), f), ctypes.c_void_p).value)
+        except (AttributeError, OSError):  # pragma: no cover - no libc: waits only spin
+            addr.append(0)
     return np.array(addr, dtype=np.int64)
 
 
@@ -74,6 +76,14 @@ def c_yield(fn):
         import ctypes
 
         ctypes.CFUNCTYPE(ctypes.c_int)(int(fn))()
+
+
+def c_sleep(fn, us):
+    """Call `int usleep(unsigned)` at address fn with us microseconds (0: nothing)."""
+    if fn != 0:
+        import ctypes
+
+        ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_uint)(int(fn))(int(us))
 
 
 _registered = False
@@ -166,6 +176,18 @@ def register_numba_extensions() -> None:
 
         return sig, codegen
 
+    @_intrinsic
+    def _c_call1(typingctx, fn, arg):
+        sig = _nbt.void(fn, arg)
+
+        def codegen(context, builder, signature, args):
+            i32 = _ir.IntType(32)
+            fnty = _ir.FunctionType(i32, [i32])
+            builder.call(builder.inttoptr(args[0], fnty.as_pointer()), [builder.trunc(args[1], i32)])
+            return context.get_dummy_value()
+
+        return sig, codegen
+
     @_overload(sync_load)
     def _sync_load_overload(sync, i):
         return lambda sync, i: _sync_load(sync, i)
@@ -186,6 +208,14 @@ def register_numba_extensions() -> None:
 
         return impl
 
+    @_overload(c_sleep)
+    def _c_sleep_overload(fn, us):
+        def impl(fn, us):
+            if fn != 0:
+                _c_call1(fn, us)
+
+        return impl
+
 
 # =============================================================================================
 # The physics thread
@@ -199,27 +229,33 @@ def register_numba_extensions() -> None:
 #   last  (set before the thread starts): no mj_step1 after the state of this many steps (the run's end).
 SYNC_GO, SYNC_S2, SYNC_S1, SYNC_WARN, SYNC_LAST, SYNC_SIZE = 0, 1, 2, 3, 4, 6
 SYNC_STOP = -1  # sync[SYNC_GO] = SYNC_STOP ends physics_server
-# Spin-wait iterations (x86 `pause`, ~20-40 ns each) before each sched_yield while waiting for the other
-# thread: a wait within a step (a few us) never yields; a descheduled partner or a long pause between
-# calls (Python between chunks, the end of the run) gives the core away.
+# A wait for the other thread spins on x86 `pause` (~10-40 ns each; a wait within a step, a few us to a few
+# hundred, ends here) with a sched_yield every SPIN iterations (a descheduled partner gets the core).  After
+# NAP_AFTER iterations (some ms: no step waits that long) it naps NAP_US per iteration instead: a long wait
+# (the loop's thread in Python between compiled calls, a slow live-view callback) does not keep a core busy,
+# and costs the wait that ends it at most a nap.
 SPIN = 2000
+NAP_AFTER = 50 * SPIN
+NAP_US = 200
 
 
-def backoff(spins, yfn):
-    """One iteration of a spin-wait: the processor's pause hint, or sched_yield (libc address yfn) once
-    every SPIN iterations.  Returns the new iteration count."""
-    if spins < SPIN:
+def backoff(spins, mjfn):
+    """Iteration `spins` (0, 1, ...) of a wait: pause, sched_yield or a nap (above; the libc addresses in
+    mjfn = MJ_FUNCS).  Returns spins + 1."""
+    if spins >= NAP_AFTER and mjfn[SLEEP_FN] != 0:
+        c_sleep(mjfn[SLEEP_FN], NAP_US)
+    elif spins % SPIN == SPIN - 1:
+        c_yield(mjfn[YIELD_FN])
+    else:
         cpu_relax()
-        return spins + 1
-    c_yield(yfn)
-    return 0
+    return spins + 1
 
 
-def sync_wait(sync, slot, value, yfn):
+def sync_wait(sync, slot, value, mjfn):
     """Wait until sync[slot] == value (acquire)."""
     spins = 0
     while sync_load(sync, slot) != value:
-        spins = backoff(spins, yfn)
+        spins = backoff(spins, mjfn)
 
 
 def step1_published(mptr, dptr, mjfn, sync, g, substeps, geo_in, geo_out):
@@ -245,7 +281,6 @@ def physics_server(mptr, dptr, mjfn, sync, wnum, wsnap, sens, sens_snap, substep
     number of mj_step2 calls."""
     g = sync_load(sync, SYNC_S2)
     last = sync_load(sync, SYNC_LAST)
-    yfn = mjfn[YIELD_FN]
     calls = 0
     if sync_load(sync, SYNC_GO) == SYNC_STOP:
         return calls
@@ -255,7 +290,7 @@ def physics_server(mptr, dptr, mjfn, sync, wnum, wsnap, sens, sens_snap, substep
         spins = 0
         go = sync_load(sync, SYNC_GO)
         while go == g:
-            spins = backoff(spins, yfn)
+            spins = backoff(spins, mjfn)
             go = sync_load(sync, SYNC_GO)
         if go == SYNC_STOP:
             break
