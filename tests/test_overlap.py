@@ -32,6 +32,9 @@ CASES = {
     "runaway": ("paper.toml", ["faults.e2_sign=-1", "duration=1.5"]),
     # the explicit integrator: MuJoCo can split it too
     "euler": ("paper.toml", ["plant.integrator='euler'"]),
+    # torque actuation on the CC chain (equality constraints in mj_step1), servo without feed-forward
+    "torque_cc": ("paper.toml", ["plant.actuation='torque'", "plant.enforce_cc=true"]),
+    "servo_no_feedforward": ("paper.toml", ["plant.servo_feedforward=false"]),
 }
 
 
