@@ -20,17 +20,15 @@ from harness.loop.force_kernels import (
     sense_forces,
 )
 from harness.loop.kernels import R_E1, R_E2, ROW_W, RUNAWAY, control_step
-from harness.loop.native import (  # noqa: F401 - MJ_FUNCS, physics_server: re-exported for the loop's callers
+from harness.loop.native import (  # noqa: F401 - MJ_FUNCS: re-exported for the loop's callers
     MJ_FUNCS,
     MJ_KINEMATICS_FN,
     MJ_STEP_FN,
     SYNC_GO,
     SYNC_S1,
     SYNC_S2,
-    SYNC_WARN,
     copy_geometry,
     mj_call,
-    physics_server,
     sync_load,
     sync_store,
     sync_wait,
@@ -117,7 +115,8 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
     or, if geo_out = (body_pos, body_quat, master_pos, tip) has rows, `copy_geometry` fills them from the
     kinematics MuJoCo computed inside the first mj_step of the step (the start state: valid for the
     single-stage integrators, not RK4), geo_in = (xpos, xquat, site_xpos, xanchor, bodies, gids).
-    wnum: view of MuJoCo's warning counters (mjData.warning.number), checked after every mj_step.
+    wnum: MuJoCo's warning counters, checked after every mj_step: a view of mjData.warning.number, or, with
+    the physics thread, the copy it takes after each mj_step2 (`physics_server`'s wsnap).
     fargs = (sensordata, cadr (ContactMap.adr or empty), Fconst (4,) constant tip forces (F2 is applied by
     the caller through xfrc_applied, F1 here through qfrc_applied = J1^T F1), fmode, fnoise, fstd, falpha,
     fdelay, fbuf, ffilt (`sense_forces`), op_on, op, targets, hand (4,), target (2,) (operator, see
@@ -200,10 +199,10 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
         if st == 0 and ((abs(r[R_E1]) + abs(r[R_E1 + 1]) > RUNAWAY)
                         or (abs(r[R_E2]) + abs(r[R_E2 + 1]) > RUNAWAY)):
             st = 4
-        if st != 0:
-            if par:  # the physics thread may be in mj_step1 of this state: wait for it to be idle
+        if st != 0:  # the last recorded step is not stepped: its geometry row from its kinematics
+            if par:  # the physics thread's mj_step1 of this state copies it: wait for it to be done
                 sync_wait(sync, SYNC_S1, gen, mjfn)
-            if live:  # the last recorded step is not stepped: its kinematics explicitly
+            elif live:
                 mj_call(mjfn[MJ_KINEMATICS_FN], mptr, dptr)
                 copy_geometry(geo_in, k - k0, geo_out)
             return st, k - k0 + 1
@@ -244,15 +243,13 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
                 gen += 1
                 sync_store(sync, SYNC_GO, gen)
                 sync_wait(sync, SYNC_S2, gen, mjfn)
-                if sync_load(sync, SYNC_WARN) != 0:  # MuJoCo's warning counters after that mj_step2
-                    return 7, k - k0 + 1
             else:
                 mj_call(mjfn[MJ_STEP_FN], mptr, dptr)
                 if live and s == 0:
                     copy_geometry(geo_in, k - k0, geo_out)
-                for w in range(wnum.shape[0]):
-                    if wnum[w] != 0:  # any MuJoCo warning stops the run: it must never pass silently
-                        return 7, k - k0 + 1
+            for w in range(wnum.shape[0]):
+                if wnum[w] != 0:  # any MuJoCo warning stops the run: it must never pass silently
+                    return 7, k - k0 + 1
     return 0, k1 - k0
 
 

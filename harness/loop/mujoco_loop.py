@@ -115,8 +115,10 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     from it; the same numbers as mj_step.  None = `overlap_default(scn, beside=on_running is not None)`;
     True for an integrator MuJoCo cannot split (RK4) raises ValueError; interpreted kernels
     (TELEOP_NO_JIT=1) always run serially."""
-    if overlap is None or os.environ.get("TELEOP_NO_JIT", "0") == "1":  # interpreted kernels: serial
+    if overlap is None:
         overlap = overlap_default(scn, beside=on_running is not None)
+    elif overlap and _interpreted():  # the kernels in Python: two threads would take turns on the GIL
+        overlap = False
     elif overlap and not two_phase_ok(scn):
         raise ValueError(f"overlap=True: MuJoCo's two-phase step needs one of the integrators "
                          f"{', '.join(LIVE_GEOMETRY_INTEGRATORS)} (its mj_step2 integrates RK4 with Euler); "
@@ -152,7 +154,10 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     status, done, k = 0, 0, 0
     interrupted = False
     warned: dict[str, int] = {}
-    wnum = d.warning.number  # view of MuJoCo's warning counters, checked by the kernel after each mj_step
+    wnum = d.warning.number  # view of MuJoCo's warning counters
+    # the counters the kernel checks after each step: MuJoCo's own, or the physics thread's copy after each
+    # mj_step2 (an mj_step1 of a state the loop then does not step must not count)
+    wseen = wnum.copy() if overlap else wnum
     sync = np.zeros(SYNC_SIZE if overlap else 0, dtype=np.int64)
 
     def chunk(k: int, k1: int):
@@ -163,14 +168,12 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
             cmap.elastic_args, servo, scn.plant.servo_feedforward, kv_over_kp, a["traj"], noise,
             scale, a["F"], a["mpk_c"], a["spk_c"], a["nodes"], a["weights"], a["gains"], a["spec"],
             ref, cmdbuf, delay, rows[k:k1], geo.qpos_hist[k:k1],
-            cmd_log[k * sub:k1 * sub] if log else cmd_log, geo.inputs, geo.outputs(k, k1), wnum,
+            cmd_log[k * sub:k1 * sub] if log else cmd_log, geo.inputs, geo.outputs(k, k1), wseen,
             force.args(k, k1), sync)
 
     tl = time.perf_counter()
     chunk(0, 0)  # no step: numba loads the kernel (on-disk cache) with the run's argument types
     load_time = time.perf_counter() - tl
-    # the warning counters of the steps taken: MuJoCo's own, or the physics thread's copy after each mj_step2
-    wseen = wnum.copy() if overlap else wnum
     helper = None
     if overlap:  # the loop reads the physics thread's copy of the sensors (d.sensordata changes in mj_step1)
         force.sensordata = d.sensordata.copy()
@@ -239,13 +242,18 @@ def two_phase_ok(scn: Scenario) -> bool:
     return scn.plant.integrator in LIVE_GEOMETRY_INTEGRATORS
 
 
+def _interpreted() -> bool:
+    return os.environ.get("TELEOP_NO_JIT", "0") == "1"
+
+
 def overlap_default(scn: Scenario, beside: bool = False) -> bool:
     """Whether the loop steps MuJoCo in a second thread (`simulate_mujoco`'s overlap) by default: when MuJoCo
     allows it (`two_phase_ok`), the kernels are compiled, and a core is free for it: this process may run on
     at least 2 CPUs, 3 when other work runs beside the loop (`beside`: the output imports of `teleop run`).
-    The thread trades CPU for time (each thread spin-waits for the other, ~1.3x the CPU of a serial run):
-    worth it only on an idle core.  TELEOP_OVERLAP=1 / 0 forces it on / off (where MuJoCo allows it)."""
-    if not two_phase_ok(scn) or os.environ.get("TELEOP_NO_JIT", "0") == "1":
+    The thread trades CPU for time (each thread spin-waits for the other: 1.4-1.9x the CPU of a serial run,
+    benchmarks/bench_threads.py): worth it only on an idle core.  TELEOP_OVERLAP=1 / 0 forces it on / off
+    (where MuJoCo allows it)."""
+    if not two_phase_ok(scn) or _interpreted():
         return False
     forced = overlap_setting()  # TELEOP_OVERLAP (ConfigError if it is not 0 or 1)
     if forced is not None:

@@ -220,14 +220,13 @@ def register_numba_extensions() -> None:
 # =============================================================================================
 # The physics thread
 # =============================================================================================
-# The physics thread of `mujoco_chunk` (its sync): int64 [go, state, step1, warn, last, spare]
+# The physics thread of `mujoco_chunk` (its sync): int64 [go, state, step1, last]
 #   go    (written by the loop): physics steps the loop asks for (mj_step2 of the current state, then of
 #         the next, ...);
 #   state (physics thread): physics steps done; qpos, qvel, sensordata hold that state;
 #   step1 (physics thread): the state whose mj_step1 is done (kinematics, ... in MjData);
-#   warn  (physics thread): 1 if any MuJoCo warning counter is non-zero after the last mj_step2;
 #   last  (set before the thread starts): no mj_step1 after the state of this many steps (the run's end).
-SYNC_GO, SYNC_S2, SYNC_S1, SYNC_WARN, SYNC_LAST, SYNC_SIZE = 0, 1, 2, 3, 4, 6
+SYNC_GO, SYNC_S2, SYNC_S1, SYNC_LAST, SYNC_SIZE = 0, 1, 2, 3, 4
 SYNC_STOP = -1  # sync[SYNC_GO] = SYNC_STOP ends physics_server
 # A wait for the other thread spins on x86 `pause` (~10-40 ns each; a wait within a step, a few us to a few
 # hundred, ends here) with a sched_yield every SPIN iterations (a descheduled partner gets the core).  After
@@ -270,15 +269,16 @@ def step1_published(mptr, dptr, mjfn, sync, g, substeps, geo_in, geo_out):
 def physics_server(mptr, dptr, mjfn, sync, wnum, wsnap, sens, sens_snap, substeps, geo_in, geo_out):
     """Physics thread of `mujoco_chunk` with a sync array (layout above): mj_step1 of the current state,
     then, each time the loop asks for the next step (sync[SYNC_GO] = state + 1), mj_step2, publish the new
-    state and MuJoCo's warning counters (wnum, a view of mjData.warning.number, copied into wsnap) and
-    mj_step1 of it (not past sync[SYNC_LAST]).  The loop reads the sensors from sens_snap, a copy of
-    sensordata (sens) after each mj_step2: mj_step1 rewrites the position and velocity sensors (e.g. a
-    contact distance).  The recording geometry of control step k (`copy_geometry`, geo_in, geo_out: the
-    whole run's rows) is copied here from the kinematics of mj_step1 of the state of physics step
-    k * substeps, so that MuJoCo's data stays in this thread's core.  wsnap holds the counters of the steps
-    the loop asked for: an mj_step1 of a state the loop then does not step (it stopped) may warn too, as
-    mj_step would not have.  Returns when sync[SYNC_GO] == SYNC_STOP (at once if it is already): the
-    number of mj_step2 calls."""
+    state, and mj_step1 of it (not past sync[SYNC_LAST]).  With the new state it publishes copies the loop
+    reads instead of MuJoCo's own arrays:
+    * sens_snap, of sensordata (sens): mj_step1 rewrites the position and velocity sensors (e.g. a contact
+      distance) while the loop reads the state;
+    * wsnap, of MuJoCo's warning counters (wnum, a view of mjData.warning.number): an mj_step1 of a state
+      the loop then does not step (it stopped) may warn, as mj_step would not have.
+    The recording geometry of control step k (`copy_geometry`, geo_in, geo_out: the whole run's rows) is
+    copied here from the kinematics of mj_step1 of the state of physics step k * substeps, so that MuJoCo's
+    data stays in this thread's core.  Returns when sync[SYNC_GO] == SYNC_STOP (at once if it is already):
+    the number of mj_step2 calls."""
     g = sync_load(sync, SYNC_S2)
     last = sync_load(sync, SYNC_LAST)
     calls = 0
@@ -299,12 +299,8 @@ def physics_server(mptr, dptr, mjfn, sync, wnum, wsnap, sens, sens_snap, substep
         g += 1
         for i in range(sens.shape[0]):
             sens_snap[i] = sens[i]
-        w = 0
         for i in range(wnum.shape[0]):
             wsnap[i] = wnum[i]
-            if wnum[i] != 0:
-                w = 1
-        sync_store(sync, SYNC_WARN, w)
         sync_store(sync, SYNC_S2, g)
         if g < last:
             step1_published(mptr, dptr, mjfn, sync, g, substeps, geo_in, geo_out)
