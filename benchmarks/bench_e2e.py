@@ -16,7 +16,8 @@ Reports, in one run:
           logged commands, no Python in the loop).  Each repetition runs raw, e2e, raw back to back;
           ratios are per repetition, against the mean of its two raw replays.
   sweep   cases/min of a mass study (benchmarks/bench_sweep.py's make_study) through
-          `harness.studies.sweep.run_sweep` in a fresh process with 1 and 2 worker processes (wall
+          `harness.studies.sweep.run_sweep` in a fresh process with 1 and 2 worker processes, and 1 and
+          2 threads (`executor="threads"`, the in-process batch path) (wall
           time includes imports, worker start-up and the summary), and per-case wall and CPU time
           inside the workers: wall / CPU > 1 means the worker waited for a core (other processes),
           CPU growing with 2 workers means the two slow each other (caches, memory, frequency); the
@@ -227,13 +228,15 @@ def run_table(scenario: str, overrides: list[str], reps: int, out) -> dict:
 
 # ---------------------------------------------------------------------------------------------
 def _timed_case(payload: dict) -> dict:
-    """run_case plus the worker's CPU time and pid (diagnostic pool below)."""
+    """run_case plus the worker's CPU time and its worker (pid, thread) (diagnostic pools below)."""
+    import threading
+
     from harness.studies.executor import run_case
 
-    c0, w0 = time.process_time(), time.perf_counter()
+    c0, w0 = time.thread_time(), time.perf_counter()
     res = run_case(payload)
-    return {"pid": os.getpid(), "cpu": time.process_time() - c0, "wall": time.perf_counter() - w0,
-            "status": res["status"], "t_end": time.time()}
+    return {"pid": (os.getpid(), threading.get_ident()), "cpu": time.thread_time() - c0,
+            "wall": time.perf_counter() - w0, "status": res["status"], "t_end": time.time()}
 
 
 _SWEEP_CHILD = r"""
@@ -242,7 +245,8 @@ t0 = time.perf_counter()
 import harness.cli as cli
 cli.prepare_process()  # as `teleop sweep` does (harness.cli.entry); the workers inherit MUJOCO_GL
 from harness.studies.sweep import run_sweep
-res = run_sweep(json.loads(sys.argv[1]), out=sys.argv[2], workers=int(sys.argv[3]), progress=False)
+res = run_sweep(json.loads(sys.argv[1]), out=sys.argv[2], workers=int(sys.argv[3]), progress=False,
+                executor=sys.argv[4])
 print("SWEEP-JSON " + json.dumps({"in_process": time.perf_counter() - t0, "n": len(res.rows),
                                   "statuses": res.counts()}))
 from harness.config.runtime import fast_exit
@@ -250,13 +254,13 @@ fast_exit(0)  # as `teleop sweep` does (harness.cli.entry)
 """
 
 
-def sweep_once(doc: dict, workers: int, n_cases: int) -> float:
+def sweep_once(doc: dict, workers: int, n_cases: int, executor: str) -> float:
     """Wall time of one sweep in a fresh process (what `teleop sweep` costs: its imports, the pool's
     start-up, the cases, results.jsonl, summary.csv and the summary plot)."""
     with tempfile.TemporaryDirectory(prefix="bench-e2e-sweep-") as tmp:
         t = time.perf_counter()
         res = subprocess.run([sys.executable, "-c", _SWEEP_CHILD, json.dumps(doc), str(Path(tmp) / "out"),
-                              str(workers)], capture_output=True, text=True, cwd=ROOT,
+                              str(workers), executor], capture_output=True, text=True, cwd=ROOT,
                              env={**os.environ, "PYTHONPATH": str(ROOT)})
         wall = time.perf_counter() - t
     line = [ln for ln in res.stdout.splitlines() if ln.startswith("SWEEP-JSON ")]
@@ -265,13 +269,17 @@ def sweep_once(doc: dict, workers: int, n_cases: int) -> float:
     return wall
 
 
-def _diag(case_list, w: int) -> tuple[float, float, float]:
-    """The same cases through a plain spawn pool of w workers: (median wall of each worker's first case,
-    median wall and CPU of the later cases) in the workers."""
+def _diag(case_list, w: int, executor: str) -> tuple[float, float, float]:
+    """The same cases through a plain pool of w workers (spawned processes, or threads of a fresh process):
+    (median wall of each worker's first case, median wall and CPU of the later cases) in the workers."""
     payloads = [{"case_id": c.case_id, "scenario": c.scenario, "metrics": ["e2_rms"], "record": False}
                 for c in case_list]
-    with cf.ProcessPoolExecutor(w, mp_context=multiprocessing.get_context("spawn")) as ex:
-        diag = list(ex.map(_timed_case, payloads))
+    if executor == "threads":
+        with cf.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as ex:
+            diag = ex.submit(_thread_diag, payloads, w).result()
+    else:
+        with cf.ProcessPoolExecutor(w, mp_context=multiprocessing.get_context("spawn")) as ex:
+            diag = list(ex.map(_timed_case, payloads))
     first, later = {}, []
     for d in diag:
         if d["pid"] not in first:
@@ -284,36 +292,45 @@ def _diag(case_list, w: int) -> tuple[float, float, float]:
     return fw, lw, lc
 
 
+def _thread_diag(payloads: list[dict], w: int) -> list[dict]:
+    with cf.ThreadPoolExecutor(w) as ex:
+        return list(ex.map(_timed_case, payloads))
+
+
 def sweep_table(cases: int, duration: float, counts: list[int], reps: int, out) -> None:
     from harness.studies.cases import expand_cases
     from harness.studies.study import load_study
 
     doc = make_study(cases, duration, "mujoco")
     case_list = expand_cases(load_study(doc))
-    walls: dict[int, list[float]] = {w: [] for w in counts}
-    diags: dict[int, list[tuple]] = {w: [] for w in counts}
+    runs = [(e, w) for e in ("processes", "threads") for w in counts]
+    walls: dict[tuple, list[float]] = {r: [] for r in runs}
+    diags: dict[tuple, list[tuple]] = {r: [] for r in runs}
     for _ in range(reps):  # interleaved: 1, 2, 1, 2, ...
-        for w in counts:
-            walls[w].append(sweep_once(doc, w, len(case_list)))
-            diags[w].append(_diag(case_list, w))
+        for e, w in runs:
+            walls[e, w].append(sweep_once(doc, w, len(case_list), e))
+            diags[e, w].append(_diag(case_list, w, e))
     out(f"Sweep: {cases} cases x {duration:g} s (mass study of benchmarks/bench_sweep.py), MuJoCo plant, "
         f"each sweep in a fresh process (`run_sweep`, the pool's spawn start-up, results and the summary "
-        f"plot included), {reps} interleaved repetition(s), median [min, max].  'Steady state' = workers / "
-        f"the median wall time of a case that is not its worker's first (a plain spawn pool, same cases, "
-        f"run after each sweep).\n")
-    out("| workers | wall s | cases/min | vs 1 worker | first case per worker (wall) "
+        f"plot included; `processes`: the default worker processes, `threads`: `--executor threads`, the "
+        f"in-process batch path), {reps} interleaved repetition(s), median [min, max].  'Steady state' = "
+        f"workers / the median wall time of a case that is not its worker's first (a plain pool of the same "
+        f"kind, same cases, run after each sweep).\n")
+    out("| executor | workers | wall s | cases/min | vs 1 worker | first case per worker (wall) "
         "| later cases: wall / CPU per case | steady state cases/min | vs 1 worker |")
-    out("|---|---|---|---|---|---|---|---|")
-    base = base_ss = None
-    for w in counts:
-        wall = float(np.median(walls[w]))
+    out("|---|---|---|---|---|---|---|---|---|")
+    base: dict[str, float] = {}
+    base_ss: dict[str, float] = {}
+    for e, w in runs:
+        wall = float(np.median(walls[e, w]))
         rate = 60.0 * len(case_list) / wall
-        base = base or rate
-        fw, lw, lc = (float(np.median([d[i] for d in diags[w]])) for i in range(3))
+        base.setdefault(e, rate)
+        fw, lw, lc = (float(np.median([d[i] for d in diags[e, w]])) for i in range(3))
         ss = 60.0 * w / lw
-        base_ss = base_ss or ss
-        out(f"| {w} | {wall:.2f} [{min(walls[w]):.2f}, {max(walls[w]):.2f}] | {rate:.0f} "
-            f"| {rate / base:.2f}x | {fw:.2f} s | {lw:.3f} s / {lc:.3f} s | {ss:.0f} | {ss / base_ss:.2f}x |")
+        base_ss.setdefault(e, ss)
+        out(f"| {e} | {w} | {wall:.2f} [{min(walls[e, w]):.2f}, {max(walls[e, w]):.2f}] | {rate:.0f} "
+            f"| {rate / base[e]:.2f}x | {fw:.2f} s | {lw:.3f} s / {lc:.3f} s | {ss:.0f} "
+            f"| {ss / base_ss[e]:.2f}x |")
     out("")
 
 
@@ -323,6 +340,9 @@ def main() -> None:
     ap.add_argument("--reps", type=int, default=None, help="repetitions of the run (default 3; quick 1)")
     ap.add_argument("--cases", default=None, help="sweep sizes, comma-separated (default 16,64; quick 6)")
     ap.add_argument("--no-sweep", action="store_true", help="skip the sweep table")
+    ap.add_argument("--no-run", action="store_true", help="skip the `teleop run` table")
+    ap.add_argument("--sweep-reps", type=int, default=None,
+                    help="repetitions of each sweep (default 2; quick 1)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                     help="scenario override for the run (repeatable), e.g. --set duration=100")
     ap.add_argument("--write", action="store_true", help="append the tables to benchmarks/RESULTS.md")
@@ -339,12 +359,13 @@ def main() -> None:
     out(f"Machine: {_machine()}; load average at start {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} "
         f"(1/5/15 min) on {os.cpu_count()} CPUs: figures measured under that load.\n")
     overrides = (["duration=5", "transient=1"] if args.quick else []) + args.overrides
-    run_table("scenarios/paper.toml", overrides, args.reps or (1 if args.quick else 3), out)
+    if not args.no_run:
+        run_table("scenarios/paper.toml", overrides, args.reps or (1 if args.quick else 3), out)
     if not args.no_sweep:
         sizes = [int(c) for c in (args.cases or ("6" if args.quick else "16,64")).split(",")]
         for n in sizes:
             sweep_table(n, 1.0 if args.quick else 2.0, sorted({1, 2, os.cpu_count() or 1}),
-                        1 if args.quick else 2, out)
+                        args.sweep_reps or (1 if args.quick else 2), out)
     load = os.getloadavg()
     out(f"Load average at the end {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}.\n")
     if args.write:

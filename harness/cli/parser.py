@@ -200,8 +200,15 @@ def build_parser() -> argparse.ArgumentParser:
                        help="output folder (created; must be writable; an existing sweep folder is "
                             "resumed). Default: runs/sweeps/<study name>.")
     sweep.add_argument("--workers", metavar="N", type=_positive_int, default=None,
-                       help="number of local worker processes, integer >= 1 (ignored with --scheduler). "
+                       help="number of cases run at once (worker processes or threads), integer >= 1 "
+                            "(ignored with --scheduler). "
                             f"Default: all cores ({os.cpu_count() or 1} here).")
+    sweep.add_argument("--executor", choices=("processes", "threads"), default="processes",
+                       help="what runs the cases: 'processes' (worker processes; a crashing case takes only "
+                            "its worker) or 'threads' (threads of this process, no worker processes: the "
+                            "compiled loops release the GIL; Python-stepped plants and controllers then run "
+                            "one at a time). Results are the same. Not with --scheduler. "
+                            "Default: processes.")
     sweep.add_argument("--scheduler", metavar="ADDRESS", default=None,
                        help="address of a running Dask scheduler (e.g. tcp://host:8786) to run on a "
                             "cluster. Default: none (local processes).")

@@ -13,7 +13,18 @@ The loop knows nothing of files, recordings or sweeps.
 
 from __future__ import annotations
 
+import os
 from typing import Any
+
+
+def releases_gil(scn) -> bool:
+    """Whether `simulate(scn)` runs in a compiled loop that releases the GIL while it steps: the paper's
+    controller on the MuJoCo or analytic plant, with compiled kernels (not TELEOP_NO_JIT=1).  Such runs
+    scale over the threads of one process (a sweep's thread executor, `harness.studies.executor`); the
+    Python-stepped loop (Python controllers, the Cosserat rod) holds the GIL for most of each step."""
+    if scn.controller.name != "paper" or scn.plant.kind not in ("mujoco", "analytic"):
+        return False
+    return os.environ.get("TELEOP_NO_JIT", "0") != "1"
 
 
 def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None, on_running=None,

@@ -38,6 +38,7 @@ import os
 import sys
 import sysconfig
 import tempfile
+import threading
 import warnings
 from pathlib import Path
 
@@ -196,6 +197,11 @@ def build(entry: str, args: tuple, modname: str, path: Path) -> None:
         os.replace(built, path)
 
 
+# Held while an entry resolves its module: importing one extension module from two threads at once fails
+# inside importlib (measured: "TypeError: can only concatenate str (not "NoneType") to str").
+_RESOLVING = threading.RLock()
+
+
 class Entry:
     """Callable standing for the kernel `name`: the AOT module for the call's argument types, else the
     jitted (or, with TELEOP_NO_JIT=1, interpreted) kernel."""
@@ -211,7 +217,10 @@ class Entry:
             return getattr(fast.K, self.name)(*args)
         fn = self._fns.get(key)
         if fn is None:
-            fn = self._fns[key] = self._resolve(key, args)
+            with _RESOLVING:  # threads of one process (a sweep's thread executor) load each module once
+                fn = self._fns.get(key)
+                if fn is None:
+                    fn = self._fns[key] = self._resolve(key, args)
         return fn(*args)
 
     def _resolve(self, key: str, args: tuple):
@@ -259,8 +268,8 @@ class _Entries:
         if name not in ENTRIES:
             raise AttributeError(f"{name!r} is not an ahead-of-time entry kernel; ENTRIES: {ENTRIES}")
         entry = self._entries.get(name)
-        if entry is None:
-            entry = self._entries[name] = Entry(name)
+        if entry is None:  # setdefault: two threads asking at once get the same Entry
+            entry = self._entries.setdefault(name, Entry(name))
         return entry
 
 

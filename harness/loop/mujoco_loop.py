@@ -41,6 +41,7 @@ from harness.loop.common import (
     set_outcome,
 )
 from harness.loop.force_args import ForceArgs
+from harness.loop.mj_warnings import WarningSink
 from harness.loop.native import MJ_FUNCS, SYNC_GO, SYNC_LAST, SYNC_S1, SYNC_SIZE, SYNC_STOP
 from harness.loop.trajectory import ROW_WIDTH, Trajectory
 from harness.plant.chain_map import ChainMap
@@ -148,8 +149,6 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     delay = int(round(scn.plant.actuation_delay / scn.control_dt))
     cmdbuf = np.zeros((delay + 1, 2 + 2 * nchain))
     force = ForceArgs(scn, m, d, cmap, plant.contact, n, s0, a["F"])
-    captured: list[str] = []
-    mujoco.set_mju_user_warning(lambda msg: captured.append(str(msg)))
     bar = progress_bar(progress, n, f"MuJoCo plant (N={cmap.n_segments}, {scn.plant.actuation})")
     status, done, k = 0, 0, 0
     interrupted = False
@@ -175,12 +174,15 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     chunk(0, 0)  # no step: numba loads the kernel (on-disk cache) with the run's argument types
     load_time = time.perf_counter() - tl
     helper = None
-    if overlap:  # the loop reads the physics thread's copy of the sensors (d.sensordata changes in mj_step1)
-        force.sensordata = d.sensordata.copy()
-        helper = _start_helper(m, d, sync, n * sub, wnum, wseen, force.sensordata, sub, geo)
+    sink = WarningSink()  # MuJoCo's warning text raised by this run's threads
     t0 = time.perf_counter()
     size = MUJOCO_CHUNK
     try:
+        if overlap:  # the loop reads the physics thread's copy of the sensors (mj_step1 changes d.sensordata)
+            force.sensordata = d.sensordata.copy()
+            helper = _start_helper(m, d, sync, n * sub, wnum, wseen, force.sensordata, sub, geo)
+            sink.follow(helper)
+            t0 = time.perf_counter()
         if on_running is not None:  # the kernel is loaded: nothing but the compiled loop runs from here
             on_running()
         while k < n:
@@ -207,7 +209,7 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
         if helper is not None:
             sync[SYNC_GO] = SYNC_STOP
             helper.join()
-        mujoco.set_mju_user_warning(None)
+        sink.close()
         if bar is not None:
             bar.close()
     wall = time.perf_counter() - t0
@@ -224,6 +226,7 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     traj.meta["overlap"] = bool(overlap)
     traj.meta["mujoco_warnings"] = int(sum(warned.values()))
     traj.meta["mujoco_warning_counts"] = warned
+    captured = sink.text
     if overlap:  # MuJoCo says each kind of warning once: a kind first raised after the last step is dropped
         captured = captured[:len(warned)]
     traj.meta["mujoco_warning_text"] = captured[:20]

@@ -1,6 +1,11 @@
 """Executors of a sweep: the worker function (`run_case`), a process pool (recreated after a worker
-died; a dying worker's case is isolated and blamed) or a Dask client, and the loop that keeps cases in
-flight and hands each result to the parent as it finishes.
+died; a dying worker's case is isolated and blamed), threads of this process, or a Dask client, and the
+loop that keeps cases in flight and hands each result to the parent as it finishes.
+
+Threads (`--executor threads`, the in-process batch path): the compiled loops release the GIL while they
+step (`harness.loop.releases_gil`), so the cases of one process run on every core without worker
+processes, with the same results.  Measured here it is not faster than the forked process pool (README,
+"Sweeps"), so processes stay the default: a crashing case then takes only its worker.
 """
 
 
@@ -26,6 +31,7 @@ from pathlib import Path
 from harness.config.errors import ConfigError
 from harness.config.runtime import end_process, set_gc_thresholds
 from harness.config.textio import jsonable
+from harness.loop.common import STOP
 from harness.studies.study import Case
 
 log = logging.getLogger(__name__)
@@ -109,12 +115,39 @@ class SweepError(RuntimeError):
 CONNECT_TIMEOUT = 5.0  # s: connecting to a Dask scheduler, and waiting for its first worker
 
 
-class Runner:
-    """An executor created on demand: a process pool (recreated after a worker died) or a Dask client."""
+EXECUTORS = ("processes", "threads")  # run_sweep(executor=...), teleop sweep --executor
 
-    def __init__(self, workers: int | None, scheduler: str | None):
+
+def pick_executor(executor: str, scheduler: str | None, cases: Sequence[Case]) -> str:
+    """The executor a sweep uses ("dask" with a scheduler, else `executor`): ConfigError for an unknown
+    name, or threads with a scheduler.  Threads on cases that hold the GIL (Python-stepped plants or
+    controllers, `harness.loop.releases_gil`) run one at a time: a warning says so."""
+    if executor not in EXECUTORS:
+        raise ConfigError(f"--executor = {executor!r}: must be one of {', '.join(EXECUTORS)}",
+                          path="executor")
+    if scheduler:
+        if executor == "threads":
+            raise ConfigError("--executor = 'threads' runs the cases in this process; it cannot be combined "
+                              f"with --scheduler = {scheduler!r} (a Dask cluster)", path="executor")
+        return "dask"
+    if executor == "threads":
+        from harness.loop import releases_gil
+
+        held = sum(not releases_gil(c.scenario) for c in cases)
+        if held:
+            log.warning("--executor threads: %d of %d cases run a Python-stepped plant or controller, which "
+                        "holds the GIL: those run one at a time (use processes)", held, len(cases))
+    return executor
+
+
+class Runner:
+    """An executor created on demand: a process pool (recreated after a worker died), a thread pool, or a
+    Dask client (`kind`: "processes", "threads", "dask")."""
+
+    def __init__(self, workers: int | None, scheduler: str | None, kind: str = "processes"):
         self.workers = max(1, workers or os.cpu_count() or 1)
         self.scheduler = scheduler
+        self.kind = "dask" if scheduler else kind
         self._ex: cf.Executor | None = None
         self._client = None
 
@@ -149,7 +182,7 @@ class Runner:
         """Start the process pool's workers now (no-op for Dask or a started pool): called by the sweep
         before it starts threads of its own (progress bar, imports), so that the workers can be forked
         (see `_process_pool`)."""
-        if self.scheduler or self._ex is not None:
+        if self.kind != "processes" or self._ex is not None:
             return
         ex = self.executor()
         for _ in range(self.workers):
@@ -163,6 +196,8 @@ class Runner:
             if self.scheduler:
                 self.connect()
                 self._ex = self._client.get_executor(pure=False)
+            elif self.kind == "threads":
+                self._ex = cf.ThreadPoolExecutor(self.workers, thread_name_prefix="sweep-case")
             else:
                 self._ex = _process_pool(self.workers)
         return self._ex
@@ -172,6 +207,8 @@ class Runner:
         if ex is not None:
             if isinstance(ex, cf.ProcessPoolExecutor):
                 _stop_pool(ex, cancel)
+            elif isinstance(ex, cf.ThreadPoolExecutor):
+                _stop_threads(ex, cancel)
             else:
                 ex.shutdown(wait=not cancel)
         if self._client is not None:
@@ -219,6 +256,20 @@ def _stop_pool(ex: cf.ProcessPoolExecutor, cancel: bool) -> None:
             p.terminate()
     for p in procs:
         p.join(timeout=10)
+
+
+def _stop_threads(ex: cf.ThreadPoolExecutor, cancel: bool) -> None:
+    """Shut a thread pool down; cancel: the pending cases are dropped and the running ones stop at their
+    next chunk of steps (`harness.loop.common.STOP`; they come back "interrupted" and re-run on resume).
+    A thread cannot be killed: this waits for them (a chunk lasts at most ~0.1 s)."""
+    if not cancel:
+        ex.shutdown(wait=True)
+        return
+    STOP.set()
+    try:
+        ex.shutdown(wait=True, cancel_futures=True)
+    finally:
+        STOP.clear()
 
 
 def _payload(case: Case, metrics: Sequence[str], record: bool) -> dict:

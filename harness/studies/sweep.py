@@ -49,7 +49,7 @@ from harness.config.scenario import Scenario
 from harness.config.textio import OutputError, describe_os_error, prepare_out_dir, write_atomic
 from harness.output.prefetch import prefetch_output_imports
 from harness.studies.cases import expand_cases, load_base
-from harness.studies.executor import Runner, SweepError, run_case, run_cases
+from harness.studies.executor import Runner, SweepError, pick_executor, run_case, run_cases
 from harness.studies.results import RESULTS, OutputLock, ResultsWriter, make_row, read_results
 from harness.studies.study import (
     DEFAULT_OUT_ROOT,
@@ -92,6 +92,7 @@ class SweepResult:
     unfinished: int = 0  # cases that came back "interrupted" (not written; they re-run)
     recordings: list[Path] = dataclasses.field(default_factory=list)
     summary: list[Path] = dataclasses.field(default_factory=list)
+    executor: str = ""  # "processes" | "threads" | "dask": what ran the cases (`pick_executor`)
 
     @property
     def complete(self) -> bool:
@@ -129,11 +130,14 @@ SUMMARY_IMPORTS = ("matplotlib.figure", "matplotlib.backends.backend_agg")  # ha
 def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | None = None,
               workers: int | None = None, scheduler: str | None = None, progress: bool = True,
               case_fn: Callable[[dict], dict] = run_case,
-              on_row: Callable[[dict], None] | None = None, max_cases: int | None = None) -> SweepResult:
+              on_row: Callable[[dict], None] | None = None, max_cases: int | None = None,
+              executor: str = "processes") -> SweepResult:
     """Run (or resume) a study.  Every case is built and validated before anything runs.
 
-    out: output folder (default runs/sweeps/<name>); workers: process-pool size (default all
-    cores); scheduler: Dask scheduler address (then `workers` is ignored); case_fn: the worker
+    out: output folder (default runs/sweeps/<name>); workers: number of cases run at once (default all
+    cores); scheduler: Dask scheduler address (then `workers` is ignored); executor: "processes" (a
+    process pool) or "threads" (threads of this process, the in-process batch path: the compiled loops
+    release the GIL; `harness.studies.executor.pick_executor`); results are the same.  case_fn: the worker
     function (top-level, picklable; default `run_case`); on_row(row): called in the parent after
     each row is on disk.  max_cases: overrides the study's [sampling] max_cases (the case count is
     checked before expansion).  Raises ConfigError for a bad study, an unreachable scheduler (checked
@@ -147,7 +151,7 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
     check_case_count(study)
     base = load_base(study)
     cases = expand_cases(study, base)
-    runner = Runner(workers, scheduler)
+    runner = Runner(workers, scheduler, pick_executor(executor, scheduler, cases))
     if scheduler:
         runner.connect()  # a bad or unreachable scheduler is input: found before anything is written
     if out is not None:
@@ -166,10 +170,12 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
         known = read_results(table)
         todo = [c for c in cases if c.case_id not in known]
         result = SweepResult(study, out, cases, {c.case_id: known[c.case_id] for c in cases
-                                                 if c.case_id in known}, skipped=len(cases) - len(todo))
+                                                 if c.case_id in known}, skipped=len(cases) - len(todo),
+                             executor=runner.kind)
         extra = len(set(known) - {c.case_id for c in cases})
-        log.info("study %s: %d cases, %d already done, %d to run%s", study.name, len(cases), result.skipped,
-                 len(todo), f" ({extra} rows of other cases in the table)" if extra else "")
+        log.info("study %s: %d cases, %d already done, %d to run on %d %s%s", study.name, len(cases),
+                 result.skipped, len(todo), runner.workers, runner.kind,
+                 f" ({extra} rows of other cases in the table)" if extra else "")
         writer = ResultsWriter(table)
         if todo:
             runner.start()  # before this process starts threads (bar, imports): the workers can be forked
@@ -260,13 +266,13 @@ EXIT_INTERRUPTED = 130  # as `teleop run` (harness.cli)
 
 def main_sweep(study_path: str | os.PathLike, out: str | os.PathLike | None = None,
                workers: int | None = None, scheduler: str | None = None, progress: bool = True,
-               max_cases: int | None = None) -> int:
+               max_cases: int | None = None, executor: str = "processes") -> int:
     """`teleop sweep`: 0 when every case has a row (diverged/error cases are data), 1 when cases are
     unfinished or the executor failed, 130 when interrupted (SIGINT/SIGTERM; re-run to resume).  A bad
     study or an unusable output folder raises ConfigError before anything runs."""
     try:
         res = run_sweep(study_path, out=out, workers=workers, scheduler=scheduler, progress=progress,
-                        max_cases=max_cases)
+                        max_cases=max_cases, executor=executor)
     except SweepError as e:
         print(f"error: {e}", file=sys.stderr)
         return 1
@@ -276,7 +282,7 @@ def main_sweep(study_path: str | os.PathLike, out: str | os.PathLike | None = No
               "run the same command again to resume", file=sys.stderr)
         return EXIT_INTERRUPTED
     counts = ", ".join(f"{n} {s}" for s, n in sorted(res.counts().items()))
-    print(f"study {res.study.name}: {len(res.cases)} cases ({counts}); ran {res.ran}, "
+    print(f"study {res.study.name}: {len(res.cases)} cases ({counts}); ran {res.ran} ({res.executor}), "
           f"{res.skipped} already done -> {res.out}", file=sys.stderr)
     for p in res.recordings:
         print(f"recording: {p}", file=sys.stderr)
