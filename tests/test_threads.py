@@ -113,6 +113,50 @@ def test_threads_load_the_compiled_module_once():
     assert "STATUSES ['ok', 'ok', 'ok'] False" in res.stdout, res.stdout + res.stderr
 
 
+_NAMESPACE_AT_ONCE = r"""
+import threading
+from harness.loop import fast
+gate = threading.Barrier(3)
+out = []
+def run():
+    gate.wait()
+    out.append(id(fast.kernels()))
+ts = [threading.Thread(target=run) for _ in range(3)]
+[t.start() for t in ts]
+[t.join() for t in ts]
+print("NAMESPACES", len(set(out)))
+"""
+
+
+def test_threads_build_one_kernel_namespace():
+    """Three threads of a fresh process ask for the jitted kernels at once (the Python-stepped loop's first
+    run): they get one namespace.  Before `harness.loop.fast.kernels` took a lock each built its own (3 of 3
+    runs), and one could compile before numba's extensions were registered."""
+    res = subprocess.run([sys.executable, "-c", _NAMESPACE_AT_ONCE], capture_output=True, text=True,
+                         cwd=ROOT, timeout=600)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "NAMESPACES 1" in res.stdout, res.stdout + res.stderr
+
+
+def test_thread_sweep_of_python_stepped_cases_equals_single_runs(tmp_path, caplog):
+    """Cases that hold the GIL (the Cosserat rod; a Python controller) still give the single runs' rows in
+    threads (they only take turns), and the sweep says so."""
+    metrics = ["e2_rms", "e2_max"]
+    doc = {"study": {"name": "stepped", "metrics": metrics, "set": ["duration=0.05", "transient=0"]},
+           "factor": [{"name": "case", "param": "plant.kind", "values": ["cosserat", "analytic"]},
+                      {"name": "ctrl", "param": "controller", "values": ["paper", "paper_no_null"]}]}
+    with caplog.at_level(logging.WARNING, logger="harness.studies.executor"):
+        res = run_sweep(doc, out=tmp_path, workers=2, progress=False, executor="threads")
+    assert "3 of 4 cases run a Python-stepped plant or controller" in caplog.text
+    assert res.complete
+    for case in res.cases:
+        row = res.rows[case.case_id]
+        single = run_case({"case_id": case.case_id, "scenario": case.scenario, "metrics": metrics,
+                           "record": False})
+        assert row["status"] == single["status"] == "ok", row["message"] + row["traceback"]
+        assert row["metrics"] == single["metrics"], case.case_id
+
+
 def _study(**st) -> dict:
     masses = [0.8, 0.9, 1.0, 1.1, 1.2, 1.3]
     return {"study": {"name": "threads", "metrics": METRICS, "set": [*SHORT, *EULER], **st},

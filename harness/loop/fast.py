@@ -19,6 +19,7 @@ from __future__ import annotations
 import hashlib
 import inspect
 import os
+import threading
 import types
 from functools import cache
 from pathlib import Path
@@ -71,9 +72,19 @@ def source_digest() -> str:
     return h.hexdigest()[:16]
 
 
-@cache
+_BUILDING = threading.Lock()
+
+
 def kernels(jit: bool | None = None) -> types.SimpleNamespace:
-    """Namespace of kernels, compiled with numba unless jit is False (or TELEOP_NO_JIT=1)."""
+    """Namespace of kernels, compiled with numba unless jit is False (or TELEOP_NO_JIT=1).  Built once
+    per process: threads asking at once (a sweep's thread executor) wait for the one namespace (without
+    the lock each built its own, and could compile before numba's extensions were registered)."""
+    with _BUILDING:
+        return _kernels(jit)
+
+
+@cache
+def _kernels(jit: bool | None) -> types.SimpleNamespace:
     if jit is None:
         jit = os.environ.get("TELEOP_NO_JIT", "0") != "1"
     mods = MODULES + _extra_modules()
