@@ -235,7 +235,7 @@ def _timed_case(payload: dict) -> dict:
 
     c0, w0 = time.thread_time(), time.perf_counter()
     res = run_case(payload)
-    return {"pid": (os.getpid(), threading.get_ident()), "cpu": time.thread_time() - c0,
+    return {"worker": (os.getpid(), threading.get_ident()), "cpu": time.thread_time() - c0,
             "wall": time.perf_counter() - w0, "status": res["status"], "t_end": time.time()}
 
 
@@ -282,8 +282,8 @@ def _diag(case_list, w: int, executor: str) -> tuple[float, float, float]:
             diag = list(ex.map(_timed_case, payloads))
     first, later = {}, []
     for d in diag:
-        if d["pid"] not in first:
-            first[d["pid"]] = d
+        if d["worker"] not in first:
+            first[d["worker"]] = d
         else:
             later.append(d)
     fw = float(np.median([d["wall"] for d in first.values()]))

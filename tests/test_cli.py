@@ -449,18 +449,21 @@ def test_models_plant_model_error_exit_2(monkeypatch, tmp_path, capsys):
 def test_sweep_delegates(monkeypatch, tmp_path):
     calls = []
     monkeypatch.setattr(_module(monkeypatch, "harness.studies.sweep"), "main_sweep",
-                        lambda *a: calls.append(a) or 0, raising=False)
+                        lambda *a, **k: calls.append((a, k)) or 0, raising=False)
     study = tmp_path / "study.toml"
     study.write_text("")
     assert main(["sweep", str(study), "--out", str(tmp_path / "s"), "--workers", "3",
                  "--scheduler", "tcp://h:8786", "--no-progress"]) == 0
-    assert calls == [(study, tmp_path / "s", 3, "tcp://h:8786", False)]
+    assert calls == [((study, tmp_path / "s", 3, "tcp://h:8786", False),
+                      {"max_cases": None, "executor": "processes"})]
     assert main(["sweep", str(study)]) == 0
-    assert calls[-1] == (study, None, None, None, True)
+    assert calls[-1] == ((study, None, None, None, True), {"max_cases": None, "executor": "processes"})
+    assert main(["sweep", str(study), "--executor", "threads", "--max-cases", "5"]) == 0
+    assert calls[-1] == ((study, None, None, None, True), {"max_cases": 5, "executor": "threads"})
 
 
 def test_sweep_errors(monkeypatch, tmp_path, capsys):
-    monkeypatch.setattr(_module(monkeypatch, "harness.studies.sweep"), "main_sweep", lambda *a: 0,
+    monkeypatch.setattr(_module(monkeypatch, "harness.studies.sweep"), "main_sweep", lambda *a, **k: 0,
                         raising=False)
     assert main(["sweep", str(tmp_path / "missing.toml")]) == 2
     assert "missing.toml" in _one_error_line(capsys.readouterr().err)

@@ -257,10 +257,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.view is not None:
         return _view_case(study, args.out, args.view)
     sweep = _import("harness.studies.sweep")  # validates the study, then creates and checks the output folder
-    extra = {"max_cases": args.max_cases} if args.max_cases is not None else {}
-    if args.executor != "processes":
-        extra["executor"] = args.executor
-    rc = sweep.main_sweep(study, args.out, args.workers, args.scheduler, not args.no_progress, **extra)
+    rc = sweep.main_sweep(study, args.out, args.workers, args.scheduler, not args.no_progress,
+                          max_cases=args.max_cases, executor=args.executor)
     return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
 
 

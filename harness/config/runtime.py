@@ -43,9 +43,6 @@ def fast_exit(rc: int) -> NoReturn:
         end_process(rc)
 
 
-__all__ = ["GC_THRESHOLDS", "end_process", "fast_exit", "set_gc_thresholds"]
-
-
 OVERLAP_ENV = "TELEOP_OVERLAP"
 
 
@@ -62,3 +59,6 @@ def overlap_setting() -> bool | None:
         raise ConfigError.field(OVERLAP_ENV, env, "1 (physics thread on), 0 (off), or unset (on when a core "
                                 "is free)")
     return None
+
+
+__all__ = ["GC_THRESHOLDS", "OVERLAP_ENV", "end_process", "fast_exit", "overlap_setting", "set_gc_thresholds"]

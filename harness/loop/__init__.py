@@ -13,7 +13,6 @@ The loop knows nothing of files, recordings or sweeps.
 
 from __future__ import annotations
 
-import os
 from typing import Any
 
 
@@ -24,7 +23,9 @@ def releases_gil(scn) -> bool:
     Python-stepped loop (Python controllers, the Cosserat rod) holds the GIL for most of each step."""
     if scn.controller.name != "paper" or scn.plant.kind not in ("mujoco", "analytic"):
         return False
-    return os.environ.get("TELEOP_NO_JIT", "0") != "1"
+    from harness.loop.fast import jit_wanted
+
+    return jit_wanted()
 
 
 def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None, on_running=None,

@@ -72,6 +72,11 @@ def source_digest() -> str:
     return h.hexdigest()[:16]
 
 
+def jit_wanted() -> bool:
+    """Whether the kernels are compiled: False when TELEOP_NO_JIT=1 (the interpreted kernels)."""
+    return os.environ.get("TELEOP_NO_JIT", "0") != "1"
+
+
 _BUILDING = threading.Lock()
 
 
@@ -86,7 +91,7 @@ def kernels(jit: bool | None = None) -> types.SimpleNamespace:
 @cache
 def _kernels(jit: bool | None) -> types.SimpleNamespace:
     if jit is None:
-        jit = os.environ.get("TELEOP_NO_JIT", "0") != "1"
+        jit = jit_wanted()
     mods = MODULES + _extra_modules()
     names: dict[str, object] = {}
     for mod in mods:

@@ -40,6 +40,7 @@ from harness.loop.common import (
     run_meta,
     set_outcome,
 )
+from harness.loop.fast import jit_wanted
 from harness.loop.force_args import ForceArgs
 from harness.loop.mj_warnings import WarningSink
 from harness.loop.native import MJ_FUNCS, SYNC_GO, SYNC_LAST, SYNC_S1, SYNC_SIZE, SYNC_STOP
@@ -118,7 +119,7 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     (TELEOP_NO_JIT=1) always run serially."""
     if overlap is None:
         overlap = overlap_default(scn, beside=on_running is not None)
-    elif overlap and _interpreted():  # the kernels in Python: two threads would take turns on the GIL
+    elif overlap and not jit_wanted():  # the kernels in Python: two threads would take turns on the GIL
         overlap = False
     elif overlap and not two_phase_ok(scn):
         raise ValueError(f"overlap=True: MuJoCo's two-phase step needs one of the integrators "
@@ -245,10 +246,6 @@ def two_phase_ok(scn: Scenario) -> bool:
     return scn.plant.integrator in LIVE_GEOMETRY_INTEGRATORS
 
 
-def _interpreted() -> bool:
-    return os.environ.get("TELEOP_NO_JIT", "0") == "1"
-
-
 def overlap_default(scn: Scenario, beside: bool = False) -> bool:
     """Whether the loop steps MuJoCo in a second thread (`simulate_mujoco`'s overlap) by default: when MuJoCo
     allows it (`two_phase_ok`), the kernels are compiled, and a core is free for it: this process may run on
@@ -256,7 +253,7 @@ def overlap_default(scn: Scenario, beside: bool = False) -> bool:
     The thread trades CPU for time (each thread spin-waits for the other: 1.4-1.9x the CPU of a serial run,
     benchmarks/bench_threads.py): worth it only on an idle core.  TELEOP_OVERLAP=1 / 0 forces it on / off
     (where MuJoCo allows it)."""
-    if not two_phase_ok(scn) or _interpreted():
+    if not two_phase_ok(scn) or not jit_wanted():
         return False
     forced = overlap_setting()  # TELEOP_OVERLAP (ConfigError if it is not 0 or 1)
     if forced is not None:

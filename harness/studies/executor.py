@@ -31,7 +31,6 @@ from pathlib import Path
 from harness.config.errors import ConfigError
 from harness.config.runtime import end_process, set_gc_thresholds
 from harness.config.textio import jsonable
-from harness.loop.common import STOP
 from harness.studies.study import Case
 
 log = logging.getLogger(__name__)
@@ -147,7 +146,7 @@ class Runner:
     def __init__(self, workers: int | None, scheduler: str | None, kind: str = "processes"):
         self.workers = max(1, workers or os.cpu_count() or 1)
         self.scheduler = scheduler
-        self.kind = "dask" if scheduler else kind
+        self.kind = kind  # `pick_executor`: "dask" exactly when there is a scheduler
         self._ex: cf.Executor | None = None
         self._client = None
 
@@ -263,6 +262,8 @@ def _stop_threads(ex: cf.ThreadPoolExecutor, cancel: bool) -> None:
     next chunk of steps (`harness.loop.common.STOP`; they come back "interrupted" and re-run on resume).
     A thread cannot be killed: this waits for them (a compiled chunk lasts about 0.25 s, 250 steps of the
     Python-stepped loop about 0.05 s on the Cosserat rod)."""
+    from harness.loop.common import STOP
+
     if not cancel:
         ex.shutdown(wait=True)
         return
