@@ -525,16 +525,22 @@ import test_sweep as t
 from harness.studies.sweep import run_sweep
 if sys.argv[3] == "thread":  # another Python thread alive: the pool must not fork
     threading.Thread(target=threading.Event().wait, daemon=True).start()
+if sys.argv[3] == "after":  # a sweep and a run's progress bars before: they leave no thread behind
+    from harness.loop.common import progress_bar
+    run_sweep(t.study([t.MASS]), out=sys.argv[2] + "-first", workers=2, progress=True, case_fn=t.stub_case)
+    progress_bar(True, 10, "run").close()
+    assert threading.active_count() == 1, threading.enumerate()
 res = run_sweep(t.study([t.MASS]), out=sys.argv[2], workers=2, progress=False, case_fn=t.warm_probe)
 print(json.dumps({k: v["metrics"] for k, v in sorted(res.rows.items())}))
 """
 
 
-@pytest.mark.parametrize("threads, warm", [("none", 1), ("thread", 0)])
+@pytest.mark.parametrize("threads, warm", [("none", 1), ("thread", 0), ("after", 1)])
 def test_workers_are_forked_warm_only_from_a_single_threaded_process(tmp_path, threads, warm):
     """A sweep started from a process without other threads forks its workers after importing the loop
     (they start without interpreter start-up or imports); beside another thread it spawns them.  The
-    rows are the same either way."""
+    rows are the same either way.  "after": a sweep and a progress bar earlier in the same process leave
+    no thread behind (tqdm's monitor thread made every later sweep spawn), so the next sweep forks."""
     log = tmp_path / "warm.txt"
     env = {**os.environ, WARM_ENV: str(log), "PYTHONPATH": str(ROOT)}
     out = subprocess.run([sys.executable, "-c", _WARM_SCRIPT, str(ROOT / "tests"), str(tmp_path / "o"),

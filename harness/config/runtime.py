@@ -1,11 +1,12 @@
 """Process-level settings shared by the `teleop` command and the sweep's pool workers: the garbage
-collector's thresholds, the fast end of a process and the TELEOP_OVERLAP switch.  Nothing here knows of
-plants or runs."""
+collector's thresholds, the fast end of a process, the TELEOP_OVERLAP switch and the progress bars.  Nothing
+here knows of plants or runs."""
 
 from __future__ import annotations
 
 import atexit
 import contextlib
+import functools
 import gc
 import os
 import sys
@@ -61,4 +62,21 @@ def overlap_setting() -> bool | None:
     return None
 
 
-__all__ = ["GC_THRESHOLDS", "OVERLAP_ENV", "end_process", "fast_exit", "overlap_setting", "set_gc_thresholds"]
+@functools.cache
+def progress_bar_class() -> type:
+    """tqdm's bar without its monitor thread.  tqdm starts a daemon thread ("tqdm_monitor") at the first bar
+    of a process, a disabled bar included, and leaves it running.  A process running any thread besides
+    the main one must not fork, so the sweep then starts its workers as fresh interpreters
+    (`harness.studies.executor.start_method`): measured, every sweep after the first in a process, and a
+    sweep after a run, lost the forked start-up.  The monitor only adjusts `miniters` of bars that
+    stall; these bars update every case or chunk.  ImportError when tqdm is missing."""
+    from tqdm import tqdm
+
+    class Bar(tqdm):
+        monitor_interval = 0  # tqdm.__new__ starts the monitor only for a class with an interval
+
+    return Bar
+
+
+__all__ = ["GC_THRESHOLDS", "OVERLAP_ENV", "end_process", "fast_exit", "overlap_setting",
+           "progress_bar_class", "set_gc_thresholds"]

@@ -16,6 +16,7 @@ from controllers import master as master_model
 from controllers import slave as slave_model
 from controllers.slave import gauss_legendre01
 from controllers.subtasks import pack_subtask
+from harness.config.runtime import progress_bar_class
 from harness.config.scenario import Scenario
 from harness.loop.fast import K
 from harness.loop.trajectory import Trajectory
@@ -96,10 +97,10 @@ def progress_bar(enabled: bool, total: int, desc: str):
     if not enabled:
         return None
     try:
-        from tqdm import tqdm
+        bar = progress_bar_class()
     except ImportError:  # pragma: no cover
         return None
-    return tqdm(total=total, desc=desc, unit="step", unit_scale=True, leave=False)
+    return bar(total=total, desc=desc, unit="step", unit_scale=True, leave=False)
 
 
 def common_arrays(scn: Scenario):

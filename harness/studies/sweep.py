@@ -42,9 +42,9 @@ from pathlib import Path
 from typing import Any
 
 import tomli_w
-from tqdm import tqdm
 
 from harness.config.load import scenario_to_dict
+from harness.config.runtime import progress_bar_class
 from harness.config.scenario import Scenario
 from harness.config.textio import OutputError, describe_os_error, prepare_out_dir, write_atomic
 from harness.output.prefetch import prefetch_output_imports
@@ -179,7 +179,7 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
         writer = ResultsWriter(table)
         if todo:
             runner.start()  # before this process starts threads (bar, imports): the workers can be forked
-        bar = tqdm(total=len(cases), initial=result.skipped, desc=study.name, unit="case",
+        bar = progress_bar_class()(total=len(cases), initial=result.skipped, desc=study.name, unit="case",
                    disable=not progress or not todo, file=sys.stderr)
 
         def on_result(case: Case, res: dict) -> None:
