@@ -125,17 +125,25 @@ ts = [threading.Thread(target=run) for _ in range(3)]
 [t.start() for t in ts]
 [t.join() for t in ts]
 print("NAMESPACES", len(set(out)))
+print("DEFAULT_IS_JIT", fast.kernels(True) is fast.kernels())
+fast.K.desired
+print("K_KEPT", fast.K.__dict__.get("desired") is fast.kernels().desired)
 """
 
 
 def test_threads_build_one_kernel_namespace():
     """Three threads of a fresh process ask for the jitted kernels at once (the Python-stepped loop's first
-    run): they get one namespace.  Before `harness.loop.fast.kernels` took a lock each built its own (3 of 3
-    runs), and one could compile before numba's extensions were registered."""
+    run): they get one namespace, the same as `kernels(True)`.  Before `harness.loop.fast.kernels` took a
+    lock each built its own (3 of 3 runs), and one could compile before numba's extensions were
+    registered."""
     res = subprocess.run([sys.executable, "-c", _NAMESPACE_AT_ONCE], capture_output=True, text=True,
                          cwd=ROOT, timeout=600)
     assert res.returncode == 0, res.stderr[-2000:]
     assert "NAMESPACES 1" in res.stdout, res.stdout + res.stderr
+    # the default namespace is the compiled one (aot.build asks for kernels(True)): not a second namespace
+    assert "DEFAULT_IS_JIT True" in res.stdout, res.stdout
+    # K keeps each kernel after its first access (later accesses skip __getattr__: per-step calls)
+    assert "K_KEPT True" in res.stdout, res.stdout
 
 
 def test_thread_sweep_of_python_stepped_cases_equals_single_runs(tmp_path, caplog):
@@ -238,3 +246,15 @@ def test_cli_rejects_an_unknown_executor(tmp_path, capsys):
     assert rc == 2
     assert "argument --executor: invalid choice: 'fibers'" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+
+def test_cli_offers_the_executors_run_sweep_accepts():
+    """`teleop sweep --executor` lists its choices in the parser (which does not import the executor
+    module): they must be the executor's own EXECUTORS."""
+    from harness.cli.parser import build_parser
+    from harness.studies.executor import EXECUTORS
+
+    sweep = next(a for a in build_parser()._subparsers._group_actions[0].choices["sweep"]._actions
+                 if a.dest == "executor")
+    assert tuple(sweep.choices) == EXECUTORS

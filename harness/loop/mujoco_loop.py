@@ -176,14 +176,13 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     load_time = time.perf_counter() - tl
     helper = None
     sink = WarningSink()  # MuJoCo's warning text raised by this run's threads
-    t0 = time.perf_counter()
     size = MUJOCO_CHUNK
     try:
         if overlap:  # the loop reads the physics thread's copy of the sensors (mj_step1 changes d.sensordata)
             force.sensordata = d.sensordata.copy()
             helper = _start_helper(m, d, sync, n * sub, wnum, wseen, force.sensordata, sub, geo)
             sink.follow(helper)
-            t0 = time.perf_counter()
+        t0 = time.perf_counter()  # the loop's wall time: after the kernel load and the physics thread's start
         if on_running is not None:  # the kernel is loaded: nothing but the compiled loop runs from here
             on_running()
         while k < n:
