@@ -10,8 +10,10 @@ then asks for mj_step2 (`harness.loop.native.physics_server`).  Same numbers (te
 Per plant, repeated --reps times in alternating order, in this process on every CPU it may use (not pinned):
   raw       the compiled replay of the run's logged [ctrl, qfrc_applied] through the C mj_step (one thread)
   serial    the loop, one thread (overlap=False)
-  threaded  the loop with the physics thread (overlap=True); its CPU time (both threads) as well
-Ratios are medians of the per-repetition ratios (each repetition measures all three back to back).
+  threaded  the loop with the physics thread from the first step (overlap=True); its CPU time (both threads)
+  default   the loop as it runs by default (overlap=None: `overlap_plan`; with 2 CPUs, serial for two calls of
+            1000 steps, then the physics thread if its first call is not slower)
+Ratios are medians of the per-repetition ratios (each repetition measures all four back to back).
 Writes its own section of benchmarks/RESULTS.md (`<!-- bench_threads.py: begin/end -->`) unless --no-write.
 """
 
@@ -39,19 +41,23 @@ from harness.loop.mujoco_loop import simulate_mujoco  # noqa: E402
 def measure(scn: Scenario, reps: int) -> dict:
     """Seconds per repetition: raw, serial, threaded (wall), threaded_cpu, serial_cpu (process CPU time)."""
     tr, log = logged_run(scn)
-    keys = ("raw", "serial", "threaded", "serial_cpu", "threaded_cpu")
+    keys = ("raw", "serial", "threaded", "default", "serial_cpu", "threaded_cpu", "default_cpu",
+            "default_threaded")
     out = {"steps": len(tr), "status": tr.status, **{k: [] for k in keys}}
-    for overlap in (False, True):  # warm
+    raw_replay_s(scn, log)  # warm: the first replay of the process loads numba and its cached kernel (~1 s)
+    modes = {"serial": False, "threaded": True, "default": None}
+    for overlap in modes.values():
         simulate_mujoco(scn, overlap=overlap)
     for rep in range(reps):
         out["raw"].append(raw_replay_s(scn, log))
-        for overlap in ((False, True) if rep % 2 == 0 else (True, False)):
+        for key in (list(modes) if rep % 2 == 0 else list(modes)[::-1]):
             c = time.process_time()
-            tr = simulate_mujoco(scn, overlap=overlap)
+            tr = simulate_mujoco(scn, overlap=modes[key])
             cpu = time.process_time() - c
-            key = "threaded" if overlap else "serial"
             out[key].append(tr.meta["wall_time"])
             out[key + "_cpu"].append(cpu)
+            if key == "default":
+                out["default_threaded"].append(tr.meta["overlap_steps"] / max(1, len(tr)))
     return {k: (np.array(v) if isinstance(v, list) else v) for k, v in out.items()}
 
 
@@ -78,11 +84,11 @@ def main(argv=None) -> int:
     lines = [f"# The MuJoCo loop with its physics thread ({now:%Y-%m-%d %H:%M} UTC, "
              f"`benchmarks/bench_threads.py --reps {args.reps}{' --quick' if args.quick else ''}`)\n",
              f"Machine: {_machine()}; {cpus} CPUs for this process.  us per control step, median of "
-             f"{args.reps} repetitions (raw, serial and threaded back to back in each); ratios: median of "
-             "the per-repetition ratios [min, max].\n",
+             f"{args.reps} repetitions (raw, serial, threaded and default back to back in each); ratios: "
+             "median of the per-repetition ratios [min, max].\n",
              "| plant | raw mj_step | serial loop | threaded loop | serial / raw | **threaded / raw** | "
-             "threaded / serial | CPU threaded / serial |",
-             "|---|---|---|---|---|---|---|---|"]
+             "threaded / serial | CPU threaded / serial | **default / raw** | default: steps threaded |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     print("\n".join(lines), flush=True)
     for label, scn in plants:
         r = measure(scn, args.reps)
@@ -97,13 +103,17 @@ def main(argv=None) -> int:
         note = "" if r["status"] == "ok" else f" ({r['status']})"
         line = (f"| {label}{note} | {us('raw'):.1f} us | {us('serial'):.1f} us | {us('threaded'):.1f} us "
                 f"| {ratio('serial', 'raw')} | **{ratio('threaded', 'raw')}** | "
-                f"{ratio('threaded', 'serial')} | {ratio('threaded_cpu', 'serial_cpu')} |")
+                f"{ratio('threaded', 'serial')} | {ratio('threaded_cpu', 'serial_cpu')} | "
+                f"**{ratio('default', 'raw')}** | {np.median(r['default_threaded']):.0%} "
+                f"[{r['default_threaded'].min():.0%}, {r['default_threaded'].max():.0%}] |")
         print(line, flush=True)
         lines.append(line)
     lines.append("\nCPU: the process's CPU time over the whole `simulate_mujoco` call (model build and "
                  "geometry included), both threads.  Each thread spin-waits while the other works, so the "
-                 "threaded loop costs more CPU for less wall time: it is the default only where a core is "
-                 "free for it (`harness.loop.mujoco_loop.overlap_default`), never in sweeps.")
+                 "threaded loop costs more CPU for less wall time: by default it is tried only where a core "
+                 "is free for it and kept only if its first call is not slower "
+                 "(`harness.loop.mujoco_loop.overlap_plan`), never in sweeps.  Default: steps threaded = the "
+                 "share of the run's control steps the physics thread stepped, median [min, max].")
     if not args.no_write:
         from results_sections import write_section
 

@@ -146,10 +146,11 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
         written.append(out / "config.toml")
     prefetch: list = []  # Rerun and matplotlib are imported on the other core while the loop runs
 
-    def start_prefetch() -> None:
+    def start_prefetch():
         from harness.output.prefetch import prefetch_output_imports
 
         prefetch.append(prefetch_output_imports())
+        return prefetch[-1]  # the MuJoCo loop's physics thread may start when it ends (overlap_plan)
 
     with stop_on_signals(common.STOP if handle_signals else None) as received:
         traj = loop.simulate(scn, plant=plant, progress=progress, on_chunk=on_chunk,

@@ -16,7 +16,7 @@ from harness.config.errors import ConfigError
 from harness.config.load import load_scenario
 from harness.config.scenario import PlantConfig, Scenario
 from harness.loop import mujoco_loop
-from harness.loop.mujoco_loop import overlap_default, simulate_mujoco
+from harness.loop.mujoco_loop import AFTER_BESIDE, AUTO, SERIAL, THREADED, overlap_plan, simulate_mujoco
 
 ROOT = Path(__file__).resolve().parents[1]
 SHORT = ["duration=0.4", "transient=0", "plant.segments=4"]
@@ -70,9 +70,7 @@ def test_physics_thread_stops_at_the_warning_step(traj_arrays):
     """MuJoCo's warning (euler, stiff servos: mjWARN_BADQACC, tests/test_reliability.py) stops the threaded
     loop at the same step, with the same counts and MuJoCo text, although its physics thread has already
     run mj_step1 of the next state."""
-    plant = PlantConfig(integrator="euler", servo_frequency=160.0, enforce_cc=True,
-                        bending_viscosity=(0.0,) * 3, extension_viscosity=(0.0,) * 3)
-    scn = Scenario(duration=0.3, plant=plant)
+    scn = _warning_scenario()
     ref = simulate_mujoco(scn, overlap=False)
     assert ref.status == "diverged" and ref.message.startswith("MuJoCo warning (mjWARN_BADQACC")
     _same(ref, simulate_mujoco(scn, overlap=True), traj_arrays, "warning")
@@ -134,26 +132,28 @@ def test_rk4_cannot_be_split():
     assert simulate_mujoco(scn).meta["overlap"] is False
 
 
-def test_overlap_default_needs_a_free_core(monkeypatch):
-    """On by default with 2 CPUs, 3 when work runs beside the loop (teleop run's output imports); never for
-    RK4 or interpreted kernels; TELEOP_OVERLAP=0 / 1 forces it."""
+def test_overlap_plan_needs_a_free_core(monkeypatch):
+    """By default the physics thread may take over (after a comparison) with 2 CPUs, with 2 CPUs and work
+    beside the loop (teleop run's output imports) only after that work, never with 1 CPU, RK4 or interpreted
+    kernels; TELEOP_OVERLAP=0 / 1 forces it off / on from the first step."""
     scn = Scenario()
     monkeypatch.delenv("TELEOP_OVERLAP", raising=False)
     monkeypatch.delenv("TELEOP_NO_JIT", raising=False)
-    for cpus, beside, want in [(1, False, False), (2, False, True), (2, True, False), (3, True, True)]:
+    for cpus, beside, want in [(1, False, SERIAL), (1, True, SERIAL), (2, False, AUTO),
+                               (2, True, AFTER_BESIDE), (3, True, AUTO)]:
         monkeypatch.setattr(os, "sched_getaffinity", lambda pid, n=cpus: set(range(n)))
-        assert overlap_default(scn, beside=beside) is want, (cpus, beside)
-    assert overlap_default(Scenario(plant=PlantConfig(integrator="rk4"))) is False
+        assert overlap_plan(scn, beside=beside) == want, (cpus, beside)
+    assert overlap_plan(Scenario(plant=PlantConfig(integrator="rk4"))) == SERIAL
     monkeypatch.setenv("TELEOP_OVERLAP", "0")
-    assert overlap_default(scn) is False
+    assert overlap_plan(scn) == SERIAL
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})
     monkeypatch.setenv("TELEOP_OVERLAP", "1")
-    assert overlap_default(scn) is True
+    assert overlap_plan(scn) == THREADED
     monkeypatch.setenv("TELEOP_OVERLAP", "yes")
     with pytest.raises(ConfigError, match=r"TELEOP_OVERLAP = 'yes'.*1 \(physics thread on\), 0 \(off\)"):
-        overlap_default(scn)
+        overlap_plan(scn)
     monkeypatch.setenv("TELEOP_NO_JIT", "1")
-    assert overlap_default(scn) is False
+    assert overlap_plan(scn) == SERIAL
 
 
 def test_sweep_cases_run_serially(monkeypatch):
@@ -183,3 +183,143 @@ def test_a_bad_overlap_switch_is_an_input_error(monkeypatch, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "TELEOP_OVERLAP = 'yes': 1 (physics thread on), 0 (off), or unset" in err
     assert not out.exists()
+
+
+def _warning_scenario() -> Scenario:
+    plant = PlantConfig(integrator="euler", servo_frequency=160.0, enforce_cc=True,
+                        bending_viscosity=(0.0,) * 3, extension_viscosity=(0.0,) * 3)
+    return Scenario(duration=0.3, plant=plant)
+
+
+@pytest.mark.parametrize("case", ["paper", "substeps_delay", "contact", "runaway", "torque_cc", "warning"])
+def test_the_physics_thread_starts_and_stops_at_any_step(case, monkeypatch, traj_arrays):
+    """The loop hands MuJoCo's stepping to the physics thread and back between compiled calls (the default
+    on 2 CPUs once the output imports end, `overlap_plan`; back when the thread is slower): switched at
+    random after compiled calls of 1-97 steps, both ways, a run gives the serial run's numbers, sensors
+    (a contact distance sensor is rewritten by the thread's mj_step1) and warnings included."""
+    if case == "warning":
+        scn = _warning_scenario()
+    else:
+        name, sets = CASES[case]
+        scn = load_scenario(ROOT / "scenarios" / name, [*SHORT, *sets])
+    ref = simulate_mujoco(scn, overlap=False)
+    if case == "warning":
+        assert ref.status == "diverged" and ref.meta["mujoco_warning_text"], ref.message
+    rng = np.random.default_rng(sum(map(ord, case)))
+    monkeypatch.setattr(mujoco_loop, "MUJOCO_CHUNK", 13)
+    monkeypatch.setattr(mujoco_loop, "next_chunk", lambda steps, seconds, on_chunk: int(rng.integers(1, 98)))
+    count = mujoco_loop._Stepping.count
+    switches = []
+
+    def switching_count(self, steps):
+        count(self, steps)
+        self.k = getattr(self, "k", 0) + steps
+        if rng.random() < 0.5:
+            switches.append(self.threaded)
+            if self.threaded:
+                self.stop()
+            else:
+                self.start(self.k)
+
+    monkeypatch.setattr(mujoco_loop._Stepping, "count", switching_count)
+    for rep in range(2):
+        switches.clear()
+        tr = simulate_mujoco(scn, overlap=False)
+        _same(ref, tr, traj_arrays, f"{case}, switched run {rep}")
+        if len(ref) > 60:
+            assert switches.count(False) >= 2 and switches.count(True) >= 2, switches
+            assert tr.meta["overlap"] is True and 0 < tr.meta["overlap_steps"] < len(tr)
+
+
+class _SlowCalls:
+    """Stands for harness.loop.aot.A in the MuJoCo loop: counts the compiled calls, ends the work `beside`
+    the loop after `serial_calls` of them, and makes every threaded call (`slow` = "threaded") or every serial
+    one ("serial") 0.05 s slower, so that the loop's comparison of the two has a known answer."""
+
+    def __init__(self, serial_calls: int, slow: str):
+        from harness.loop.aot import A
+
+        self.real, self.serial_calls, self.slow = A, serial_calls, slow
+        self.calls = 0
+        self.release = threading.Event()
+        self.beside = threading.Thread(target=self.release.wait, name="beside-work")
+        self.modes: list[bool] = []
+
+    def __getattr__(self, name):
+        return getattr(self.real, name)
+
+    def mujoco_chunk(self, *args):
+        threaded = args[-1].shape[0] > 0
+        if args[3] != args[4]:  # a call with steps (not the kernel-loading call)
+            self.modes.append(threaded)
+            self.calls += 1
+            if threaded == (self.slow == "threaded"):
+                import time
+
+                time.sleep(0.05)
+            if self.calls == self.serial_calls:
+                self.release.set()
+                self.beside.join()
+        return self.real.mujoco_chunk(*args)
+
+    def on_running(self):
+        self.beside.start()
+        return self.beside
+
+
+@pytest.mark.parametrize("slow", ["serial", "threaded"])
+def test_on_two_cpus_the_physics_thread_starts_when_the_work_beside_ends(slow, monkeypatch, traj_arrays):
+    """With 2 CPUs and work beside the loop (teleop run's output imports, whose thread on_running returns),
+    this thread steps MuJoCo until that work ends, then the physics thread takes over, for good unless its
+    first call is slower per step than the serial ones (here made slower on purpose): then only for that call.
+    The numbers are the serial run's."""
+    monkeypatch.delenv("TELEOP_OVERLAP", raising=False)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    scn = load_scenario(ROOT / "scenarios" / "paper.toml", ["duration=1.0", "transient=0"])
+    ref = simulate_mujoco(scn, overlap=False)
+    monkeypatch.setattr(mujoco_loop, "MUJOCO_CHUNK", 50)
+    fake = _SlowCalls(serial_calls=4, slow=slow)
+    monkeypatch.setattr(mujoco_loop, "A", fake)
+    tr = simulate_mujoco(scn, on_running=fake.on_running)
+    _same(ref, tr, traj_arrays, f"after the work beside, slow {slow}")
+    assert fake.modes[:4] == [False] * 4 and fake.modes[4] is True, fake.modes
+    assert tr.meta["overlap_from_step"] == 200
+    if slow == "threaded":  # one threaded call of PROBE_CHUNKS * MUJOCO_CHUNK steps, then serial to the end
+        assert fake.modes[5:] == [False] * (len(fake.modes) - 5) and len(fake.modes) > 6, fake.modes
+        assert tr.meta["overlap_steps"] == mujoco_loop.PROBE_CHUNKS * 50
+    else:
+        assert all(fake.modes[4:]), fake.modes
+        assert tr.meta["overlap_steps"] == len(tr) - 200
+
+
+def test_without_a_handle_on_the_work_beside_the_loop_stays_serial(monkeypatch):
+    """On 2 CPUs, an on_running that returns no thread: the loop cannot know when a core frees up, and never
+    starts its physics thread."""
+    monkeypatch.delenv("TELEOP_OVERLAP", raising=False)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    scn = load_scenario(ROOT / "scenarios" / "paper.toml", SHORT)
+    tr = simulate_mujoco(scn, on_running=lambda: None)
+    assert tr.meta["overlap"] is False and tr.meta["overlap_from_step"] is None
+
+
+@pytest.mark.parametrize("slow", ["serial", "threaded"])
+def test_with_a_free_core_the_physics_thread_takes_over_if_faster(slow, monkeypatch, traj_arrays):
+    """With 2 CPUs and nothing beside the loop, the physics thread starts after two serial calls (the first
+    starts cold, the second is the reference) and goes on only if its first call is not slower per step."""
+    monkeypatch.delenv("TELEOP_OVERLAP", raising=False)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    scn = load_scenario(ROOT / "scenarios" / "paper.toml", ["duration=0.6", "transient=0"])
+    ref = simulate_mujoco(scn, overlap=False)
+    monkeypatch.setattr(mujoco_loop, "MUJOCO_CHUNK", 50)
+    fake = _SlowCalls(serial_calls=0, slow=slow)
+    monkeypatch.setattr(mujoco_loop, "A", fake)
+    tr = simulate_mujoco(scn)
+    _same(ref, tr, traj_arrays, f"auto, slow {slow}")
+    assert fake.modes[:3] == [False, False, True], fake.modes
+    assert tr.meta["overlap_from_step"] == 100
+    probe = mujoco_loop.PROBE_CHUNKS * 50
+    if slow == "threaded":
+        assert not any(fake.modes[3:]) and len(fake.modes) > 3, fake.modes
+        assert tr.meta["overlap_steps"] == probe
+    else:
+        assert all(fake.modes[2:]) and tr.meta["overlap_steps"] == len(tr) - 100, fake.modes

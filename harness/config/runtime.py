@@ -49,8 +49,8 @@ OVERLAP_ENV = "TELEOP_OVERLAP"
 
 def overlap_setting() -> bool | None:
     """$TELEOP_OVERLAP: True ("1": the MuJoCo loop's physics thread on), False ("0": off) or None (unset or
-    empty: on when a core is free, `harness.loop.mujoco_loop.overlap_default`).  Anything else raises
-    ConfigError naming the variable and its values (checked by `teleop` before any command runs)."""
+    empty: where a core is free and it is faster, `harness.loop.mujoco_loop.overlap_plan`).  Anything else
+    raises ConfigError naming the variable and its values (checked by `teleop` before any command runs)."""
     from harness.config.errors import ConfigError
 
     env = os.environ.get(OVERLAP_ENV, "").strip()

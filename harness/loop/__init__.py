@@ -36,11 +36,12 @@ def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None, on_r
     once, without arguments, when the loop's start-up (numba loading its kernels, model set-up) is over:
     after the first chunk of steps, or, in the compiled MuJoCo loop, as soon as its kernel is loaded.
     Background work started then (the output imports, `harness.output.prefetch`) does not compete with
-    the start-up for the GIL.  Not called by the Python-stepped loop on plants that release the GIL at
-    every step (`simulate_stepped`): there such work would stall every step.
+    the start-up for the GIL; on_running may return that work's thread, and on 2 CPUs the MuJoCo loop's
+    physics thread (overlap) starts when it ends.  Not called by the Python-stepped loop on plants that
+    release the GIL at every step (`simulate_stepped`): there such work would stall every step.
     overlap: the compiled MuJoCo loop steps MuJoCo in a second thread (same numbers, less time, more CPU;
-    `harness.loop.mujoco_loop.simulate_mujoco`); None = when a core is free for it.  Ignored by the other
-    loops.
+    `harness.loop.mujoco_loop.simulate_mujoco`); None = when and while a core is free for it.  Ignored by
+    the other loops.
 
     A run that diverges or is interrupted (`harness.loop.common.STOP`) returns everything up to that
     point, with `status` and `message` saying what happened and when."""

@@ -43,7 +43,7 @@ from harness.loop.common import (
 from harness.loop.fast import jit_wanted
 from harness.loop.force_args import ForceArgs
 from harness.loop.mj_warnings import WarningSink
-from harness.loop.native import MJ_FUNCS, SYNC_GO, SYNC_LAST, SYNC_S1, SYNC_SIZE, SYNC_STOP
+from harness.loop.native import MJ_FUNCS, SYNC_GO, SYNC_LAST, SYNC_S1, SYNC_S2, SYNC_SIZE, SYNC_STOP
 from harness.loop.trajectory import ROW_WIDTH, Trajectory
 from harness.plant.chain_map import ChainMap
 from harness.plant.mujoco_model import MujocoPlant
@@ -58,6 +58,13 @@ MUJOCO_CHUNK = 1000
 # The numbers do not depend on where the calls split the run
 # (tests/test_speed_paths.py::test_chunk_boundaries_do_not_change_the_run).
 CHUNK_SECONDS = 0.25
+
+
+# By default (overlap_plan's AUTO, AFTER_BESIDE) the physics thread's first call has PROBE_CHUNKS *
+# MUJOCO_CHUNK steps (MUJOCO_CHUNK with on_chunk); the thread goes on unless that call took more than
+# PROBE_MARGIN times the time per step of the serial calls before it (the median of the last 3).
+PROBE_CHUNKS = 2
+PROBE_MARGIN = 1.05
 
 
 def next_chunk(steps: int, seconds: float, on_chunk: bool) -> int:
@@ -114,17 +121,24 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     loop runs, releasing the GIL ~0.25 s at a time.
     overlap: step MuJoCo in a second thread, in its two phases (`harness.loop.native.physics_server`): the
     first (mj_step1: positions, velocities) of each state runs while this thread computes the control step
-    from it; the same numbers as mj_step.  None = `overlap_default(scn, beside=on_running is not None)`;
+    from it; the same numbers as mj_step.  True: from the first step; False: never; None =
+    `overlap_plan(scn, beside=on_running is not None)`: where a core is free, this thread steps MuJoCo in
+    calls of MUJOCO_CHUNK steps until the physics thread may start (after the second call, or, with 2 CPUs
+    and work beside the loop, once that work has ended: on_running returns its thread); the thread's first
+    call is compared with the serial ones (PROBE_MARGIN), and it goes on only if it is not slower.
     True for an integrator MuJoCo cannot split (RK4) raises ValueError; interpreted kernels
-    (TELEOP_NO_JIT=1) always run serially."""
+    (TELEOP_NO_JIT=1) always run serially.  traj.meta["overlap_from_step"]: the control step from which
+    the physics thread stepped MuJoCo (None: never), "overlap_steps": how many steps it stepped."""
     if overlap is None:
-        overlap = overlap_default(scn, beside=on_running is not None)
+        plan = overlap_plan(scn, beside=on_running is not None)
     elif overlap and not jit_wanted():  # the kernels in Python: two threads would take turns on the GIL
-        overlap = False
+        plan = SERIAL
     elif overlap and not two_phase_ok(scn):
         raise ValueError(f"overlap=True: MuJoCo's two-phase step needs one of the integrators "
                          f"{', '.join(LIVE_GEOMETRY_INTEGRATORS)} (its mj_step2 integrates RK4 with Euler); "
                          f"plant.integrator = {scn.plant.integrator!r}")
+    else:
+        plan = THREADED if overlap else SERIAL
     tb = time.perf_counter()
     if plant is None:
         plant = MujocoPlant.build(scn)
@@ -154,11 +168,8 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     status, done, k = 0, 0, 0
     interrupted = False
     warned: dict[str, int] = {}
-    wnum = d.warning.number  # view of MuJoCo's warning counters
-    # the counters the kernel checks after each step: MuJoCo's own, or the physics thread's copy after each
-    # mj_step2 (an mj_step1 of a state the loop then does not step must not count)
-    wseen = wnum.copy() if overlap else wnum
-    sync = np.zeros(SYNC_SIZE if overlap else 0, dtype=np.int64)
+    sink = WarningSink()  # MuJoCo's warning text raised by this run's threads
+    st = _Stepping(m, d, sub, n * sub, geo, force, sink)
 
     def chunk(k: int, k1: int):
         return A.mujoco_chunk(
@@ -168,35 +179,51 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
             cmap.elastic_args, servo, scn.plant.servo_feedforward, kv_over_kp, a["traj"], noise,
             scale, a["F"], a["mpk_c"], a["spk_c"], a["nodes"], a["weights"], a["gains"], a["spec"],
             ref, cmdbuf, delay, rows[k:k1], geo.qpos_hist[k:k1],
-            cmd_log[k * sub:k1 * sub] if log else cmd_log, geo.inputs, geo.outputs(k, k1), wseen,
-            force.args(k, k1), sync)
+            cmd_log[k * sub:k1 * sub] if log else cmd_log, geo.inputs, geo.outputs(k, k1), st.wseen,
+            force.args(k, k1), st.sync)
 
     tl = time.perf_counter()
     chunk(0, 0)  # no step: numba loads the kernel (on-disk cache) with the run's argument types
     load_time = time.perf_counter() - tl
-    helper = None
-    sink = WarningSink()  # MuJoCo's warning text raised by this run's threads
     size = MUJOCO_CHUNK
+    beside = None
+    serial_rates: list[float] = []  # seconds per step of the full serial calls after the first (probing)
     try:
-        if overlap:  # the loop reads the physics thread's copy of the sensors (mj_step1 changes d.sensordata)
-            force.sensordata = d.sensordata.copy()
-            helper = _start_helper(m, d, sync, n * sub, wnum, wseen, force.sensordata, sub, geo)
-            sink.follow(helper)
+        if plan == THREADED:
+            st.start(0)
         t0 = time.perf_counter()  # the loop's wall time: after the kernel load and the physics thread's start
         if on_running is not None:  # the kernel is loaded: nothing but the compiled loop runs from here
-            on_running()
+            beside = on_running()
+        if plan == AFTER_BESIDE and not callable(getattr(beside, "is_alive", None)):
+            plan = SERIAL  # no handle on the work beside: a core may never be free
+        probing = plan in (AUTO, AFTER_BESIDE)
         while k < n:
+            if (probing and not st.threaded and serial_rates
+                    and (plan == AUTO or not beside.is_alive())):  # a core is free: the physics thread's turn
+                st.start(k)
+                size = MUJOCO_CHUNK if on_chunk is not None else PROBE_CHUNKS * MUJOCO_CHUNK
             k1 = min(n, k + size)
             tc = time.perf_counter()
             status, mdone = chunk(k, k1)
-            size = next_chunk(mdone, time.perf_counter() - tc, on_chunk is not None)
+            spent = time.perf_counter() - tc
+            st.count(mdone)
+            if probing and mdone == k1 - k:
+                if not st.threaded:
+                    if k > 0 and mdone == MUJOCO_CHUNK:  # (the first call starts cold)
+                        serial_rates.append(spent / mdone)
+                else:
+                    if spent / mdone > PROBE_MARGIN * float(np.median(serial_rates[-3:])):
+                        st.stop()  # slower than this thread alone (a busy machine): it steps MuJoCo again
+                    probing = False
+            size = (MUJOCO_CHUNK if probing and not st.threaded
+                    else next_chunk(mdone, spent, on_chunk is not None))
             done = k + mdone
             if bar is not None:
                 bar.update(mdone)
             if on_chunk is not None and mdone:
                 on_chunk(_chunk(scn, m, cmap, geo, rows, k, done))
-            if wseen.any():
-                warned = warning_counts(wseen)
+            if st.wseen.any():
+                warned = warning_counts(st.wseen)
                 if status == 0:  # the kernel stops at the step that raised it; never pass silently
                     status = 7
             if status != 0:
@@ -206,9 +233,7 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
                 interrupted = True
                 break
     finally:
-        if helper is not None:
-            sync[SYNC_GO] = SYNC_STOP
-            helper.join()
+        st.stop()
         sink.close()
         if bar is not None:
             bar.close()
@@ -223,12 +248,16 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     traj.meta["geometry_time"] = time.perf_counter() - tg
     traj.meta["build_time"] = build_time
     traj.meta["kernel_load_time"] = load_time
-    traj.meta["overlap"] = bool(overlap)
+    traj.meta["overlap"] = st.from_step is not None
+    traj.meta["overlap_from_step"] = st.from_step
+    traj.meta["overlap_steps"] = st.threaded_steps
     traj.meta["mujoco_warnings"] = int(sum(warned.values()))
     traj.meta["mujoco_warning_counts"] = warned
     captured = sink.text
-    if overlap:  # MuJoCo says each kind of warning once: a kind first raised after the last step is dropped
-        captured = captured[:len(warned)]
+    if st.from_step is not None:
+        # MuJoCo says each kind of warning once: a kind first raised after the last step is dropped, and one
+        # raised by the physics thread's mj_step1 of a state that this thread then stepped is said twice
+        captured = list(dict.fromkeys(captured))[:len(warned)]
     traj.meta["mujoco_warning_text"] = captured[:20]
     detail = ""
     if warned:
@@ -245,35 +274,99 @@ def two_phase_ok(scn: Scenario) -> bool:
     return scn.plant.integrator in LIVE_GEOMETRY_INTEGRATORS
 
 
-def overlap_default(scn: Scenario, beside: bool = False) -> bool:
-    """Whether the loop steps MuJoCo in a second thread (`simulate_mujoco`'s overlap) by default: when MuJoCo
-    allows it (`two_phase_ok`), the kernels are compiled, and a core is free for it: this process may run on
-    at least 2 CPUs, 3 when other work runs beside the loop (`beside`: the output imports of `teleop run`).
-    The thread trades CPU for time (each thread spin-waits for the other: 1.4-1.9x the CPU of a serial run,
-    benchmarks/bench_threads.py): worth it only on an idle core.  TELEOP_OVERLAP=1 / 0 forces it on / off
-    (where MuJoCo allows it)."""
+SERIAL, THREADED, AUTO, AFTER_BESIDE = "serial", "threaded", "auto", "after_beside"  # overlap_plan's answers
+
+
+def overlap_plan(scn: Scenario, beside: bool = False) -> str:
+    """Who steps MuJoCo in `simulate_mujoco(overlap=None)`: the loop's thread throughout (SERIAL), or, where
+    MuJoCo allows the split (`two_phase_ok`), the kernels are compiled and a core is free, the physics thread
+    after a comparison (`simulate_mujoco`): AUTO when this process may run on at least 2 CPUs, 3 when other
+    work runs beside the loop (`beside`: the output imports of `teleop run`); AFTER_BESIDE with 2 CPUs and
+    work beside: not before that work has ended.  The thread trades CPU for time (each thread spin-waits for
+    the other: 1.4-1.9x the CPU of a serial run, benchmarks/bench_threads.py): worth it only on an idle core.
+    TELEOP_OVERLAP=1 / 0 forces it on from the first step (THREADED) / off (SERIAL), where MuJoCo allows
+    it."""
     if not two_phase_ok(scn) or not jit_wanted():
-        return False
+        return SERIAL
     forced = overlap_setting()  # TELEOP_OVERLAP (ConfigError if it is not 0 or 1)
     if forced is not None:
-        return forced
+        return THREADED if forced else SERIAL
     try:
         cpus = len(os.sched_getaffinity(0))
     except AttributeError:  # pragma: no cover - not Linux
         cpus = os.cpu_count() or 1
-    return cpus >= (3 if beside else 2)
+    if cpus >= (3 if beside else 2):
+        return AUTO
+    return AFTER_BESIDE if cpus >= 2 else SERIAL
+
+
+class _Stepping:
+    """Who steps MuJoCo in a run: this thread (mj_step; `sync` empty) or the physics thread (`start`, `stop`:
+    between two compiled calls, at any step; the numbers do not change, tests/test_overlap.py).
+    wseen: the warning counters the kernel checks after each step: MuJoCo's own, or the physics thread's copy
+    after each mj_step2 (an mj_step1 of a state the loop then does not step must not count); the loop reads
+    the sensors from force.sensordata: d.sensordata, or that thread's copy (mj_step1 rewrites them)."""
+
+    def __init__(self, m: mujoco.MjModel, d: mujoco.MjData, substeps: int, last: int, geo: _Geometry,
+                 force: ForceArgs, sink: WarningSink):
+        self.m, self.d, self.substeps, self.last = m, d, substeps, last
+        self.geo, self.force, self.sink = geo, force, sink
+        self.wnum = d.warning.number  # view of MuJoCo's warning counters
+        self.wseen = self.wnum
+        self.sync = np.zeros(0, dtype=np.int64)
+        self.helper: threading.Thread | None = None
+        self.from_step: int | None = None
+        self.threaded_steps = 0
+
+    @property
+    def threaded(self) -> bool:
+        return self.helper is not None
+
+    def start(self, k: int) -> None:
+        """The physics thread steps MuJoCo from control step k on (the state MjData holds)."""
+        if self.helper is not None:
+            return
+        self.force.sensordata = self.d.sensordata.copy()
+        self.wseen = self.wnum.copy()
+        self.sync = np.zeros(SYNC_SIZE, dtype=np.int64)
+        self.helper = _start_helper(self.m, self.d, self.sync, self.last, self.wnum, self.wseen,
+                                    self.force.sensordata, self.substeps, self.geo, k * self.substeps)
+        self.sink.follow(self.helper)
+        if self.from_step is None:
+            self.from_step = k
+
+    def stop(self) -> None:
+        """This thread steps MuJoCo again: the physics thread ends, and MjData's sensors and warning counters
+        are those of its last mj_step2 (its mj_step1 of the next state is redone by mj_step)."""
+        if self.helper is None:
+            return
+        self.sync[SYNC_GO] = SYNC_STOP
+        self.helper.join()
+        self.helper = None
+        self.d.sensordata[:] = self.force.sensordata
+        self.wnum[:] = self.wseen
+        self.force.sensordata = self.d.sensordata
+        self.wseen = self.wnum
+        self.sync = np.zeros(0, dtype=np.int64)
+
+    def count(self, steps: int) -> None:
+        if self.helper is not None:
+            self.threaded_steps += steps
 
 
 def _start_helper(m: mujoco.MjModel, d: mujoco.MjData, sync: np.ndarray, last: int, wnum: np.ndarray,
                   wsnap: np.ndarray, sens_snap: np.ndarray, substeps: int,
-                  geo: _Geometry) -> threading.Thread:
-    """Start the thread that steps MuJoCo for `mujoco_chunk` (`harness.loop.native.physics_server`).
-    The kernel is first called with the stop flag set (returns at once): it is loaded, or built, here."""
+                  geo: _Geometry, g0: int = 0) -> threading.Thread:
+    """Start the thread that steps MuJoCo for `mujoco_chunk` (`harness.loop.native.physics_server`) from
+    physics step g0 (the state MjData holds).  The kernel is first called with the stop flag set (returns
+    at once): it is loaded, or built, here."""
     sync[SYNC_GO] = SYNC_STOP
     args = (m._address, d._address, MJ_FUNCS, sync, wnum, wsnap, d.sensordata, sens_snap, substeps,
             geo.inputs, geo.outputs(0, geo.tip.shape[0]))
     A.physics_server(*args)
     sync[:] = 0
+    sync[SYNC_GO] = g0
+    sync[SYNC_S2] = g0
     sync[SYNC_S1] = -2  # no mj_step1 done yet
     sync[SYNC_LAST] = last
     t = threading.Thread(target=A.physics_server, args=args,
