@@ -304,22 +304,22 @@ def test_without_a_handle_on_the_work_beside_the_loop_stays_serial(monkeypatch):
 
 @pytest.mark.parametrize("slow", ["serial", "threaded"])
 def test_with_a_free_core_the_physics_thread_takes_over_if_faster(slow, monkeypatch, traj_arrays):
-    """With 2 CPUs and nothing beside the loop, the physics thread starts after two serial calls (the first
-    starts cold, the second is the reference) and goes on only if its first call is not slower per step."""
+    """With 2 CPUs and nothing beside the loop, the physics thread starts after three serial calls (the first
+    starts cold, the others are the reference) and goes on only if its first call is not slower per step."""
     monkeypatch.delenv("TELEOP_OVERLAP", raising=False)
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
     scn = load_scenario(ROOT / "scenarios" / "paper.toml", ["duration=0.6", "transient=0"])
     ref = simulate_mujoco(scn, overlap=False)
-    monkeypatch.setattr(mujoco_loop, "MUJOCO_CHUNK", 50)
+    monkeypatch.setattr(mujoco_loop, "PROBE_CALL", 50)
     fake = _SlowCalls(serial_calls=0, slow=slow)
     monkeypatch.setattr(mujoco_loop, "A", fake)
     tr = simulate_mujoco(scn)
     _same(ref, tr, traj_arrays, f"auto, slow {slow}")
-    assert fake.modes[:3] == [False, False, True], fake.modes
-    assert tr.meta["overlap_from_step"] == 100
+    assert fake.modes[:4] == [False, False, False, True], fake.modes
+    assert tr.meta["overlap_from_step"] == 150
     probe = mujoco_loop.PROBE_CHUNKS * 50
     if slow == "threaded":
-        assert not any(fake.modes[3:]) and len(fake.modes) > 3, fake.modes
+        assert not any(fake.modes[4:]) and len(fake.modes) > 4, fake.modes
         assert tr.meta["overlap_steps"] == probe
     else:
-        assert all(fake.modes[2:]) and tr.meta["overlap_steps"] == len(tr) - 100, fake.modes
+        assert all(fake.modes[3:]) and tr.meta["overlap_steps"] == len(tr) - 150, fake.modes

@@ -255,12 +255,15 @@ def test_noise_free_record_rows_equal_recomputed_rows(kind):
             np.testing.assert_array_equal(got, row[sl], err_msg=f"{name} at step {k}")
 
 
+@pytest.mark.parametrize("overlap", [False, True], ids=["serial", "threaded"])
 @pytest.mark.parametrize("case", ["paper_delay", "contact"])
-def test_chunk_boundaries_do_not_change_the_run(monkeypatch, case, traj_arrays):
+def test_chunk_boundaries_do_not_change_the_run(monkeypatch, case, overlap, traj_arrays):
     """The MuJoCo loop's compiled calls may split a run anywhere (their length follows the measured speed,
     `mujoco_loop.next_chunk`): one call, calls of 1-97 steps in a seeded random order, and the default
     give bit-identical trajectories, with a command delay (its ring buffer spans the calls) and with
-    contact and a delayed, filtered force sensor (scenarios/contact.toml)."""
+    contact and a delayed, filtered force sensor (scenarios/contact.toml); MuJoCo stepped by the loop's
+    thread or by the physics thread from the first step (the default switches between the two:
+    tests/test_overlap.py)."""
     from harness.config.load import load_scenario
     from harness.loop import mujoco_loop
 
@@ -271,9 +274,9 @@ def test_chunk_boundaries_do_not_change_the_run(monkeypatch, case, traj_arrays):
     else:
         scn = load_scenario(root / "scenarios" / "paper.toml", [*short, "plant.actuation_delay=0.003"])
     runs = {}
-    runs["default"] = traj_arrays(simulate_mujoco(scn))
+    runs["default"] = traj_arrays(simulate_mujoco(scn, overlap=overlap))
     monkeypatch.setattr(mujoco_loop, "MUJOCO_CHUNK", 10 ** 9)
-    runs["one call"] = traj_arrays(simulate_mujoco(scn))
+    runs["one call"] = traj_arrays(simulate_mujoco(scn, overlap=overlap))
     rng = np.random.default_rng(7)
     sizes = []
 
@@ -283,7 +286,7 @@ def test_chunk_boundaries_do_not_change_the_run(monkeypatch, case, traj_arrays):
 
     monkeypatch.setattr(mujoco_loop, "MUJOCO_CHUNK", 13)
     monkeypatch.setattr(mujoco_loop, "next_chunk", random_chunk)
-    runs["random"] = traj_arrays(simulate_mujoco(scn))
+    runs["random"] = traj_arrays(simulate_mujoco(scn, overlap=overlap))
     assert len(sizes) > 5
     ref = runs.pop("default")
     assert len(ref["t"]) == scn.n_steps and "body_pos" in ref

@@ -60,9 +60,12 @@ MUJOCO_CHUNK = 1000
 CHUNK_SECONDS = 0.25
 
 
-# By default (overlap_plan's AUTO, AFTER_BESIDE) the physics thread's first call has PROBE_CHUNKS *
-# MUJOCO_CHUNK steps (MUJOCO_CHUNK with on_chunk); the thread goes on unless that call took more than
-# PROBE_MARGIN times the time per step of the serial calls before it (the median of the last 3).
+# By default (overlap_plan's AUTO, AFTER_BESIDE) the loop's thread steps MuJoCo in calls of PROBE_CALL steps
+# (MUJOCO_CHUNK while work runs beside, or with on_chunk) until the physics thread may start and at least 2
+# calls after the first (which starts cold) are timed.  The thread's first call has PROBE_CHUNKS times as
+# many steps (MUJOCO_CHUNK with on_chunk); the thread goes on unless that call took more than PROBE_MARGIN
+# times the time per step of the serial calls (the median of the last 3).
+PROBE_CALL = 250
 PROBE_CHUNKS = 2
 PROBE_MARGIN = 1.05
 
@@ -123,9 +126,9 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     first (mj_step1: positions, velocities) of each state runs while this thread computes the control step
     from it; the same numbers as mj_step.  True: from the first step; False: never; None =
     `overlap_plan(scn, beside=on_running is not None)`: where a core is free, this thread steps MuJoCo in
-    calls of MUJOCO_CHUNK steps until the physics thread may start (after the second call, or, with 2 CPUs
-    and work beside the loop, once that work has ended: on_running returns its thread); the thread's first
-    call is compared with the serial ones (PROBE_MARGIN), and it goes on only if it is not slower.
+    short calls until the physics thread may start (after three calls, or, with 2 CPUs and work beside the
+    loop, once that work has ended: on_running returns its thread); the thread's first call is compared
+    with the serial ones (PROBE_CALL, PROBE_MARGIN), and it goes on only if it is not slower.
     True for an integrator MuJoCo cannot split (RK4) raises ValueError; interpreted kernels
     (TELEOP_NO_JIT=1) always run serially.  traj.meta["overlap_from_step"]: the control step from which
     the physics thread stepped MuJoCo (None: never), "overlap_steps": how many steps it stepped."""
@@ -197,11 +200,14 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
         if plan == AFTER_BESIDE and not callable(getattr(beside, "is_alive", None)):
             plan = SERIAL  # no handle on the work beside: a core may never be free
         probing = plan in (AUTO, AFTER_BESIDE)
+        ref_size = MUJOCO_CHUNK if on_chunk is not None or plan == AFTER_BESIDE else PROBE_CALL
+        if probing:
+            size = ref_size
         while k < n:
-            if (probing and not st.threaded and serial_rates
+            if (probing and not st.threaded and len(serial_rates) >= 2
                     and (plan == AUTO or not beside.is_alive())):  # a core is free: the physics thread's turn
                 st.start(k)
-                size = MUJOCO_CHUNK if on_chunk is not None else PROBE_CHUNKS * MUJOCO_CHUNK
+                size = MUJOCO_CHUNK if on_chunk is not None else PROBE_CHUNKS * ref_size
             k1 = min(n, k + size)
             tc = time.perf_counter()
             status, mdone = chunk(k, k1)
@@ -209,14 +215,13 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
             st.count(mdone)
             if probing and mdone == k1 - k:
                 if not st.threaded:
-                    if k > 0 and mdone == MUJOCO_CHUNK:  # (the first call starts cold)
+                    if k > 0 and mdone == ref_size:  # (the first call starts cold)
                         serial_rates.append(spent / mdone)
                 else:
                     if spent / mdone > PROBE_MARGIN * float(np.median(serial_rates[-3:])):
                         st.stop()  # slower than this thread alone (a busy machine): it steps MuJoCo again
                     probing = False
-            size = (MUJOCO_CHUNK if probing and not st.threaded
-                    else next_chunk(mdone, spent, on_chunk is not None))
+            size = ref_size if probing and not st.threaded else next_chunk(mdone, spent, on_chunk is not None)
             done = k + mdone
             if bar is not None:
                 bar.update(mdone)
