@@ -268,28 +268,31 @@ class _SlowCalls:
 
 
 @pytest.mark.parametrize("slow", ["serial", "threaded"])
-def test_on_two_cpus_the_physics_thread_starts_when_the_work_beside_ends(slow, monkeypatch, traj_arrays):
-    """With 2 CPUs and work beside the loop (teleop run's output imports, whose thread on_running returns),
-    this thread steps MuJoCo until that work ends, then the physics thread takes over, for good unless its
-    first call is slower per step than the serial ones (here made slower on purpose): then only for that call.
-    The numbers are the serial run's."""
+@pytest.mark.parametrize("beside", [True, False], ids=["after_beside", "auto"])
+def test_the_physics_thread_takes_over_when_a_core_is_free_if_faster(beside, slow, monkeypatch, traj_arrays):
+    """With 2 CPUs the loop's thread steps MuJoCo first: with work beside the loop (teleop run's output
+    imports, whose thread on_running returns) until that work ends; else for three calls (the first starts
+    cold, the others are the reference).  Then the physics thread takes over, for good unless its first call
+    is slower per step than the serial ones (made slower on purpose here): then only for that call.  The
+    numbers are the serial run's."""
     monkeypatch.delenv("TELEOP_OVERLAP", raising=False)
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
     scn = load_scenario(ROOT / "scenarios" / "paper.toml", ["duration=1.0", "transient=0"])
     ref = simulate_mujoco(scn, overlap=False)
-    monkeypatch.setattr(mujoco_loop, "MUJOCO_CHUNK", 50)
-    fake = _SlowCalls(serial_calls=4, slow=slow)
+    monkeypatch.setattr(mujoco_loop, "MUJOCO_CHUNK" if beside else "PROBE_CALL", 50)
+    serial = 4 if beside else 3
+    fake = _SlowCalls(serial_calls=serial if beside else 0, slow=slow)
     monkeypatch.setattr(mujoco_loop, "A", fake)
-    tr = simulate_mujoco(scn, on_running=fake.on_running)
-    _same(ref, tr, traj_arrays, f"after the work beside, slow {slow}")
-    assert fake.modes[:4] == [False] * 4 and fake.modes[4] is True, fake.modes
-    assert tr.meta["overlap_from_step"] == 200
-    if slow == "threaded":  # one threaded call of PROBE_CHUNKS * MUJOCO_CHUNK steps, then serial to the end
-        assert fake.modes[5:] == [False] * (len(fake.modes) - 5) and len(fake.modes) > 6, fake.modes
+    tr = simulate_mujoco(scn, on_running=fake.on_running if beside else None)
+    _same(ref, tr, traj_arrays, f"beside {beside}, slow {slow}")
+    assert fake.modes[:serial + 1] == [False] * serial + [True], fake.modes
+    assert tr.meta["overlap_from_step"] == serial * 50
+    if slow == "threaded":  # one threaded call of PROBE_CHUNKS * 50 steps, then serial to the end
+        assert not any(fake.modes[serial + 1:]) and len(fake.modes) > serial + 1, fake.modes
         assert tr.meta["overlap_steps"] == mujoco_loop.PROBE_CHUNKS * 50
     else:
-        assert all(fake.modes[4:]), fake.modes
-        assert tr.meta["overlap_steps"] == len(tr) - 200
+        assert all(fake.modes[serial:]), fake.modes
+        assert tr.meta["overlap_steps"] == len(tr) - serial * 50
 
 
 def test_without_a_handle_on_the_work_beside_the_loop_stays_serial(monkeypatch):
@@ -300,26 +303,3 @@ def test_without_a_handle_on_the_work_beside_the_loop_stays_serial(monkeypatch):
     scn = load_scenario(ROOT / "scenarios" / "paper.toml", SHORT)
     tr = simulate_mujoco(scn, on_running=lambda: None)
     assert tr.meta["overlap"] is False and tr.meta["overlap_from_step"] is None
-
-
-@pytest.mark.parametrize("slow", ["serial", "threaded"])
-def test_with_a_free_core_the_physics_thread_takes_over_if_faster(slow, monkeypatch, traj_arrays):
-    """With 2 CPUs and nothing beside the loop, the physics thread starts after three serial calls (the first
-    starts cold, the others are the reference) and goes on only if its first call is not slower per step."""
-    monkeypatch.delenv("TELEOP_OVERLAP", raising=False)
-    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
-    scn = load_scenario(ROOT / "scenarios" / "paper.toml", ["duration=0.6", "transient=0"])
-    ref = simulate_mujoco(scn, overlap=False)
-    monkeypatch.setattr(mujoco_loop, "PROBE_CALL", 50)
-    fake = _SlowCalls(serial_calls=0, slow=slow)
-    monkeypatch.setattr(mujoco_loop, "A", fake)
-    tr = simulate_mujoco(scn)
-    _same(ref, tr, traj_arrays, f"auto, slow {slow}")
-    assert fake.modes[:4] == [False, False, False, True], fake.modes
-    assert tr.meta["overlap_from_step"] == 150
-    probe = mujoco_loop.PROBE_CHUNKS * 50
-    if slow == "threaded":
-        assert not any(fake.modes[4:]) and len(fake.modes) > 4, fake.modes
-        assert tr.meta["overlap_steps"] == probe
-    else:
-        assert all(fake.modes[3:]) and tr.meta["overlap_steps"] == len(tr) - 150, fake.modes
