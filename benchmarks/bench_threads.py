@@ -11,8 +11,9 @@ Per plant, repeated --reps times in alternating order, in this process on every 
   raw       the compiled replay of the run's logged [ctrl, qfrc_applied] through the C mj_step (one thread)
   serial    the loop, one thread (overlap=False)
   threaded  the loop with the physics thread from the first step (overlap=True); its CPU time (both threads)
-  default   the loop as it runs by default (overlap=None: `overlap_plan`; with 2 CPUs, serial for two calls of
-            1000 steps, then the physics thread if its first call is not slower)
+  default   the loop as it runs by default (overlap=None: `overlap_plan`; with 2 CPUs, serial for three
+            calls of 100 steps, then the physics thread if its first call is not slower)
+and, once per plant, MuJoCo's two phases (mj_step1, mj_step2) timed from Python on the same commands.
 Ratios are medians of the per-repetition ratios (each repetition measures all four back to back).
 Writes its own section of benchmarks/RESULTS.md (`<!-- bench_threads.py: begin/end -->`) unless --no-write.
 """
@@ -38,12 +39,39 @@ from harness.config.scenario import PlantConfig, Scenario  # noqa: E402
 from harness.loop.mujoco_loop import simulate_mujoco  # noqa: E402
 
 
+def phase_split_us(scn: Scenario, log: np.ndarray, passes: int = 3) -> tuple[float, float]:
+    """MuJoCo's two phases per physics step, us (median of `passes` replays of the logged commands, each
+    call timed from Python: about 0.3-0.5 us of call overhead included in each): (mj_step1, mj_step2)."""
+    import mujoco
+
+    from harness.loop.mujoco_loop import make_plant
+
+    s1, s2 = [], []
+    for _ in range(passes):
+        m, d, _ = make_plant(scn)
+        nu, pc = m.nu, time.perf_counter
+        t1 = t2 = 0.0
+        for row in log:
+            d.ctrl[:] = row[:nu]
+            d.qfrc_applied[:] = row[nu:]
+            a = pc()
+            mujoco.mj_step1(m, d)
+            b = pc()
+            mujoco.mj_step2(m, d)
+            t1 += b - a
+            t2 += pc() - b
+        s1.append(t1 / len(log) * 1e6)
+        s2.append(t2 / len(log) * 1e6)
+    return float(np.median(s1)), float(np.median(s2))
+
+
 def measure(scn: Scenario, reps: int) -> dict:
     """Seconds per repetition: raw, serial, threaded (wall), threaded_cpu, serial_cpu (process CPU time)."""
     tr, log = logged_run(scn)
     keys = ("raw", "serial", "threaded", "default", "serial_cpu", "threaded_cpu", "default_cpu",
             "default_threaded")
     out = {"steps": len(tr), "status": tr.status, **{k: [] for k in keys}}
+    out["step1_us"], out["step2_us"] = phase_split_us(scn, log)
     raw_replay_s(scn, log)  # warm: the first replay of the process loads numba and its cached kernel (~1 s)
     modes = {"serial": False, "threaded": True, "default": None}
     for overlap in modes.values():
@@ -87,8 +115,9 @@ def main(argv=None) -> int:
              f"{args.reps} repetitions (raw, serial, threaded and default back to back in each); ratios: "
              "median of the per-repetition ratios [min, max].\n",
              "| plant | raw mj_step | serial loop | threaded loop | serial / raw | **threaded / raw** | "
-             "threaded / serial | CPU threaded / serial | **default / raw** | default: steps threaded |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "threaded / serial | CPU threaded / serial | **default / raw** | default: steps threaded | "
+             "mj_step1 + mj_step2 | serial - raw |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     print("\n".join(lines), flush=True)
     for label, scn in plants:
         r = measure(scn, args.reps)
@@ -105,7 +134,8 @@ def main(argv=None) -> int:
                 f"| {ratio('serial', 'raw')} | **{ratio('threaded', 'raw')}** | "
                 f"{ratio('threaded', 'serial')} | {ratio('threaded_cpu', 'serial_cpu')} | "
                 f"**{ratio('default', 'raw')}** | {np.median(r['default_threaded']):.0%} "
-                f"[{r['default_threaded'].min():.0%}, {r['default_threaded'].max():.0%}] |")
+                f"[{r['default_threaded'].min():.0%}, {r['default_threaded'].max():.0%}] | "
+                f"{r['step1_us']:.1f} + {r['step2_us']:.1f} us | {us('serial') - us('raw'):.1f} us |")
         print(line, flush=True)
         lines.append(line)
     lines.append("\nCPU: the process's CPU time over the whole `simulate_mujoco` call (model build and "
@@ -113,7 +143,11 @@ def main(argv=None) -> int:
                  "threaded loop costs more CPU for less wall time: by default it is tried only where a core "
                  "is free for it and kept only if its first call is not slower "
                  "(`harness.loop.mujoco_loop.overlap_plan`), never in sweeps.  Default: steps threaded = the "
-                 "share of the run's control steps the physics thread stepped, median [min, max].")
+                 "share of the run's control steps the physics thread stepped, median [min, max].  "
+                 "mj_step1 + mj_step2: MuJoCo's two phases per step, each call timed from Python (about "
+                 "0.3-0.5 us of call overhead in each).  Serial - raw: what the loop's thread adds per step "
+                 "(controller, sensing, commands, records).  With the physics thread a step takes at least "
+                 "mj_step2 + max(mj_step1, serial - raw) plus the two threads' hand-overs.")
     if not args.no_write:
         from results_sections import write_section
 

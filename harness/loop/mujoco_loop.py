@@ -65,7 +65,7 @@ CHUNK_SECONDS = 0.25
 # calls after the first (which starts cold) are timed.  The thread's first call has PROBE_CHUNKS times as
 # many steps (MUJOCO_CHUNK with on_chunk); the thread goes on unless that call took more than PROBE_MARGIN
 # times the time per step of the serial calls (the median of the last 3).
-PROBE_CALL = 250
+PROBE_CALL = 100
 PROBE_CHUNKS = 2
 PROBE_MARGIN = 1.05
 
