@@ -28,6 +28,7 @@ import sys
 import time
 from pathlib import Path
 
+import mujoco
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -36,16 +37,12 @@ sys.path.insert(0, str(ROOT))
 from bench_loop import _machine, logged_run, raw_replay_s  # noqa: E402  (this folder: the script's own)
 
 from harness.config.scenario import PlantConfig, Scenario  # noqa: E402
-from harness.loop.mujoco_loop import simulate_mujoco  # noqa: E402
+from harness.loop.mujoco_loop import make_plant, simulate_mujoco  # noqa: E402
 
 
 def phase_split_us(scn: Scenario, log: np.ndarray, passes: int = 3) -> tuple[float, float]:
     """MuJoCo's two phases per physics step, us (median of `passes` replays of the logged commands, each
     call timed from Python: about 0.3-0.5 us of call overhead included in each): (mj_step1, mj_step2)."""
-    import mujoco
-
-    from harness.loop.mujoco_loop import make_plant
-
     s1, s2 = [], []
     for _ in range(passes):
         m, d, _ = make_plant(scn)
@@ -66,7 +63,9 @@ def phase_split_us(scn: Scenario, log: np.ndarray, passes: int = 3) -> tuple[flo
 
 
 def measure(scn: Scenario, reps: int) -> dict:
-    """Seconds per repetition: raw, serial, threaded (wall), threaded_cpu, serial_cpu (process CPU time)."""
+    """Seconds per repetition: raw, serial, threaded, default (wall), serial_cpu, threaded_cpu, default_cpu
+    (process CPU time); default_threaded: the share of the default run's steps the physics thread stepped;
+    step1_us, step2_us: `phase_split_us`."""
     tr, log = logged_run(scn)
     keys = ("raw", "serial", "threaded", "default", "serial_cpu", "threaded_cpu", "default_cpu",
             "default_threaded")

@@ -188,7 +188,6 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     tl = time.perf_counter()
     chunk(0, 0)  # no step: numba loads the kernel (on-disk cache) with the run's argument types
     load_time = time.perf_counter() - tl
-    size = MUJOCO_CHUNK
     beside = None
     serial_rates: list[float] = []  # seconds per step of the full serial calls after the first (probing)
     try:
@@ -201,8 +200,7 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
             plan = SERIAL  # no handle on the work beside: a core may never be free
         probing = plan in (AUTO, AFTER_BESIDE)
         ref_size = MUJOCO_CHUNK if on_chunk is not None or plan == AFTER_BESIDE else PROBE_CALL
-        if probing:
-            size = ref_size
+        size = ref_size if probing else MUJOCO_CHUNK
         while k < n:
             if (probing and not st.threaded and len(serial_rates) >= 2
                     and (plan == AUTO or not beside.is_alive())):  # a core is free: the physics thread's turn
@@ -214,13 +212,12 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
             spent = time.perf_counter() - tc
             st.count(mdone)
             if probing and mdone == k1 - k:
-                if not st.threaded:
-                    if k > 0 and mdone == ref_size:  # (the first call starts cold)
-                        serial_rates.append(spent / mdone)
-                else:
+                if st.threaded:  # the thread's first call decides
                     if spent / mdone > PROBE_MARGIN * float(np.median(serial_rates[-3:])):
                         st.stop()  # slower than this thread alone (a busy machine): it steps MuJoCo again
                     probing = False
+                elif k > 0 and mdone == ref_size:  # a reference (the first call starts cold)
+                    serial_rates.append(spent / mdone)
             size = ref_size if probing and not st.threaded else next_chunk(mdone, spent, on_chunk is not None)
             done = k + mdone
             if bar is not None:
@@ -361,7 +358,7 @@ class _Stepping:
 
 def _start_helper(m: mujoco.MjModel, d: mujoco.MjData, sync: np.ndarray, last: int, wnum: np.ndarray,
                   wsnap: np.ndarray, sens_snap: np.ndarray, substeps: int,
-                  geo: _Geometry, g0: int = 0) -> threading.Thread:
+                  geo: _Geometry, g0: int) -> threading.Thread:
     """Start the thread that steps MuJoCo for `mujoco_chunk` (`harness.loop.native.physics_server`) from
     physics step g0 (the state MjData holds).  The kernel is first called with the stop flag set (returns
     at once): it is loaded, or built, here."""
