@@ -9,7 +9,8 @@ must share `mujoco_chunk`'s argument list with this checkout, which sets up ever
 by side and run in turn (order reversed every other round) on the paper scenario; CPU time per run (model
 build excluded) and its ratio to the first build, run by run: machine drift hits every build alike, which
 process pairs on a noisy machine cannot achieve.  A raw `mj_step` replay of the same steps each round gives
-/raw.
+/raw.  The loop runs serially (`overlap=False`): the physics thread's spin-waits would count as CPU time, and
+whether it is kept would differ from run to run.
 """
 
 from __future__ import annotations
@@ -71,14 +72,14 @@ def main(argv=None) -> int:
     names = list(fns)
     for k in names:  # warm every build once
         sel.fn = fns[k]
-        ML.simulate_mujoco(scn)
+        ML.simulate_mujoco(scn, overlap=False)
     cpu = {k: [] for k in names}
     raws = []
     for rep in range(args.reps):
         for k in names if rep % 2 == 0 else names[::-1]:
             sel.fn = fns[k]
             c = time.process_time()
-            tr = ML.simulate_mujoco(scn)
+            tr = ML.simulate_mujoco(scn, overlap=False)
             cpu[k].append(time.process_time() - c - tr.meta["build_time"])
         raws.append(raw())
     first = np.array(cpu[names[0]])

@@ -28,6 +28,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .scratch import scratch, scratch_cz
+
 IPOW = np.array([1.0 + 0.0j, 0.0 + 1.0j, -1.0 + 0.0j, 0.0 - 1.0j])  # i**n for n mod 4
 SERIES_RADIUS = 2.0  # |t| below which E_n uses the power series (24 terms: error < 1e-16)
 INV = 1.0 / np.arange(1.0, 33.0)  # INV[k] = 1 / (k + 1)
@@ -362,7 +364,7 @@ def point_y_derivs(s, u, d, th, order, ydot, c, Jy, Hy, Ty):
 def tip_point_jacobian(q, order, x, J):
     """Tip x (2,) and, if order >= 1, J (2, 6) (the order <= 1 path of tip_kinematics: the same
     numbers, without the Hessian work arrays)."""
-    Jy = np.zeros(6, dtype=np.complex128)
+    Jy = scratch_cz(6)
     c = 0.0j
     phi = 0.0
     for j in range(3):
@@ -404,14 +406,14 @@ def tip_kinematics(q, dq, order, x, J, H, Hd):
     if order <= 1:
         tip_point_jacobian(q, order, x, J)
         return
-    d = np.empty(3)
-    th = np.empty(3)
-    ydot = np.empty(6)
+    d = scratch(3)
+    th = scratch(3)
+    ydot = scratch(6)
     y_of_q(q, d, th, ydot, dq)
-    c = np.zeros(1, dtype=np.complex128)
-    Jy = np.zeros(6, dtype=np.complex128)
-    Hy = np.zeros((6, 6), dtype=np.complex128)
-    Ty = np.zeros((6, 6), dtype=np.complex128)
+    c = scratch_cz(1)
+    Jy = scratch_cz(6)
+    Hy = scratch_cz((6, 6))
+    Ty = scratch_cz((6, 6))
     phi = 0.0
     for j in range(3):
         term_y_derivs(j, 1.0, d, th, phi, order, ydot, c, Jy, Hy, Ty)

@@ -24,6 +24,7 @@ from .cc import gram_terms, tip_kinematics
 from .master import master_kernel
 from .master import packed as master_packed
 from .params import Gains, MasterParams, SlaveParams, SubtaskSpec
+from .scratch import scratch, scratch_zeros
 from .slave import gauss_legendre01, mass_nle_kernel
 from .subtasks import pack_subtask, subtask_kernel
 
@@ -40,15 +41,15 @@ def master_control_kernel(pk, gains, q, dq, xd, dxd, ddxd, F1, T1, info):
     """Master feedback linearization (12)-(13).  Writes T1 (2,) and info (MASTER_INFO,):
     x1, e1, de1, a1 = ddx_d + k1 de1 + k2 e1 (the commanded task acceleration), dx1.
     Returns det(J1) (0 means singular: T1 is then not written)."""
-    x = np.empty(2)
-    J = np.empty((2, 2))
-    Jd = np.empty((2, 2))
-    M = np.empty((2, 2))
-    N = np.empty(2)
+    x = scratch(2)
+    J = scratch((2, 2))
+    Jd = scratch((2, 2))
+    M = scratch((2, 2))
+    N = scratch(2)
     master_kernel(pk, q, dq, x, J, Jd, M, N)
     k1 = gains[0]
     k2 = gains[1]
-    v = np.empty(2)
+    v = scratch(2)
     for i in range(2):
         dx = J[i, 0] * dq[0] + J[i, 1] * dq[1]
         e = xd[i] - x[i]
@@ -72,7 +73,7 @@ def master_control_kernel(pk, gains, q, dq, xd, dxd, ddxd, F1, T1, info):
 
 def pinv_terms(J, Jd, Jp, Jpd):
     """J^+ = J^T (J J^T)^-1 (6,2) and its exact time derivative (6,2).  Returns det(J J^T)."""
-    g = np.empty(6)
+    g = scratch(6)
     gram_terms(J, Jd, g)
     A00, A01, A11, D00, D01, D11 = g[0], g[1], g[2], g[3], g[4], g[5]
     det = A00 * A11 - A01 * A01
@@ -118,23 +119,23 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
     if gains.shape[0] > 8:
         sgn = gains[7]
         nss = gains[8]
-    x = np.empty(2)
-    J = np.empty((2, 6))
-    H = np.empty((2, 6, 6))
-    Hd = np.empty((2, 6, 6))
+    x = scratch(2)
+    J = scratch((2, 6))
+    H = scratch((2, 6, 6))
+    Hd = scratch((2, 6, 6))
     tip_kinematics(q, dq, 3, x, J, H, Hd)
-    Jd = np.zeros((2, 6))
+    Jd = scratch_zeros((2, 6))
     for i in range(2):
         for a in range(6):
             acc = 0.0
             for b in range(6):
                 acc += H[i, a, b] * dq[b]
             Jd[i, a] = acc
-    Jp = np.zeros((6, 2))
-    Jpd = np.zeros((6, 2))
+    Jp = scratch_zeros((6, 2))
+    Jpd = scratch_zeros((6, 2))
     det = pinv_terms(J, Jd, Jp, Jpd)
     # task-space errors (16)
-    v = np.empty(2)
+    v = scratch(2)
     for i in range(2):
         dx2 = 0.0
         jdq = 0.0
@@ -159,17 +160,17 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
         info[SI_BL] = 0.0
         return det
     # sub-task (29)-(33): g = ks ky y^2 grad beta, dg exact
-    grad = np.empty(6)
-    graddot = np.empty(6)
-    parts = np.empty(3)
+    grad = scratch(6)
+    graddot = scratch(6)
+    parts = scratch(3)
     beta = subtask_kernel(spec, J, H, Jd, Hd, q, dq, grad, graddot, parts)
     ya = np.exp(-ky * beta)
     betad = 0.0
     for a in range(6):
         betad += grad[a] * dq[a]
     yad = -ky * ya * betad
-    g = np.empty(6)
-    gd = np.empty(6)
+    g = scratch(6)
+    gd = scratch(6)
     for a in range(6):
         g[a] = ks * ky * ya * ya * grad[a]
         gd[a] = ks * ky * (2.0 * ya * yad * grad[a] + ya * ya * graddot[a])
@@ -178,22 +179,22 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
     info[SI_BM] = parts[0]
     info[SI_BL] = parts[1]
     # projector P = I - J^+ J, J_phi (26)
-    P = np.empty((6, 6))
-    JpJ = np.empty((6, 6))
+    P = scratch((6, 6))
+    JpJ = scratch((6, 6))
     for a in range(6):
         for b in range(6):
             s = Jp[a, 0] * J[0, b] + Jp[a, 1] * J[1, b]
             JpJ[a, b] = s
             P[a, b] = (1.0 if a == b else 0.0) - s
     # JdJpJ = dJ J^+ J (2,6)
-    JdJpJ = np.empty((2, 6))
+    JdJpJ = scratch((2, 6))
     for i in range(2):
         for b in range(6):
             acc = 0.0
             for a in range(6):
                 acc += Jd[i, a] * JpJ[a, b]
             JdJpJ[i, b] = acc
-    r = np.empty(6)  # g - dq
+    r = scratch(6)  # g - dq
     for a in range(6):
         r[a] = g[a] - dq[a]
     for a in range(6):
@@ -211,7 +212,7 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
         Jr1 += J[1, b] * r[b]
         Kr0 += JdJpJ[0, b] * r[b]
         Kr1 += JdJpJ[1, b] * r[b]
-    phi = np.empty(6)
+    phi = scratch(6)
     for a in range(6):
         acc = 0.0
         for b in range(6):
@@ -220,8 +221,8 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
     for a in range(6):
         u2[a] = Jp[a, 0] * v[0] + Jp[a, 1] * v[1] + nss * phi[a]
     # T2 = M u2 + N2 - J^T F2 (17)
-    M = np.empty((6, 6))
-    N = np.empty(6)
+    M = scratch((6, 6))
+    N = scratch(6)
     mass_nle_kernel(pk, q, dq, nodes, weights, M, N)
     for a in range(6):
         acc = N[a] - (J[0, a] * F2[0] + J[1, a] * F2[1])

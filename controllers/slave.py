@@ -35,6 +35,7 @@ from .cc import (
     y_of_q,
 )
 from .params import SlaveParams
+from .scratch import scratch, scratch_c, scratch_cz, scratch_i, scratch_zeros
 
 # layout of SlaveParams.packed(): name -> offset (each 3 wide, gravity 2 wide)
 PACK = {"L0": 0, "m": 3, "Kb": 6, "Ke": 9, "cd": 12, "ck": 15, "Is": 18, "g": 21}
@@ -53,22 +54,22 @@ def gauss_legendre01(n: int) -> tuple[np.ndarray, np.ndarray]:
 def dynamics_kernel(pk, q, nodes, weights, want_dM, M, dM, G):
     """Mass matrix M (6,6), its derivative dM[a, b, c] = dM_ab/dq_c (6,6,6) if want_dM, and the
     gravity generalized force G (6,) = dV_gravity/dq (all outputs overwritten)."""
-    d = np.empty(3)
-    th = np.empty(3)
-    ydot = np.zeros(6)
-    zero6 = np.zeros(6)
+    d = scratch(3)
+    th = scratch(3)
+    ydot = scratch_zeros(6)
+    zero6 = scratch_zeros(6)
     y_of_q(q, d, th, ydot, zero6)
-    nzu = np.empty((6, 2), dtype=np.int64)
-    nzb = np.empty((6, 2))
-    nzbd = np.empty((6, 2))
+    nzu = scratch_i((6, 2))
+    nzb = scratch((6, 2))
+    nzbd = scratch((6, 2))
     chain_nz(q, zero6, nzu, nzb, nzbd)
-    c = np.zeros(1, dtype=np.complex128)
-    Jy = np.zeros(6, dtype=np.complex128)
-    Hy = np.zeros((6, 6), dtype=np.complex128)
-    Ty = np.zeros((6, 6), dtype=np.complex128)
-    Jq = np.empty(6, dtype=np.complex128)
-    Hq = np.empty((6, 6), dtype=np.complex128)
-    alpha = np.empty(6)
+    c = scratch_cz(1)
+    Jy = scratch_cz(6)
+    Hy = scratch_cz((6, 6))
+    Ty = scratch_cz((6, 6))
+    Jq = scratch_c(6)
+    Hq = scratch_c((6, 6))
+    alpha = scratch(6)
     for a in range(6):
         G[a] = 0.0
         for b in range(6):
@@ -157,7 +158,7 @@ def christoffel_coriolis(dM, dq, C):
 
 def nle_kernel(pk, q, dq, nodes, weights, M, dM, C, out):
     """N2 (6,) = C dq + G + K + D dq; also fills M, dM and C (work arrays the caller may reuse)."""
-    G = np.empty(6)
+    G = scratch(6)
     dynamics_kernel(pk, q, nodes, weights, True, M, dM, G)
     christoffel_coriolis(dM, dq, C)
     elastic_kernel(pk, q, out)
@@ -187,14 +188,14 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
       sum_g w_g conj(phi_k) psi_m of (1, b0, b1, b2) (the same Gauss-Legendre points and weights),
       and M and N are assembled once per section from them: the same sums, regrouped.
     """
-    d = np.empty(3)
-    th = np.empty(3)
-    ydot = np.empty(6)
+    d = scratch(3)
+    th = scratch(3)
+    ydot = scratch(6)
     y_of_q(q, d, th, ydot, dq)
     # prefix sums over the completed sections: y-gradient and ydot^T H_y ydot of their end terms
-    PJ = np.zeros((3, 6), dtype=np.complex128)
-    Pcor = np.zeros(3, dtype=np.complex128)
-    fs = np.empty(3, dtype=np.complex128)  # exp(i phi) at the start of each section
+    PJ = scratch_cz((3, 6))
+    Pcor = scratch_cz(3)
+    fs = scratch_c(3)  # exp(i phi) at the start of each section
     fs[0] = 1.0
     phi = 0.0
     for s in range(1, 3):
@@ -211,15 +212,15 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
         for b in range(6):
             M[a, b] = 0.0
     gcc = complex(pk[PACK_G + 1], -pk[PACK_G])  # conj(gravity as Z + iX)
-    cen = np.empty(3)  # 2 dk_i dd_i
+    cen = scratch(3)  # 2 dk_i dd_i
     for i in range(3):
         cen[i] = 2.0 * dq[3 + i] * dq[i]
-    Y = np.empty((3, 6), dtype=np.complex128)  # y-space V0, V1, V2
-    V = np.empty((3, 6), dtype=np.complex128)  # q-space (B^T Y)
-    Z = np.empty((3, 6), dtype=np.complex128)
-    Q = np.empty((3, 4), dtype=np.complex128)  # Q[k, m] = sum_g w conj(phi_k) psi_m
-    A = np.empty(4, dtype=np.complex128)  # d^2p/dt^2 = sum_m A_m psi_m, psi = (1, b0, b1, b2)
-    alpha = np.empty(6)
+    Y = scratch_c((3, 6))  # y-space V0, V1, V2
+    V = scratch_c((3, 6))  # q-space (B^T Y)
+    Z = scratch_c((3, 6))
+    Q = scratch_c((3, 4))  # Q[k, m] = sum_g w conj(phi_k) psi_m
+    A = scratch_c(4)  # d^2p/dt^2 = sum_m A_m psi_m, psi = (1, b0, b1, b2)
+    alpha = scratch(6)
     for s in range(3):
         ms = pk[PACK_M + s]
         Is = pk[PACK_IS + s]

@@ -26,6 +26,7 @@ import numpy as np
 
 from .cc import gram_terms, tip_kinematics
 from .params import SlaveParams, SubtaskSpec
+from .scratch import scratch
 
 SPEC_SIZE = 8
 
@@ -42,7 +43,7 @@ def manipulability_kernel(J, H, Jd, Hd, dq, grad, graddot):
 
     J (2,6), H (2,6,6) = dJ/dq, Jd (2,6) = dJ/dt, Hd (2,6,6) = dH/dt.  Returns (beta, det A).
     """
-    gt = np.empty(6)
+    gt = scratch(6)
     gram_terms(J, Jd, gt)
     A00, A01, A11, Ad00, Ad01, Ad11 = gt[0], gt[1], gt[2], gt[3], gt[4], gt[5]
     det = A00 * A11 - A01 * A01
@@ -137,8 +138,8 @@ def limits_kernel(spec, q, dq, grad, graddot):
 def subtask_kernel(spec, J, H, Jd, Hd, q, dq, grad, graddot, parts):
     """Combined beta = w_m beta_m + w_l beta_l with grad and d/dt grad (6,) (overwritten).
     parts (3,) receives [beta_m, beta_l, det(J J^T)].  Returns beta."""
-    g1 = np.empty(6)
-    gd1 = np.empty(6)
+    g1 = scratch(6)
+    gd1 = scratch(6)
     beta_m, det = manipulability_kernel(J, H, Jd, Hd, dq, g1, gd1)
     parts[0] = beta_m
     parts[2] = det

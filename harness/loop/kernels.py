@@ -32,6 +32,7 @@ from controllers.control import (
     slave_control_kernel,
 )
 from controllers.master import master_kernel
+from controllers.scratch import scratch, scratch_zeros
 from controllers.subtasks import limits_kernel
 from harness.plant.analytic import plant_accel
 
@@ -94,15 +95,15 @@ def record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row):
     row[R_T] = t
     for i in range(16):
         row[R_Q1 + i] = state[i]
-    x1 = np.empty(2)
-    J1 = np.empty((2, 2))
-    Jd1 = np.empty((2, 2))
-    M1 = np.empty((2, 2))
-    N1 = np.empty(2)
+    x1 = scratch(2)
+    J1 = scratch((2, 2))
+    Jd1 = scratch((2, 2))
+    M1 = scratch((2, 2))
+    N1 = scratch(2)
     master_kernel(mpk, state[0:2], state[2:4], x1, J1, Jd1, M1, N1)
-    x2 = np.empty(2)
-    J2 = np.empty((2, 6))
-    H = np.empty((2, 6, 6))
+    x2 = scratch(2)
+    J2 = scratch((2, 6))
+    H = scratch((2, 6, 6))
     q2 = state[4:10]
     dq2 = state[10:16]
     tip_kinematics(q2, dq2, 1, x2, J2, H, H)
@@ -130,9 +131,9 @@ def record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row):
     bm = np.sqrt(det) if det > 0.0 else 0.0
     beta = spec[0] * bm
     if spec[1] != 0.0:
-        g = np.empty(6)
-        gd = np.empty(6)
-        beta += spec[1] * limits_kernel(spec, q2, np.zeros(6), g, gd)
+        g = scratch(6)
+        gd = scratch(6)
+        beta += spec[1] * limits_kernel(spec, q2, scratch_zeros(6), g, gd)
     row[R_BETA] = bm
     row[R_YA] = np.exp(-gains[4] * beta)
     for a in range(6):
@@ -217,21 +218,21 @@ def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale
     `continuous`, where both laws are evaluated in every RK4 stage on the true state (no noise).
     F (4,) = [F1, F2] the laws get (13), (17); Fp (4,) the interaction forces the plant feels (1).
     Returns (status, number of completed steps)."""
-    T1 = np.zeros(2)
-    T2 = np.zeros(6)
-    u2 = np.zeros(6)
-    deN = np.zeros(6)
-    minfo = np.empty(MASTER_INFO)
-    sinfo = np.empty(SLAVE_INFO)
-    sensed = np.empty(16)
-    xd = np.empty(2)
-    dxd = np.empty(2)
-    ddxd = np.empty(2)
-    k1s = np.empty(16)
-    k2s = np.empty(16)
-    k3s = np.empty(16)
-    k4s = np.empty(16)
-    tmp = np.empty(16)
+    T1 = scratch_zeros(2)
+    T2 = scratch_zeros(6)
+    u2 = scratch_zeros(6)
+    deN = scratch_zeros(6)
+    minfo = scratch(MASTER_INFO)
+    sinfo = scratch(SLAVE_INFO)
+    sensed = scratch(16)
+    xd = scratch(2)
+    dxd = scratch(2)
+    ddxd = scratch(2)
+    k1s = scratch(16)
+    k2s = scratch(16)
+    k3s = scratch(16)
+    k4s = scratch(16)
+    tmp = scratch(16)
     h = dt / nsub
     for k in range(k0, k1):
         t = k * dt

@@ -11,6 +11,7 @@ import numpy as np
 from controllers.cc import backbone_points
 from controllers.control import MASTER_INFO, SLAVE_INFO
 from controllers.master import master_kernel
+from controllers.scratch import scratch, scratch_zeros
 from harness.loop.force_kernels import (
     CONTACT_INFO,
     operator_advance,
@@ -131,35 +132,35 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
     warning was raised during the last completed step (whose row is recorded)."""
     (sensordata, cadr, Fconst, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, op_on, op, targets, hand,
      target, mpk_p, cpts) = fargs
-    F2c = np.zeros(2)
-    F1op = np.zeros(2)
-    Ftrue = np.zeros(4)
-    q1 = np.empty(2)
-    dq1 = np.empty(2)
-    xm = np.empty(2)
-    vm = np.empty(2)
-    J1 = np.empty((2, 2))
-    Jd1 = np.empty((2, 2))
-    M1 = np.empty((2, 2))
-    N1 = np.empty(2)
-    nopts = np.zeros((0, 6))
+    F2c = scratch_zeros(2)
+    F1op = scratch_zeros(2)
+    Ftrue = scratch_zeros(4)
+    q1 = scratch(2)
+    dq1 = scratch(2)
+    xm = scratch(2)
+    vm = scratch(2)
+    J1 = scratch((2, 2))
+    Jd1 = scratch((2, 2))
+    M1 = scratch((2, 2))
+    N1 = scratch(2)
+    nopts = scratch_zeros((0, 6))
     apply1 = op_on or Fconst[0] != 0.0 or Fconst[1] != 0.0
     hphys = dt / substeps
     n = C.shape[0]
-    state = np.empty(16)
-    sensed = np.empty(16)
+    state = scratch(16)
+    sensed = scratch(16)
     qc = np.empty(n)
     vc = np.empty(n)
     corr = np.empty(n)
-    T1 = np.zeros(2)
-    T2 = np.zeros(6)
-    u2 = np.zeros(6)
-    deN = np.zeros(6)
-    minfo = np.empty(MASTER_INFO)
-    sinfo = np.empty(SLAVE_INFO)
-    xd = np.empty(2)
-    dxd = np.empty(2)
-    ddxd = np.empty(2)
+    T1 = scratch_zeros(2)
+    T2 = scratch_zeros(6)
+    u2 = scratch_zeros(6)
+    deN = scratch_zeros(6)
+    minfo = scratch(MASTER_INFO)
+    sinfo = scratch(SLAVE_INFO)
+    xd = scratch(2)
+    dxd = scratch(2)
+    ddxd = scratch(2)
     nb = delay + 1
     log = cmd_log.shape[0] > 0
     hist = qpos_hist.shape[0] > 0

@@ -216,6 +216,79 @@ def register_numba_extensions() -> None:
 
         return impl
 
+    _register_scratch()
+
+
+def _literal_dims(shape):
+    """The dimensions of a numba shape type of integer literals (an int or a tuple of them), else None."""
+    from numba import types as _nbt
+
+    if isinstance(shape, _nbt.IntegerLiteral):
+        return (int(shape.literal_value),)
+    if isinstance(shape, _nbt.BaseTuple) and len(shape) > 0 and all(
+            isinstance(t, _nbt.IntegerLiteral) for t in shape):
+        return tuple(int(t.literal_value) for t in shape)
+    return None
+
+
+def _register_scratch() -> None:
+    """The compiled form of `controllers.scratch`: an array over a block of the calling kernel's stack frame
+    (an `alloca` in its entry block, so a call in a loop reuses one block), with no meminfo (nothing to count
+    or free), zero-filled at each call for the `_zeros` / `_cz` forms.  A shape that is not made of literals
+    is a typing error (compile time), never a heap array in disguise."""
+    from numba import types as _nbt
+    from numba.core import cgutils as _cgutils
+    from numba.extending import intrinsic as _intrinsic
+    from numba.extending import overload as _overload
+
+    from controllers.scratch import SCRATCH_FORMS
+
+    def make(dtype_name, zero):
+        dtype = getattr(_nbt, dtype_name)
+
+        @_intrinsic
+        def _stack_array(typingctx, shape):
+            dims = _literal_dims(shape)
+            if dims is None or min(dims) < 0:
+                return None
+            aryty = _nbt.Array(dtype, len(dims), "C")
+
+            def codegen(context, builder, signature, args):
+                llty = context.get_data_type(dtype)
+                count = 1
+                for n in dims:
+                    count *= n
+                ptr = _cgutils.alloca_once(builder, llty, size=max(count, 1))
+                itemsize = context.get_abi_sizeof(llty)
+                if zero and count > 0:
+                    _cgutils.memset(builder, ptr, context.get_constant(_nbt.intp, count * itemsize), 0)
+                strides, step = [], itemsize
+                for n in reversed(dims):
+                    strides.insert(0, step)
+                    step *= n
+                ary = context.make_array(aryty)(context, builder)
+                intp = [context.get_constant(_nbt.intp, v) for v in dims + tuple(strides) + (itemsize,)]
+                context.populate_array(ary, data=ptr, shape=intp[:len(dims)], strides=intp[len(dims):-1],
+                                       itemsize=intp[-1], meminfo=None)
+                return ary._getvalue()
+
+            return aryty(shape), codegen
+
+        return _stack_array
+
+    def typer_of(stack_array):
+        def typer(shape):
+            if _literal_dims(shape) is None:
+                return None  # numba retries with the literal types of the arguments
+            return lambda shape: stack_array(shape)
+
+        return typer
+
+    for fn, dtype_name, zero in SCRATCH_FORMS:
+        # inline="always": numba inlines the overload into the kernel's own IR, so the alloca is in the
+        # kernel's frame (a called overload would return an array over its own, dead frame)
+        _overload(fn, inline="always")(typer_of(make(dtype_name, zero)))
+
 
 # =============================================================================================
 # The physics thread

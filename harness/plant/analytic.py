@@ -13,13 +13,14 @@ import numpy as np
 from controllers.cc import tip_kinematics
 from controllers.master import master_kernel
 from controllers.params import MasterParams, SlaveParams
+from controllers.scratch import scratch
 from controllers.slave import mass_nle_kernel
 
 
-def cholesky_solve(A, b, out):
-    """Solve A x = b for symmetric positive definite A (n,n) by Cholesky; returns False if not SPD."""
+def cholesky_solve(A, b, out, L, y):
+    """Solve A x = b for symmetric positive definite A (n,n) by Cholesky into out (n,); returns False if not
+    SPD.  Work arrays: L (n, n) (its lower triangle receives the factor; the upper is never read), y (n,)."""
     n = A.shape[0]
-    L = np.zeros((n, n))
     for i in range(n):
         for j in range(i + 1):
             s = A[i, j]
@@ -31,7 +32,6 @@ def cholesky_solve(A, b, out):
                 L[i, i] = np.sqrt(s)
             else:
                 L[i, j] = s / L[j, j]
-    y = np.empty(n)
     for i in range(n):
         s = b[i]
         for k in range(i):
@@ -47,33 +47,33 @@ def cholesky_solve(A, b, out):
 
 def plant_accel(mpk, spk, nodes, weights, s, T1, T2, F, acc):
     """Analytic plant forward dynamics: acc (16,) = d/dt [q1, dq1, q2, dq2].  False if not SPD."""
-    x = np.empty(2)
-    J1 = np.empty((2, 2))
-    Jd1 = np.empty((2, 2))
-    M1 = np.empty((2, 2))
-    N1 = np.empty(2)
+    x = scratch(2)
+    J1 = scratch((2, 2))
+    Jd1 = scratch((2, 2))
+    M1 = scratch((2, 2))
+    N1 = scratch(2)
     master_kernel(mpk, s[0:2], s[2:4], x, J1, Jd1, M1, N1)
-    rhs1 = np.empty(2)
+    rhs1 = scratch(2)
     for i in range(2):
         rhs1[i] = T1[i] - N1[i] + J1[0, i] * F[0] + J1[1, i] * F[1]
-    dd1 = np.empty(2)
-    ok1 = cholesky_solve(M1, rhs1, dd1)
-    M2 = np.empty((6, 6))
-    N2 = np.empty(6)
+    dd1 = scratch(2)
+    ok1 = cholesky_solve(M1, rhs1, dd1, scratch((2, 2)), scratch(2))
+    M2 = scratch((6, 6))
+    N2 = scratch(6)
     mass_nle_kernel(spk, s[4:10], s[10:16], nodes, weights, M2, N2)
-    rhs2 = np.empty(6)
+    rhs2 = scratch(6)
     if F[2] != 0.0 or F[3] != 0.0:
-        x2 = np.empty(2)
-        J2 = np.empty((2, 6))
-        H = np.empty((2, 6, 6))
+        x2 = scratch(2)
+        J2 = scratch((2, 6))
+        H = scratch((2, 6, 6))
         tip_kinematics(s[4:10], s[10:16], 1, x2, J2, H, H)
         for a in range(6):
             rhs2[a] = T2[a] - N2[a] + J2[0, a] * F[2] + J2[1, a] * F[3]
     else:
         for a in range(6):
             rhs2[a] = T2[a] - N2[a]
-    dd2 = np.empty(6)
-    ok2 = cholesky_solve(M2, rhs2, dd2)
+    dd2 = scratch(6)
+    ok2 = cholesky_solve(M2, rhs2, dd2, scratch((6, 6)), scratch(6))
     acc[0] = s[2]
     acc[1] = s[3]
     acc[2] = dd1[0]

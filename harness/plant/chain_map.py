@@ -14,6 +14,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from controllers.scratch import scratch, scratch_zeros
+
 # ================================================================================================
 # Numba-compatible per-step kernels (plain loops, float64/int64 arrays in, results written to `out`)
 # ================================================================================================
@@ -24,7 +26,7 @@ def chain_joints_from_q2(q2, C, L0, out):
     out = C u with u = [d - L0, k * d] (extensions in m, section bends in rad).
     """
     n = C.shape[0]
-    u = np.empty(6)
+    u = scratch(6)
     for i in range(3):
         u[i] = q2[i] - L0[i]
         u[3 + i] = q2[3 + i] * q2[i]
@@ -114,7 +116,7 @@ def chain_force_from_T2(q2, T2, R, out):
     q2 is the state at which the map is evaluated (normally the sensed q2).
     """
     n = R.shape[1]
-    w = np.empty(6)
+    w = scratch(6)
     for i in range(3):
         d = q2[i]
         mk = T2[3 + i] / d
@@ -165,17 +167,17 @@ def chain_elastic_correction(qpos_chain, R, C, L0, section, is_hinge, seg_kb, ke
     (springref 0); k_shape (n,) (0 on hinges); out (n,).
     """
     n = R.shape[1]
-    e = np.empty(3)
-    sq = np.empty(3)
+    e = scratch(3)
+    sq = scratch(3)
     chain_extension(qpos_chain, R, section, is_hinge, e, sq)
-    dEdd = np.empty(3)
-    dinv = np.empty(3)
+    dEdd = scratch(3)
+    dinv = scratch(3)
     for i in range(3):
         d = L0[i] + e[i]
         dinv[i] = 1.0 / d
         dEdd[i] = -0.5 * seg_kb[i] * sq[i] * dinv[i] * dinv[i] + ke[i] * e[i]
     # shape term: g = k_shape * r on slides;  grad = g - P^T (C_e^T g)
-    ctg = np.zeros(3)
+    ctg = scratch_zeros(3)
     for c in range(n):
         if is_hinge[c] == 0 and k_shape[c] != 0.0:
             r = qpos_chain[c]
@@ -201,8 +203,8 @@ def chain_elastic_correction(qpos_chain, R, C, L0, section, is_hinge, seg_kb, ke
 def chain_elastic_energy(qpos_chain, R, C, L0, section, is_hinge, seg_kb, ke, k_shape):
     """The energy E (J) whose negative gradient ``chain_elastic_correction`` completes (see there)."""
     n = R.shape[1]
-    e = np.empty(3)
-    sq = np.empty(3)
+    e = scratch(3)
+    sq = scratch(3)
     chain_extension(qpos_chain, R, section, is_hinge, e, sq)
     E = 0.0
     for i in range(3):

@@ -1,0 +1,137 @@
+"""The kernels' working arrays (`controllers.scratch`): compiled, a block of the kernel's stack frame; the
+same numbers as numpy's arrays; and no heap allocation per control step in the compiled loops."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from controllers.scratch import scratch, scratch_c, scratch_cz, scratch_i, scratch_zeros
+
+pytestmark = pytest.mark.skipif(os.environ.get("TELEOP_NO_JIT") == "1",
+                                reason="interpreted kernels requested (TELEOP_NO_JIT=1): nothing is compiled")
+
+
+def _fill(a, v):
+    for i in range(a.shape[0]):
+        a[i] = v + i
+
+
+def _use_every_form(rounds):
+    """Each form in a loop (the same block every round: the zero forms must be zero again), filled by a
+    callee, read back here."""
+    total = 0.0 + 0.0j
+    dirty = 0
+    for r in range(rounds):
+        z = scratch_zeros((2, 3))
+        cz = scratch_cz(4)
+        for i in range(2):
+            for j in range(3):
+                if z[i, j] != 0.0:
+                    dirty += 1
+        for i in range(4):
+            if cz[i] != 0.0:
+                dirty += 1
+        z[1, 2] = r + 1.0
+        cz[3] = r + 1.0j
+        a = scratch(5)
+        _fill(a, r)
+        c = scratch_c((2, 2))
+        c[0, 0] = 1.0 + 2.0j
+        c[1, 1] = a[4]
+        k = scratch_i(3)
+        k[0] = r
+        k[1] = 2 * r
+        k[2] = k[0] + k[1]
+        total += a.sum() + c[0, 0] + c[1, 1] + z.sum() + cz.sum() + k[2]
+    return total, dirty
+
+
+def _compiled(fn, *helpers):
+    import numba
+
+    from harness.loop.native import register_numba_extensions
+
+    register_numba_extensions()
+    ns = dict(fn.__globals__)
+    for h in helpers:
+        ns[h.__name__] = numba.njit(h)
+    import types
+
+    clone = types.FunctionType(fn.__code__, ns, fn.__name__)
+    return numba.njit(clone)
+
+
+def test_scratch_arrays_give_numpys_numbers_and_fresh_zeros():
+    """Compiled and interpreted: the same sums, and the zero forms are zero at every round, although the
+    compiled form reuses one block of the stack frame."""
+    fast = _compiled(_use_every_form, _fill)
+    for rounds in (1, 7):
+        expected = _use_every_form(rounds)
+        got = fast(rounds)
+        assert got[1] == 0 and expected[1] == 0
+        assert got[0] == expected[0]
+
+
+def test_a_shape_not_known_when_compiling_is_a_typing_error():
+    """A run-time shape would need the heap: refused when the kernel compiles, never silently allocated."""
+    import numba
+
+    def bad(n):
+        a = scratch(n)
+        a[0] = 1.0
+        return a[0]
+
+    with pytest.raises(numba.core.errors.TypingError):
+        _compiled(bad)(3)
+
+
+_NO_ALLOCATION_SCRIPT = textwrap.dedent("""
+    import os, sys
+    os.environ["NUMBA_NRT_STATS"] = "1"
+    import numpy as np
+    from numba.core.runtime import rtsys
+    from harness.config.scenario import Scenario
+    from harness.loop.common import common_arrays, initial_state, noise_table
+    from harness.loop.fast import kernels
+    from harness.loop.trajectory import ROW_WIDTH
+    from controllers import master
+
+    K = kernels(True)
+    scn = Scenario(duration=0.2)
+    n = scn.n_steps
+    a = common_arrays(scn)
+    rows = np.zeros((n, ROW_WIDTH))
+    mpk_p, spk_p = master.packed(scn.plant_master), scn.plant_slave.packed()
+
+    def run(k0, k1, state):
+        noise, scale = noise_table(scn, n)  # fresh: its running power sums are updated in place
+        return K.analytic_chunk(state, k0, k1, scn.control_dt, 1, False, a["traj"], noise, scale, a["F"],
+                                a["F"], a["mpk_c"], a["spk_c"], mpk_p, spk_p, a["nodes"],
+                                a["weights"], a["gains"], a["spec"], rows)
+
+    run(0, 1, initial_state(scn))  # compile or load
+    counts = []
+    for steps in (1, n):
+        before = rtsys.get_allocation_stats()
+        st, done = run(0, steps, initial_state(scn))
+        after = rtsys.get_allocation_stats()
+        assert st == 0 and done == steps, (st, done)
+        counts.append(after.alloc - before.alloc)
+    print(counts[0], counts[1])
+""")
+
+
+def test_the_compiled_control_step_allocates_nothing_per_step():
+    """The analytic loop (both laws with the null-space terms, noise, record rows, RK4 of the analytic plant:
+    every per-step kernel of the MuJoCo loop but MuJoCo's step and the chain maps) makes the same number of
+    heap allocations for 1 step as for a whole run: none per step (numba's own allocation counter)."""
+    out = subprocess.run([sys.executable, "-c", _NO_ALLOCATION_SCRIPT], capture_output=True, text=True,
+                         timeout=600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    one, many = (int(v) for v in out.stdout.split()[-2:])
+    assert many == one, f"{many - one} heap allocations over {200 - 1} more steps"
