@@ -52,18 +52,23 @@ def _use_every_form(rounds):
 
 
 def _compiled(fn, *helpers):
-    import numba
-
-    from harness.loop.native import register_numba_extensions
-
-    register_numba_extensions()
-    ns = dict(fn.__globals__)
-    for h in helpers:
-        ns[h.__name__] = numba.njit(h)
+    """fn compiled the way `harness.loop.fast` compiles the kernels: the scratch names are their numba form,
+    without numba's runtime (helpers are compiled alike)."""
     import types
 
-    clone = types.FunctionType(fn.__code__, ns, fn.__name__)
-    return numba.njit(clone)
+    import numba
+
+    from harness.loop.native import scratch_intrinsics
+
+    ns = dict(fn.__globals__)
+    ns.update(scratch_intrinsics())
+
+    def jit(f):
+        return numba.njit(_nrt=False)(types.FunctionType(f.__code__, ns, f.__name__))
+
+    for h in helpers:
+        ns[h.__name__] = jit(h)
+    return jit(fn)
 
 
 def test_scratch_arrays_give_numpys_numbers_and_fresh_zeros():
@@ -129,7 +134,9 @@ _NO_ALLOCATION_SCRIPT = textwrap.dedent("""
 def test_the_compiled_control_step_allocates_nothing_per_step():
     """The analytic loop (both laws with the null-space terms, noise, record rows, RK4 of the analytic plant:
     every per-step kernel of the MuJoCo loop but MuJoCo's step and the chain maps) makes the same number of
-    heap allocations for 1 step as for a whole run: none per step (numba's own allocation counter)."""
+    heap allocations for 1 step as for a whole run: none per step (numba's own allocation counter).  It is
+    compiled without numba's runtime (not in a HEAP_KERNELS list), so a heap array added to any kernel it
+    calls fails here, at compile time."""
     out = subprocess.run([sys.executable, "-c", _NO_ALLOCATION_SCRIPT], capture_output=True, text=True,
                          timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]

@@ -5,12 +5,19 @@ each kernel is cloned with a shared globals namespace in which every kernel name
 compiled counterpart, then wrapped in `numba.njit(cache=True)`, so calls between kernels stay in
 machine code.  The compiled functions give the same numbers as the interpreted ones (tested).
 
+Working arrays (`controllers.scratch`) are blocks of the kernel's stack frame when compiled
+(`harness.loop.native.scratch_intrinsics`, put into that namespace), so the kernels that never make a heap
+array are compiled without numba's runtime (`_nrt=False`): no reference counting in the per-step code.  A
+kernel that does allocate (a run-time size) is listed in its module's HEAP_KERNELS; one that allocates
+without being listed fails to compile, loudly.
+
 Usage: `from harness.loop.fast import K; K.slave_control_kernel(...)`.  `K` is built on first access.
 If numba is unavailable (or TELEOP_NO_JIT=1), K holds the interpreted functions (slow, same maths).
 
 On-disk cache: numba's own cache does not notice when a kernel in *another* file changes (a cached
 caller keeps the old callee), so the cache directory is keyed by a hash of every kernel module's
-source and the numba/numpy versions: any code change compiles afresh, never runs stale code.
+source (and of this module, which sets how they compile) and the numba/numpy versions: any code change
+compiles afresh, never runs stale code.
 Location: $TELEOP_CACHE_DIR, else $XDG_CACHE_HOME/octarm-teleop, else ~/.cache/octarm-teleop.
 """
 
@@ -67,7 +74,7 @@ def source_digest() -> str:
     except PackageNotFoundError:  # pragma: no cover - numba missing: nothing is compiled
         nb = "none"
     h = hashlib.sha256(f"{nb} {numpy.__version__} {sys.version} {sys.platform}".encode())
-    for mod in MODULES + _extra_modules():
+    for mod in [*MODULES, *_extra_modules(), sys.modules[__name__]]:  # this module: how they are compiled
         h.update(inspect.getsource(mod).encode())
     return h.hexdigest()[:16]
 
@@ -121,15 +128,21 @@ def _build(jit: bool) -> types.SimpleNamespace:
     ns: dict[str, object] = {}
     for mod in mods:
         ns.update({k: v for k, v in vars(mod).items() if not k.startswith("__")})
+    from harness.loop.native import scratch_intrinsics
+
+    ns.update(scratch_intrinsics())  # controllers.scratch's arrays on the kernels' stack frames
     nocache = set()
     for mod in mods:
         nocache.update(getattr(mod, "NOCACHE", ()))
+    heap = set()  # kernels that allocate numpy arrays on the heap: compiled with numba's runtime
+    for mod in mods:
+        heap.update(getattr(mod, "HEAP_KERNELS", ()))
     compiled = {}
     for name, f in names.items():
         clone = types.FunctionType(f.__code__, ns, name, f.__defaults__, f.__closure__)
         clone.__module__ = f.__module__
         clone.__qualname__ = f.__qualname__
-        compiled[name] = numba.njit(cache=name not in nocache, nogil=True)(clone)
+        compiled[name] = numba.njit(cache=name not in nocache, nogil=True, _nrt=name in heap)(clone)
     ns.update(compiled)
     return types.SimpleNamespace(**compiled)
 

@@ -267,6 +267,8 @@ def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):
         mj_call(mjfn[MJ_STEP_FN], mptr, dptr)
 
 
+# the kernels that allocate on the heap (run-time sizes), compiled with numba's runtime (harness.loop.fast)
+HEAP_KERNELS = ("mujoco_chunk", "backbone_world")
 KERNELS = ("sense_mujoco", "mujoco_commands", "master_tip_state", "mujoco_chunk", "replay_commands")
 
 

@@ -216,7 +216,6 @@ def register_numba_extensions() -> None:
 
         return impl
 
-    _register_scratch()
 
 
 def _literal_dims(shape):
@@ -231,26 +230,29 @@ def _literal_dims(shape):
     return None
 
 
-def _register_scratch() -> None:
-    """The compiled form of `controllers.scratch`: an array over a block of the calling kernel's stack frame
-    (an `alloca` in its entry block, so a call in a loop reuses one block), with no meminfo (nothing to count
-    or free), zero-filled at each call for the `_zeros` / `_cz` forms.  A shape that is not made of literals
-    is a typing error (compile time), never a heap array in disguise."""
+def scratch_intrinsics() -> dict:
+    """The compiled form of `controllers.scratch`, by name, for the namespace `harness.loop.fast` compiles the
+    kernels in (where each replaces the numpy function of that name): an array over a block of the calling
+    kernel's stack frame (an `alloca` in its entry block, emitted into the kernel itself, so a call in a
+    loop reuses one block), with no meminfo (nothing to count or free), zero-filled at each call for the
+    `_zeros` / `_cz` forms.  A shape that is not made of literals is a typing error (compile time), never a
+    heap array in disguise."""
+    global _SCRATCH
+    if _SCRATCH is not None:
+        return _SCRATCH
     from numba import types as _nbt
     from numba.core import cgutils as _cgutils
     from numba.extending import intrinsic as _intrinsic
-    from numba.extending import overload as _overload
 
     from controllers.scratch import SCRATCH_FORMS
 
     def make(dtype_name, zero):
         dtype = getattr(_nbt, dtype_name)
 
-        @_intrinsic
-        def _stack_array(typingctx, shape):
+        def stack_array(typingctx, shape):
             dims = _literal_dims(shape)
             if dims is None or min(dims) < 0:
-                return None
+                return None  # numba retries with the literal types of the arguments
             aryty = _nbt.Array(dtype, len(dims), "C")
 
             def codegen(context, builder, signature, args):
@@ -274,20 +276,14 @@ def _register_scratch() -> None:
 
             return aryty(shape), codegen
 
-        return _stack_array
+        stack_array.__name__ = f"stack_{dtype_name}{'_zeros' if zero else ''}"
+        return _intrinsic(stack_array)
 
-    def typer_of(stack_array):
-        def typer(shape):
-            if _literal_dims(shape) is None:
-                return None  # numba retries with the literal types of the arguments
-            return lambda shape: stack_array(shape)
+    _SCRATCH = {fn.__name__: make(dtype_name, zero) for fn, dtype_name, zero in SCRATCH_FORMS}
+    return _SCRATCH
 
-        return typer
 
-    for fn, dtype_name, zero in SCRATCH_FORMS:
-        # inline="always": numba inlines the overload into the kernel's own IR, so the alloca is in the
-        # kernel's frame (a called overload would return an array over its own, dead frame)
-        _overload(fn, inline="always")(typer_of(make(dtype_name, zero)))
+_SCRATCH: dict | None = None
 
 
 # =============================================================================================
