@@ -3,7 +3,8 @@ the loop with its physics thread (numba-compatible; compiled by `harness.loop.fa
 
 Each helper below is plain Python (interpreted kernels, TELEOP_NO_JIT=1) and has a compiled form registered
 by `register_numba_extensions` (called by `harness.loop.fast.kernels` before compiling; importing this module
-does not import numba).
+does not import numba).  `scratch_intrinsics` gives the compiled form of `controllers.scratch` (the kernels'
+working arrays on their stack frames).
 """
 
 from __future__ import annotations
