@@ -218,6 +218,8 @@ def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale
     `continuous`, where both laws are evaluated in every RK4 stage on the true state (no noise).
     F (4,) = [F1, F2] the laws get (13), (17); Fp (4,) the interaction forces the plant feels (1).
     Returns (status, number of completed steps)."""
+    # the control step's arrays: made here, not by a shared helper (a scratch array lives in the frame that
+    # makes it: a helper would hand back arrays over its finished frame)
     T1 = scratch_zeros(2)
     T2 = scratch_zeros(6)
     u2 = scratch_zeros(6)

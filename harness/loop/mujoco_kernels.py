@@ -152,6 +152,8 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
     qc = np.empty(n)
     vc = np.empty(n)
     corr = np.empty(n)
+    # the control step's arrays: made here, not by a shared helper (a scratch array lives in the frame that
+    # makes it: a helper would hand back arrays over its finished frame)
     T1 = scratch_zeros(2)
     T2 = scratch_zeros(6)
     u2 = scratch_zeros(6)
