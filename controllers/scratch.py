@@ -3,12 +3,12 @@
     x = scratch(2);  J = scratch((2, 6));  Hy = scratch_cz((6, 6))
 
 Here, in plain numpy, each is `np.empty` / `np.zeros` of that shape (float64; `_c`: complex128; `_i`:
-int64; `_z` / `scratch_zeros`: zero-filled).  Compiled (`harness.loop.fast` compiles the kernels in a
-namespace where these names are their numba form, `harness.loop.native.scratch_intrinsics`; this module
-imports numpy only), each call site is a block of the calling kernel's stack frame instead of a heap
-allocation: no malloc and free, no reference count, per call; and a kernel that makes no heap array
-compiles without numba's runtime.  The per-step kernels made some 70 heap arrays per control step before
-(README, Speed).
+int64; `scratch_zeros` and `scratch_cz` are zero-filled).  Compiled (`harness.loop.fast` compiles the
+kernels in a namespace where these names are their numba form, `harness.loop.native.scratch_intrinsics`;
+this module imports numpy only), each call site is a block of the calling kernel's stack frame instead of
+a heap allocation: no malloc and free, no reference count, per call; and a kernel that makes no heap
+array compiles without numba's runtime.  The per-step kernels made some 70 heap arrays per control step
+before (README, Speed).
 
 Rules, so that both forms give the same numbers:
 * the shape is an int or a tuple of ints known when the kernel is compiled (a literal or a module constant);

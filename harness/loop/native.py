@@ -218,7 +218,6 @@ def register_numba_extensions() -> None:
         return impl
 
 
-
 def _literal_dims(shape):
     """The dimensions of a numba shape type of integer literals (an int or a tuple of them), else None."""
     from numba import types as _nbt
