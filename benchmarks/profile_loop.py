@@ -34,8 +34,13 @@ def main(argv=None) -> int:
     ap.add_argument("mode", choices=("log", "loop", "raw"))
     ap.add_argument("duration", type=float, nargs="?", default=1.0, help="simulated seconds (default 1)")
     ap.add_argument("--log", default="/tmp/octarm-cmdlog.npy", help="command log file (default %(default)s)")
+    ap.add_argument("--segments", type=int, default=None,
+                    help="the CC chain with this many segments per section (default: the paper's plant)")
     args = ap.parse_args(argv)
     scn = dataclasses.replace(load_scenario(ROOT / "scenarios" / "paper.toml"), duration=args.duration)
+    if args.segments is not None:
+        plant = dataclasses.replace(scn.plant, enforce_cc=True, segments=args.segments)
+        scn = dataclasses.replace(scn, plant=plant)
     if args.mode == "log":
         m, _, _ = make_plant(scn)
         log = np.zeros((scn.n_steps * scn.substeps, m.nu + m.nv))

@@ -165,7 +165,17 @@ def test_failing_child_writer_is_one_line(tmp_path):
         write_in_child(fail, tmp_path / "x.rrd")
 
 
-def test_ctrl_c_ends_a_blocked_writer(tmp_path):
+@pytest.fixture
+def python_sigint():
+    """Python's own SIGINT handler for the test, also where the runner was started with SIGINT ignored
+    (a background job of a non-interactive shell, where a SIGINT would otherwise be dropped and the
+    test below would wait for its blocked child for ever)."""
+    prev = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, prev)
+
+
+def test_ctrl_c_ends_a_blocked_writer(tmp_path, python_sigint):
     pid_file = tmp_path / "pid"
 
     def blocked():
