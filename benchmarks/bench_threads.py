@@ -62,6 +62,14 @@ def phase_split_us(scn: Scenario, log: np.ndarray, passes: int = 3) -> tuple[flo
     return float(np.median(s1)), float(np.median(s2))
 
 
+def median_ci(v: np.ndarray, level: float = 0.95, resamples: int = 2000) -> tuple[float, float]:
+    """Bootstrap confidence interval of the median of `v` (percentile method; fixed seed: the same
+    repetitions give the same interval)."""
+    rng = np.random.default_rng(0)
+    meds = np.median(rng.choice(v, size=(resamples, len(v)), replace=True), axis=1)
+    return float(np.quantile(meds, (1 - level) / 2)), float(np.quantile(meds, (1 + level) / 2))
+
+
 def measure(scn: Scenario, reps: int) -> dict:
     """Seconds per repetition: raw, serial, threaded, default (wall), serial_cpu, threaded_cpu, default_cpu
     (process CPU time); default_threaded: the share of the default run's steps the physics thread stepped;
@@ -112,7 +120,7 @@ def main(argv=None) -> int:
              f"`benchmarks/bench_threads.py --reps {args.reps}{' --quick' if args.quick else ''}`)\n",
              f"Machine: {_machine()}; {cpus} CPUs for this process.  us per control step, median of "
              f"{args.reps} repetitions (raw, serial, threaded and default back to back in each); ratios: "
-             "median of the per-repetition ratios [min, max].\n",
+             "median of the per-repetition ratios (its 95 % bootstrap confidence interval) [min, max].\n",
              "| plant | raw mj_step | serial loop | threaded loop | serial / raw | **threaded / raw** | "
              "threaded / serial | CPU threaded / serial | **default / raw** | default: steps threaded | "
              "mj_step1 + mj_step2 | serial - raw |",
@@ -128,7 +136,8 @@ def main(argv=None) -> int:
 
         def ratio(a, b, r=r):
             v = r[a] / r[b]
-            return f"{np.median(v):.2f}x [{v.min():.2f}, {v.max():.2f}]"
+            lo, hi = median_ci(v)
+            return f"{np.median(v):.2f}x ({lo:.2f}-{hi:.2f}) [{v.min():.2f}, {v.max():.2f}]"
 
         note = "" if r["status"] == "ok" else f" ({r['status']})"
         line = (f"| {label}{note} | {us('raw'):.1f} us | {us('serial'):.1f} us | {us('threaded'):.1f} us "
