@@ -245,18 +245,20 @@ t0 = time.perf_counter()
 import harness.cli as cli
 cli.prepare_process()  # as `teleop sweep` does (harness.cli.entry); the workers inherit MUJOCO_GL
 from harness.studies.sweep import run_sweep
+t1 = time.perf_counter()
 res = run_sweep(json.loads(sys.argv[1]), out=sys.argv[2], workers=int(sys.argv[3]), progress=False,
                 executor=sys.argv[4])
-print("SWEEP-JSON " + json.dumps({"in_process": time.perf_counter() - t0, "n": len(res.rows),
-                                  "statuses": res.counts()}))
+print("SWEEP-JSON " + json.dumps({"in_process": time.perf_counter() - t0, "imports": t1 - t0,
+                                  "n": len(res.rows), "statuses": res.counts(), "timings": res.timings}))
 from harness.config.runtime import fast_exit
 fast_exit(0)  # as `teleop sweep` does (harness.cli.entry)
 """
 
 
-def sweep_once(doc: dict, workers: int, n_cases: int, executor: str) -> float:
+def sweep_once(doc: dict, workers: int, n_cases: int, executor: str) -> tuple[float, dict]:
     """Wall time of one sweep in a fresh process (what `teleop sweep` costs: its imports, the pool's
-    start-up, the cases, results.jsonl, summary.csv and the summary plot)."""
+    start-up, the cases, results.jsonl, summary.csv and the summary plot), and its phases: "start-up"
+    (interpreter and imports), `SweepResult.timings` ("setup", "cases", "summary") and "rest" (exit)."""
     with tempfile.TemporaryDirectory(prefix="bench-e2e-sweep-") as tmp:
         t = time.perf_counter()
         res = subprocess.run([sys.executable, "-c", _SWEEP_CHILD, json.dumps(doc), str(Path(tmp) / "out"),
@@ -266,7 +268,12 @@ def sweep_once(doc: dict, workers: int, n_cases: int, executor: str) -> float:
     line = [ln for ln in res.stdout.splitlines() if ln.startswith("SWEEP-JSON ")]
     if not line or json.loads(line[-1][11:])["statuses"].get("ok") != n_cases:
         raise RuntimeError(f"sweep failed: {res.stdout[-2000:]}{res.stderr[-2000:]}")
-    return wall
+    d = json.loads(line[-1][11:])
+    t = d["timings"]
+    phases = {"start-up": wall - d["in_process"] + d["imports"], "setup": t["setup"], "cases": t["cases"],
+              "summary": t["summary"] + t["recordings"]}
+    phases["rest"] = wall - sum(phases.values())
+    return wall, phases
 
 
 def _diag(case_list, w: int, executor: str) -> tuple[float, float, float]:
@@ -305,10 +312,13 @@ def sweep_table(cases: int, duration: float, counts: list[int], reps: int, out) 
     case_list = expand_cases(load_study(doc))
     runs = [(e, w) for e in ("processes", "threads") for w in counts]
     walls: dict[tuple, list[float]] = {r: [] for r in runs}
+    phases: dict[tuple, list[dict]] = {r: [] for r in runs}
     diags: dict[tuple, list[tuple]] = {r: [] for r in runs}
     for _ in range(reps):  # interleaved: 1, 2, 1, 2, ...
         for e, w in runs:
-            walls[e, w].append(sweep_once(doc, w, len(case_list), e))
+            wall, ph = sweep_once(doc, w, len(case_list), e)
+            walls[e, w].append(wall)
+            phases[e, w].append(ph)
             diags[e, w].append(_diag(case_list, w, e))
     out(f"Sweep: {cases} cases x {duration:g} s (mass study of benchmarks/bench_sweep.py), MuJoCo plant, "
         f"each sweep in a fresh process (`run_sweep`, the pool's spawn start-up, results and the summary "
@@ -331,6 +341,21 @@ def sweep_table(cases: int, duration: float, counts: list[int], reps: int, out) 
         out(f"| {e} | {w} | {wall:.2f} [{min(walls[e, w]):.2f}, {max(walls[e, w]):.2f}] | {rate:.0f} "
             f"| {rate / base[e]:.2f}x | {fw:.2f} s | {lw:.3f} s / {lc:.3f} s | {ss:.0f} "
             f"| {ss / base_ss[e]:.2f}x |")
+    out("\nWhere each sweep's wall time goes, median seconds per phase (start-up: the interpreter and "
+        "the imports; set-up: the study, its cases, the output folder and the workers' start; cases: first "
+        "submit to last result; summary: summary.csv and the plot, with the wait for matplotlib, imported "
+        "in a thread during the cases; rest: exit).  The cases phase alone gives the rate the workers "
+        "reach; the other phases do not shrink with more workers.\n")
+    names = ("start-up", "setup", "cases", "summary", "rest")
+    out("| executor | workers | " + " | ".join(names) + " | cases phase: cases/min | vs 1 worker |")
+    out("|---|---|" + "---|" * (len(names) + 2))
+    base_c: dict[str, float] = {}
+    for e, w in runs:
+        med = {k: float(np.median([p[k] for p in phases[e, w]])) for k in names}
+        crate = 60.0 * len(case_list) / med["cases"]
+        base_c.setdefault(e, crate)
+        out(f"| {e} | {w} | " + " | ".join(f"{med[k]:.2f}" for k in names)
+            + f" | {crate:.0f} | {crate / base_c[e]:.2f}x |")
     out("")
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -19,6 +20,7 @@ import pytest
 
 from controllers.params import MasterParams, SlaveParams
 from harness.config.errors import ConfigError
+from harness.studies import sweep as sweep_module
 from harness.studies.sweep import (
     METRIC_NAMES,
     RESULTS,
@@ -554,3 +556,27 @@ def test_workers_are_forked_warm_only_from_a_single_threaded_process(tmp_path, t
                                       "record": False})["metrics"]
                 for c in expand_cases(load_study(study([MASS])))}
     assert rows == expected
+
+
+def test_phase_timings_add_up(tmp_path, capsys, monkeypatch):
+    """SweepResult.timings splits the call's wall time into set-up, cases, recordings and summary: each
+    phase is measured, none is negative, they fit in the call, and the cases phase holds the cases (9
+    cases of at least 0.3 s each on 3 workers: at least 0.9 s).  `teleop sweep` prints the rate."""
+    doc = study(GRID2)
+    t = time.perf_counter()
+    res = run_sweep(doc, out=tmp_path / "a", workers=3, progress=False, case_fn=slow_stub)
+    wall = time.perf_counter() - t
+    ph = res.timings
+    assert set(ph) == {"setup", "cases", "recordings", "summary"}
+    assert all(v >= 0.0 for v in ph.values()), ph
+    assert sum(ph.values()) <= wall
+    assert ph["cases"] >= 0.9 and ph["summary"] > 0.0 and ph["setup"] > 0.0
+    # the command's last line: the rate of the cases phase, and the other phases
+    path = tmp_path / "study.toml"
+    path.write_text((tmp_path / "a" / "study.toml").read_text())
+    real = sweep_module.run_sweep
+    monkeypatch.setattr(sweep_module, "run_sweep", lambda *a, **k: real(*a, case_fn=slow_stub, **k))
+    assert sweep_module.main_sweep(path, tmp_path / "b", workers=3, progress=False) == 0
+    err = capsys.readouterr().err
+    pattern = r"ran 9 \(processes\) in \d+\.\d s \(\d+ cases/min; set-up \d+\.\d s, summary \d+\.\d s\)"
+    assert re.search(pattern, err), err

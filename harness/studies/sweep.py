@@ -36,6 +36,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -93,6 +94,10 @@ class SweepResult:
     recordings: list[Path] = dataclasses.field(default_factory=list)
     summary: list[Path] = dataclasses.field(default_factory=list)
     executor: str = ""  # "processes" | "threads" | "dask": what ran the cases (`pick_executor`)
+    # wall seconds of this call's phases: "setup" (from the call: study, cases, output folder, workers),
+    # "cases" (first submit to last result), "recordings" (the worst cases re-run), "summary" (summary.csv,
+    # plots, the wait for their imports)
+    timings: dict[str, float] = dataclasses.field(default_factory=dict)
 
     @property
     def complete(self) -> bool:
@@ -142,6 +147,7 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
     each row is on disk.  max_cases: overrides the study's [sampling] max_cases (the case count is
     checked before expansion).  Raises ConfigError for a bad study, an unreachable scheduler (checked
     before any file is written) or an unusable output folder; SweepInterrupted on Ctrl-C/SIGTERM."""
+    t_call = time.perf_counter()  # SweepResult.timings
     if max_cases is not None:
         max_cases = check_max_cases(max_cases, "--max-cases")
     if not isinstance(study, Study):
@@ -200,14 +206,22 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
         # matplotlib (for the summary plots) is imported while the workers run the cases, not after
         prefetch = prefetch_output_imports(SUMMARY_IMPORTS) if todo else None
         try:
+            tc = time.perf_counter()
+            result.timings["setup"] = tc - t_call
             run_cases(runner, case_fn, todo, study.metrics, False, on_result)
             bar.close()
+            tj = time.perf_counter()
+            result.timings["cases"] = tj - tc
             if prefetch is not None:
-                prefetch.join()
+                prefetch.join()  # the summary's imports; before any later fork (no import lock held)
+            tr = time.perf_counter()
             if study.record and result.complete:
                 result.recordings = _record_worst(study, result, runner, case_fn)
             runner.close()
+            ts = time.perf_counter()
+            result.timings["recordings"] = ts - tr
             result.summary = write_summary(study, cases, result.rows, out)
+            result.timings["summary"] = time.perf_counter() - ts + (tr - tj)  # with the wait for its imports
         except KeyboardInterrupt:
             runner.close(cancel=True)
             raise SweepInterrupted(result) from None
@@ -282,7 +296,11 @@ def main_sweep(study_path: str | os.PathLike, out: str | os.PathLike | None = No
               "run the same command again to resume", file=sys.stderr)
         return EXIT_INTERRUPTED
     counts = ", ".join(f"{n} {s}" for s, n in sorted(res.counts().items()))
-    print(f"study {res.study.name}: {len(res.cases)} cases ({counts}); ran {res.ran} ({res.executor}), "
+    t = res.timings
+    rec = f"recordings {t['recordings']:.1f} s, " if res.recordings else ""
+    rate = (f" in {t['cases']:.1f} s ({60.0 * res.ran / t['cases']:.0f} cases/min; set-up "
+            f"{t['setup']:.1f} s, {rec}summary {t['summary']:.1f} s)" if res.ran and t.get("cases") else "")
+    print(f"study {res.study.name}: {len(res.cases)} cases ({counts}); ran {res.ran} ({res.executor}){rate}, "
           f"{res.skipped} already done -> {res.out}", file=sys.stderr)
     for p in res.recordings:
         print(f"recording: {p}", file=sys.stderr)
