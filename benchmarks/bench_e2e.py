@@ -266,9 +266,9 @@ def sweep_once(doc: dict, workers: int, n_cases: int, executor: str) -> tuple[fl
                              env={**os.environ, "PYTHONPATH": str(ROOT)})
         wall = time.perf_counter() - t
     line = [ln for ln in res.stdout.splitlines() if ln.startswith("SWEEP-JSON ")]
-    if not line or json.loads(line[-1][11:])["statuses"].get("ok") != n_cases:
+    d = json.loads(line[-1][11:]) if line else {}
+    if d.get("statuses", {}).get("ok") != n_cases:
         raise RuntimeError(f"sweep failed: {res.stdout[-2000:]}{res.stderr[-2000:]}")
-    d = json.loads(line[-1][11:])
     t = d["timings"]
     phases = {"start-up": wall - d["in_process"] + d["imports"], "setup": t["setup"], "cases": t["cases"],
               "summary": t["summary"] + t["recordings"]}

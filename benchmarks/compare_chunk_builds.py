@@ -66,12 +66,10 @@ def main(argv=None) -> int:
     fns = {f.name: _load(f) for f in args.folders}
     sel = _Select()
     ML.A = sel
-    scn = load_scenario(ROOT / "scenarios" / "paper.toml")
-    if args.duration is not None:
+    cc = [] if args.segments is None else ["plant.enforce_cc=true", f"plant.segments={args.segments}"]
+    scn = load_scenario(ROOT / "scenarios" / "paper.toml", cc)
+    if args.duration is not None:  # after validation: shorter than the transient is fine here
         scn = dataclasses.replace(scn, duration=args.duration)
-    if args.segments is not None:
-        scn = dataclasses.replace(scn, plant=dataclasses.replace(scn.plant, enforce_cc=True,
-                                                                 segments=args.segments))
     sel.fn = next(iter(fns.values()))
     _, log = logged_run(scn)  # the first build's commands, replayed raw each round
 

@@ -147,7 +147,13 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
     each row is on disk.  max_cases: overrides the study's [sampling] max_cases (the case count is
     checked before expansion).  Raises ConfigError for a bad study, an unreachable scheduler (checked
     before any file is written) or an unusable output folder; SweepInterrupted on Ctrl-C/SIGTERM."""
-    t_call = time.perf_counter()  # SweepResult.timings
+    clock = [time.perf_counter()]  # SweepResult.timings: each lap adds the time since the last one
+
+    def lap(phase: str) -> None:
+        now = time.perf_counter()
+        result.timings[phase] = result.timings.get(phase, 0.0) + now - clock[0]
+        clock[0] = now
+
     if max_cases is not None:
         max_cases = check_max_cases(max_cases, "--max-cases")
     if not isinstance(study, Study):
@@ -206,22 +212,19 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
         # matplotlib (for the summary plots) is imported while the workers run the cases, not after
         prefetch = prefetch_output_imports(SUMMARY_IMPORTS) if todo else None
         try:
-            tc = time.perf_counter()
-            result.timings["setup"] = tc - t_call
+            lap("setup")
             run_cases(runner, case_fn, todo, study.metrics, False, on_result)
             bar.close()
-            tj = time.perf_counter()
-            result.timings["cases"] = tj - tc
+            lap("cases")
             if prefetch is not None:
                 prefetch.join()  # the summary's imports; before any later fork (no import lock held)
-            tr = time.perf_counter()
+            lap("summary")
             if study.record and result.complete:
                 result.recordings = _record_worst(study, result, runner, case_fn)
             runner.close()
-            ts = time.perf_counter()
-            result.timings["recordings"] = ts - tr
+            lap("recordings")
             result.summary = write_summary(study, cases, result.rows, out)
-            result.timings["summary"] = time.perf_counter() - ts + (tr - tj)  # with the wait for its imports
+            lap("summary")
         except KeyboardInterrupt:
             runner.close(cancel=True)
             raise SweepInterrupted(result) from None
