@@ -34,6 +34,7 @@ from .cc import (
     tip_kinematics,
     y_of_q,
 )
+from .moments import section_moments
 from .params import SlaveParams
 from .scratch import scratch, scratch_c, scratch_cz, scratch_i, scratch_zeros
 
@@ -186,7 +187,10 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
       `term_bases`; V0 = the completed sections' end terms, V1, V2 constant), and d^2 p/dt^2 is
       affine in b0, b1, b2 (`term_ydd`).  So the quadrature only accumulates the weighted moments
       sum_g w_g conj(phi_k) psi_m of (1, b0, b1, b2) (the same Gauss-Legendre points and weights),
-      and M and N are assembled once per section from them: the same sums, regrouped.
+      and M and N are assembled once per section from them: the same sums, regrouped;
+    * for |Theta_s| <= 1.5 those moments come from their power series in Theta_s with coefficients
+      tabulated per rule (`controllers.moments.section_moments`): the same sums again, without a
+      loop over the nodes (the node loop's en_tuple and complex products were half of this kernel).
     """
     d = scratch(3)
     th = scratch(3)
@@ -254,25 +258,29 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
             A[0] += Y[0, 3 + i] * cen[i]
             A[1] += Y[1, 3 + i] * cen[i]
             A[2] += Y[2, 3 + i] * cen[i]
-        # weighted moments over the Gauss-Legendre points of the section
-        for k in range(3):
-            for m in range(4):
-                Q[k, m] = 0.0
-        for g in range(nodes.shape[0]):
+        # weighted moments over the Gauss-Legendre points of the section: by their power series in
+        # Theta_s (controllers.moments, the same sums) where it applies, else node by node
+        series = section_moments(th[s], fs[s], nodes, Q)
+        if not series:
+            for k in range(3):
+                for m in range(4):
+                    Q[k, m] = 0.0
+        for g in range(nodes.shape[0] if (not series or Is != 0.0) else 0):
             u = nodes[g]
             w = weights[g]
-            b0, b1, b2, b3 = term_bases(u, th[s], fs[s])
-            wb0 = w * b0.conjugate()
-            wb1 = w * b1.conjugate()
-            Q[0, 0] += w
-            Q[0, 1] += w * b0
-            Q[0, 2] += w * b1
-            Q[0, 3] += w * b2
-            Q[1, 1] += wb0 * b0
-            Q[1, 2] += wb0 * b1
-            Q[1, 3] += wb0 * b2
-            Q[2, 2] += wb1 * b1
-            Q[2, 3] += wb1 * b2
+            if not series:
+                b0, b1, b2, b3 = term_bases(u, th[s], fs[s])
+                wb0 = w * b0.conjugate()
+                wb1 = w * b1.conjugate()
+                Q[0, 0] += w
+                Q[0, 1] += w * b0
+                Q[0, 2] += w * b1
+                Q[0, 3] += w * b2
+                Q[1, 1] += wb0 * b0
+                Q[1, 2] += wb0 * b1
+                Q[1, 3] += wb0 * b2
+                Q[2, 2] += wb1 * b1
+                Q[2, 3] += wb1 * b2
             if Is != 0.0:
                 thdd = 0.0  # d^2 theta/dt^2 at ddq = 0
                 for a in range(6):
@@ -292,6 +300,7 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
         Q[2, 1] = Q[1, 2].conjugate()
         # M_ab += m_s Re sum_kl Q_kl conj(V_ka) V_lb;  N_a += m_s Re sum_k conj(V_ka) (sum_m Q_km A_m)
         #                                                  - m_s Re(conj(g) sum_k V_ka Q_0k)
+        # (over the nonzero columns: a = ia for ia < na, 3 + ia - na after)
         for a in range(6):
             for ll in range(3):
                 z = 0.0j

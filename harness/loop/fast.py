@@ -31,9 +31,9 @@ import types
 from functools import cache
 from pathlib import Path
 
-from controllers import cc, control, master, slave, subtasks
+from controllers import cc, control, master, moments, slave, subtasks
 
-MODULES = [cc, slave, master, subtasks, control]
+MODULES = [cc, moments, slave, master, subtasks, control]
 
 
 def _extra_modules():

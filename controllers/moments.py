@@ -1,0 +1,134 @@
+"""The per-section quadrature moments of the fused slave dynamics (`slave.mass_nle_kernel`) as power
+series in the section's bending angle, with coefficients tabulated once per quadrature rule.
+
+Along section s the backbone point's derivatives are affine in the bases (controllers.cc `term_bases`)
+
+    b_n(u) = f u^(n+1) E_n(u Theta) = f sum_m (i Theta)^m u^(m+n+1) / (m! (m+n+1)),   |f| = 1,
+
+and `mass_nle_kernel` needs the Gauss-Legendre sums (weights w_g, nodes u_g on [0, 1])
+
+    Q[0, n+1]   = sum_g w_g b_n(u_g)                  = f sum_p (i Theta)^p  a_{n,p} mu_{p+n+1}
+    Q[k+1, l+1] = sum_g w_g conj(b_k(u_g)) b_l(u_g)   =   sum_p (i Theta)^p  c_{kl,p} mu_{p+k+l+2}
+
+with mu_j = sum_g w_g u_g^j (the rule's moments), a_{n,p} = 1 / (p! (p+n+1)) and
+c_{kl,p} = sum_{m=0..p} (-1)^m / (m! (m+k+1) (p-m)! (p-m+l+1)) (rationals, computed exactly here).
+These are the same sums regrouped, not a different integral: the series gives the quadrature's own
+value (with few points the quadrature's error too), to rounding.  The kernel evaluates them with one
+real multiply-add per moment and power instead of `en_tuple` and nine complex products per node.
+
+Used where |Theta| <= MOMENT_RADIUS: there every term is below about 1.5 in size (no cancellation
+beyond rounding) and the series stops after at most P_MAX powers; elsewhere, and for nodes that are
+not `slave.gauss_legendre01(n)` with 2 <= n <= N_RULES, the caller sums over the nodes as before.
+"""
+
+from __future__ import annotations
+
+from fractions import Fraction
+from math import factorial
+
+import numpy as np
+
+MOMENT_RADIUS = 1.5  # rad, |Theta| up to which the series is used
+P_MAX = 36  # powers of Theta tabulated (the term at p = 36 is < 1.5^36 / 36! ~ 5e-36 at the radius)
+N_RULES = 32  # Gauss-Legendre rules tabulated: n = 2..32 points (slave.n_quad's range)
+TAIL = 1e-20  # the series stops once |Theta|^p max_moment |coef_p| drops below this (the moments are >= 1e-3)
+# the eight moments: (k, l) of conj(b_k) b_l, or (-1, n) for b_n alone
+MOMENTS = ((-1, 0), (-1, 1), (-1, 2), (0, 0), (0, 1), (0, 2), (1, 1), (1, 2))
+
+
+def _rules() -> tuple[np.ndarray, np.ndarray]:
+    """NODE0[n]: the first node of the n-point rule on [0, 1]; MU[n, j] = sum_g w_g u_g^j."""
+    node0 = np.full(N_RULES + 1, np.nan)
+    mu = np.zeros((N_RULES + 1, P_MAX + 8))  # j <= P_MAX + 2 + 1 + 2
+    for n in range(2, N_RULES + 1):
+        x, w = np.polynomial.legendre.leggauss(n)
+        u, w = 0.5 * (x + 1.0), 0.5 * w  # exactly slave.gauss_legendre01(n)
+        node0[n] = u[0]
+        mu[n] = [float(np.sum(w * u**j)) for j in range(P_MAX + 8)]
+    return node0, mu
+
+
+def _series_table() -> np.ndarray:
+    """COEF[n, q, p]: the coefficient of Theta^p in moment q (MOMENTS order) for the n-point rule, the
+    factor i^p folded in as a sign (even p: real part, odd p: imaginary part)."""
+    sign = [1, 1, -1, -1]  # i^p = 1, i, -1, -i: the sign of its nonzero part
+    coef = np.zeros((N_RULES + 1, len(MOMENTS), P_MAX + 3))
+    for q, (k, l) in enumerate(MOMENTS):
+        for p in range(P_MAX + 3):
+            if k < 0:
+                r = Fraction(1, factorial(p) * (p + l + 1))
+                j = p + l + 1
+            else:
+                r = sum(Fraction((-1) ** m, factorial(m) * (m + k + 1) * factorial(p - m) * (p - m + l + 1))
+                        for m in range(p + 1))
+                j = p + k + l + 2
+            coef[:, q, p] = sign[p % 4] * float(r) * MU[:, j]
+    return coef
+
+
+NODE0, MU = _rules()
+COEF = _series_table()
+# CTAIL[p]: the largest coefficient of any moment and rule at powers >= p (bounds the next terms)
+CTAIL = np.maximum.accumulate(np.abs(COEF[2:]).max(axis=(0, 1))[::-1])[::-1].copy()
+
+
+def section_moments(th, f, nodes, Q):
+    """Fill Q[0, 0..3], Q[1, 1..3] and Q[2, 2..3] (complex (3, 4), the sums above) for a section of bending
+    angle th (rad) starting at direction f = exp(i phi) by the series; returns False, leaving Q
+    untouched, when |th| > MOMENT_RADIUS or `nodes` is not a tabulated Gauss-Legendre rule (the
+    caller then sums over the nodes)."""
+    n = nodes.shape[0]
+    if abs(th) > MOMENT_RADIUS or n < 2 or n > N_RULES or nodes[0] != NODE0[n]:
+        return False
+    r0 = COEF[n, 0, 0]
+    r1 = COEF[n, 1, 0]
+    r2 = COEF[n, 2, 0]
+    r3 = COEF[n, 3, 0]
+    r4 = COEF[n, 4, 0]
+    r5 = COEF[n, 5, 0]
+    r6 = COEF[n, 6, 0]
+    r7 = COEF[n, 7, 0]
+    i0 = 0.0
+    i1 = 0.0
+    i2 = 0.0
+    i3 = 0.0
+    i4 = 0.0
+    i5 = 0.0
+    i6 = 0.0
+    i7 = 0.0
+    a = abs(th)
+    t = 1.0  # th^p
+    for p in range(1, P_MAX, 2):
+        t *= th  # odd power p: the imaginary parts
+        i0 += t * COEF[n, 0, p]
+        i1 += t * COEF[n, 1, p]
+        i2 += t * COEF[n, 2, p]
+        i3 += t * COEF[n, 3, p]
+        i4 += t * COEF[n, 4, p]
+        i5 += t * COEF[n, 5, p]
+        i6 += t * COEF[n, 6, p]
+        i7 += t * COEF[n, 7, p]
+        t *= th  # even power p + 1: the real parts
+        r0 += t * COEF[n, 0, p + 1]
+        r1 += t * COEF[n, 1, p + 1]
+        r2 += t * COEF[n, 2, p + 1]
+        r3 += t * COEF[n, 3, p + 1]
+        r4 += t * COEF[n, 4, p + 1]
+        r5 += t * COEF[n, 5, p + 1]
+        r6 += t * COEF[n, 6, p + 1]
+        r7 += t * COEF[n, 7, p + 1]
+        if abs(t) * a * CTAIL[p + 2] < TAIL:  # the terms from p + 2 on (|th| < 1.5 < p: they shrink)
+            break
+    Q[0, 0] = MU[n, 0]
+    Q[0, 1] = f * complex(r0, i0)
+    Q[0, 2] = f * complex(r1, i1)
+    Q[0, 3] = f * complex(r2, i2)
+    Q[1, 1] = complex(r3, i3)
+    Q[1, 2] = complex(r4, i4)
+    Q[1, 3] = complex(r5, i5)
+    Q[2, 2] = complex(r6, i6)
+    Q[2, 3] = complex(r7, i7)
+    return True
+
+
+KERNELS = ("section_moments",)
