@@ -18,7 +18,7 @@ real multiply-add per moment and power instead of `en_tuple` and nine complex pr
 
 Used where |Theta| <= MOMENT_RADIUS: there every term is below about 1.5 in size (no cancellation
 beyond rounding) and the series stops after at most P_MAX powers; elsewhere, and for nodes that are
-not `slave.gauss_legendre01(n)` with 2 <= n <= N_RULES, the caller sums over the nodes as before.
+not `gauss_legendre01(n)` with 2 <= n <= N_RULES, the caller sums over the nodes as before.
 """
 
 from __future__ import annotations
@@ -36,13 +36,18 @@ TAIL = 1e-20  # the series stops once |Theta|^p max_moment |coef_p| drops below 
 MOMENTS = ((-1, 0), (-1, 1), (-1, 2), (0, 0), (0, 1), (0, 2), (1, 1), (1, 2))
 
 
+def gauss_legendre01(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss-Legendre nodes and weights on [0, 1] (n points; also `controllers.slave.gauss_legendre01`)."""
+    x, w = np.polynomial.legendre.leggauss(n)
+    return 0.5 * (x + 1.0), 0.5 * w
+
+
 def _rules() -> tuple[np.ndarray, np.ndarray]:
     """NODE0[n]: the first node of the n-point rule on [0, 1]; MU[n, j] = sum_g w_g u_g^j."""
     node0 = np.full(N_RULES + 1, np.nan)
-    mu = np.zeros((N_RULES + 1, P_MAX + 8))  # j <= P_MAX + 2 + 1 + 2
+    mu = np.zeros((N_RULES + 1, P_MAX + 8))  # j = p + k + l + 2 <= (P_MAX + 2) + 3 + 2
     for n in range(2, N_RULES + 1):
-        x, w = np.polynomial.legendre.leggauss(n)
-        u, w = 0.5 * (x + 1.0), 0.5 * w  # exactly slave.gauss_legendre01(n)
+        u, w = gauss_legendre01(n)
         node0[n] = u[0]
         mu[n] = [float(np.sum(w * u**j)) for j in range(P_MAX + 8)]
     return node0, mu

@@ -34,19 +34,13 @@ from .cc import (
     tip_kinematics,
     y_of_q,
 )
-from .moments import section_moments
+from .moments import gauss_legendre01, section_moments
 from .params import SlaveParams
 from .scratch import scratch, scratch_c, scratch_cz, scratch_i, scratch_zeros
 
 # layout of SlaveParams.packed(): name -> offset (each 3 wide, gravity 2 wide)
 PACK = {"L0": 0, "m": 3, "Kb": 6, "Ke": 9, "cd": 12, "ck": 15, "Is": 18, "g": 21}
 PACK_SIZE = 23
-
-
-def gauss_legendre01(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss-Legendre nodes and weights on [0, 1]."""
-    x, w = np.polynomial.legendre.leggauss(n)
-    return 0.5 * (x + 1.0), 0.5 * w
 
 
 # ---------------------------------------------------------------------------------------------
@@ -300,7 +294,6 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
         Q[2, 1] = Q[1, 2].conjugate()
         # M_ab += m_s Re sum_kl Q_kl conj(V_ka) V_lb;  N_a += m_s Re sum_k conj(V_ka) (sum_m Q_km A_m)
         #                                                  - m_s Re(conj(g) sum_k V_ka Q_0k)
-        # (over the nonzero columns: a = ia for ia < na, 3 + ia - na after)
         for a in range(6):
             for ll in range(3):
                 z = 0.0j

@@ -168,17 +168,21 @@ def test_fused_mass_nle_equals_reference(slice_inertia):
     nodes, weights = slave_model.gauss_legendre01(p.n_quad)
     q, dq = _random_states(np.random.default_rng(3))
     for Kx in (kernels(True), kernels(False)):
-        for a in range(len(q)):
-            M, N = np.empty((6, 6)), np.empty(6)
-            Kx.mass_nle_kernel(pk, q[a], dq[a], nodes, weights, M, N)
-            Mr, dM, G = np.empty((6, 6)), np.empty((6, 6, 6)), np.empty(6)
-            Kx.dynamics_kernel(pk, q[a], nodes, weights, False, Mr, dM, G)
-            Nr = np.empty(6)
-            Kx.nle_kernel(pk, q[a], dq[a], nodes, weights, np.empty((6, 6)), np.empty((6, 6, 6)),
-                          np.empty((6, 6)), Nr)
-            np.testing.assert_allclose(M, Mr, rtol=1e-12, atol=1e-12 * np.abs(Mr).max())
-            np.testing.assert_allclose(N, Nr, rtol=1e-12, atol=1e-12 * np.abs(Nr).max())
+        _assert_mass_nle_matches_reference(Kx, pk, nodes, weights, q, dq)
 
+
+def _assert_mass_nle_matches_reference(Kx, pk, nodes, weights, q, dq):
+    """mass_nle_kernel's M2 and N2 = dynamics_kernel's M2 and nle_kernel's N2 (1e-12) at each row of q, dq."""
+    for a in range(len(q)):
+        M, N = np.empty((6, 6)), np.empty(6)
+        Kx.mass_nle_kernel(pk, q[a], dq[a], nodes, weights, M, N)
+        Mr, G = np.empty((6, 6)), np.empty(6)
+        Kx.dynamics_kernel(pk, q[a], nodes, weights, False, Mr, np.empty((6, 6, 6)), G)
+        Nr = np.empty(6)
+        Kx.nle_kernel(pk, q[a], dq[a], nodes, weights, np.empty((6, 6)), np.empty((6, 6, 6)),
+                      np.empty((6, 6)), Nr)
+        np.testing.assert_allclose(M, Mr, rtol=1e-12, atol=1e-12 * np.abs(Mr).max())
+        np.testing.assert_allclose(N, Nr, rtol=1e-12, atol=1e-12 * np.abs(Nr).max())
 
 
 def _node_sums(nodes, weights, th, f):
@@ -198,9 +202,9 @@ def _node_sums(nodes, weights, th, f):
 @pytest.mark.parametrize("n", [2, 3, 8, 17, 32])
 def test_section_moment_series_equal_the_node_sums(n):
     """controllers.moments: the power series in Theta give the quadrature's own sums (not the exact
-    integrals: with 2 and 3 points these differ by 2.3e-3 and 3.4e-5 at |Theta| = 1.5), to 1e-15 absolute over
-    |Theta| <= MOMENT_RADIUS, compiled and interpreted; outside the radius, and for nodes that are not a
-    tabulated rule, they decline (the kernel then sums node by node)."""
+    integrals: with 2 and 3 points these differ by 2.3e-3 and 3.4e-5 at |Theta| = 1.5), to 1e-15
+    absolute over |Theta| <= MOMENT_RADIUS, compiled and interpreted; outside the radius, and for nodes
+    that are not a tabulated rule, they decline (the kernel then sums node by node)."""
     from controllers import moments
     from harness.loop.fast import kernels
 
@@ -243,17 +247,8 @@ def test_fused_mass_nle_series_and_node_paths_agree(n_quad):
     th = np.concatenate([rng.uniform(-1.5, 1.5, (10, 3)), outside, rng.uniform(-3.0, 3.0, (10, 3))])
     q = np.column_stack([d, th / d])
     dq = rng.normal(size=(30, 6))
-    K1 = kernels(True)
-    for a in range(len(q)):
-        M, N = np.empty((6, 6)), np.empty(6)
-        K1.mass_nle_kernel(pk, q[a], dq[a], nodes, weights, M, N)
-        Mr, G = np.empty((6, 6)), np.empty(6)
-        K1.dynamics_kernel(pk, q[a], nodes, weights, False, Mr, np.empty((6, 6, 6)), G)
-        Nr = np.empty(6)
-        K1.nle_kernel(pk, q[a], dq[a], nodes, weights, np.empty((6, 6)), np.empty((6, 6, 6)),
-                      np.empty((6, 6)), Nr)
-        np.testing.assert_allclose(M, Mr, rtol=1e-12, atol=1e-12 * np.abs(Mr).max())
-        np.testing.assert_allclose(N, Nr, rtol=1e-12, atol=1e-12 * np.abs(Nr).max())
+    _assert_mass_nle_matches_reference(kernels(True), pk, nodes, weights, q, dq)
+
 
 def test_tip_kinematics_equals_generic_chain_rule():
     """tip_kinematics (order-1 path; sparse chain rule written out, mirrored upper triangle) = the
