@@ -28,8 +28,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scratch import scratch, scratch_cz
-
 IPOW = np.array([1.0 + 0.0j, 0.0 + 1.0j, -1.0 + 0.0j, 0.0 - 1.0j])  # i**n for n mod 4
 SERIES_RADIUS = 2.0  # |t| below which E_n uses the power series (24 terms: error < 1e-16)
 INV = 1.0 / np.arange(1.0, 33.0)  # INV[k] = 1 / (k + 1)
@@ -361,101 +359,6 @@ def point_y_derivs(s, u, d, th, order, ydot, c, Jy, Hy, Ty):
         phi += th[j]
 
 
-def tip_point_jacobian(q, order, x, J):
-    """Tip x (2,) and, if order >= 1, J (2, 6) (the order <= 1 path of tip_kinematics: the same
-    numbers, without the Hessian work arrays)."""
-    Jy = scratch_cz(6)
-    c = 0.0j
-    phi = 0.0
-    for j in range(3):
-        dj = q[j]
-        thj = q[3 + j] * dj
-        b0, b1, b2, b3 = term_bases(1.0, thj, complex(np.cos(phi), np.sin(phi)))
-        c += b0 * dj
-        if order >= 1:
-            term_grad_add(j, dj, b0, b1, Jy)
-        phi += thj
-    x[0] = c.imag
-    x[1] = c.real
-    if order < 1:
-        return
-    for i in range(3):
-        jd = Jy[i] + Jy[3 + i] * q[3 + i]
-        jk = Jy[3 + i] * q[i]
-        J[0, i] = jd.imag
-        J[1, i] = jd.real
-        J[0, 3 + i] = jk.imag
-        J[1, 3 + i] = jk.real
-
-
-def b_column(a, q, dq):
-    """Column a of B = dy/dq (y = [d, Theta], Theta_i = k_i d_i) as two (row, weight, rate) entries:
-    (r0, w0, v0, r1, w1, v1), rate = d(weight)/dt.  d_i (a = i < 3) enters y_i with 1 and Theta_i with
-    k_i; k_i (a = 3 + i) enters Theta_i with d_i (second entry weight 0)."""
-    if a < 3:
-        return a, 1.0, 0.0, 3 + a, q[3 + a], dq[3 + a]
-    return a, q[a - 3], dq[a - 3], a, 0.0, 0.0
-
-
-def tip_kinematics(q, dq, order, x, J, H, Hd):
-    """Tip of the 3-section arm and its q-derivatives, as real arrays in [X, Z] rows.
-
-    q, dq: (6,) [d (m), k (1/m)] and rates.  x (2,) m; J (2,6) = dx/dq; H (2,6,6) = d^2x/dq^2
-    (order >= 2); Hd (2,6,6) = dH/dt along dq (order >= 3).  J2dot = H . dq.
-    """
-    if order <= 1:
-        tip_point_jacobian(q, order, x, J)
-        return
-    d = scratch(3)
-    th = scratch(3)
-    ydot = scratch(6)
-    y_of_q(q, d, th, ydot, dq)
-    c = scratch_cz(1)
-    Jy = scratch_cz(6)
-    Hy = scratch_cz((6, 6))
-    Ty = scratch_cz((6, 6))
-    phi = 0.0
-    for j in range(3):
-        term_y_derivs(j, 1.0, d, th, phi, order, ydot, c, Jy, Hy, Ty)
-        phi += th[j]
-    x[0] = c[0].imag
-    x[1] = c[0].real
-    # Exact chain rule y -> q with the sparse B = dy/dq (see chain_nz / chain_to_q / chain_to_q_dot),
-    # written out: column a = d_i of B has rows (i: 1, 3+i: k_i), column a = k_i has (3+i: d_i), and
-    # dB/dt the rates of those weights.  H and dH/dt are symmetric: the upper triangle is formed and
-    # mirrored.
-    for a in range(6):
-        ra0, wa0, va0, ra1, wa1, va1 = b_column(a, q, dq)
-        ja = Jy[ra0] * wa0 + Jy[ra1] * wa1
-        J[0, a] = ja.imag
-        J[1, a] = ja.real
-        for b in range(a, 6):
-            rb0, wb0, vb0, rb1, wb1, vb1 = b_column(b, q, dq)
-            h = (Hy[ra0, rb0] * (wa0 * wb0) + Hy[ra0, rb1] * (wa0 * wb1)
-                 + Hy[ra1, rb0] * (wa1 * wb0) + Hy[ra1, rb1] * (wa1 * wb1))
-            if b == a + 3 and a < 3:  # d^2 Theta_i / (dd_i dk_i) = 1
-                h += Jy[3 + a]
-            H[0, a, b] = h.imag
-            H[1, a, b] = h.real
-            H[0, b, a] = h.imag
-            H[1, b, a] = h.real
-            if order < 3:
-                continue
-            hd = (Ty[ra0, rb0] * (wa0 * wb0) + Ty[ra0, rb1] * (wa0 * wb1)
-                  + Ty[ra1, rb0] * (wa1 * wb0) + Ty[ra1, rb1] * (wa1 * wb1)
-                  + Hy[ra0, rb0] * (va0 * wb0 + wa0 * vb0) + Hy[ra0, rb1] * (va0 * wb1 + wa0 * vb1)
-                  + Hy[ra1, rb0] * (va1 * wb0 + wa1 * vb0) + Hy[ra1, rb1] * (va1 * wb1 + wa1 * vb1))
-            if b == a + 3 and a < 3:  # + (Hy ydot)[Theta_i]
-                jd = 0.0j
-                for w in range(6):
-                    jd += Hy[3 + a, w] * ydot[w]
-                hd += jd
-            Hd[0, a, b] = hd.imag
-            Hd[1, a, b] = hd.real
-            Hd[0, b, a] = hd.imag
-            Hd[1, b, a] = hd.real
-
-
 def backbone_points(q, n_per_section, out):
     """Backbone points [X, Z] at n_per_section + 1 evenly spaced material points per section
     (shared section ends counted once): out (3 n + 1, 2), m."""
@@ -494,6 +397,5 @@ def gram_terms(J, Jd, out):
 KERNELS = (
     "gram_terms", "en_tuple", "en_values", "ipow_mul", "term_bases", "tval", "ty_acc", "term_grad_add",
     "term_ydd", "vtype", "term_mono", "term_table", "term_y_derivs", "chain_nz", "y_of_q", "chain_to_q",
-    "chain_to_q_dot", "point_y_derivs", "tip_point_jacobian", "tip_kinematics", "backbone_points",
-    "add_role_blocks", "b_column",
+    "chain_to_q_dot", "point_y_derivs", "backbone_points", "add_role_blocks",
 )

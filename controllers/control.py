@@ -20,13 +20,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cc import gram_terms, tip_kinematics
+from .cc import gram_terms
 from .master import master_kernel
 from .master import packed as master_packed
 from .params import Gains, MasterParams, SlaveParams, SubtaskSpec
 from .scratch import scratch, scratch_zeros
 from .slave import gauss_legendre01, mass_nle_kernel
 from .subtasks import pack_subtask, subtask_kernel
+from .tip import tip_kinematics
 
 # layout of the master info vector
 MI_X1, MI_E1, MI_DE1, MI_A1, MI_DX1 = 0, 2, 4, 6, 8

@@ -50,7 +50,7 @@ from typing import Any
 
 import numpy as np
 
-from . import cc, control, master, slave, subtasks
+from . import control, master, slave, subtasks, tip
 from .params import Gains, MasterParams, SlaveParams, SubtaskSpec
 
 
@@ -115,7 +115,7 @@ class NominalModels:
                  kernels: Any = None) -> None:
         if kernels is None:
             kernels = types.SimpleNamespace(master_kernel=master.master_kernel,
-                                            tip_kinematics=cc.tip_kinematics,
+                                            tip_kinematics=tip.tip_kinematics,
                                             mass_nle_kernel=slave.mass_nle_kernel,
                                             pinv_terms=control.pinv_terms)
         self._k = kernels

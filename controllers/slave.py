@@ -31,12 +31,12 @@ from .cc import (
     term_bases,
     term_grad_add,
     term_ydd,
-    tip_kinematics,
     y_of_q,
 )
 from .moments import gauss_legendre01, section_moments
 from .params import SlaveParams
 from .scratch import scratch, scratch_c, scratch_cz, scratch_i, scratch_zeros
+from .tip import tip_kinematics
 
 # layout of SlaveParams.packed(): name -> offset (each 3 wide, gravity 2 wide)
 PACK = {"L0": 0, "m": 3, "Kb": 6, "Ke": 9, "cd": 12, "ck": 15, "Is": 18, "g": 21}

@@ -24,9 +24,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cc import gram_terms, tip_kinematics
+from .cc import gram_terms
 from .params import SlaveParams, SubtaskSpec
 from .scratch import scratch
+from .tip import tip_kinematics
 
 SPEC_SIZE = 8
 

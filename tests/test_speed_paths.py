@@ -251,11 +251,18 @@ def test_fused_mass_nle_series_and_node_paths_agree(n_quad):
 
 
 def test_tip_kinematics_equals_generic_chain_rule():
-    """tip_kinematics (order-1 path; sparse chain rule written out, mirrored upper triangle) = the
-    generic point_y_derivs + chain_to_q + chain_to_q_dot path."""
-    from controllers import cc
+    """tip_kinematics (controllers.tip: closed forms by the tails, chain rule per pair of sections),
+    compiled and interpreted, = the generic role-by-role path point_y_derivs + chain_to_q + chain_to_q_dot,
+    on random states, straight sections (k = 0), nearly straight ones and |k d| past E_n's series radius."""
+    from controllers import cc, tip
 
     q, dq = _random_states(np.random.default_rng(4))
+    rng = np.random.default_rng(41)
+    d = rng.uniform(0.2, 0.5, (24, 3))
+    k = rng.uniform(-12.0, 12.0, (24, 3)) * rng.choice([0.0, 1e-9, 0.01, 1.0], (24, 3))
+    q = np.concatenate([q, np.column_stack([d, k])])
+    dq = np.concatenate([dq, rng.normal(size=(24, 6))])
+    assert np.abs(q[:, 3:] * q[:, :3]).max() > cc.SERIES_RADIUS and (q[:, 3:] == 0.0).any()
     for a in range(len(q)):
         d, th, ydot = np.empty(3), np.empty(3), np.empty(6)
         cc.y_of_q(q[a], d, th, ydot, dq[a])
@@ -267,18 +274,19 @@ def test_tip_kinematics_equals_generic_chain_rule():
         Jq, Hq, Hqd = np.empty(6, complex), np.empty((6, 6), complex), np.empty((6, 6), complex)
         cc.chain_to_q(3, Jy, Hy, Ty, nzu, nzb, nzbd, Jq, Hq, Hqd)
         cc.chain_to_q_dot(Jy, Hy, Ty, ydot, nzu, nzb, nzbd, Hqd)
-        for order in (0, 1, 2, 3):
-            x, J, H, Hd = np.zeros(2), np.zeros((2, 6)), np.zeros((2, 6, 6)), np.zeros((2, 6, 6))
-            K.tip_kinematics(q[a], dq[a], order, x, J, H, Hd)
-            np.testing.assert_allclose(x, [c[0].imag, c[0].real], rtol=1e-14, atol=1e-15)
-            if order >= 1:
-                np.testing.assert_allclose(J, np.stack([Jq.imag, Jq.real]), rtol=1e-13, atol=1e-14)
-            if order >= 2:
-                ref = np.stack([Hq.imag, Hq.real])
-                np.testing.assert_allclose(H, ref, rtol=1e-12, atol=1e-13 * np.abs(ref).max())
-            if order >= 3:
-                ref = np.stack([Hqd.imag, Hqd.real])
-                np.testing.assert_allclose(Hd, ref, rtol=1e-12, atol=1e-13 * np.abs(ref).max())
+        for fn in (K.tip_kinematics, tip.tip_kinematics):
+            for order in (0, 1, 2, 3):
+                x, J, H, Hd = np.zeros(2), np.zeros((2, 6)), np.zeros((2, 6, 6)), np.zeros((2, 6, 6))
+                fn(q[a], dq[a], order, x, J, H, Hd)
+                np.testing.assert_allclose(x, [c[0].imag, c[0].real], rtol=1e-14, atol=1e-15)
+                if order >= 1:
+                    np.testing.assert_allclose(J, np.stack([Jq.imag, Jq.real]), rtol=1e-13, atol=1e-14)
+                if order >= 2:
+                    ref = np.stack([Hq.imag, Hq.real])
+                    np.testing.assert_allclose(H, ref, rtol=1e-12, atol=1e-13 * np.abs(ref).max())
+                if order >= 3:
+                    ref = np.stack([Hqd.imag, Hqd.real])
+                    np.testing.assert_allclose(Hd, ref, rtol=1e-12, atol=1e-13 * np.abs(ref).max())
 
 
 def test_en_tuple_equals_complex_series():

@@ -31,9 +31,9 @@ import types
 from functools import cache
 from pathlib import Path
 
-from controllers import cc, control, master, moments, slave, subtasks
+from controllers import cc, control, master, moments, slave, subtasks, tip
 
-MODULES = [cc, moments, slave, master, subtasks, control]
+MODULES = [cc, tip, moments, slave, master, subtasks, control]
 
 
 def _extra_modules():

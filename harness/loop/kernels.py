@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from controllers.cc import tip_kinematics
 from controllers.control import (
     DET_MIN,
     MASTER_INFO,
@@ -34,6 +33,7 @@ from controllers.control import (
 from controllers.master import master_kernel
 from controllers.scratch import scratch, scratch_zeros
 from controllers.subtasks import limits_kernel
+from controllers.tip import tip_kinematics
 from harness.plant.analytic import plant_accel
 
 # record row layout (must match harness.loop.trajectory.ROW_FIELDS)

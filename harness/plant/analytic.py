@@ -10,11 +10,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.cc import tip_kinematics
 from controllers.master import master_kernel
 from controllers.params import MasterParams, SlaveParams
 from controllers.scratch import scratch
 from controllers.slave import mass_nle_kernel
+from controllers.tip import tip_kinematics
 
 
 def cholesky_solve(A, b, out, L, y):
