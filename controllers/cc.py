@@ -142,18 +142,6 @@ def tval(npre, nd, nt, dj, b0, b1, b2, b3):
     return v
 
 
-def vtype(j, v):
-    """Role of intermediate variable y_v in term T_j: 0 none, 1 earlier angle, 2 d_j, 3 Theta_j."""
-    if v < 3:
-        return 2 if v == j else 0
-    s = v - 3
-    if s < j:
-        return 1
-    if s == j:
-        return 3
-    return 0
-
-
 def term_mono(fj, npre, nd, nt, u, dj, E):
     """Derivative of T_j(u) = f_j u d_j E_0(u Theta_j) taken npre times in earlier angles, nd times
     in d_j and nt times in Theta_j (E = E_n(u Theta_j), n = 0..3)."""
@@ -163,19 +151,6 @@ def term_mono(fj, npre, nd, nt, u, dj, E):
     if nd == 0:
         val = val * dj
     return val
-
-
-def term_table(fj, u, dj, E, tab):
-    """tab[npre, nd, nt] = term_mono(fj, npre, nd, nt, u, dj, E) for npre, nt in 0..3, nd in 0..1
-    (derivatives of order > 3 are never used)."""
-    up = 1.0
-    for nt in range(4):
-        up = up * u  # u^(1+nt)
-        base = up * E[nt]
-        for npre in range(4 - nt):
-            v = fj * IPOW[(npre + nt) % 4] * base
-            tab[npre, 0, nt] = v * dj
-            tab[npre, 1, nt] = v
 
 
 def ty_acc(j, npre, nd, nt, ydot, dj, b0, b1, b2, b3):
@@ -396,6 +371,6 @@ def gram_terms(J, Jd, out):
 
 KERNELS = (
     "gram_terms", "en_tuple", "en_values", "ipow_mul", "term_bases", "tval", "ty_acc", "term_grad_add",
-    "term_ydd", "vtype", "term_mono", "term_table", "term_y_derivs", "chain_nz", "y_of_q", "chain_to_q",
+    "term_ydd", "term_mono", "term_y_derivs", "chain_nz", "y_of_q", "chain_to_q",
     "chain_to_q_dot", "point_y_derivs", "backbone_points", "add_role_blocks",
 )

@@ -254,16 +254,13 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
             A[2] += Y[2, 3 + i] * cen[i]
         # weighted moments over the Gauss-Legendre points of the section: by their power series in
         # Theta_s (controllers.moments, the same sums) where it applies, else node by node
-        series = section_moments(th[s], fs[s], nodes, Q)
-        if not series:
+        if not section_moments(th[s], fs[s], nodes, Q):
             for k in range(3):
                 for m in range(4):
                     Q[k, m] = 0.0
-        for g in range(nodes.shape[0] if (not series or Is != 0.0) else 0):
-            u = nodes[g]
-            w = weights[g]
-            if not series:
-                b0, b1, b2, b3 = term_bases(u, th[s], fs[s])
+            for g in range(nodes.shape[0]):
+                w = weights[g]
+                b0, b1, b2, b3 = term_bases(nodes[g], th[s], fs[s])
                 wb0 = w * b0.conjugate()
                 wb1 = w * b1.conjugate()
                 Q[0, 0] += w
@@ -275,7 +272,9 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
                 Q[1, 3] += wb0 * b2
                 Q[2, 2] += wb1 * b1
                 Q[2, 3] += wb1 * b2
-            if Is != 0.0:
+        if Is != 0.0:  # slice rotation: sum_g Is w_g alpha alpha^T, alpha = d theta/dq at u_g
+            for g in range(nodes.shape[0]):
+                u = nodes[g]
                 thdd = 0.0  # d^2 theta/dt^2 at ddq = 0
                 for a in range(6):
                     alpha[a] = 0.0
@@ -284,7 +283,7 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
                     alpha[ll] = f * q[3 + ll]
                     alpha[3 + ll] = f * q[ll]
                     thdd += f * 2.0 * dq[3 + ll] * dq[ll]
-                iw = Is * w
+                iw = Is * weights[g]
                 for a in range(6):
                     N[a] += iw * alpha[a] * thdd
                     for b in range(6):

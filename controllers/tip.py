@@ -17,7 +17,7 @@ numpy only, numba-compatible subset, no allocation of returned arrays (`harness.
 from __future__ import annotations
 
 from .cc import en_tuple
-from .scratch import scratch, scratch_c
+from .scratch import scratch_c
 
 
 def tip_bases(q, b, R):
@@ -119,14 +119,13 @@ def tip_kinematics(q, dq, order, x, J, H, Hd):
         Gd = scratch_c(3)
         YdT = scratch_c((3, 3))
         YTT = scratch_c((3, 3))
-        thd = scratch(3)
         phid = 0.0
         for j in range(3):
-            thd[j] = q[3 + j] * dq[j] + q[j] * dq[3 + j]
+            thd = q[3 + j] * dq[j] + q[j] * dq[3 + j]  # dTheta_j/dt
             for n in range(3):
-                v = phid * b[j, n] + thd[j] * b[j, n + 1]
+                v = phid * b[j, n] + thd * b[j, n + 1]
                 bd[j, n] = complex(-v.imag, v.real)
-            phid += thd[j]
+            phid += thd
         Rd[3] = 0.0
         for j in range(2, -1, -1):
             Rd[j] = Rd[j + 1] + dq[j] * b[j, 0] + q[j] * bd[j, 0]
