@@ -14,13 +14,13 @@ with phi_{j-1} = sum_{l<j} Theta_l and E_n(t) = int_0^1 v^n exp(i t v) dv, an en
 stable upward recursion E_n = (e^{it} - n E_{n-1}) / (i t) elsewhere, so every quantity and every
 derivative is finite and smooth across k = 0 (no sin(kd)/k).
 
-Derivatives are first taken in the intermediate variables y = [d_0, d_1, d_2, Theta_0, Theta_1,
-Theta_2], where they follow one closed-form rule (``term_mono``): d^n/dTheta^n E_0(t) = i^n E_n(t),
-and derivatives of exp(i phi_{j-1}) in any earlier Theta give a factor i.  The chain rule to
-q = [d, k] (Theta = k d) is then exact: B = dy/dq is sparse and d^2 Theta_j/(dd_j dk_j) = 1.
+The per-section bases b_n = f u^(1+n) E_n(u Theta) (`term_bases`) carry every derivative of a point in
+y = [d_0, d_1, d_2, Theta_0, Theta_1, Theta_2] (d^n/dTheta^n E_0(t) = i^n E_n(t)); the slave dynamics
+(`controllers.slave`) and the tip (`controllers.tip`) are built on them.  `backbone_points` is the one CC
+backbone of the project (controllers, plants and outputs).
 
 All functions in this module are written in the numba-compatible subset of numpy (loops, no
-Python objects): `harness.fast` compiles them unchanged.  They allocate nothing they return;
+Python objects): `harness.loop.fast` compiles them unchanged.  They allocate nothing they return;
 callers pass output arrays.
 """
 
@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import numpy as np
 
-IPOW = np.array([1.0 + 0.0j, 0.0 + 1.0j, -1.0 + 0.0j, 0.0 - 1.0j])  # i**n for n mod 4
 SERIES_RADIUS = 2.0  # |t| below which E_n uses the power series (24 terms: error < 1e-16)
 INV = 1.0 / np.arange(1.0, 33.0)  # INV[k] = 1 / (k + 1)
 
@@ -92,27 +91,6 @@ def en_tuple(t):
     return complex(r0, i0), complex(r1, i1), complex(r2, i2), complex(r3, i3)
 
 
-def en_values(t, out):
-    """E_n(t) = int_0^1 v^n exp(i t v) dv for n = 0..3 into out, complex (4,)."""
-    e0, e1, e2, e3 = en_tuple(t)
-    out[0] = e0
-    out[1] = e1
-    out[2] = e2
-    out[3] = e3
-
-
-def ipow_mul(k, z):
-    """i^k z (exact: a swap and signs)."""
-    k = k & 3
-    if k == 0:
-        return z
-    if k == 1:
-        return complex(-z.imag, z.real)
-    if k == 2:
-        return complex(-z.real, -z.imag)
-    return complex(z.imag, -z.real)
-
-
 def term_bases(u, thj, f):
     """b_n = f u^(1+n) E_n(u Theta_j), n = 0..3, f = exp(i phi_prev) (phi_prev: angle at the start of
     section j): every derivative of T_j(u) is i^(npre+nt) b_nt, times d_j if it is not
@@ -122,49 +100,6 @@ def term_bases(u, thj, f):
     u3 = u2 * u
     u4 = u3 * u
     return f * (u * e0), f * (u2 * e1), f * (u3 * e2), f * (u4 * e3)
-
-
-def tval(npre, nd, nt, dj, b0, b1, b2, b3):
-    """term_mono(npre, nd, nt) from the bases b_n of term_bases (0 for nd >= 2)."""
-    if nd >= 2:
-        return 0.0j
-    if nt == 0:
-        b = b0
-    elif nt == 1:
-        b = b1
-    elif nt == 2:
-        b = b2
-    else:
-        b = b3
-    v = ipow_mul(npre + nt, b)
-    if nd == 0:
-        v = v * dj
-    return v
-
-
-def term_mono(fj, npre, nd, nt, u, dj, E):
-    """Derivative of T_j(u) = f_j u d_j E_0(u Theta_j) taken npre times in earlier angles, nd times
-    in d_j and nt times in Theta_j (E = E_n(u Theta_j), n = 0..3)."""
-    if nd >= 2:
-        return 0.0j
-    val = fj * IPOW[(npre + nt) % 4] * u ** (1 + nt) * E[nt]
-    if nd == 0:
-        val = val * dj
-    return val
-
-
-def ty_acc(j, npre, nd, nt, ydot, dj, b0, b1, b2, b3):
-    """sum_w ydot_w term_mono(derivative (npre, nd, nt) of T_j, once more in y_w), w in order."""
-    acc = 0.0j
-    if nd == 0 and ydot[j] != 0.0:
-        acc += ydot[j] * tval(npre, 1, nt, dj, b0, b1, b2, b3)
-    tp = tval(npre + 1, nd, nt, dj, b0, b1, b2, b3)
-    for ll in range(j):
-        if ydot[3 + ll] != 0.0:
-            acc += ydot[3 + ll] * tp
-    if ydot[3 + j] != 0.0:
-        acc += ydot[3 + j] * tval(npre, nd, nt + 1, dj, b0, b1, b2, b3)
-    return acc
 
 
 def term_grad_add(j, dj, b0, b1, Jy):
@@ -190,77 +125,6 @@ def term_ydd(j, dj, ydot, b0, b1, b2):
         - (W * W * dj) * b2
 
 
-def term_y_derivs(j, u, d, th, phi_prev, order, ydot, c, Jy, Hy, Ty):
-    """Accumulate T_j(u) and its y-derivatives into c (1,), Jy (6,), Hy (6,6), Ty (6,6) (complex).
-
-    order 0: value; 1: + gradient; 2: + Hessian; 3: + third derivative contracted with ydot (6,).
-    phi_prev: angle at the start of section j (sum of earlier Theta).  Every derivative is
-    term_mono(npre, nd, nt) (see there): the variables of T_j play three roles, earlier angles
-    y[3 + l], l < j (npre), d_j (nd) and Theta_j (nt), so each block of Hy and Ty is one value.
-    """
-    b0, b1, b2, b3 = term_bases(u, th[j], complex(np.cos(phi_prev), np.sin(phi_prev)))
-    dj = d[j]
-    c[0] += b0 * dj
-    if order < 1:
-        return
-    # gradient: earlier angles (1,0,0), d_j (0,1,0), Theta_j (0,0,1)
-    v = tval(1, 0, 0, dj, b0, b1, b2, b3)
-    for ll in range(j):
-        Jy[3 + ll] += v
-    Jy[j] += tval(0, 1, 0, dj, b0, b1, b2, b3)
-    Jy[3 + j] += tval(0, 0, 1, dj, b0, b1, b2, b3)
-    if order < 2:
-        return
-    b = (b0, b1, b2, b3)
-    add_role_blocks(j, tval(2, 0, 0, dj, *b), tval(1, 1, 0, dj, *b), tval(1, 0, 1, dj, *b),
-                    tval(0, 1, 1, dj, *b), tval(0, 0, 2, dj, *b), Hy)
-    if order < 3:
-        return
-    # Ty = sum_w ydot_w d^3 T / dy_a dy_b dy_w: one more derivative in one of the roles
-    add_role_blocks(j, ty_acc(j, 2, 0, 0, ydot, dj, *b), ty_acc(j, 1, 1, 0, ydot, dj, *b),
-                    ty_acc(j, 1, 0, 1, ydot, dj, *b), ty_acc(j, 0, 1, 1, ydot, dj, *b),
-                    ty_acc(j, 0, 0, 2, ydot, dj, *b), Ty)
-
-
-def add_role_blocks(j, v200, v110, v101, v011, v002, X):
-    """Add a symmetric second-derivative pattern of T_j to X (6,6) complex: v_(npre, nd, nt) is the
-    value for npre derivatives in the earlier angles y[3 + l] (l < j), nd in d_j (= y[j]) and nt in
-    Theta_j (= y[3 + j]); every pair of variables gets the value of its roles."""
-    dd = j
-    tt = 3 + j
-    for la in range(j):
-        a = 3 + la
-        for lb in range(j):
-            X[a, 3 + lb] += v200
-        X[a, dd] += v110
-        X[dd, a] += v110
-        X[a, tt] += v101
-        X[tt, a] += v101
-    X[dd, tt] += v011
-    X[tt, dd] += v011
-    X[tt, tt] += v002
-
-
-def chain_nz(q, dq, nzu, nzb, nzbd):
-    """Sparse B = dy/dq and its time derivative: column a of B has entries nzb[a, r] at rows
-    nzu[a, r] (r = 0, 1); nzbd holds the matching entries of dB/dt."""
-    for i in range(3):
-        # column d_i: y[d_i] = d_i (1), y[Theta_i] = k_i d_i (k_i)
-        nzu[i, 0] = i
-        nzb[i, 0] = 1.0
-        nzbd[i, 0] = 0.0
-        nzu[i, 1] = 3 + i
-        nzb[i, 1] = q[3 + i]
-        nzbd[i, 1] = dq[3 + i]
-        # column k_i: y[Theta_i] (d_i); second slot unused
-        nzu[3 + i, 0] = 3 + i
-        nzb[3 + i, 0] = q[i]
-        nzbd[3 + i, 0] = dq[i]
-        nzu[3 + i, 1] = 3 + i
-        nzb[3 + i, 1] = 0.0
-        nzbd[3 + i, 1] = 0.0
-
-
 def y_of_q(q, d, th, ydot, dq):
     """Split q = [d, k] into d (3,), Theta (3,) and ydot = dy/dt (6,) (dq may be zeros)."""
     for i in range(3):
@@ -268,70 +132,6 @@ def y_of_q(q, d, th, ydot, dq):
         th[i] = q[3 + i] * q[i]
         ydot[i] = dq[i]
         ydot[3 + i] = q[3 + i] * dq[i] + q[i] * dq[3 + i]
-
-
-def chain_to_q(order, Jy, Hy, Ty, nzu, nzb, nzbd, Jq, Hq, Hqd):
-    """Exact chain rule y -> q.  Jq (6,), Hq (6,6) = d^2 c/dq^2, Hqd (6,6) = d/dt Hq (complex).
-
-    Jq = B^T Jy;  Hq = B^T Hy B + sum_i Jy[Theta_i] (E_{d_i k_i} + E_{k_i d_i});
-    Hqd = dB^T Hy B + B^T Hy dB + B^T Ty B + sum_i (Hy ydot)[Theta_i] (E_{d_i k_i} + E_{k_i d_i}),
-    where Ty = sum_w d^3c/dy dy dy_w ydot_w and ydot = B dq.  (Needs ydot only through Ty.)
-    """
-    for a in range(6):
-        acc = 0.0j
-        for r in range(2):
-            acc += Jy[nzu[a, r]] * nzb[a, r]
-        Jq[a] = acc
-    if order < 2:
-        return
-    for a in range(6):
-        for b in range(6):
-            acc = 0.0j
-            for r in range(2):
-                ua = nzu[a, r]
-                ba = nzb[a, r]
-                if ba == 0.0:
-                    continue
-                for s in range(2):
-                    acc += Hy[ua, nzu[b, s]] * ba * nzb[b, s]
-            Hq[a, b] = acc
-    for i in range(3):
-        Hq[i, 3 + i] += Jy[3 + i]
-        Hq[3 + i, i] += Jy[3 + i]
-
-
-def chain_to_q_dot(Jy, Hy, Ty, ydot, nzu, nzb, nzbd, Hqd):
-    """Hqd = d/dt (d^2 c / dq^2) along the motion (see chain_to_q)."""
-    for a in range(6):
-        for b in range(6):
-            acc = 0.0j
-            for r in range(2):
-                ua = nzu[a, r]
-                for s in range(2):
-                    ub = nzu[b, s]
-                    acc += Ty[ua, ub] * nzb[a, r] * nzb[b, s]
-                    acc += Hy[ua, ub] * (nzbd[a, r] * nzb[b, s] + nzb[a, r] * nzbd[b, s])
-            Hqd[a, b] = acc
-    for i in range(3):
-        jd = 0.0j
-        for w in range(6):
-            jd += Hy[3 + i, w] * ydot[w]
-        Hqd[i, 3 + i] += jd
-        Hqd[3 + i, i] += jd
-
-
-def point_y_derivs(s, u, d, th, order, ydot, c, Jy, Hy, Ty):
-    """Point at material coordinate u of section s: value and y-derivatives (zeroes outputs)."""
-    c[0] = 0.0
-    for a in range(6):
-        Jy[a] = 0.0
-        for b in range(6):
-            Hy[a, b] = 0.0
-            Ty[a, b] = 0.0
-    phi = 0.0
-    for j in range(s + 1):
-        term_y_derivs(j, 1.0 if j < s else u, d, th, phi, order, ydot, c, Jy, Hy, Ty)
-        phi += th[j]
 
 
 def backbone_points(q, n_per_section, out):
@@ -369,8 +169,4 @@ def gram_terms(J, Jd, out):
         out[5] += 2.0 * Jd[1, a] * J[1, a]
 
 
-KERNELS = (
-    "gram_terms", "en_tuple", "en_values", "ipow_mul", "term_bases", "tval", "ty_acc", "term_grad_add",
-    "term_ydd", "term_mono", "term_y_derivs", "chain_nz", "y_of_q", "chain_to_q",
-    "chain_to_q_dot", "point_y_derivs", "backbone_points", "add_role_blocks",
-)
+KERNELS = ("gram_terms", "en_tuple", "term_bases", "term_grad_add", "term_ydd", "y_of_q", "backbone_points")

@@ -260,20 +260,3 @@ def slave_control(p: SlaveParams, gains: Gains, spec: SubtaskSpec, q2, dq2, x1, 
         raise FloatingPointError(f"slave J2 J2^T is singular (det = {det:.3e})")
     return {"T2": T2, "u2": u2, "deN": deN, "x2": info[0:2], "e2": info[2:4], "de2": info[4:6],
             "beta": info[SI_BETA], "ya": info[SI_YA], "det": det, "beta_limits": info[SI_BL]}
-
-
-def null_space_quantities(p: SlaveParams, q2, dq2, g, dg):
-    """(J2^+ (6,2), dJ2^+/dt (6,2), P = I - J2^+ J2 (6,6), J_phi (6,6) of (26), de_N (6,) of (23)) at
-    (q2, dq2) for a given g (6,); dg is accepted for symmetry with (27) and unused.  Reference for
-    tests (numpy, allocating)."""
-    q2 = np.ascontiguousarray(q2, dtype=float)
-    dq2 = np.ascontiguousarray(dq2, dtype=float)
-    x, J, H, Hd = np.empty(2), np.empty((2, 6)), np.empty((2, 6, 6)), np.empty((2, 6, 6))
-    tip_kinematics(q2, dq2, 2, x, J, H, Hd)
-    Jd = np.einsum("iab,b->ia", H, dq2)
-    Jp, Jpd = np.zeros((6, 2)), np.zeros((6, 2))
-    pinv_terms(J, Jd, Jp, Jpd)
-    P = np.eye(6) - Jp @ J
-    Jphi = Jpd @ J + Jp @ Jd @ Jp @ J
-    deN = P @ (np.asarray(g) - dq2)
-    return Jp, Jpd, P, Jphi, deN

@@ -98,14 +98,6 @@ def gravity_force(p: MasterParams, q) -> np.ndarray:
     return _eval(p, q)[4]
 
 
-def elbow_points(p: MasterParams, q) -> np.ndarray:
-    """Base, elbow, tip [X, Z] (3, 2) for drawing."""
-    q = np.asarray(q, dtype=float)
-    l1, l2 = p.lengths
-    e = np.array([l1 * np.sin(q[0]), l1 * np.cos(q[0])])
-    return np.array([[0.0, 0.0], e, fk(p, q)])
-
-
 def ik(p: MasterParams, x, elbow: int = -1) -> np.ndarray:
     """Joint angles reaching x = [X, Z] (2,); elbow = sign of q_b.  Raises ValueError if unreachable."""
     X, Z = float(x[0]), float(x[1])

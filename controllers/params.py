@@ -40,6 +40,23 @@ def _check_positive(owner: str, name: str, values, allow_zero: bool = False) -> 
         raise ParameterError(f"{owner}.{name} = {values!r}: every entry must be finite and {rng}")
 
 
+def _packed(name: str, default: tuple):
+    """A dataclass field that enters the packed parameter vector of the kernels under `name`."""
+    return field(default=default, metadata={"pack": name, "size": len(default)})
+
+
+def _pack_layout(cls) -> tuple[tuple[str, ...], dict[str, int], int]:
+    """(field names, pack name -> offset, size) of the fields declared with `_packed`, in declaration
+    order."""
+    names, offsets, off = [], {}, 0
+    for f in fields(cls):
+        if "pack" in f.metadata:
+            names.append(f.name)
+            offsets[f.metadata["pack"]] = off
+            off += f.metadata["size"]
+    return tuple(names), offsets, off
+
+
 @dataclass(frozen=True)
 class MasterParams:
     """Planar 2-link revolute master in the x-z plane (paper Sec. II-C, VI).
@@ -86,16 +103,17 @@ class SlaveParams:
     1/2 Ke_i (d_i - L0_i)^2, plus optional viscous damping on q2 rates.
     """
 
-    rest_lengths: tuple[float, float, float] = (0.30, 0.30, 0.30)  # L0, m
-    masses: tuple[float, float, float] = (1.0, 0.7, 0.4)  # kg, base to tip
-    bending_stiffness: tuple[float, float, float] = (8.0, 3.0, 1.0)  # Kb, N m^2
-    extension_stiffness: tuple[float, float, float] = (1000.0, 700.0, 400.0)  # Ke, N/m
+    # fields with a `pack` name enter the kernels' packed vector (`packed`, layout SLAVE_PACK), in this order
+    rest_lengths: tuple[float, float, float] = _packed("L0", (0.30, 0.30, 0.30))  # L0, m
+    masses: tuple[float, float, float] = _packed("m", (1.0, 0.7, 0.4))  # kg, base to tip
+    bending_stiffness: tuple[float, float, float] = _packed("Kb", (8.0, 3.0, 1.0))  # Kb, N m^2
+    extension_stiffness: tuple[float, float, float] = _packed("Ke", (1000.0, 700.0, 400.0))  # Ke, N/m
     # viscous damping on [d-rates (N s/m), k-rates (N m^2 s)], optional
-    extension_damping: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    bending_damping: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    extension_damping: tuple[float, float, float] = _packed("cd", (0.0, 0.0, 0.0))
+    bending_damping: tuple[float, float, float] = _packed("ck", (0.0, 0.0, 0.0))
     # rotational inertia of the cross-section slices per unit material coordinate, kg m^2 (optional)
-    slice_inertia: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    gravity: tuple[float, float] = (0.0, -GRAVITY)  # gravity vector in (X, Z), m/s^2
+    slice_inertia: tuple[float, float, float] = _packed("Is", (0.0, 0.0, 0.0))
+    gravity: tuple[float, float] = _packed("g", (0.0, -GRAVITY))  # gravity vector in (X, Z), m/s^2
     max_extension: float = 1.5  # section length range [L0, max_extension * L0]
     max_bend: float = float(np.pi / 2)  # |k_i d_i| <= max_bend, rad
     n_quad: int = 8  # Gauss-Legendre points per section for the energy integrals
@@ -130,19 +148,15 @@ class SlaveParams:
         L0 = np.asarray(self.rest_lengths)
         return L0.copy(), self.max_extension * L0
 
-    def in_range(self, q2: np.ndarray, tol: float = 0.0) -> bool:
-        lo, hi = self.length_range
-        d, k = np.asarray(q2[:3]), np.asarray(q2[3:])
-        return bool(np.all(d >= lo - tol) and np.all(d <= hi + tol)
-                    and np.all(np.abs(k * d) <= self.max_bend + tol))
-
     # --- packed arrays for the compiled kernels ------------------------------------------------
     def packed(self) -> np.ndarray:
-        """All parameters as one float64 vector (layout in `controllers.slave.PACK`)."""
-        return np.concatenate([
-            self.rest_lengths, self.masses, self.bending_stiffness, self.extension_stiffness,
-            self.extension_damping, self.bending_damping, self.slice_inertia, self.gravity,
-        ]).astype(np.float64)
+        """The fields declared with a pack name, concatenated in declaration order: float64
+        (SLAVE_PACK_SIZE,), entry SLAVE_PACK[name] + i = component i of that field."""
+        return np.concatenate([getattr(self, f) for f in _PACK_FIELDS]).astype(np.float64)
+
+
+# the packed layout of SlaveParams, generated from its field declarations: name -> offset
+_PACK_FIELDS, SLAVE_PACK, SLAVE_PACK_SIZE = _pack_layout(SlaveParams)
 
 
 @dataclass(frozen=True)
@@ -198,4 +212,5 @@ class SubtaskSpec:
             raise ParameterError(f"subtask.limit_power = {self.limit_power!r}: must be an integer in [1, 10]")
 
 
-__all__ = ["GRAVITY", "Gains", "MasterParams", "ParameterError", "SlaveParams", "SubtaskSpec", "field"]
+__all__ = ["GRAVITY", "SLAVE_PACK", "SLAVE_PACK_SIZE", "Gains", "MasterParams", "ParameterError",
+           "SlaveParams", "SubtaskSpec", "field"]

@@ -12,126 +12,37 @@ with each section's mass m_s spread uniformly over its material coordinate u (so
 length), p_s(u) the backbone point, theta_s(u) the backbone angle and I_s an optional slice
 rotational inertia.  The integrals use Gauss-Legendre quadrature with `n_quad` points per section;
 the integrands are entire functions of u so 8 points are exact to rounding for |k d| <= pi/2.
-N2 = C(q, dq) dq + G(q) + K(q) + D dq with C from the Christoffel symbols of the exact dM/dq.
+N2 = C(q, dq) dq + G(q) + K(q) + D dq.  One implementation in production: `mass_nle_kernel` (M2 and N2
+together, Coriolis in Lagrange form); the Christoffel form lives in tests/reference_models.py and checks it.
 
 Public functions take the frozen `SlaveParams` and return new arrays; the `*_kernel` functions take
-the packed parameter vector (`SlaveParams.packed()`, layout PACK) and output arrays and are
-compiled by `harness.fast`.
+the packed parameter vector (`SlaveParams.packed()`, layout `controllers.params.SLAVE_PACK`) and output
+arrays and are compiled by `harness.loop.fast`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .cc import (
-    backbone_points,
-    chain_nz,
-    chain_to_q,
-    point_y_derivs,
-    term_bases,
-    term_grad_add,
-    term_ydd,
-    y_of_q,
-)
+from .cc import backbone_points, term_bases, term_grad_add, term_ydd, y_of_q
 from .moments import gauss_legendre01, section_moments
-from .params import SlaveParams
-from .scratch import scratch, scratch_c, scratch_cz, scratch_i, scratch_zeros
+from .params import SLAVE_PACK, SlaveParams
+from .scratch import scratch, scratch_c, scratch_cz
 from .tip import tip_kinematics
 
-# layout of SlaveParams.packed(): name -> offset (each 3 wide, gravity 2 wide)
-PACK = {"L0": 0, "m": 3, "Kb": 6, "Ke": 9, "cd": 12, "ck": 15, "Is": 18, "g": 21}
-PACK_SIZE = 23
+PACK_L0 = SLAVE_PACK["L0"]
+PACK_M = SLAVE_PACK["m"]
+PACK_KB = SLAVE_PACK["Kb"]
+PACK_KE = SLAVE_PACK["Ke"]
+PACK_CD = SLAVE_PACK["cd"]
+PACK_CK = SLAVE_PACK["ck"]
+PACK_IS = SLAVE_PACK["Is"]
+PACK_G = SLAVE_PACK["g"]
 
 
 # ---------------------------------------------------------------------------------------------
 # kernels (numba-compatible)
 # ---------------------------------------------------------------------------------------------
-def dynamics_kernel(pk, q, nodes, weights, want_dM, M, dM, G):
-    """Mass matrix M (6,6), its derivative dM[a, b, c] = dM_ab/dq_c (6,6,6) if want_dM, and the
-    gravity generalized force G (6,) = dV_gravity/dq (all outputs overwritten)."""
-    d = scratch(3)
-    th = scratch(3)
-    ydot = scratch_zeros(6)
-    zero6 = scratch_zeros(6)
-    y_of_q(q, d, th, ydot, zero6)
-    nzu = scratch_i((6, 2))
-    nzb = scratch((6, 2))
-    nzbd = scratch((6, 2))
-    chain_nz(q, zero6, nzu, nzb, nzbd)
-    c = scratch_cz(1)
-    Jy = scratch_cz(6)
-    Hy = scratch_cz((6, 6))
-    Ty = scratch_cz((6, 6))
-    Jq = scratch_c(6)
-    Hq = scratch_c((6, 6))
-    alpha = scratch(6)
-    for a in range(6):
-        G[a] = 0.0
-        for b in range(6):
-            M[a, b] = 0.0
-            if want_dM:
-                for e in range(6):
-                    dM[a, b, e] = 0.0
-    gc = complex(pk[PACK_G + 1], pk[PACK_G])  # gravity as Z + iX
-    order = 2 if want_dM else 1
-    for s in range(3):
-        ms = pk[PACK_M + s]
-        Is = pk[PACK_IS + s]
-        for g in range(nodes.shape[0]):
-            u = nodes[g]
-            w = weights[g]
-            point_y_derivs(s, u, d, th, order, ydot, c, Jy, Hy, Ty)
-            chain_to_q(order, Jy, Hy, Ty, nzu, nzb, nzbd, Jq, Hq, Hq)
-            mw = ms * w
-            for a in range(6):
-                G[a] -= mw * (gc.conjugate() * Jq[a]).real
-                for b in range(a, 6):
-                    v = mw * (Jq[a].conjugate() * Jq[b]).real
-                    M[a, b] += v
-                    if b != a:
-                        M[b, a] += v
-            if want_dM:
-                for a in range(6):
-                    for b in range(a, 6):
-                        for e in range(6):
-                            v = mw * (Hq[a, e].conjugate() * Jq[b] + Jq[a].conjugate() * Hq[b, e]).real
-                            dM[a, b, e] += v
-                            if b != a:
-                                dM[b, a, e] += v
-            if Is != 0.0:
-                # backbone angle theta = sum_{l<s} Theta_l + u Theta_s;  alpha = dtheta/dq
-                for a in range(6):
-                    alpha[a] = 0.0
-                for ll in range(s + 1):
-                    f = 1.0 if ll < s else u
-                    alpha[ll] = f * q[3 + ll]
-                    alpha[3 + ll] = f * q[ll]
-                iw = Is * w
-                for a in range(6):
-                    for b in range(6):
-                        M[a, b] += iw * alpha[a] * alpha[b]
-                if want_dM:
-                    # d alpha_a / dq_e is f when {a, e} = {l, 3+l}
-                    for ll in range(s + 1):
-                        f = 1.0 if ll < s else u
-                        for b in range(6):
-                            # e = 3+l differentiates alpha[l]; e = l differentiates alpha[3+l]
-                            dM[ll, b, 3 + ll] += iw * f * alpha[b]
-                            dM[b, ll, 3 + ll] += iw * f * alpha[b]
-                            dM[3 + ll, b, ll] += iw * f * alpha[b]
-                            dM[b, 3 + ll, ll] += iw * f * alpha[b]
-
-
-PACK_L0 = PACK["L0"]
-PACK_M = PACK["m"]
-PACK_KB = PACK["Kb"]
-PACK_KE = PACK["Ke"]
-PACK_CD = PACK["cd"]
-PACK_CK = PACK["ck"]
-PACK_IS = PACK["Is"]
-PACK_G = PACK["g"]
-
-
 def elastic_kernel(pk, q, out):
     """dV_elastic/dq (6,): V = sum Kb d k^2 / 2 + Ke (d - L0)^2 / 2."""
     for i in range(3):
@@ -141,41 +52,15 @@ def elastic_kernel(pk, q, out):
         out[3 + i] = pk[PACK_KB + i] * d * k
 
 
-def christoffel_coriolis(dM, dq, C):
-    """C (6,6) with C_ij = sum_k Gamma_ijk dq_k, Gamma_ijk = (dM_ij/dq_k + dM_ik/dq_j - dM_jk/dq_i)/2."""
-    for i in range(6):
-        for j in range(6):
-            acc = 0.0
-            for k in range(6):
-                acc += (dM[i, j, k] + dM[i, k, j] - dM[j, k, i]) * dq[k]
-            C[i, j] = 0.5 * acc
-
-
-def nle_kernel(pk, q, dq, nodes, weights, M, dM, C, out):
-    """N2 (6,) = C dq + G + K + D dq; also fills M, dM and C (work arrays the caller may reuse)."""
-    G = scratch(6)
-    dynamics_kernel(pk, q, nodes, weights, True, M, dM, G)
-    christoffel_coriolis(dM, dq, C)
-    elastic_kernel(pk, q, out)
-    for i in range(6):
-        acc = 0.0
-        for j in range(6):
-            acc += C[i, j] * dq[j]
-        out[i] += acc + G[i]
-    for i in range(3):
-        out[i] += pk[PACK_CD + i] * dq[i]
-        out[3 + i] += pk[PACK_CK + i] * dq[3 + i]
-
-
 def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
     """Fused M2 (6,6) and N2 (6,) for the control loop (outputs overwritten).
 
-    Same model as `dynamics_kernel` + `nle_kernel`, computed faster and exactly:
+    pk: SlaveParams.packed(); q, dq (6,); nodes, weights: Gauss-Legendre rule on [0, 1]; M (6,6), N (6,) out.
     * the Coriolis/centripetal vector uses the Lagrange form for a continuum of particles,
       C(q, dq) dq = sum_s int m_s J_p^T (d^2 p/dt^2 at ddq = 0) du  (+ the slice-rotation analogue),
       with d^2 p/dt^2|_{ddq=0} = ydot^T H_y ydot + sum_i dp/dTheta_i * 2 dk_i dd_i.  It equals the
-      Christoffel form C dq of `nle_kernel` identically (tested to rounding), without building
-      the 6x6x6 tensor dM/dq;
+      Christoffel form C dq (tests/reference_models.py) identically (tested to rounding), without
+      building the 6x6x6 tensor dM/dq;
     * along section s the point's q-gradient is affine in two scalar functions of u,
       J_p(u) = V0 + b0(u) V1 + b1(u) V2 (b_n = exp(i phi_s) u^(1+n) E_n(u Theta_s), controllers.cc
       `term_bases`; V0 = the completed sections' end terms, V1, V2 constant), and d^2 p/dt^2 is
@@ -315,15 +200,14 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
             gk = gcc * Q[0, k]
             for a in range(6):
                 N[a] += ms * ((V[k, a].conjugate() * uk).real - (gk * V[k, a]).real)
+    E = scratch(6)
+    elastic_kernel(pk, q, E)
     for i in range(3):
-        dd = q[i]
-        k = q[3 + i]
-        N[i] += (0.5 * pk[PACK_KB + i] * k * k + pk[PACK_KE + i] * (dd - pk[PACK_L0 + i])
-                 + pk[PACK_CD + i] * dq[i])
-        N[3 + i] += pk[PACK_KB + i] * dd * k + pk[PACK_CK + i] * dq[3 + i]
+        N[i] += E[i] + pk[PACK_CD + i] * dq[i]
+        N[3 + i] += E[3 + i] + pk[PACK_CK + i] * dq[3 + i]
 
 
-KERNELS = ("dynamics_kernel", "elastic_kernel", "christoffel_coriolis", "nle_kernel", "mass_nle_kernel")
+KERNELS = ("elastic_kernel", "mass_nle_kernel")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -376,26 +260,34 @@ def backbone(p: SlaveParams, q, n_per_section: int = 20) -> np.ndarray:
     return out
 
 
-def _dyn(p: SlaveParams, q, want_dM: bool):
+def mass_and_nle(p: SlaveParams, q, dq) -> tuple[np.ndarray, np.ndarray]:
+    """(M2 (6,6), N2 (6,)) of paper eq. (1): `mass_nle_kernel`, the kernel of the control law and the
+    plants."""
     nodes, weights = gauss_legendre01(p.n_quad)
-    M, dM, G = np.empty((6, 6)), np.empty((6, 6, 6)), np.empty(6)
-    dynamics_kernel(p.packed(), _q(q), nodes, weights, want_dM, M, dM, G)
-    return M, dM, G
+    M, N = np.empty((6, 6)), np.empty(6)
+    mass_nle_kernel(p.packed(), _q(q), _q(dq), nodes, weights, M, N)
+    return M, N
 
 
 def mass_matrix(p: SlaveParams, q) -> np.ndarray:
     """M2(q2) (6, 6), symmetric positive definite (units mix kg, kg m, kg m^2)."""
-    return _dyn(p, q, False)[0]
+    return mass_and_nle(p, q, np.zeros(6))[0]
 
 
-def mass_matrix_derivative(p: SlaveParams, q) -> np.ndarray:
-    """dM2/dq2 as (6, 6, 6) with [a, b, c] = d M_ab / d q_c (exact)."""
-    return _dyn(p, q, True)[1]
+def nle(p: SlaveParams, q, dq) -> np.ndarray:
+    """N2(q2, dq2) (6,) = C dq + G + elastic + damping (paper eq. (1))."""
+    return mass_and_nle(p, q, dq)[1]
 
 
 def gravity_force(p: SlaveParams, q) -> np.ndarray:
-    """dV_gravity/dq2 (6,): the gravity part of N2."""
-    return _dyn(p, q, False)[2]
+    """dV_gravity/dq2 (6,): the gravity part of N2 (N2 at rest with the stiffnesses set to 0)."""
+    pk = p.packed()
+    pk[PACK_KB:PACK_KB + 3] = 0.0
+    pk[PACK_KE:PACK_KE + 3] = 0.0
+    nodes, weights = gauss_legendre01(p.n_quad)
+    M, N = np.empty((6, 6)), np.empty(6)
+    mass_nle_kernel(pk, _q(q), np.zeros(6), nodes, weights, M, N)
+    return N
 
 
 def elastic_force(p: SlaveParams, q) -> np.ndarray:
@@ -403,40 +295,3 @@ def elastic_force(p: SlaveParams, q) -> np.ndarray:
     out = np.empty(6)
     elastic_kernel(p.packed(), _q(q), out)
     return out
-
-
-def damping_force(p: SlaveParams, dq) -> np.ndarray:
-    """Viscous damping force D dq2 (6,)."""
-    return np.concatenate([p.extension_damping, p.bending_damping]) * _q(dq)
-
-
-def coriolis_matrix(p: SlaveParams, q, dq) -> np.ndarray:
-    """C(q2, dq2) (6, 6) from the Christoffel symbols of dM2/dq2 (dM/dt - 2C is skew-symmetric)."""
-    C = np.empty((6, 6))
-    christoffel_coriolis(mass_matrix_derivative(p, q), _q(dq), C)
-    return C
-
-
-def nle(p: SlaveParams, q, dq) -> np.ndarray:
-    """N2(q2, dq2) (6,) = C dq + G + elastic + damping (paper eq. (1))."""
-    nodes, weights = gauss_legendre01(p.n_quad)
-    out = np.empty(6)
-    nle_kernel(p.packed(), _q(q), _q(dq), nodes, weights, np.empty((6, 6)), np.empty((6, 6, 6)),
-               np.empty((6, 6)), out)
-    return out
-
-
-def mass_and_nle(p: SlaveParams, q, dq) -> tuple[np.ndarray, np.ndarray]:
-    """(M2 (6,6), N2 (6,)) from the fused kernel used in the control loop (Lagrange-form Coriolis)."""
-    nodes, weights = gauss_legendre01(p.n_quad)
-    M, N = np.empty((6, 6)), np.empty(6)
-    mass_nle_kernel(p.packed(), _q(q), _q(dq), nodes, weights, M, N)
-    return M, N
-
-
-def forward_dynamics(p: SlaveParams, q, dq, T, F=None) -> np.ndarray:
-    """ddq2 = M2^-1 (T2 + J2^T F2 - N2)."""
-    rhs = np.asarray(T, dtype=float) - nle(p, q, dq)
-    if F is not None:
-        rhs = rhs + jacobian(p, q).T @ np.asarray(F, dtype=float)
-    return np.linalg.solve(mass_matrix(p, q), rhs)

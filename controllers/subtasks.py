@@ -180,15 +180,3 @@ def manipulability(slave: SlaveParams, q) -> float:
     x, J, H, Hd = np.empty(2), np.empty((2, 6)), np.empty((2, 6, 6)), np.empty((2, 6, 6))
     tip_kinematics(np.ascontiguousarray(q, dtype=float), np.zeros(6), 1, x, J, H, Hd)
     return float(np.sqrt(max(np.linalg.det(J @ J.T), 0.0)))
-
-
-def null_space_reference(spec: SubtaskSpec, slave: SlaveParams, ky: float, ks: float, q, dq):
-    """(y_a, J_s (6,), g (6,), dg/dt (6,)) of eqs. (29), (31), (33) and the exact time derivative."""
-    b, grad, graddot = beta(spec, slave, q, dq)
-    dq = np.asarray(dq, dtype=float)
-    ya = np.exp(-ky * b)
-    yad = -ky * ya * (grad @ dq)
-    Js = -ky * ya * grad
-    g = ks * ky * ya * ya * grad
-    gd = ks * ky * (2.0 * ya * yad * grad + ya * ya * graddot)
-    return ya, Js, g, gd

@@ -6,10 +6,8 @@ Same representation as `controllers.cc` (c = Z + i X, E_n(t) = int_0^1 v^n exp(i
 Here the tip is written by its tails: R_j = sum_{m >= j} d_m f_m E_0(Theta_m) is the chord from the start
 of section j to the tip, f_j = exp(i phi_j).  Turning Theta_l turns every later section rigidly, so
 dc/dTheta_l = i (R_{l+1} + d_l f_l E_1(Theta_l)), and each second derivative in y is one closed form
-in the bases f_j E_n(Theta_j) and the tails (`tip_y_blocks`); their time derivatives give dH/dt.  This
-replaces the role-by-role accumulation of `cc.point_y_derivs` and the generic chain rule in the
-per-step path (3.8 k instead of 12.5 k instructions per control step); tests check it against that generic
-path and against finite differences.
+in the bases f_j E_n(Theta_j) and the tails (`tip_y_blocks`); their time derivatives give dH/dt.  Tests
+check it against the generic role-by-role path (tests/reference_models.py) and finite differences.
 
 numpy only, numba-compatible subset, no allocation of returned arrays (`harness.loop.fast` compiles it).
 """
@@ -85,7 +83,6 @@ def tip_kinematics(q, dq, order, x, J, H, Hd):
         H[d_i, d_j] = k_j XdT[i, j] + k_i XdT[j, i] + k_i k_j XTT[i, j]
         H[d_i, k_j] = d_j (XdT[i, j] + k_i XTT[i, j]) + [i = j] G[i]
         H[k_i, k_j] = d_i d_j XTT[i, j].
-    Verified against the generic role-by-role path (point_y_derivs, chain_to_q, chain_to_q_dot) in tests.
     """
     b = scratch_c((3, 4))
     R = scratch_c(4)

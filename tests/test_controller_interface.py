@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from reference_models import null_space_reference
 
 from controllers import master as mm
 from controllers import slave as sm
 from controllers.interface import Action, Controller, ControllerDiverged, Observation
-from controllers.subtasks import null_space_reference
 from harness.api import load_scenario
 from harness.cli import main
 from harness.config.errors import ConfigError

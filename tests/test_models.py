@@ -2,9 +2,9 @@
 
 import numpy as np
 import pytest
+import reference_models as ref
 
 from controllers import master, slave, subtasks
-from controllers.control import null_space_quantities
 from controllers.params import MasterParams, SlaveParams, SubtaskSpec
 from harness.loop.fast import kernels
 
@@ -59,29 +59,34 @@ def test_slave_tip_matches_closed_form_arc_sum(rng):
 
 
 def test_slave_mass_matrix_spd_and_derivative(rng):
+    """Production M2 symmetric positive definite; the reference's exact dM2/dq2 = finite differences of it."""
     for q in random_q2(rng, n=3):
         M = slave.mass_matrix(SP, q)
         np.testing.assert_allclose(M, M.T, atol=0)
         assert np.linalg.eigvalsh(M).min() > 0
-        dM = slave.mass_matrix_derivative(SP, q)
+        dM = ref.mass_matrix_derivative(SP, q)
         np.testing.assert_allclose(dM, fd(lambda z: slave.mass_matrix(SP, z), q), atol=1e-7)
 
 
 def test_coriolis_skew_symmetry_and_lagrange_form(rng):
-    """dM/dt - 2C skew-symmetric; C dq equals dM/dt dq - dT/dq (Lagrange's equations, with the
-    kinetic energy differentiated by finite differences)."""
+    """Reference: dM/dt - 2C skew-symmetric (C from the Christoffel symbols).  Production: the velocity part
+    of N2, N2(q, dq) - N2(q, 0) - D dq, equals dM/dt dq - dT/dq (Lagrange's equations, T = dq^T M2 dq / 2
+    with M2 the production mass matrix differentiated by finite differences) and the reference's C dq."""
+    D = np.concatenate([SP.extension_damping, SP.bending_damping])
     for q in random_q2(rng, n=3):
         dq = rng.normal(size=6)
-        C = slave.coriolis_matrix(SP, q, dq)
-        Md = slave.mass_matrix_derivative(SP, q) @ dq
+        C = ref.coriolis_matrix(SP, q, dq)
+        Md = ref.mass_matrix_derivative(SP, q) @ dq
         S = Md - 2 * C
         np.testing.assert_allclose(S, -S.T, atol=1e-12)
-        # independent: kinetic energy T(q, dq) by quadrature; Lagrange's equations by finite
-        # differences of T give M ddq + C dq; compare the velocity-dependent part.
+
         def T(qq, vv):
             return 0.5 * vv @ slave.mass_matrix(SP, qq) @ vv
         dTdq = fd(lambda z: np.array(T(z, dq)), q)
-        np.testing.assert_allclose(C @ dq, Md @ dq - dTdq, atol=1e-7)
+        Md_fd = (slave.mass_matrix(SP, q + H * dq) - slave.mass_matrix(SP, q - H * dq)) / (2 * H)
+        cor = slave.nle(SP, q, dq) - slave.nle(SP, q, np.zeros(6)) - D * dq
+        np.testing.assert_allclose(cor, Md_fd @ dq - dTdq, atol=1e-7)
+        np.testing.assert_allclose(cor, C @ dq, rtol=1e-11, atol=1e-11 * np.abs(C @ dq).max())
 
 
 def _potential(p, q):
@@ -121,7 +126,7 @@ def test_straight_arm_is_finite_and_continuous():
     dq = np.array([0.1, -0.2, 0.3, 0.5, -0.4, 0.2])
     fs = {"tip": lambda q: slave.tip_position(SP, q), "J2": lambda q: slave.jacobian(SP, q),
           "H": lambda q: slave.tip_hessian(SP, q), "dH/dt": lambda q: slave.tip_derivatives(SP, q, dq)[3],
-          "M2": lambda q: slave.mass_matrix(SP, q), "dM2/dq": lambda q: slave.mass_matrix_derivative(SP, q),
+          "M2": lambda q: slave.mass_matrix(SP, q), "dM2/dq": lambda q: ref.mass_matrix_derivative(SP, q),
           "N2": lambda q: slave.nle(SP, q, dq),
           "grad beta": lambda q: subtasks.beta(SubtaskSpec(), SP, q, dq)[1],
           "d/dt grad beta": lambda q: subtasks.beta(SubtaskSpec(), SP, q, dq)[2]}
@@ -140,15 +145,13 @@ def test_straight_arm_is_finite_and_continuous():
 
 def test_series_and_closed_form_branches_agree():
     """E_n switches from its power series to the recursion at |t| = 2: both sides agree."""
-    from controllers.cc import SERIES_RADIUS, en_values
+    from controllers.cc import SERIES_RADIUS, en_tuple
 
-    a, b = np.empty(4, complex), np.empty(4, complex)
     for t in (SERIES_RADIUS * (1 - 1e-12), -SERIES_RADIUS * (1 - 1e-12)):
-        en_values(t, a)
-        en_values(t * (1 + 2e-12), b)
+        a, b = np.array(en_tuple(t)), np.array(en_tuple(t * (1 + 2e-12)))
         np.testing.assert_allclose(a, b, atol=1e-12)
     for t in (0.3, 1.7, 2.5, 3.1):
-        en_values(t, a)
+        a = np.array(en_tuple(t))
         v = (np.arange(200000) + 0.5) / 200000
         for n in range(4):
             np.testing.assert_allclose(a[n], np.mean(v**n * np.exp(1j * t * v)), atol=1e-10)
@@ -167,11 +170,11 @@ def test_subtask_gradient_and_rate_against_finite_differences(rng):
                                   + 0.3 * subtasks.limits_kernel(
                                       subtasks.pack_subtask(spec, SP), q, dq, np.empty(6), np.empty(6)))
         # J_s and g of (31), (33), and dg/dt against finite differences
-        ya, Js, g, gd = subtasks.null_space_reference(spec, SP, 1.0, 1.0, q, dq)
+        ya, Js, g, gd = ref.null_space_reference(spec, SP, 1.0, 1.0, q, dq)
         np.testing.assert_allclose(Js, fd(lambda z: np.array(np.exp(-subtasks.beta(spec, SP, z)[0])), q),
                                    atol=1e-8)
-        g_fd = (subtasks.null_space_reference(spec, SP, 1.0, 1.0, q + H * dq, dq)[2]
-                - subtasks.null_space_reference(spec, SP, 1.0, 1.0, q - H * dq, dq)[2]) / (2 * H)
+        g_fd = (ref.null_space_reference(spec, SP, 1.0, 1.0, q + H * dq, dq)[2]
+                - ref.null_space_reference(spec, SP, 1.0, 1.0, q - H * dq, dq)[2]) / (2 * H)
         np.testing.assert_allclose(gd, g_fd, atol=1e-6)
 
 
@@ -184,19 +187,19 @@ def test_moore_penrose_identities_and_null_space(rng):
         dq = rng.normal(size=6)
         J = slave.jacobian(SP, q)
         g, dg = rng.normal(size=6), rng.normal(size=6)
-        Jp, Jpd, P, Jphi, deN = null_space_quantities(SP, q, dq, g, dg)
+        Jp, Jpd, P, Jphi, deN = ref.null_space_quantities(SP, q, dq, g, dg)
         np.testing.assert_allclose(J @ Jp, np.eye(2), atol=1e-10)  # (8)
         np.testing.assert_allclose(P @ P, P, atol=1e-10)  # (9)
         np.testing.assert_allclose(P @ Jp, 0, atol=1e-10)  # (10)
         np.testing.assert_allclose(J @ Jphi, 0, atol=1e-10)
         phiN = P @ (dg + 100 * deN) - Jphi @ (g - dq)  # (27)
         np.testing.assert_allclose(J @ phiN, 0, atol=1e-10)  # (22)
-        Jp_fd = (null_space_quantities(SP, q + H * dq, dq, g, dg)[0]
-                 - null_space_quantities(SP, q - H * dq, dq, g, dg)[0]) / (2 * H)
+        Jp_fd = (ref.null_space_quantities(SP, q + H * dq, dq, g, dg)[0]
+                 - ref.null_space_quantities(SP, q - H * dq, dq, g, dg)[0]) / (2 * H)
         np.testing.assert_allclose(Jpd, Jp_fd, atol=1e-7)
         # dP/dt = -(dJ^+ J + J^+ dJ) (behind (24)-(26)), against central differences of P itself
-        P_fd = (null_space_quantities(SP, q + H * dq, dq, g, dg)[2]
-                - null_space_quantities(SP, q - H * dq, dq, g, dg)[2]) / (2 * H)
+        P_fd = (ref.null_space_quantities(SP, q + H * dq, dq, g, dg)[2]
+                - ref.null_space_quantities(SP, q - H * dq, dq, g, dg)[2]) / (2 * H)
         np.testing.assert_allclose(-(Jpd @ J + Jp @ slave.jacobian_dot(SP, q, dq)), P_fd, atol=1e-7)
         # the full law: u2 satisfies J2 u2 = commanded task acceleration - dJ2 dq2
         out = slave_control(SP, Gains(), SubtaskSpec(), q, dq, np.array([0.05, 1.0]), np.zeros(2),
@@ -245,13 +248,15 @@ def test_compiled_kernels_equal_interpreted(rng):
 
 
 def test_fused_loop_dynamics_equal_christoffel_form(rng):
-    """The control loop's fused kernel (Lagrange-form Coriolis, prefix sums) equals M2 and the
-    Christoffel-symbol N2 of the reference implementation."""
+    """The production kernel (Lagrange-form Coriolis, moments of the quadrature) equals M2, G2 and the
+    Christoffel-symbol N2 of the reference implementation (tests/reference_models.py)."""
     for q in random_q2(rng, n=4):
         dq = rng.normal(size=6)
         M, N = slave.mass_and_nle(SP, q, dq)
-        np.testing.assert_allclose(M, slave.mass_matrix(SP, q), rtol=1e-13, atol=1e-13)
-        np.testing.assert_allclose(N, slave.nle(SP, q, dq), rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(M, ref.mass_matrix(SP, q), rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(N, ref.nle(SP, q, dq), rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(slave.gravity_force(SP, q), ref.gravity_force(SP, q),
+                                   rtol=1e-12, atol=1e-12)
 
 
 def test_controllers_import_numpy_only():

@@ -158,8 +158,8 @@ def _random_states(rng, n=25):
 
 @pytest.mark.parametrize("slice_inertia", [(0.0, 0.0, 0.0), (2e-3, 1e-3, 5e-4)])
 def test_fused_mass_nle_equals_reference(slice_inertia):
-    """mass_nle_kernel (moments of the quadrature, Lagrange-form Coriolis) = dynamics_kernel M2 and
-    the Christoffel-form nle_kernel N2 (compiled and interpreted)."""
+    """mass_nle_kernel (moments of the quadrature, Lagrange-form Coriolis), compiled and interpreted, = the
+    reference dynamics_kernel M2 and the Christoffel-form nle_kernel N2."""
     from controllers.params import SlaveParams
     from harness.loop.fast import kernels
 
@@ -172,15 +172,18 @@ def test_fused_mass_nle_equals_reference(slice_inertia):
 
 
 def _assert_mass_nle_matches_reference(Kx, pk, nodes, weights, q, dq):
-    """mass_nle_kernel's M2 and N2 = dynamics_kernel's M2 and nle_kernel's N2 (1e-12) at each row of q, dq."""
+    """mass_nle_kernel's M2 and N2 = the reference dynamics_kernel's M2 and nle_kernel's N2 (Christoffel form,
+    tests/reference_models.py) (1e-12) at each row of q, dq."""
+    import reference_models as ref
+
     for a in range(len(q)):
         M, N = np.empty((6, 6)), np.empty(6)
         Kx.mass_nle_kernel(pk, q[a], dq[a], nodes, weights, M, N)
         Mr, G = np.empty((6, 6)), np.empty(6)
-        Kx.dynamics_kernel(pk, q[a], nodes, weights, False, Mr, np.empty((6, 6, 6)), G)
+        ref.dynamics_kernel(pk, q[a], nodes, weights, False, Mr, np.empty((6, 6, 6)), G)
         Nr = np.empty(6)
-        Kx.nle_kernel(pk, q[a], dq[a], nodes, weights, np.empty((6, 6)), np.empty((6, 6, 6)),
-                      np.empty((6, 6)), Nr)
+        ref.nle_kernel(pk, q[a], dq[a], nodes, weights, np.empty((6, 6)), np.empty((6, 6, 6)),
+                       np.empty((6, 6)), Nr)
         np.testing.assert_allclose(M, Mr, rtol=1e-12, atol=1e-12 * np.abs(Mr).max())
         np.testing.assert_allclose(N, Nr, rtol=1e-12, atol=1e-12 * np.abs(Nr).max())
 
@@ -234,7 +237,8 @@ def test_section_moment_series_equal_the_node_sums(n):
 @pytest.mark.parametrize("n_quad", [2, 8])
 def test_fused_mass_nle_series_and_node_paths_agree(n_quad):
     """mass_nle_kernel on states whose sections all take the series (|Theta| <= 1.5), all take the node
-    loop, or mix them, against dynamics_kernel / nle_kernel (always node by node), with 2 and 8 points."""
+    loop, or mix them, against the reference dynamics_kernel / nle_kernel (node by node), with 2 and 8
+    points."""
     from controllers.params import SlaveParams
     from harness.loop.fast import kernels
 
@@ -252,8 +256,11 @@ def test_fused_mass_nle_series_and_node_paths_agree(n_quad):
 
 def test_tip_kinematics_equals_generic_chain_rule():
     """tip_kinematics (controllers.tip: closed forms by the tails, chain rule per pair of sections),
-    compiled and interpreted, = the generic role-by-role path point_y_derivs + chain_to_q + chain_to_q_dot,
-    on random states, straight sections (k = 0), nearly straight ones and |k d| past E_n's series radius."""
+    compiled and interpreted, = the generic role-by-role path of tests/reference_models.py (point_y_derivs +
+    chain_to_q + chain_to_q_dot), on random states, straight sections (k = 0), nearly straight ones and
+    |k d| past E_n's series radius."""
+    import reference_models as ref
+
     from controllers import cc, tip
 
     q, dq = _random_states(np.random.default_rng(4))
@@ -264,29 +271,20 @@ def test_tip_kinematics_equals_generic_chain_rule():
     dq = np.concatenate([dq, rng.normal(size=(24, 6))])
     assert np.abs(q[:, 3:] * q[:, :3]).max() > cc.SERIES_RADIUS and (q[:, 3:] == 0.0).any()
     for a in range(len(q)):
-        d, th, ydot = np.empty(3), np.empty(3), np.empty(6)
-        cc.y_of_q(q[a], d, th, ydot, dq[a])
-        c = np.zeros(1, complex)
-        Jy, Hy, Ty = np.zeros(6, complex), np.zeros((6, 6), complex), np.zeros((6, 6), complex)
-        cc.point_y_derivs(2, 1.0, d, th, 3, ydot, c, Jy, Hy, Ty)
-        nzu, nzb, nzbd = np.empty((6, 2), np.int64), np.empty((6, 2)), np.empty((6, 2))
-        cc.chain_nz(q[a], dq[a], nzu, nzb, nzbd)
-        Jq, Hq, Hqd = np.empty(6, complex), np.empty((6, 6), complex), np.empty((6, 6), complex)
-        cc.chain_to_q(3, Jy, Hy, Ty, nzu, nzb, nzbd, Jq, Hq, Hqd)
-        cc.chain_to_q_dot(Jy, Hy, Ty, ydot, nzu, nzb, nzbd, Hqd)
+        c, Jq, Hq, Hqd = ref.tip_generic(q[a], dq[a])
         for fn in (K.tip_kinematics, tip.tip_kinematics):
             for order in (0, 1, 2, 3):
                 x, J, H, Hd = np.zeros(2), np.zeros((2, 6)), np.zeros((2, 6, 6)), np.zeros((2, 6, 6))
                 fn(q[a], dq[a], order, x, J, H, Hd)
-                np.testing.assert_allclose(x, [c[0].imag, c[0].real], rtol=1e-14, atol=1e-15)
+                np.testing.assert_allclose(x, [c.imag, c.real], rtol=1e-14, atol=1e-15)
                 if order >= 1:
                     np.testing.assert_allclose(J, np.stack([Jq.imag, Jq.real]), rtol=1e-13, atol=1e-14)
                 if order >= 2:
-                    ref = np.stack([Hq.imag, Hq.real])
-                    np.testing.assert_allclose(H, ref, rtol=1e-12, atol=1e-13 * np.abs(ref).max())
+                    ref_h = np.stack([Hq.imag, Hq.real])
+                    np.testing.assert_allclose(H, ref_h, rtol=1e-12, atol=1e-13 * np.abs(ref_h).max())
                 if order >= 3:
-                    ref = np.stack([Hqd.imag, Hqd.real])
-                    np.testing.assert_allclose(Hd, ref, rtol=1e-12, atol=1e-13 * np.abs(ref).max())
+                    ref_h = np.stack([Hqd.imag, Hqd.real])
+                    np.testing.assert_allclose(Hd, ref_h, rtol=1e-12, atol=1e-13 * np.abs(ref_h).max())
 
 
 def test_en_tuple_equals_complex_series():

@@ -283,14 +283,6 @@ def _sinc(x):
 
 
 @njit(cache=True)
-def _one_minus_cos_over(x):
-    """(1 - cos x) / x, accurate at small x."""
-    if abs(x) < 1e-4:
-        return 0.5 * x - x * x * x / 24.0
-    return (1.0 - np.cos(x)) / x
-
-
-@njit(cache=True)
 def cc_nodes(q2, n_per_section, xz, elem_angle):
     """Nodes [X, Z] (3 n + 1, 2) of the CC shape q2 at uniform arc-length steps d_i / n within each
     section (exactly on the arcs) and the element chord angles (3 n,) (from +Z toward +X)."""
