@@ -5,8 +5,8 @@ import pytest
 
 from controllers import slave
 from controllers.params import SlaveParams
-from harness.plant import cosserat_rod as kr
 from harness.plant.cosserat import CosseratSlave, hinge_damping, material_damping_from_slave, stable_dt
+from harness.plant.cosserat import kernels as kr
 
 P0 = SlaveParams(gravity=(0.0, 0.0))
 Q2 = np.array([0.33, 0.36, 0.40, 2.0, -3.0, 4.0])
@@ -166,3 +166,24 @@ def test_bad_step_duration_and_helpers():
     np.testing.assert_allclose(eta_b, 0.01 / 0.3)
     np.testing.assert_allclose(hinge_damping(eta_b, 0.03), eta_b / 0.03)
     assert stable_dt(SlaveParams(), 20) < stable_dt(SlaveParams(), 10)
+
+
+def test_missing_pyelastica_internals_are_a_one_line_error():
+    """The PyElastica internals sit behind one adapter: without them, one line naming the installed and the
+    supported versions (checked in a fresh interpreter with elastica._linalg emptied)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, types\n"
+            "import elastica\n"
+            "sys.modules['elastica._linalg'] = types.ModuleType('elastica._linalg')\n"
+            "try:\n"
+            "    import harness.plant.cosserat.pyelastica\n"
+            "except ImportError as exc:\n"
+            "    print(type(exc).__name__, exc)\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    line = res.stdout.strip()
+    assert "\n" not in line and line.startswith("PyElasticaVersionError"), line
+    from importlib.metadata import version
+    assert f"installed pyelastica {version('pyelastica')}" in line and "supported pyelastica>=1.0,<2" in line

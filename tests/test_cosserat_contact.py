@@ -1,5 +1,6 @@
 """Environment contact on the Cosserat plant (issue 16): PyElastica's penalty law on every rod node
-(harness/plant/rod_contact.py, compiled in harness/plant/cosserat_rod.py).  A static tip push against a
+(harness/plant/cosserat/contact.py, compiled in harness/plant/cosserat/kernels.py).  A static tip push
+against a
 plane settles at the penetration the closed form predicts (wall spring k in parallel with the rod's
 axial stiffness), the contact force equals k times the geometric penetration, a sphere beside the
 middle of the rod is touched by body nodes while the tip is free, the stepped loop records the tip
@@ -17,9 +18,8 @@ from harness.config.load import load_scenario
 from harness.config.scenario import EnvironmentConfig, EnvObject
 from harness.loop.stepped_loop import simulate_stepped
 from harness.plant import build_plant
-from harness.plant.cosserat import CosseratSlave
+from harness.plant.cosserat import NODE_RADIUS, CosseratSlave, contact_arrays
 from harness.plant.initial import initial_state
-from harness.plant.rod_contact import NODE_RADIUS, contact_arrays
 
 N_EL = 6  # elements per section
 

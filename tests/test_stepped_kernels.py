@@ -148,10 +148,10 @@ def test_cosserat_plant_built_for_a_shorter_run_records_a_longer_one():
 
 
 def test_rod_command_kernels_equal_the_numpy_expressions():
-    """cosserat_rod.rest_strains / active_loads (the servo rest strains and the active loads of
+    """cosserat.kernels.rest_strains / active_loads (the servo rest strains and the active loads of
     harness.plant.cosserat, Actuation) give the numbers of the numpy expressions they replaced, bit for
     bit."""
-    from harness.plant import cosserat_rod as kr
+    from harness.plant.cosserat import kernels as kr
 
     rng = np.random.default_rng(5)
     n = 7

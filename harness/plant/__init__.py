@@ -3,7 +3,7 @@
 * `harness.plant.mujoco_model`: the MuJoCo model (MJCF + MjSpec-generated Octarm chain) and
   `harness.plant.chain_map`: the chain <-> q2 maps (sensing, actuation, elastic correction);
 * `harness.plant.analytic`: the paper's analytic models themselves as the plant (RK4);
-* `harness.plant.cosserat_plant`: a Cosserat rod (PyElastica) slave + the rigid master, stepped from
+* `harness.plant.cosserat`: a Cosserat rod (PyElastica) slave + the rigid master, stepped from
   Python (protocol `harness.plant.stepped.SteppedPlant`).
 
 `build_plant(scn)` builds the plant a scenario asks for; a plant validates its own inputs (scene
@@ -81,7 +81,7 @@ def build_plant(scn: Scenario) -> Any:
                                         f"unusable MJCF: {exc}") from None
             raise ConfigError(f"plant: cannot build the MuJoCo model: {exc}", path="plant") from None
     if kind == "cosserat":
-        from harness.plant.cosserat_plant import CosseratPlant
+        from harness.plant.cosserat.plant import CosseratPlant
 
         return CosseratPlant(scn)
     raise ConfigError.field("plant.kind", kind, "unknown plant")

@@ -3,7 +3,7 @@ drives them with any controller: the paper's or a `controllers.interface.Control
 
 A stepped plant simulates both arms (master and slave) and is advanced one control step at a time by
 the loop; the controller never sees it directly, only its sensed state.  Implementations: the Cosserat
-rod (`harness.plant.cosserat_plant`, no `harness.loop` import) and the Python-stepped MuJoCo and
+rod (`harness.plant.cosserat.plant`, no `harness.loop` import) and the Python-stepped MuJoCo and
 analytic plants (`harness.loop.stepped_plants`, which use the loops' compiled kernels).
 
 Per control step of length control_dt, the loop calls, in this order:

@@ -1,4 +1,4 @@
-"""The Cosserat-rod plant of a scenario: the rod slave (`harness.plant.cosserat.CosseratSlave`) and the
+"""The Cosserat-rod plant of a scenario: the rod slave (`harness.plant.cosserat.rod.CosseratSlave`) and the
 rigid 2-link master, as a `harness.plant.stepped.SteppedPlant` for `harness.loop.stepped_loop`.
 
 * Slave: one PyElastica Cosserat rod built from the plant slave parameters (EI = Kb, EA = Ke L0,
@@ -16,7 +16,7 @@ rigid 2-link master, as a `harness.plant.stepped.SteppedPlant` for `harness.loop
 * Master: the analytic master dynamics (paper eq. 1, which MuJoCo's master matches to round-off),
   classical RK4 with steps of at most 1 ms (`master_rk4`, compiled here).
 * Interaction forces: F1 on the master tip (J1^T F1), F2 on the rod's tip node.
-* Environment (`harness.plant.rod_contact`): plane and sphere objects act on every rod node (PyElastica's
+* Environment (`harness.plant.cosserat.contact`): plane and sphere objects act on every rod node (PyElastica's
   penalty law, per node stiffness k); `forces` gives the true tip forces (F2 = constant + contact force
   on the tip node) and the contact summary for the stepped loop's F_true / contact columns.
 * Time step: plant.cosserat.dt, or "auto" = control_dt / m, the largest below the rod's
@@ -38,8 +38,8 @@ from numba import njit
 from controllers import master as master_model
 from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
-from harness.plant import rod_contact
-from harness.plant.cosserat import CosseratSlave, stable_dt
+from harness.plant.cosserat import contact as rod_contact
+from harness.plant.cosserat.rod import CosseratSlave, stable_dt
 from harness.plant.initial import InitialStateError, initial_state
 
 MASTER_BASE = np.array([0.0, -0.3, 0.0])  # m, world (as mjcf/master.xml)

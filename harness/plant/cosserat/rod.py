@@ -152,7 +152,7 @@ import numpy as np
 from elastica.timestepper.symplectic_steppers import PositionVerlet
 
 from controllers.params import SlaveParams
-from harness.plant import cosserat_rod as kr
+from harness.plant.cosserat import kernels as kr
 
 DEFAULT_ELEMENTS = 10
 DEFAULT_ETA_B = 0.1  # N m^2 s, bending viscosity per section

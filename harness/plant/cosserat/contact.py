@@ -1,6 +1,7 @@
 """Environment objects on the Cosserat plant: the `[environment.objects.<name>]` of the scenario acting on
-every node of the rod (`harness.plant.cosserat_plant`), through the penalty law of PyElastica's
-`RodPlaneContact` / `RodSphereContact` compiled into the rod's own step (`cosserat_rod.contact_forces`).
+every node of the rod (`harness.plant.cosserat.plant`), through the penalty law of PyElastica's
+`RodPlaneContact` / `RodSphereContact` compiled into the rod's own step
+(`harness.plant.cosserat.kernels.contact_forces`).
 
 Geometry (slave task frame [X, Z], base at the origin, as `EnvObject.position`).  Each node j >= 1 of the
 centreline is a ball of radius `NODE_RADIUS` (= the MuJoCo plant's segment capsule radius, 0.02 m), so
@@ -40,7 +41,7 @@ PLANE, SPHERE = 0.0, 1.0
 
 
 def contact_arrays(env: EnvironmentConfig, node_mass: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(objs (no, 6), cdamp (no, nn + 1)) for `cosserat_rod.contact_forces`; node_mass (nn,) kg.
+    """(objs (no, 6), cdamp (no, nn + 1)) for `kernels.contact_forces`; node_mass (nn,) kg.
     ConfigError naming a box object (not supported on the Cosserat plant)."""
     objs = np.zeros((len(env.objects), 6))
     cdamp = np.zeros((len(env.objects), node_mass.shape[0] + 1))

@@ -1,13 +1,13 @@
-"""Compiled physics of the planar Octarm Cosserat rod (kernels for `harness.plant.cosserat`).
+"""Compiled physics of the planar Octarm Cosserat rod (kernels for `harness.plant.cosserat.rod`).
 
-The maths, the frames and the parameter mapping are documented in `harness.plant.cosserat`; this
+The maths, the frames and the parameter mapping are documented in `harness.plant.cosserat.rod`; this
 module holds the numba kernels only:
 
 * `rod_loads`: the elastic, damping, active and external loads of one step, written into the
   PyElastica rod's own arrays (`internal_forces`, `internal_torques`, `external_forces`,
   `external_torques`), from the strains computed by PyElastica's kernels
   (`_compute_shear_stretch_strains`, `_compute_bending_twist_strains`, `_compute_dilatation_rate`,
-  `_inv_rotate`);
+  `_inv_rotate`, through `harness.plant.cosserat.pyelastica`);
 * `run_steps`: position-Verlet steps (PyElastica's `PositionVerlet` scheme: half drift, loads,
   kick, half drift) compiled into one loop with PyElastica's own update kernels
   (`overload_operator_kinematic_numba`, `_update_accelerations`), so a step has no Python overhead;
@@ -22,16 +22,18 @@ positive curvature k is a positive rotation about d2 = +Y and is kappa[1] in PyE
 from __future__ import annotations
 
 import numpy as np
-from elastica._linalg import _batch_cross, _batch_matvec
-from elastica._rotations import _inv_rotate
-from elastica.rod.cosserat_rod import (
+from numba import njit
+
+from harness.plant.cosserat.pyelastica import (
+    _batch_cross,
+    _batch_matvec,
     _compute_bending_twist_strains,
     _compute_dilatation_rate,
     _compute_shear_stretch_strains,
+    _inv_rotate,
     _update_accelerations,
+    overload_operator_kinematic_numba,
 )
-from elastica.rod.data_structures import overload_operator_kinematic_numba
-from numba import njit
 
 
 @njit(cache=True)
@@ -316,7 +318,7 @@ def _wrap(a):
 
 @njit(cache=True)
 def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
-    """Least-squares CC fit of each section's nodes; see `harness.plant.cosserat` (Sensing).
+    """Least-squares CC fit of each section's nodes; see `harness.plant.cosserat.rod` (Sensing).
 
     xz, vxz (nn, 2): node positions and velocities [X, Z]; bounds (4,): section boundary nodes.
     Writes q2 = [d, k] and dq2 (first-order rates) in place.
@@ -452,7 +454,7 @@ def _at_hinges(v, sec, l0, out, base):
 
 @njit(cache=True)
 def rest_strains(q2c, n, L0, sec, l0, rest_sigma, rest_kappa, base_kappa0):
-    """Servo command q2c (6,) = [d, k] -> the rod's rest strains (see `harness.plant.cosserat`,
+    """Servo command q2c (6,) = [d, k] -> the rod's rest strains (see `harness.plant.cosserat.rod`,
     Actuation): rest_sigma (3, ne) <- [0, 0, (d / L0) sinc(k h / 2) - 1] per element (h = d / n),
     rest_kappa (3, nv) <- [0, k d / L0 (rest-length weighted mean at the hinges), 0], base_kappa0 (3,)
     <- [0, k_1 d_1 / L0_1, 0].  L0 (3,) m, sec (ne,) section of each element, l0 (ne,) m.
@@ -478,7 +480,7 @@ def rest_strains(q2c, n, L0, sec, l0, rest_sigma, rest_kappa, base_kappa0):
 @njit(cache=True)
 def active_loads(T2, q2, sec, l0, act_n, act_m, act_m_base):
     """Generalized forces T2 (6,) [T_d N, T_k N m] at the fitted q2 (6,) -> the internal active loads
-    (see `harness.plant.cosserat`, Actuation): mu = T_k / d, act_n (ne,) <- T_d - k mu per element,
+    (see `harness.plant.cosserat.rod`, Actuation): mu = T_k / d, act_n (ne,) <- T_d - k mu per element,
     act_m (3, nv) <- [0, mu (rest-length weighted mean at the hinges), 0], act_m_base (3,) <- [0, mu_1, 0]."""
     mu = np.empty(3)
     ax = np.empty(3)
