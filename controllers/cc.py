@@ -156,6 +156,12 @@ def backbone_points(q, n_per_section, out):
         phi += ths
 
 
+def backbone_rows(q2, n_per_section, out):
+    """`backbone_points` of every row of q2 (m, 6) into out (m, 3 n + 1, 2), m (the outputs' form)."""
+    for k in range(q2.shape[0]):
+        backbone_points(q2[k], n_per_section, out[k])
+
+
 def gram_terms(J, Jd, out):
     """A = J J^T and dA/dt = dJ J^T + J dJ^T for a 2x6 J: out = [A00, A01, A11, dA00, dA01, dA11]."""
     for r in range(6):
@@ -169,4 +175,5 @@ def gram_terms(J, Jd, out):
         out[5] += 2.0 * Jd[1, a] * J[1, a]
 
 
-KERNELS = ("gram_terms", "en_tuple", "term_bases", "term_grad_add", "term_ydd", "y_of_q", "backbone_points")
+KERNELS = ("gram_terms", "en_tuple", "term_bases", "term_grad_add", "term_ydd", "y_of_q", "backbone_points",
+           "backbone_rows")

@@ -57,7 +57,49 @@ def master_kernel(pk, q, dq, x, J, Jd, M, N):
     N[1] = h * dq[0] * dq[0] - g * m2 * lc2 * s12 + b2 * dq[1]
 
 
-KERNELS = ("master_kernel",)
+def master_accel(pk, s, T1, F1, acc):
+    """Forward dynamics of the master (paper eq. (1), i = 1): acc (4,) = d/dt [q1, dq1] of the state
+    s (4,) = [q1, dq1] under joint torques T1 (2,) N m and the tip force F1 (2,) N, from
+    M1 ddq1 = T1 - N1 + J1^T F1 (2x2 solve by Cramer's rule).  False if M1 is singular.
+    Numba-compatible with heap work arrays: compiled by the Cosserat plant
+    (`harness.plant.cosserat.plant`)."""
+    x = np.empty(2)
+    J = np.empty((2, 2))
+    Jd = np.empty((2, 2))
+    M = np.empty((2, 2))
+    N = np.empty(2)
+    master_kernel(pk, s[0:2], s[2:4], x, J, Jd, M, N)
+    r0 = T1[0] - N[0] + J[0, 0] * F1[0] + J[1, 0] * F1[1]
+    r1 = T1[1] - N[1] + J[0, 1] * F1[0] + J[1, 1] * F1[1]
+    det = M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
+    if not det > 0.0:
+        return False
+    acc[0] = s[2]
+    acc[1] = s[3]
+    acc[2] = (M[1, 1] * r0 - M[0, 1] * r1) / det
+    acc[3] = (M[0, 0] * r1 - M[1, 0] * r0) / det
+    return True
+
+
+def master_points(pk, m, base, out):
+    """Base, elbow and tip of the master, world frame (n, 3, 3), m, for the master states m (n, 4) [q1, dq1]
+    (or (n, 2)) with its base at base (3,) (task [X, Z] -> world (b_x + X, b_y, b_z + Z)).
+    Numba-compatible."""
+    l1 = pk[0]
+    l2 = pk[1]
+    for k in range(m.shape[0]):
+        q0 = m[k, 0]
+        q1 = m[k, 1]
+        for i in range(3):
+            for j in range(3):
+                out[k, i, j] = base[j]
+        out[k, 1, 0] += l1 * np.sin(q0)
+        out[k, 1, 2] += l1 * np.cos(q0)
+        out[k, 2, 0] = out[k, 1, 0] + l2 * np.sin(q0 + q1)
+        out[k, 2, 2] = out[k, 1, 2] + l2 * np.cos(q0 + q1)
+
+
+KERNELS = ("master_kernel",)  # master_accel and master_points: compiled where used (the Cosserat plant)
 
 
 def _eval(p: MasterParams, q, dq=None):

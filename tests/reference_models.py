@@ -18,30 +18,10 @@ import numpy as np
 from controllers.cc import term_bases, y_of_q
 from controllers.control import pinv_terms
 from controllers.params import SLAVE_PACK, SlaveParams, SubtaskSpec
+from controllers.scratch import scratch, scratch_c, scratch_cz, scratch_i, scratch_zeros
 from controllers.slave import elastic_kernel, gauss_legendre01
 from controllers.subtasks import beta
 from controllers.tip import tip_kinematics
-
-
-def scratch(shape):
-    return np.empty(shape)
-
-
-def scratch_zeros(shape):
-    return np.zeros(shape)
-
-
-def scratch_c(shape):
-    return np.empty(shape, dtype=np.complex128)
-
-
-def scratch_cz(shape):
-    return np.zeros(shape, dtype=np.complex128)
-
-
-def scratch_i(shape):
-    return np.empty(shape, dtype=np.int64)
-
 
 PACK_M = SLAVE_PACK["m"]
 PACK_IS = SLAVE_PACK["Is"]

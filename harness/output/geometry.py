@@ -52,34 +52,15 @@ def master_points(q1: np.ndarray, lengths, base: np.ndarray) -> np.ndarray:
 
 
 def cc_backbone(q2: np.ndarray, points_per_section: int = BACKBONE_POINTS_PER_SECTION) -> np.ndarray:
-    """Planar constant-curvature backbone of q2 = [d1, d2, d3, k1, k2, k3], task space (n, 3 P + 1, 2).
+    """Planar constant-curvature backbone of q2 = [d1, d2, d3, k1, k2, k3], task space (n, 3 P + 1, 2):
+    P evenly spaced material points per section after the base (`controllers.cc.backbone_points`,
+    compiled)."""
+    from harness.loop.fast import K
 
-    Base at the origin, tangent +Z, k > 0 bends toward +X (controllers.params.SlaveParams).  Along a
-    section with tangent angle phi (from +Z toward +X) and arc s: p(s) = p0 + t sin(k s)/k
-    + nrm (1 - cos(k s))/k with t = (sin phi, cos phi), nrm = (cos phi, -sin phi); phi += k d.
-    Near-zero curvature uses the series limits (s, k s^2 / 2), so k = 0 is exact.
-    """
-    q2 = np.asarray(q2, dtype=float).reshape(-1, 6)
-    n, P = q2.shape[0], int(points_per_section)
-    u = np.linspace(0.0, 1.0, P + 1)[1:]  # fraction of the section, (P,)
-    pts = np.empty((n, 3 * P + 1, 2))
-    pts[:, 0] = 0.0
-    p0 = np.zeros((n, 2))
-    phi = np.zeros(n)
-    for i in range(3):
-        d, k = q2[:, i], q2[:, 3 + i]
-        s = d[:, None] * u[None, :]  # (n, P)
-        ks = k[:, None] * s
-        small = np.abs(ks) < 1e-6
-        with np.errstate(divide="ignore", invalid="ignore"):
-            along = np.where(small, s * (1.0 - ks * ks / 6.0), np.sin(ks) / k[:, None])
-            across = np.where(small, 0.5 * ks * s, (1.0 - np.cos(ks)) / k[:, None])
-        t = np.stack([np.sin(phi), np.cos(phi)], axis=-1)[:, None, :]
-        nrm = np.stack([np.cos(phi), -np.sin(phi)], axis=-1)[:, None, :]
-        seg = p0[:, None, :] + t * along[..., None] + nrm * across[..., None]
-        pts[:, 1 + i * P: 1 + (i + 1) * P] = seg
-        p0 = seg[:, -1]
-        phi = phi + k * d
+    q2 = np.ascontiguousarray(q2, dtype=float).reshape(-1, 6)
+    P = int(points_per_section)
+    pts = np.empty((q2.shape[0], 3 * P + 1, 2))
+    K.backbone_rows(q2, P, pts)
     return pts
 
 

@@ -11,7 +11,6 @@ module holds the numba kernels only:
 * `run_steps`: position-Verlet steps (PyElastica's `PositionVerlet` scheme: half drift, loads,
   kick, half drift) compiled into one loop with PyElastica's own update kernels
   (`overload_operator_kinematic_numba`, `_update_accelerations`), so a step has no Python overhead;
-* `cc_nodes`: node positions and element angles of a constant-curvature shape;
 * `cc_fit`: the least-squares constant-curvature fit of a section's nodes (and its rates).
 
 Planar embedding: plane point [X, Z] -> (X, 0, Z); the rod's directors are d1 = (cos p, 0, -sin p),
@@ -275,40 +274,6 @@ def contact_forces(pos, vel, objs, cdamp, f_contact):
 
 
 # --- constant-curvature geometry and its least-squares fit ------------------------------------------------
-
-
-@njit(cache=True)
-def _sinc(x):
-    if abs(x) < 1e-4:
-        return 1.0 - x * x / 6.0
-    return np.sin(x) / x
-
-
-@njit(cache=True)
-def cc_nodes(q2, n_per_section, xz, elem_angle):
-    """Nodes [X, Z] (3 n + 1, 2) of the CC shape q2 at uniform arc-length steps d_i / n within each
-    section (exactly on the arcs) and the element chord angles (3 n,) (from +Z toward +X)."""
-    x = 0.0
-    z = 0.0
-    phi = 0.0
-    xz[0, 0] = 0.0
-    xz[0, 1] = 0.0
-    idx = 0
-    for s in range(3):
-        h = q2[s] / n_per_section
-        k = q2[3 + s]
-        dphi = k * h
-        for _ in range(n_per_section):
-            # chord of an arc of length h turning by dphi: length h sinc(dphi/2), at angle phi + dphi/2
-            c = h * _sinc(0.5 * dphi)
-            a = phi + 0.5 * dphi
-            x += c * np.sin(a)
-            z += c * np.cos(a)
-            elem_angle[idx] = a
-            idx += 1
-            xz[idx, 0] = x
-            xz[idx, 1] = z
-            phi += dphi
 
 
 @njit(cache=True)

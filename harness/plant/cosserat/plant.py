@@ -13,8 +13,8 @@ rigid 2-link master, as a `harness.plant.stepped.SteppedPlant` for `harness.loop
   rod's stiffness about q2_ref and makes the closed loop diverge within 25 ms: measured).
   Torque actuation: T2 as internal section loads.  q2 is sensed by the
   least-squares CC fit of each section (`CosseratSlave.sense`).
-* Master: the analytic master dynamics (paper eq. 1, which MuJoCo's master matches to round-off),
-  classical RK4 with steps of at most 1 ms (`master_rk4`, compiled here).
+* Master: the analytic master dynamics (`controllers.master.master_accel`, paper eq. 1, which MuJoCo's
+  master matches to round-off), classical RK4 with steps of at most 1 ms (`master_rk4`, compiled here).
 * Interaction forces: F1 on the master tip (J1^T F1), F2 on the rod's tip node.
 * Environment (`harness.plant.cosserat.contact`): plane and sphere objects act on every rod node (PyElastica's
   penalty law, per node stiffness k); `forces` gives the true tip forces (F2 = constant + contact force
@@ -31,11 +31,13 @@ rigid 2-link master, as a `harness.plant.stepped.SteppedPlant` for `harness.loop
 from __future__ import annotations
 
 import math
+import types
 
 import numpy as np
 from numba import njit
 
 from controllers import master as master_model
+from controllers import slave as slave_model
 from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
 from harness.plant.cosserat import contact as rod_contact
@@ -46,29 +48,15 @@ MASTER_BASE = np.array([0.0, -0.3, 0.0])  # m, world (as mjcf/master.xml)
 SLAVE_BASE = np.array([0.0, 0.3, 0.0])  # m, world (as mjcf/octarm_base.xml)
 MASTER_MAX_H = 1e-3  # s, largest master RK4 step
 
+def _jit(fn, **deps):
+    """numba.njit(cache=True) of a numba-compatible function of `controllers`, its callees `deps` compiled."""
+    return njit(cache=True)(types.FunctionType(fn.__code__, {**fn.__globals__, **deps}, fn.__name__))
+
+
 _master_kernel = njit(cache=True)(master_model.master_kernel)
-
-
-@njit(cache=True)
-def _master_accel(mpk, s, T1, F1, acc):
-    """d/dt [q1, dq1] (4,) of the master (paper eq. 1): M1 ddq1 = T1 - N1 + J1^T F1 (2x2 solve).
-    False if M1 is singular."""
-    x = np.empty(2)
-    J = np.empty((2, 2))
-    Jd = np.empty((2, 2))
-    M = np.empty((2, 2))
-    N = np.empty(2)
-    _master_kernel(mpk, s[0:2], s[2:4], x, J, Jd, M, N)
-    r0 = T1[0] - N[0] + J[0, 0] * F1[0] + J[1, 0] * F1[1]
-    r1 = T1[1] - N[1] + J[0, 1] * F1[0] + J[1, 1] * F1[1]
-    det = M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
-    if not det > 0.0:
-        return False
-    acc[0] = s[2]
-    acc[1] = s[3]
-    acc[2] = (M[1, 1] * r0 - M[0, 1] * r1) / det
-    acc[3] = (M[0, 0] * r1 - M[1, 0] * r0) / det
-    return True
+_master_accel = _jit(master_model.master_accel, master_kernel=_master_kernel)
+master_points = njit(cache=True)(master_model.master_points)
+_elastic_kernel = njit(cache=True)(slave_model.elastic_kernel)
 
 
 @njit(cache=True)
@@ -101,30 +89,13 @@ def master_rk4(mpk, s, T1, F1, h, nsub):
 
 
 @njit(cache=True)
-def master_points(m, l1, l2, base, out):
-    """Master base, elbow and tip (n, 3, 3), world frame, m, of the master states m (n, 4) [q1, dq1]
-    (links l1, l2, m; base (3,)); `CosseratPlant.geometry` and `finish` use it."""
-    for k in range(m.shape[0]):
-        q0, q1 = m[k, 0], m[k, 1]
-        for i in range(3):
-            for j in range(3):
-                out[k, i, j] = base[j]
-        out[k, 1, 0] += l1 * math.sin(q0)
-        out[k, 1, 2] += l1 * math.cos(q0)
-        out[k, 2, 0] = out[k, 1, 0] + l2 * math.sin(q0 + q1)
-        out[k, 2, 2] = out[k, 1, 2] + l2 * math.cos(q0 + q1)
-
-
-@njit(cache=True)
-def feedforward(T2, q2, Kb, Ke, L0, out):
+def feedforward(T2, q2, spk, out):
     """Servo feed-forward out (6,) = T2 - dV/dq2 at q2 (6,) = [d, k], V = sum 1/2 Kb d k^2 + 1/2 Ke (d - L0)^2
-    the plant slave's CC elastic energy (Kb N m^2, Ke N/m, L0 m, each (3,)): dV/dd = 1/2 Kb k^2 + Ke (d - L0),
-    dV/dk = Kb d k."""
-    for i in range(3):
-        d = q2[i]
-        k = q2[3 + i]
-        out[i] = T2[i] - (0.5 * Kb[i] * k * k + Ke[i] * (d - L0[i]))
-        out[3 + i] = T2[3 + i] - Kb[i] * d * k
+    the plant slave's CC elastic energy (`controllers.slave.elastic_kernel`; spk: SlaveParams.packed())."""
+    E = np.empty(6)
+    _elastic_kernel(spk, q2, E)
+    for i in range(6):
+        out[i] = T2[i] - E[i]
 
 
 def _field_of(msg: str, scn: Scenario) -> str:
@@ -193,10 +164,7 @@ class CosseratPlant:
         self._T2 = np.zeros(6)
         self._q_ref = np.zeros(6)
         self._ff = np.zeros(6)
-        ps = scn.plant_slave
-        self._Kb = np.asarray(ps.bending_stiffness, dtype=float)
-        self._Ke = np.asarray(ps.extension_stiffness, dtype=float)
-        self._L0 = np.asarray(ps.rest_lengths, dtype=float)
+        self._spk = scn.plant_slave.packed()
         nn = 3 * self.slave.n + 1
         self._geo = {"centreline": np.zeros((nn, 3)), "sections": np.zeros((4, 3)),
                      "master": np.zeros((3, 3))}
@@ -244,7 +212,7 @@ class CosseratPlant:
             ff = None
             if self.feedforward:
                 ff = self._ff
-                feedforward(self._T2, self._q2, self._Kb, self._Ke, self._L0, ff)
+                feedforward(self._T2, self._q2, self._spk, ff)
             ok = self.slave.step(self._q_ref, dt, ff)
         else:
             ok = self.slave.step(self._T2, dt)
@@ -280,7 +248,7 @@ class CosseratPlant:
         cl[:] = pos.T
         cl += SLAVE_BASE
         g["sections"][:] = cl[self.slave.section_nodes]
-        master_points(self._m[None], self.mpk[0], self.mpk[1], MASTER_BASE, g["master"][None])
+        master_points(self.mpk, self._m[None], MASTER_BASE, g["master"][None])
         return g
 
     def record(self, k: int) -> None:
@@ -303,7 +271,7 @@ class CosseratPlant:
         np.add(pos.transpose(0, 2, 1), SLAVE_BASE, out=cl)
         traj.x2_plant = np.ascontiguousarray(pos[:, [0, 2], -1])
         traj.master_pos = np.empty((done, 3, 3))
-        master_points(self._m_hist[:done], self.mpk[0], self.mpk[1], MASTER_BASE, traj.master_pos)
+        master_points(self.mpk, self._m_hist[:done], MASTER_BASE, traj.master_pos)
         traj.meta["geometry"] = {"centreline": cl, "sections": cl.take(self.slave.section_nodes, axis=1)}
         traj.meta.update(self.meta())
 

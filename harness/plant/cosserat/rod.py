@@ -151,6 +151,7 @@ import elastica as ea
 import numpy as np
 from elastica.timestepper.symplectic_steppers import PositionVerlet
 
+from controllers.cc import backbone_points
 from controllers.params import SlaveParams
 from harness.plant.cosserat import kernels as kr
 
@@ -444,9 +445,19 @@ class CosseratSlave:
         self._steps = 0
 
     def _cc(self, q2):
+        """Nodes [X, Z] (3 n + 1, 2) of the CC shape q2 at uniform arc-length steps d_i / n within each
+        section (exactly on the arcs: `controllers.cc.backbone_points`) and the element chord angles (3 n,)
+        (from +Z toward +X: the tangent at the element's middle)."""
+        q2 = np.asarray(q2, dtype=float)
         xz = np.empty((3 * self.n + 1, 2))
+        backbone_points(q2, self.n, xz)
         ang = np.empty(3 * self.n)
-        kr.cc_nodes(np.asarray(q2, dtype=float), self.n, xz, ang)
+        phi = 0.0
+        for s in range(3):
+            dphi = q2[3 + s] * (q2[s] / self.n)
+            for m in range(self.n):
+                ang[s * self.n + m] = phi + 0.5 * dphi
+                phi += dphi
         return xz, ang
 
     def external_tip_force(self, F) -> None:
