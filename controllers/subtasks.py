@@ -39,7 +39,7 @@ def pack_subtask(spec: SubtaskSpec, slave: SlaveParams) -> np.ndarray:
                      slave.max_extension, slave.max_bend, *slave.rest_lengths], dtype=np.float64)
 
 
-def manipulability_kernel(J, H, Jd, Hd, dq, grad, graddot):
+def manipulability_kernel(J, H, Jd, Hd, grad, graddot):
     """beta_m = sqrt(det A), A = J J^T, with grad (6,) and d/dt grad (6,) (outputs overwritten).
 
     J (2,6), H (2,6,6) = dJ/dq, Jd (2,6) = dJ/dt, Hd (2,6,6) = dH/dt.  Returns (beta, det A).
@@ -141,7 +141,7 @@ def subtask_kernel(spec, J, H, Jd, Hd, q, dq, grad, graddot, parts):
     parts (3,) receives [beta_m, beta_l, det(J J^T)].  Returns beta."""
     g1 = scratch(6)
     gd1 = scratch(6)
-    beta_m, det = manipulability_kernel(J, H, Jd, Hd, dq, g1, gd1)
+    beta_m, det = manipulability_kernel(J, H, Jd, Hd, g1, gd1)
     parts[0] = beta_m
     parts[2] = det
     beta = spec[0] * beta_m
