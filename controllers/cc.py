@@ -94,7 +94,7 @@ def en_tuple(t):
 def term_bases(u, thj, f):
     """b_n = f u^(1+n) E_n(u Theta_j), n = 0..3, f = exp(i phi_prev) (phi_prev: angle at the start of
     section j): every derivative of T_j(u) is i^(npre+nt) b_nt, times d_j if it is not
-    differentiated in d_j (see term_mono)."""
+    differentiated in d_j."""
     e0, e1, e2, e3 = en_tuple(u * thj)
     u2 = u * u
     u3 = u2 * u

@@ -12,7 +12,7 @@ prints +kn, a sign typo: with +kn the null-space error would grow).
 
 dJ2^+ is exact: d/dt [J^T A^-1] = dJ^T A^-1 - J^T A^-1 dA A^-1, A = J J^T, dA = dJ J^T + J dJ^T.
 
-Kernels are numba-compatible (compiled by `harness.fast`); `master_control` / `slave_control` are
+Kernels are numba-compatible (compiled by `harness.loop.fast`); `master_control` / `slave_control` are
 the readable pure-numpy entry points returning dictionaries.
 """
 

@@ -48,7 +48,9 @@ def ipow_mul(k, z):
 
 
 def tval(npre, nd, nt, dj, b0, b1, b2, b3):
-    """term_mono(npre, nd, nt) from the bases b_n of term_bases (0 for nd >= 2)."""
+    """The derivative of T_j(u) = f_j u d_j E_0(u Theta_j) taken npre times in earlier angles, nd times in d_j
+    and nt times in Theta_j: i^(npre + nt) b_nt, times d_j if nd = 0 (0 for nd >= 2), from the bases b_n of
+    term_bases."""
     if nd >= 2:
         return 0.0j
     if nt == 0:
@@ -68,7 +70,7 @@ def tval(npre, nd, nt, dj, b0, b1, b2, b3):
 
 
 def ty_acc(j, npre, nd, nt, ydot, dj, b0, b1, b2, b3):
-    """sum_w ydot_w term_mono(derivative (npre, nd, nt) of T_j, once more in y_w), w in order."""
+    """sum_w ydot_w tval(derivative (npre, nd, nt) of T_j, once more in y_w), w in order."""
     acc = 0.0j
     if nd == 0 and ydot[j] != 0.0:
         acc += ydot[j] * tval(npre, 1, nt, dj, b0, b1, b2, b3)
@@ -88,7 +90,7 @@ def term_y_derivs(j, u, d, th, phi_prev, order, ydot, c, Jy, Hy, Ty):
 
     order 0: value; 1: + gradient; 2: + Hessian; 3: + third derivative contracted with ydot (6,).
     phi_prev: angle at the start of section j (sum of earlier Theta).  Every derivative is
-    term_mono(npre, nd, nt) (see there): the variables of T_j play three roles, earlier angles
+    tval(npre, nd, nt) (see there): the variables of T_j play three roles, earlier angles
     y[3 + l], l < j (npre), d_j (nd) and Theta_j (nt), so each block of Hy and Ty is one value.
     """
     b0, b1, b2, b3 = term_bases(u, th[j], complex(np.cos(phi_prev), np.sin(phi_prev)))
