@@ -52,7 +52,7 @@ import numpy as np
 from harness.config.assets import shipped
 from harness.config.errors import ConfigError, short_repr
 from harness.config.scenario import KEY_RE, NAME_RE, EnvironmentConfig, Scenario, TrajectoryConfig
-from harness.config.schema import decode, did_you_mean, fields_of, info, none_words, suggest, type_name
+from harness.config.schema import decode, did_you_mean, fields_of, info, suggest, type_name
 from harness.config.textio import loads_toml, read_toml, toml_literal, write_atomic
 
 BARE_WORD = r"^[A-Za-z_][A-Za-z0-9_.+-]*$"
@@ -358,7 +358,7 @@ def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterabl
 def _prepare(raw: Mapping, default_name: str | None) -> tuple[dict, dict[int, str]]:
     """The TOML layout -> the schema's: fields in schema order, [controller] given as a name, named
     [environment.objects.<name>] tables -> a list, [plant.master]/[plant.slave] on top of the nominal
-    [master]/[slave], default sub-task weights per kind, "none" -> None.  -> (table, object names)."""
+    [master]/[slave], default sub-task weights per kind.  -> (table, object names)."""
     order = [f.name for f in info(Scenario).fields]
     raw = {**{k: raw[k] for k in raw if k not in order}, **{k: raw[k] for k in order if k in raw}}
     if "name" not in raw and default_name:
@@ -390,7 +390,7 @@ def _prepare(raw: Mapping, default_name: str | None) -> tuple[dict, dict[int, st
     if isinstance(sub, dict) and "weights" not in sub and isinstance(sub.get("kinds"), list):
         default_w = dict(zip(Scenario().subtask.kinds, Scenario().subtask.weights, strict=True))
         sub["weights"] = [default_w.get(k, 1.0) if isinstance(k, str) else 1.0 for k in sub["kinds"]]
-    return none_words(raw, info(Scenario)), names
+    return raw, names
 
 
 def _scenario_from_dict(raw: Mapping, default_name: str | None) -> Scenario:

@@ -46,10 +46,15 @@ def vec(n: int, desc: str, **rng: float) -> Any:
     return Annotated[tuple[(item,) * n], Meta(description=desc or None)]
 
 
-def doc(tp: Any, desc: str, expect: str | None = None, **meta: Any) -> Any:
-    """`tp` with a description, msgspec constraints such as `pattern`, and `expect`: what the error
-    message says the value must be (default: from the type)."""
-    return Annotated[tp, Meta(description=desc or None, extra={"expect": expect} if expect else None, **meta)]
+_META = ("gt", "ge", "lt", "le", "multiple_of", "pattern", "min_length", "max_length")
+
+
+def doc(tp: Any, desc: str, **meta: Any) -> Any:
+    """`tp` with a description, msgspec constraints (`pattern`, ...) and extra keys: `expect` (what the
+    error message says the value must be; default: from the type), `unit`, ..."""
+    extra = {k: v for k, v in meta.items() if k not in _META}
+    rules = {k: v for k, v in meta.items() if k in _META}
+    return Annotated[tp, Meta(description=desc or None, extra=extra or None, **rules)]
 
 
 def checked(cls: type, spec: Mapping[str, Any]) -> type:
@@ -334,11 +339,13 @@ def _bad_key(table: Mapping, tp: Any) -> str | None:
 
 def decode(raw: Any, cls: type, *, prefix: str = "", names: dict[int, str] | None = None,
            elsewhere: tuple[str, ...] = ()) -> Any:
-    """`raw` (a parsed TOML table) as a `cls` instance, or a one-line ConfigError.  `prefix` is put
+    """`raw` (a parsed TOML table) as a `cls` instance, or a one-line ConfigError ("none" or false
+    unset an optional field).  `prefix` is put
     before every field path; `names` names the tables of an array in messages (index -> name)."""
     if not isinstance(raw, Mapping):
         raise ConfigError.field(prefix.rstrip(".") or "file", raw, f"must be a table (got {type_name(raw)})")
     _check_keys(raw, info(cls), prefix.rstrip("."), elsewhere, names)
+    raw = none_words(raw, info(cls))
     bad = _non_finite(raw, [])
     if bad is not None:
         raise field_error(cls, raw, bad, "finite", names, prefix)
