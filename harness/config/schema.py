@@ -207,7 +207,8 @@ def fields_of(cls: type, prefix: str = "", arrays: bool = False) -> Iterator[tup
     `arrays`, also of the tables in arrays of tables (named `<name>`)."""
     for f in info(cls).fields:
         path = prefix + f.name
-        default = f.default if f.default is not msgspec.NODEFAULT else f.default_factory()
+        default = f.default if f.default is not msgspec.NODEFAULT else \
+            f.default_factory() if f.default_factory is not msgspec.NODEFAULT else msgspec.NODEFAULT
         yield path, f.type, default
         sub = _dataclass_of(f.type)
         if sub is None and arrays and isinstance(bare(f.type), mi.VarTupleType):
