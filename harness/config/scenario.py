@@ -195,7 +195,7 @@ class EnvironmentConfig:
     """Objects the slave's segments and tip can touch (none = the paper's free-space scenario)."""
 
     objects: doc(tuple[EnvObject, ...], "one [environment.objects.<name>] table per object (see "
-                 "scenarios/contact.toml)") = ()
+                 "scenarios/contact.toml)", item="<name>") = ()
 
 
 @dataclass(frozen=True)

@@ -204,7 +204,8 @@ def _dataclass_of(t: Any) -> Any:
 
 def fields_of(cls: type, prefix: str = "", arrays: bool = False) -> Iterator[tuple[str, Any, Any]]:
     """(dotted name, msgspec type info, default) of every field of `cls` and of its sub-tables; with
-    `arrays`, also of the tables in arrays of tables (named `<name>`)."""
+    `arrays`, also of the tables in arrays of tables (`factor[].param`, or as the array's `item` extra
+    says: `environment.objects.<name>.kind`)."""
     for f in info(cls).fields:
         path = prefix + f.name
         default = f.default if f.default is not msgspec.NODEFAULT else \
@@ -212,7 +213,9 @@ def fields_of(cls: type, prefix: str = "", arrays: bool = False) -> Iterator[tup
         yield path, f.type, default
         sub = _dataclass_of(f.type)
         if sub is None and arrays and isinstance(bare(f.type), mi.VarTupleType):
-            sub, path = _dataclass_of(bare(f.type).item_type), path + ".<name>"
+            extra = f.type.extra if isinstance(f.type, mi.Metadata) and f.type.extra else {}
+            item = extra.get("item", "[]")
+            sub, path = _dataclass_of(bare(f.type).item_type), path + (item if item == "[]" else "." + item)
         if sub is not None:
             yield from fields_of(sub.cls, path + ".", arrays)
 
@@ -376,5 +379,25 @@ def none_words(raw: Any, t: Any) -> Any:
 
 
 __all__ = ["ConfigError", "Meta", "checked", "decode", "describe", "did_you_mean", "doc", "field_error",
+           "parse_params",
            "fields_of", "info", "integer", "none_words", "num", "plain", "suggest", "type_name",
            "unknown_key", "vec"]
+
+
+def parse_params(cls: type, raw: Mapping | None) -> Any:
+    """The validated `Params` of a controller class (controllers/interface.py) from its
+    [controller.params] table: missing keys take the defaults, each error one line naming
+    ``controller.params.<key>`` (ConfigError; the class' own ``check()`` may raise ParamsError)."""
+    params, raw = getattr(cls, "Params", None), dict(raw or {})
+    if params is None:
+        if raw:
+            key = sorted(raw)[0]
+            raise ConfigError.field(f"controller.params.{key}", raw[key],
+                                    f"unknown key; controller {getattr(cls, 'name', cls.__name__)!r} takes "
+                                    "no parameters")
+        return None
+    p = decode(raw, params, prefix="controller.params.")
+    check = getattr(p, "check", None)
+    if callable(check):
+        check()
+    return p

@@ -79,27 +79,27 @@ import logging
 import math
 import os
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 from harness.config.assets import shipped
 from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
-from harness.config.schema import decode, did_you_mean, doc, fields_of, integer, suggest, unknown_key
+from harness.config.schema import decode, did_you_mean, fields_of, suggest, unknown_key
+from harness.config.study import (  # noqa: F401 - DEFAULT_MAX_CASES, METRIC_NAMES re-exported
+    DEFAULT_MAX_CASES,
+    DISTRIBUTIONS,
+    METRIC_NAMES,
+    PARAM_RE,
+    FactorTable,
+    StudyFile,
+)
 from harness.config.textio import read_toml
 
 log = logging.getLogger(__name__)
 
 
-# Keys of harness.loop.metrics.compute_metrics kept in a row's "metrics" (status/message are row fields).
-METRIC_NAMES = (
-    "e1_rms", "e1_max", "e2_rms", "e2_max", "e2_plant_rms", "e2_plant_max", "deN_rms", "beta_min",
-    "ya_max", "e1_final", "e2_final", "range_violation", "mujoco_warnings", "sim_time_reached",
-    "wall_time", "realtime_factor",
-    "contact_force_peak", "contact_force_rms", "penetration_max", "contact_time", "body_contact_time",
-    "force_tracking_rms",
-)
 LOWER_IS_WORSE = frozenset({"beta_min"})
 # axis labels of the summary plots (units as in harness.loop.metrics)
 METRIC_LABELS = {
@@ -113,13 +113,7 @@ METRIC_LABELS = {
     "penetration_max": "penetration_max [m]", "contact_time": "contact_time [s]",
     "body_contact_time": "body_contact_time [s]", "force_tracking_rms": "force_tracking_rms [N]",
 }
-DISTRIBUTIONS = {
-    "uniform": ("low", "high"), "loguniform": ("low", "high"), "normal": ("mean", "std"),
-    "integers": ("low", "high"),
-}
 DEFAULT_OUT_ROOT = Path("runs") / "sweeps"
-DEFAULT_MAX_CASES = 10000  # [sampling] max_cases / --max-cases
-_PARAM_RE = re.compile(r"^([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)(?:\[(\d+)\])?$")
 
 
 # --- study file -------------------------------------------------------------------------------------
@@ -172,62 +166,6 @@ class Case:
     scenario: Scenario
 
 
-# --- the study file's schema ------------------------------------------------------------------------
-_Number = int | float
-
-
-@dataclass(frozen=True)
-class RecordTable:
-    worst: integer("number of worst cases recorded as .rrd", ge=1) = 1
-    by: doc(Literal[METRIC_NAMES], "metric that ranks the cases (one of study.metrics)") = "e2_rms"
-    order: doc(Literal["max", "min"] | None, 'which end of the metric is worst; default "min" for beta_min, '
-               'else "max"') = None
-
-
-@dataclass(frozen=True)
-class StudyTable:
-    name: doc(doc(str, "", pattern=r"^[\w.-]+$") | None, "output folder name (letters, digits, '_', '-', "
-              "'.'); default: the file's stem") = None
-    description: doc(str, "free text") = ""
-    scenario: doc(str | None, "base scenario file, relative to the study file; default: the inline "
-                  "[scenario] table or the built-in paper scenario") = None
-    set: doc(tuple[str, ...], "scenario overrides 'key=value' applied to every case") = ()
-    metrics: doc(tuple[Literal[METRIC_NAMES], ...], "metrics kept per case (default: all)",
-                 min_length=1) = METRIC_NAMES
-    record: doc(RecordTable | None, "recordings of the worst cases: {worst, by, order}") = None
-
-
-@dataclass(frozen=True)
-class FactorTable:
-    param: doc(str, "dotted Scenario path, optionally indexed (plant.slave.masses[0]); "
-               "'controller' compares controllers", pattern=_PARAM_RE.pattern,
-               expect="a dotted Scenario path like 'plant.slave.masses[0]'")
-    name: doc(doc(str, "", min_length=1) | None, "label in tables and plots; default: param") = None
-    scale: doc(list[_Number] | dict[str, Any] | None, "multiplicative factors of the nominal value, "
-               "or a {random = ...} table", expect="an array of numbers or a {random = ...} table") = None
-    values: doc(list[Any] | dict[str, Any] | None, "absolute values, or a {random = ...} table",
-                expect="an array of values or a {random = ...} table") = None
-
-
-@dataclass(frozen=True)
-class SamplingTable:
-    mode: doc(Literal["grid", "random"], '"grid": cartesian product; "random": n random cases') = "grid"
-    n: doc(integer("", ge=1) | None, "number of random draws (mode = 'random' or random factors)") = None
-    seed: integer("seed of the random draws", ge=0) = 0
-    max_cases: integer("refuse larger studies before expanding them (--max-cases)", ge=1) = DEFAULT_MAX_CASES
-
-
-@dataclass(frozen=True)
-class StudyFile:
-    """A study file: [study], one [[factor]] per varied field, [sampling], an optional inline
-    [scenario] (same keys as a scenario file)."""
-
-    factor: doc(tuple[FactorTable, ...], "one table per varied field")
-    study: doc(StudyTable, "the study") = field(default_factory=StudyTable)
-    sampling: doc(SamplingTable, "how cases are drawn") = field(default_factory=SamplingTable)
-    scenario: doc(dict[str, Any] | None, "inline base scenario (instead of study.scenario)") = None
-
-
 def is_real(v) -> bool:
     return isinstance(v, int | float) and not isinstance(v, bool)
 
@@ -263,7 +201,7 @@ def _parse_dist(spec: dict, where: str) -> dict:
 def _parse_factor(t: FactorTable) -> Factor:
     name = t.name if t.name is not None else t.param
     where = f"[[factor]] {name!r}"
-    m = _PARAM_RE.match(t.param)
+    m = PARAM_RE.match(t.param)
     path = tuple(m.group(1).split("."))
     index = None if m.group(2) is None else int(m.group(2))
     if path[0] in ("master", "slave"):
