@@ -34,7 +34,7 @@ from typing import Any
 
 from harness.config.assets import shipped
 from harness.config.errors import ConfigError, short_repr
-from harness.config.schema import decode, doc, info, num, unknown_key
+from harness.config.schema import decode, doc, info, num, unknown_keys
 from harness.config.textio import read_toml
 
 
@@ -120,9 +120,9 @@ def bounds_from_dict(raw: Mapping, label: str | None = None) -> Bounds:
     try:
         if not isinstance(raw, Mapping):
             raise ConfigError(f"bounds file must be a table, got {short_repr(raw)}")
-        for k, v in raw.items():
-            if k not in ("bounds", "description"):
-                raise unknown_key(str(k), v, ("bounds", "description"))
+        bad = {k: v for k, v in raw.items() if k not in ("bounds", "description")}
+        if bad:
+            raise unknown_keys("", bad, ("bounds", "description"))
         if "bounds" not in raw:
             raise ConfigError("missing [bounds] table", path="bounds")
         table, desc = raw["bounds"], raw.get("description", "")
@@ -130,7 +130,7 @@ def bounds_from_dict(raw: Mapping, label: str | None = None) -> Bounds:
             raise ConfigError.field("description", desc, "must be a string")
         if isinstance(table, Mapping) and "description" in table:
             allowed = [f.name for f in fields(Bounds)][:-1]
-            raise unknown_key("bounds.description", table["description"], allowed)
+            raise unknown_keys("bounds.", {"description": table["description"]}, allowed)
         if isinstance(table, Mapping):
             table = {**table, "description": desc}
         return decode(table, Bounds, prefix="bounds.")

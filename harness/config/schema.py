@@ -172,22 +172,32 @@ def suggest(word: Any, choices: Iterable[str], n: int = 3) -> list[str]:
     return difflib.get_close_matches(str(word), list(choices), n=n, cutoff=0.6)
 
 
-def did_you_mean(hints: Iterable[str]) -> str:
+def did_you_mean(hints: Iterable[str], key: str = "") -> str:
     hints = list(hints)
-    return f"did you mean {' or '.join(repr(h) for h in hints[:4])}? " if hints else ""
+    alts = " or ".join(repr(h) for h in hints[:4])
+    return f"did you mean {alts}{f' for {key!r}' if key else ''}? " if hints else ""
 
 
-def unknown_key(path: str, value: Any, allowed: Iterable[str], elsewhere: Iterable[str] = ()) -> ConfigError:
-    """``path = value: unknown key; did you mean ...? allowed keys here: ...`` (`elsewhere`: dotted
-    paths of the same file whose last part is the key, e.g. `plant.segments` for a top-level
-    `segments`)."""
-    allowed = list(allowed)
-    key = path.rsplit(".", 1)[-1]
-    prefix = path[: -len(key)]
-    hints = [prefix + c for c in suggest(key, allowed)]
-    hints += [p for p in elsewhere if p.rsplit(".", 1)[-1] == key and p != path and p not in hints]
-    return ConfigError(f"{path} = {short_repr(value, 40)}: unknown key; {did_you_mean(hints)}"
-                       f"allowed keys here: {', '.join(allowed) or 'none'}", path=path)
+def unknown_keys(prefix: str, bad: Mapping, allowed: Iterable[str],
+                 elsewhere: Iterable[str] = ()) -> ConfigError:
+    """One line for the unknown keys `bad` (key -> value) of the table at `prefix` ("plant." or ""):
+    the close spellings among `allowed`, and the dotted paths of the file (`elsewhere`) where the key
+    belongs, e.g. `plant.segments` for a top-level `segments`."""
+    allowed, elsewhere = list(allowed), list(elsewhere)
+    hints = []
+    for k in bad:
+        close = [prefix + c for c in suggest(k, allowed)]
+        other = [e for e in elsewhere if e.rsplit(".", 1)[-1] == k and e != prefix + k and e not in close]
+        text = did_you_mean(close + other, k if len(bad) > 1 else "")
+        hints.append(text + (f"({k!r} belongs under [{other[0].rsplit('.', 1)[0]}]) " if other else ""))
+    if len(bad) == 1:
+        (k, v), = bad.items()
+        head, path = f"{prefix}{k} = {short_repr(v, 40)}: unknown key", prefix + str(k)
+    else:
+        path = prefix.rstrip(".")
+        head = f"{path or 'file'}: unknown keys {', '.join(map(repr, bad))}"
+    allowed_text = ", ".join(allowed) or "none"
+    return ConfigError(f"{head}; {''.join(hints)}allowed keys here: {allowed_text}", path=path)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -228,12 +238,14 @@ def _check_keys(raw: Any, t: Any, path: str, elsewhere: tuple[str, ...], names: 
     if t is None or not isinstance(raw, Mapping):
         return
     fields = {f.name: f for f in t.fields}
-    for k, v in raw.items():
+    for k in raw:
         if not isinstance(k, str):
             raise ConfigError(f"{path or 'file'}: key {short_repr(k)} is not a string", path=path)
+    bad = {k: v for k, v in raw.items() if k not in fields}
+    if bad:
+        raise unknown_keys(f"{path}." if path else "", bad, fields, elsewhere)
+    for k, v in raw.items():
         p = f"{path}.{k}" if path else k
-        if k not in fields:
-            raise unknown_key(p, v, fields, elsewhere)
         ft = bare(fields[k].type)
         if isinstance(ft, (mi.VarTupleType, mi.ListType)) and isinstance(v, (list, tuple)):
             for i, item in enumerate(v):
@@ -381,7 +393,7 @@ def none_words(raw: Any, t: Any) -> Any:
 __all__ = ["ConfigError", "Meta", "checked", "decode", "describe", "did_you_mean", "doc", "field_error",
            "parse_params",
            "fields_of", "info", "integer", "none_words", "num", "plain", "suggest", "type_name",
-           "unknown_key", "vec"]
+           "unknown_keys", "vec"]
 
 
 def parse_params(cls: type, raw: Mapping | None) -> Any:

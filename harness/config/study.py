@@ -72,7 +72,7 @@ class StudyFile:
     """A study file: [study], one [[factor]] per varied field, [sampling], an optional inline
     [scenario] (same keys as a scenario file)."""
 
-    factor: doc(tuple[FactorTable, ...], "one table per varied field")
+    factor: doc(tuple[FactorTable, ...], "one table per varied field (at least one)") = ()
     study: doc(StudyTable, "the study") = field(default_factory=StudyTable)
     sampling: doc(SamplingTable, "how cases are drawn") = field(default_factory=SamplingTable)
     scenario: doc(dict[str, Any] | None, "inline base scenario (instead of study.scenario)") = None

@@ -86,7 +86,7 @@ from typing import Any
 from harness.config.assets import shipped
 from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
-from harness.config.schema import decode, did_you_mean, fields_of, suggest, unknown_key
+from harness.config.schema import decode, did_you_mean, fields_of, suggest, unknown_keys
 from harness.config.study import (  # noqa: F401 - DEFAULT_MAX_CASES, METRIC_NAMES re-exported
     DEFAULT_MAX_CASES,
     DISTRIBUTIONS,
@@ -180,9 +180,9 @@ def _parse_dist(spec: dict, where: str) -> dict:
         hint = did_you_mean(suggest(kind, DISTRIBUTIONS)) if isinstance(kind, str) else ""
         raise ConfigError(f"{where}: random = {kind!r}; {hint}expected one of {sorted(DISTRIBUTIONS)}")
     keys = DISTRIBUTIONS[kind]
-    for k in spec:
-        if k not in ("random", *keys):
-            raise unknown_key(f"{where}.{k}", spec[k], ("random", *keys))
+    bad = {k: v for k, v in spec.items() if k not in ("random", *keys)}
+    if bad:
+        raise unknown_keys(f"{where}.", bad, ("random", *keys))
     missing = [k for k in keys if k not in spec]
     if missing or not all(is_real(spec[k]) for k in keys):
         raise ConfigError(f"{where}: random = {kind!r} needs numbers {list(keys)}, got {spec!r}")
@@ -238,12 +238,12 @@ def load_study(source: str | os.PathLike | dict, base_dir: str | os.PathLike | N
         path = shipped(source, "studies")  # a shipped name (segments) works from any folder
         doc_, stem, label = read_toml(path, "study file"), path.stem, f"study file {source}"
         base = Path(base_dir) if base_dir is not None else path.resolve().parent
-    if isinstance(doc_, dict) and not doc_.get("factor"):
-        raise ConfigError("study file: at least one [[factor]] table is required")
     try:
         f = decode(doc_, StudyFile, elsewhere=tuple(p for p, _, _ in fields_of(StudyFile)))
     except ConfigError as e:
         raise (e.with_context(label) if label else e) from None
+    if not f.factor:
+        raise ConfigError("study file: at least one [[factor]] table is required")
     st, sp = f.study, f.sampling
     name = st.name if st.name is not None else stem
     if name is None or not re.fullmatch(r"[\w.-]+", name):
