@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import math
 import re
 import tomllib
@@ -49,6 +50,7 @@ from typing import Any
 
 import numpy as np
 
+from controllers.params import SubtaskSpec
 from harness.config.assets import shipped
 from harness.config.errors import ConfigError, short_repr
 from harness.config.scenario import KEY_RE, NAME_RE, EnvironmentConfig, Scenario, TrajectoryConfig
@@ -388,7 +390,7 @@ def _prepare(raw: Mapping, default_name: str | None) -> tuple[dict, dict[int, st
             plant[sub] = {**(nominal if isinstance(nominal, dict) else {}), **plant[sub]}
     sub = raw.get("subtask")
     if isinstance(sub, dict) and "weights" not in sub and isinstance(sub.get("kinds"), list):
-        default_w = dict(zip(Scenario().subtask.kinds, Scenario().subtask.weights, strict=True))
+        default_w = dict(zip(SubtaskSpec().kinds, SubtaskSpec().weights, strict=True))
         sub["weights"] = [default_w.get(k, 1.0) if isinstance(k, str) else 1.0 for k in sub["kinds"]]
     return raw, names
 
@@ -404,6 +406,7 @@ def _scenario_from_dict(raw: Mapping, default_name: str | None) -> Scenario:
     return scn
 
 
+@functools.cache
 def schema_paths() -> tuple[str, ...]:
     """Every settable dotted key of a scenario file (suggestions, tests)."""
     return tuple(p for p, _, _ in fields_of(Scenario))
