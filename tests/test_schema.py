@@ -95,13 +95,25 @@ def test_parse_params_keeps_the_class_check_and_no_params():
         parse_params(_NoParams, {"k": 1})
 
 
-def test_builtin_params_parse_like_the_interface():
-    """The built-in controllers' Params give the same instances through both parsers."""
-    from harness.loop.controllers import BUILTINS
+def test_shipped_params_parse_like_the_interface():
+    """The shipped controllers' Params (built-in and example) give the same instances through both
+    parsers, and both refuse the same bad values."""
+    from controllers.interface import ParamsError
+    from harness.loop.controllers import BUILTINS, load_class
 
-    for cls in BUILTINS.values():
-        if getattr(cls, "Params", None) is not None:
-            assert parse_params(cls, {}) == cls.parse_params({})
+    example = load_class(f"{ROOT / 'examples' / 'controllers' / 'jacobian_transpose.py'}:JacobianTransposePD")
+    classes = [c for c in [*BUILTINS.values(), example] if getattr(c, "Params", None) is not None]
+    assert len(classes) == 2
+    for cls in classes:
+        key, default = next(iter(vars(cls.Params()).items()))
+        for raw in ({}, {key: 2 * default + 1}):
+            assert parse_params(cls, raw) == cls.parse_params(raw)
+        for raw in ({key: "x"}, {key: -1.0}, {"nope": 1}):
+            with pytest.raises((ParamsError, ConfigError)) as a:
+                cls.parse_params(raw)
+            with pytest.raises((ParamsError, ConfigError)) as b:
+                parse_params(cls, raw)
+            assert str(b.value).split(":")[0] == str(a.value).split(":")[0]
 
 
 def test_set_refuses_an_unknown_object_name():
