@@ -66,17 +66,16 @@ def checked(cls: type, spec: Mapping[str, Any]) -> type:
         raise TypeError(f"{cls.__name__}: schema fields {sorted(spec)} != dataclass fields")
     extra = [(f.name, spec[f.name], dataclasses.field(default=f.default, default_factory=f.default_factory))
              for f in own]
-    return dataclasses.make_dataclass(cls.__name__, extra, bases=(cls,), frozen=True, eq=False)
+    return dataclasses.make_dataclass(cls.__name__, extra, bases=(cls,), frozen=True, eq=False,
+                                      namespace={"schema_of": cls})
 
 
 def plain(value: Any) -> Any:
     """A `checked` subclass instance as an instance of its parameter dataclass (others unchanged)."""
-    cls = type(value)
-    if dataclasses.is_dataclass(value) and cls.__base__ is not object and \
-            dataclasses.is_dataclass(cls.__base__) and cls.__name__ == cls.__base__.__name__:
-        base = cls.__base__
-        return base(**{f.name: getattr(value, f.name) for f in dataclasses.fields(base)})
-    return value
+    base = getattr(type(value), "schema_of", None)
+    if base is None:
+        return value
+    return base(**{f.name: getattr(value, f.name) for f in dataclasses.fields(base)})
 
 
 # ---------------------------------------------------------------------------------------------
@@ -334,7 +333,7 @@ def field_error(cls: type, raw: Any, tokens: list, why: str = "", names: dict[in
     if why == "finite":
         expected = f"finite ({expected})"
     if isinstance(t, (mi.DataclassType, mi.DictType)):
-        expected = f"a table [{path}]" + (' or "none"' if isinstance(bare(ftype), mi.UnionType) else "")
+        expected = f"a table [{path}]"
     return ConfigError.field(path, value, f"must be {expected}{got}")
 
 
