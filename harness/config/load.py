@@ -1,16 +1,7 @@
 """Scenario TOML <-> `harness.config.Scenario`, with complete validation before any simulation.
 
-TOML layout mirrors the dataclasses (see `scenarios/paper.toml`, which spells out every default)::
-
-    name = "paper"            # also the default output folder runs/<name>
-    duration = 20.0           # s
-    control_dt = 0.001        # s
-    snr_db = 40.0             # dB, or "none" (or false) for no noise
-    seed = 0
-    transient = 5.0           # s
-    continuous_control = false
-    interaction_forces = [[0.0, 0.0], [0.0, 0.0]]
-    [gains] [master] [slave] [subtask] [trajectory] [initial] [plant] [plant.master] [plant.slave]
+The TOML layout mirrors the dataclasses of `harness.config.scenario` (`scenarios/paper.toml` spells
+out every default; docs/config_reference.md lists every field with its range).
 
 Rules:
 
@@ -24,7 +15,8 @@ Rules:
 * Integers are accepted where floats are expected, booleans never count as numbers, floats are
   never accepted as integers, NaN/inf are rejected everywhere.
 * ``subtask.weights`` defaults to the default weight of each kind in ``subtask.kinds``.
-* ``name`` defaults to the file stem when loading from a file (``"paper"`` otherwise).
+* ``name`` defaults to the file stem when loading from a file (``"paper"`` otherwise); ``transient``
+  to 5 s, or a quarter of a shorter ``duration``.
 
 Overrides are dotted ``key=value`` strings whose value is parsed as a TOML value
 (``plant.segments=16``, ``plant.slave.masses=[1.2,0.7,0.4]``, ``snr_db=30``); a bare word that

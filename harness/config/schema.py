@@ -1,6 +1,6 @@
 """The one validator of every input file: typed frozen dataclasses whose fields carry their constraints
-and descriptions as `msgspec.Meta` annotations (`harness.config.scenario`, `.bounds`,
-`harness.studies.study`, a controller's `Params`), decoded by `msgspec.convert`.  This module adds
+and descriptions as `msgspec.Meta` annotations (`harness.config.scenario`, `.bounds`, `.study`, a
+controller's `Params`), decoded by `msgspec.convert`.  This module adds
 what msgspec does not say: unknown keys with "did you mean" (`suggest`, the only such helper),
 non-finite numbers, and the one-line message ``<dotted field> = <value>: must be <range>`` built from
 the field's declared type (`describe`).  `fields_of` lists every field (dotted name, type, default,
@@ -33,11 +33,11 @@ _TOKEN = re.compile(r"\.([^.\[\]]+)|\[(\d+|\.\.\.)\]")
 # ---------------------------------------------------------------------------------------------
 def num(desc: str, **rng: float) -> Any:
     """A finite real number (TOML integers accepted) with optional bounds gt/ge/lt/le."""
-    return Annotated[float, Meta(description=desc or None, **rng)]
+    return doc(float, desc, **rng)
 
 
 def integer(desc: str, **rng: int) -> Any:
-    return Annotated[int, Meta(description=desc or None, **rng)]
+    return doc(int, desc, **rng)
 
 
 def vec(n: int, desc: str, **rng: float) -> Any:
