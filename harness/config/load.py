@@ -360,8 +360,11 @@ def _prepare(raw: Mapping, default_name: str | None) -> tuple[dict, dict[int, st
     ctrl = raw.get("controller")
     if isinstance(ctrl, str):
         raw["controller"] = {"name": ctrl.strip()}
-    elif isinstance(ctrl, dict) and isinstance(ctrl.get("name"), str):
-        ctrl["name"] = ctrl["name"].strip()
+    elif isinstance(ctrl, dict):
+        if isinstance(ctrl.get("name"), str):
+            ctrl["name"] = ctrl["name"].strip()
+        if isinstance(ctrl.get("params"), str) and ctrl["params"].strip().lower() == "none":
+            ctrl["params"] = {}
     names: dict[int, str] = {}
     env = raw.get("environment")
     if isinstance(env, dict) and "objects" in env:
