@@ -76,17 +76,43 @@ def test_schema_matches_the_parameter_dataclasses():
         derived = {f.name: f for f in dataclasses.fields(sc.checked(cls, spec))}
         assert {n: (f.default, f.default_factory) for n, f in derived.items()} == {
             n: (f.default, f.default_factory) for n, f in own.items()}
-    # ranges: a value just outside the schema's range is refused by the dataclass too
-    for path, outside in (("master.lengths", [0.0, 0.6]), ("master.damping", [-1e-9, 0.0]),
-                          ("slave.masses", [0.0, 1.0, 1.0]), ("slave.max_extension", 1.0),
-                          ("slave.max_bend", 3.1416), ("slave.n_quad", 33), ("gains.k1", 0.0),
-                          ("subtask.limit_power", 0)):
-        sec, key = path.split(".")
-        with pytest.raises(ConfigError, match=path):
-            load_scenario({sec: {key: outside}})
-        cls = {"master": MasterParams, "slave": SlaveParams, "gains": Gains, "subtask": SubtaskSpec}[sec]
-        with pytest.raises(ValueError):
-            cls(**{key: tuple(outside) if isinstance(outside, list) else outside})
+    # ranges: at every bound of the schema, a value just outside is refused by the schema and by the
+    # dataclass' own check; the bound itself, when inclusive, is accepted by both
+    def refused(fn):
+        try:
+            fn()
+        except (ConfigError, ValueError):
+            return True
+        return False
+
+    mismatches, checked = [], 0
+    for cls, spec in ((MasterParams, sc.MASTER), (SlaveParams, sc.SLAVE), (Gains, sc.GAINS),
+                      (SubtaskSpec, sc.SUBTASK)):
+        typed = sc.checked(cls, spec)
+        for name, tp in spec.items():
+            t = schema.bare(schema.info(tp))
+            item = schema.bare(t.item_types[0] if hasattr(t, "item_types") else getattr(t, "item_type", t))
+            default = getattr(cls(), name)
+            for bound, lower, inclusive in ((getattr(item, "gt", None), True, False),
+                                            (getattr(item, "ge", None), True, True),
+                                            (getattr(item, "lt", None), False, False),
+                                            (getattr(item, "le", None), False, True)):
+                if bound is None:
+                    continue
+                step = 1 if isinstance(bound, int) else max(abs(bound), 1.0) * 1e-9
+                outside = bound if not inclusive else bound - step if lower else bound + step
+                for v, ok in [(outside, False)] + ([(bound, True)] if inclusive else []):
+                    value = (v, *default[1:]) if isinstance(default, tuple) else v
+                    raw = list(value) if isinstance(value, tuple) else value
+                    by_schema = refused(lambda: schema.decode({name: raw}, typed))  # noqa: B023
+                    by_class = refused(lambda: cls(**{name: value}))  # noqa: B023
+                    checked += 1
+                    if by_schema != (not ok) or by_class != (not ok):
+                        mismatches.append((cls.__name__, name, v, by_schema, by_class))
+    assert checked > 30
+    # the one difference: files cap max_extension at 100 (a sanity limit on input); the maths only
+    # needs > 1, which is what the dataclass checks
+    assert mismatches == [("SlaveParams", "max_extension", 100.0000001, True, False)]
 
 
 # --------------------------------------------------------------------------------------------- bad inputs
