@@ -17,7 +17,7 @@ from harness.config import load as io_config
 from harness.config import schema
 from harness.config.errors import ConfigError
 from harness.config.load import dump_scenario, load_scenario, parse_override, scenario_to_dict
-from harness.config.scenario import FaultConfig, InitialState, PlantConfig, Scenario, TrajectoryConfig
+from harness.config.scenario import Scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER_TOML = ROOT / "scenarios" / "paper.toml"
@@ -46,18 +46,73 @@ def test_paper_toml_spells_out_every_default():
     assert raw == expected
 
 
-def test_schema_covers_every_dataclass_field():
-    """A field added to harness.config.scenario / controllers.params must be added to the loader too."""
-    names = {f.name for f in dataclasses.fields(Scenario)}
-    assert set(schema.TOP) | set(schema.SECTIONS) == names
-    for sec, (cls, spec) in schema.SECTIONS.items():
-        expected = {f.name for f in dataclasses.fields(cls)}
-        if cls is PlantConfig:
-            expected -= set(schema.PLANT_MODELS)
-        assert set(spec) == expected, sec
-    assert {c for c, _ in schema.SECTIONS.values()} == {
-        Gains, MasterParams, SlaveParams, SubtaskSpec, TrajectoryConfig, InitialState, PlantConfig,
-        FaultConfig}
+def test_schema_matches_the_parameter_dataclasses():
+    """The controller side's dataclasses (controllers.params, numpy only) declare names, types and
+    defaults; harness.config.scenario adds ranges and descriptions.  Same names, same defaults, same
+    types under the constraints, and the dataclasses' own checks agree with the schema's ranges."""
+    import typing
+
+    import msgspec
+
+    from harness.config import scenario as sc
+
+    for cls, spec in ((MasterParams, sc.MASTER), (SlaveParams, sc.SLAVE), (Gains, sc.GAINS),
+                      (SubtaskSpec, sc.SUBTASK)):
+        own = {f.name: f for f in dataclasses.fields(cls)}
+        assert set(spec) == set(own), cls
+        hints = typing.get_type_hints(cls)
+        for name, tp in spec.items():
+            def strip(t):
+                t = schema.bare(t)
+                for a in ("item_types",):
+                    if hasattr(t, a):
+                        return type(t)(tuple(strip(i) for i in getattr(t, a)))
+                if hasattr(t, "item_type"):
+                    return type(t)(strip(t.item_type))
+                if isinstance(t, msgspec.inspect.LiteralType):
+                    return msgspec.inspect.StrType()
+                return type(t)()
+            assert strip(schema.info(tp)) == strip(schema.info(hints[name])), (cls, name)
+        derived = {f.name: f for f in dataclasses.fields(sc.checked(cls, spec))}
+        assert {n: (f.default, f.default_factory) for n, f in derived.items()} == {
+            n: (f.default, f.default_factory) for n, f in own.items()}
+    # ranges: at every bound of the schema, a value just outside is refused by the schema and by the
+    # dataclass' own check; the bound itself, when inclusive, is accepted by both
+    def refused(fn):
+        try:
+            fn()
+        except (ConfigError, ValueError):
+            return True
+        return False
+
+    mismatches, checked = [], 0
+    for cls, spec in ((MasterParams, sc.MASTER), (SlaveParams, sc.SLAVE), (Gains, sc.GAINS),
+                      (SubtaskSpec, sc.SUBTASK)):
+        typed = sc.checked(cls, spec)
+        for name, tp in spec.items():
+            t = schema.bare(schema.info(tp))
+            item = schema.bare(t.item_types[0] if hasattr(t, "item_types") else getattr(t, "item_type", t))
+            default = getattr(cls(), name)
+            for bound, lower, inclusive in ((getattr(item, "gt", None), True, False),
+                                            (getattr(item, "ge", None), True, True),
+                                            (getattr(item, "lt", None), False, False),
+                                            (getattr(item, "le", None), False, True)):
+                if bound is None:
+                    continue
+                step = 1 if isinstance(bound, int) else max(abs(bound), 1.0) * 1e-9
+                outside = bound if not inclusive else bound - step if lower else bound + step
+                for v, ok in [(outside, False)] + ([(bound, True)] if inclusive else []):
+                    value = (v, *default[1:]) if isinstance(default, tuple) else v
+                    raw = list(value) if isinstance(value, tuple) else value
+                    by_schema = refused(lambda: schema.decode({name: raw}, typed))  # noqa: B023
+                    by_class = refused(lambda: cls(**{name: value}))  # noqa: B023
+                    checked += 1
+                    if by_schema != (not ok) or by_class != (not ok):
+                        mismatches.append((cls.__name__, name, v, by_schema, by_class))
+    assert checked > 30
+    # the one difference: files cap max_extension at 100 (a sanity limit on input); the maths only
+    # needs > 1, which is what the dataclass checks
+    assert mismatches == [("SlaveParams", "max_extension", 100.0000001, True, False)]
 
 
 # --------------------------------------------------------------------------------------------- bad inputs
@@ -298,9 +353,9 @@ def test_subtask_weights_default_per_kind():
 
 def test_parameter_error_is_wrapped_with_the_path():
     with pytest.raises(ConfigError, match=r"^plant\.master\.lengths"):
-        schema.build_section(MasterParams, {"lengths": (1.0,)}, "plant.master")
+        load_scenario({"plant": {"master": {"lengths": [1.0]}}})
     with pytest.raises(ConfigError, match=r"^slave\.max_bend"):
-        schema.build_section(SlaveParams, {"max_bend": 5.0}, "slave")
+        load_scenario({"slave": {"max_bend": 5.0}})
 
 
 # --------------------------------------------------------------------------------------------- round trip
@@ -329,7 +384,7 @@ def test_dump_load_round_trip(tmp_path, source, overrides):
     assert load_scenario(scenario_to_dict(scn)) == scn
     # the dump is complete: every schema key is present
     raw = tomllib.loads(path.read_text())
-    for key in schema.schema_paths():
+    for key in io_config.schema_paths():
         node = raw
         parts = key.split(".")
         if parts[0] == "plant" and len(parts) == 3 and not isinstance(raw["plant"][parts[1]], dict):
@@ -365,7 +420,7 @@ def test_round_trip_property(tmp_path, gains, snr, seed, segments, masses, amp):
 
 
 # --------------------------------------------------------------------------------------------- fuzzing
-_KEYS = sorted({p for path in schema.schema_paths() for p in path.split(".")} | {"x", "", "none"})
+_KEYS = sorted({p for path in io_config.schema_paths() for p in path.split(".")} | {"x", "", "none"})
 _scalars = (
     st.none() | st.booleans() | st.integers() | st.integers(-(10**400), 10**400)
     | st.floats(allow_nan=True, allow_infinity=True) | st.text(max_size=8)
@@ -400,7 +455,7 @@ def test_fuzz_mutated_valid_scenario(data):
     """Replace a few leaves (or whole tables) of a valid scenario with random values."""
     src = scenario_to_dict(Scenario())
     for _ in range(data.draw(st.integers(1, 3))):
-        path = data.draw(st.sampled_from(schema.schema_paths())).split(".")
+        path = data.draw(st.sampled_from(io_config.schema_paths())).split(".")
         node = src
         for p in path[:-1]:
             if not isinstance(node.get(p), dict):

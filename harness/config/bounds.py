@@ -26,7 +26,6 @@ contact_force_rms, penetration_max, contact_time, force_tracking_rms), mujoco_wa
 
 from __future__ import annotations
 
-import difflib
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
@@ -35,61 +34,47 @@ from typing import Any
 
 from harness.config.assets import shipped
 from harness.config.errors import ConfigError, short_repr
+from harness.config.schema import decode, doc, info, num, unknown_keys
 from harness.config.textio import read_toml
 
-# bound key -> (metric, relation, unit, description)
-NUMERIC_BOUNDS: dict[str, tuple[str, str, str, str]] = {
-    "e1_rms_max": ("e1_rms", "max", "m", "RMS of the master tracking error |e1| after the transient"),
-    "e1_max_max": ("e1_max", "max", "m", "max of |e1| after the transient"),
-    "e2_rms_max": ("e2_rms", "max", "m", "RMS of the coordination error |e2| after the transient"),
-    "e2_max_max": ("e2_max", "max", "m", "max of |e2| after the transient"),
-    "e2_plant_rms_max": ("e2_plant_rms", "max", "m", "RMS of |x1 - MuJoCo tip site| after the transient"),
-    "e2_plant_max_max": ("e2_plant_max", "max", "m", "max of |x1 - MuJoCo tip site| after the transient"),
-    "beta_min_min": ("beta_min", "min", "", "minimum manipulability beta (41) must stay above"),
-    "deN_rms_max": ("deN_rms", "max", "",
-                    "RMS of the null-space velocity error |de_N| (23) after the transient"),
-    "range_violation_max": ("range_violation", "max", "",
-                            "largest excursion of section lengths (m) / bend angles (rad) "
-                            "outside their range"),
-    # contact scenarios (harness.loop.metrics.contact_metrics)
-    "contact_force_peak_max": ("contact_force_peak", "max", "N",
-                               "peak |true F2| (slave tip contact + constant)"),
-    "contact_force_rms_max": ("contact_force_rms", "max", "N", "RMS |true F2| after the transient"),
-    "contact_force_rms_min": ("contact_force_rms", "min", "N",
-                              "RMS |true F2| after the transient (contact held)"),
-    "penetration_max_max": ("penetration_max", "max", "m", "max penetration of the arm into an object"),
-    "contact_time_min": ("contact_time", "min", "s", "time with any arm contact"),
-    "force_tracking_rms_max": ("force_tracking_rms", "max", "N",
-                               "RMS |F2 given to the law - true F2| after the transient"),
-}
-FLAG_BOUNDS: dict[str, str] = {
-    "no_mujoco_warnings": "mujoco_warnings must be 0",
-    "status_ok": 'status must be "ok"',
-}
+
+def _limit(unit: str, desc: str) -> Any:
+    """A bound `<metric>_max` (measured <= limit) or `<metric>_min` (measured >= limit)."""
+    return doc(num("", gt=0.0) | None, f"{unit + ', ' if unit else ''}{desc}", unit=unit)
 
 
 @dataclass(frozen=True)
 class Bounds:
     """Acceptance limits; None = not checked."""
 
-    e1_rms_max: float | None = None
-    e1_max_max: float | None = None
-    e2_rms_max: float | None = None
-    e2_max_max: float | None = None
-    e2_plant_rms_max: float | None = None
-    e2_plant_max_max: float | None = None
-    beta_min_min: float | None = None
-    deN_rms_max: float | None = None
-    range_violation_max: float | None = None
-    contact_force_peak_max: float | None = None
-    contact_force_rms_max: float | None = None
-    contact_force_rms_min: float | None = None
-    penetration_max_max: float | None = None
-    contact_time_min: float | None = None
-    force_tracking_rms_max: float | None = None
-    no_mujoco_warnings: bool = False
-    status_ok: bool = True
-    description: str = ""
+    e1_rms_max: _limit("m", "RMS of the master tracking error |e1| after the transient") = None
+    e1_max_max: _limit("m", "max of |e1| after the transient") = None
+    e2_rms_max: _limit("m", "RMS of the coordination error |e2| after the transient") = None
+    e2_max_max: _limit("m", "max of |e2| after the transient") = None
+    e2_plant_rms_max: _limit("m", "RMS of |x1 - MuJoCo tip site| after the transient") = None
+    e2_plant_max_max: _limit("m", "max of |x1 - MuJoCo tip site| after the transient") = None
+    beta_min_min: _limit("", "minimum manipulability beta (41) must stay above") = None
+    deN_rms_max: _limit("", "RMS of the null-space velocity error |de_N| (23) after the transient") = None
+    range_violation_max: _limit("", "largest excursion of section lengths (m) / bend angles (rad) outside "
+                                "their range") = None
+    contact_force_peak_max: _limit("N", "peak |true F2| (slave tip contact + constant)") = None
+    contact_force_rms_max: _limit("N", "RMS |true F2| after the transient") = None
+    contact_force_rms_min: _limit("N", "RMS |true F2| after the transient (contact held)") = None
+    penetration_max_max: _limit("m", "max penetration of the arm into an object") = None
+    contact_time_min: _limit("s", "time with any arm contact") = None
+    force_tracking_rms_max: _limit("N", "RMS |F2 given to the law - true F2| after the transient") = None
+    no_mujoco_warnings: doc(bool, "mujoco_warnings must be 0") = False
+    status_ok: doc(bool, 'status must be "ok"') = True
+    description: doc(str, "free text (top-level key of the file)") = ""
+
+
+FLAGS = {"no_mujoco_warnings": "mujoco_warnings", "status_ok": "status"}  # flag -> metric it checks
+
+
+def limit_of(name: str) -> tuple[str, str, str]:
+    """(metric, relation "max"/"min", unit) of a numeric bound field."""
+    unit = next(f.type.extra.get("unit", "") for f in info(Bounds).fields if f.name == name)
+    return name[:-4], name[-3:], unit
 
 
 def _fmt(x: Any, unit: str = "") -> str:
@@ -130,60 +115,27 @@ class Violation:
         return f"{self.name} = {meas} {verb} {lim}"
 
 
-def _err(path: str, value: Any, expected: str) -> ConfigError:
-    return ConfigError.field(path, value, expected)
-
-
 def bounds_from_dict(raw: Mapping, label: str | None = None) -> Bounds:
     """Validate a parsed bounds table (the whole file: {"bounds": {...}, "description": ...})."""
     try:
-        return _bounds_from_dict(raw)
+        if not isinstance(raw, Mapping):
+            raise ConfigError(f"bounds file must be a table, got {short_repr(raw)}")
+        bad = {k: v for k, v in raw.items() if k not in ("bounds", "description")}
+        if bad:
+            raise unknown_keys("", bad, ("bounds", "description"))
+        if "bounds" not in raw:
+            raise ConfigError("missing [bounds] table", path="bounds")
+        table, desc = raw["bounds"], raw.get("description", "")
+        if not isinstance(desc, str):
+            raise ConfigError.field("description", desc, "must be a string")
+        if isinstance(table, Mapping) and "description" in table:
+            allowed = [f.name for f in fields(Bounds)][:-1]
+            raise unknown_keys("bounds.", {"description": table["description"]}, allowed)
+        if isinstance(table, Mapping):
+            table = {**table, "description": desc}
+        return decode(table, Bounds, prefix="bounds.")
     except ConfigError as e:
         raise (e.with_context(label) if label else e) from None
-
-
-def _bounds_from_dict(raw: Mapping) -> Bounds:
-    if not isinstance(raw, Mapping):
-        raise ConfigError(f"bounds file must be a table, got {short_repr(raw)}")
-    top_allowed = ["bounds", "description"]
-    for k in raw:
-        if k not in top_allowed:
-            close = difflib.get_close_matches(str(k), top_allowed, n=1)
-            hint = f"did you mean {close[0]!r}? " if close else ""
-            raise ConfigError(f"unknown key {k!r}; {hint}allowed top-level keys: bounds, description",
-                              path=str(k))
-    if "bounds" not in raw:
-        raise ConfigError("missing [bounds] table", path="bounds")
-    table = raw["bounds"]
-    if not isinstance(table, Mapping):
-        raise _err("bounds", table, "must be a table [bounds]")
-    kwargs: dict[str, Any] = {}
-    desc = raw.get("description", "")
-    if not isinstance(desc, str):
-        raise _err("description", desc, "must be a string")
-    kwargs["description"] = desc
-    allowed = list(NUMERIC_BOUNDS) + list(FLAG_BOUNDS)
-    for k, v in table.items():
-        path = f"bounds.{k}"
-        if k in NUMERIC_BOUNDS:
-            ok = isinstance(v, (int, float)) and not isinstance(v, bool)
-            try:
-                f = float(v) if ok else math.nan
-            except OverflowError:
-                f = math.nan
-            if not (math.isfinite(f) and f > 0):
-                unit = NUMERIC_BOUNDS[k][2]
-                raise _err(path, v, f"must be a finite number > 0{' (' + unit + ')' if unit else ''}")
-            kwargs[k] = f
-        elif k in FLAG_BOUNDS:
-            if not isinstance(v, bool):
-                raise _err(path, v, "must be true or false")
-            kwargs[k] = v
-        else:
-            close = difflib.get_close_matches(str(k), allowed, n=2)
-            hint = f"did you mean {' or '.join(repr('bounds.' + c) for c in close)}? " if close else ""
-            raise ConfigError(f"unknown key {path!r}; {hint}allowed keys: {', '.join(allowed)}", path=path)
-    return Bounds(**kwargs)
 
 
 def load_bounds(source: str | Path | Mapping) -> Bounds:
@@ -213,31 +165,22 @@ def check_bounds(metrics: Mapping[str, Any], bounds: Bounds) -> list[Violation]:
     out: list[Violation] = []
     for f in fields(bounds):
         key, limit = f.name, getattr(bounds, f.name)
-        if key in NUMERIC_BOUNDS:
-            if limit is None:
-                continue
-            name, rel, unit, _ = NUMERIC_BOUNDS[key]
+        if key in FLAGS:
+            name = FLAGS[key]
+            want, rel = (0, "max") if name == "mujoco_warnings" else ("ok", "eq")
             v = _measured(metrics, name)
-            if v is None:
-                out.append(Violation(name, None, limit, key, rel, unit))
-                continue
             is_num = isinstance(v, (int, float)) and not isinstance(v, bool)
-            good = is_num and math.isfinite(v) and (v <= limit if rel == "max" else v >= limit)
-            if not good:
+            good = v == want and (name == "status" or is_num)
+            if limit and not good:
+                out.append(Violation(name, v, want, key, rel))
+        elif key != "description" and limit is not None:
+            name, rel, unit = limit_of(key)
+            v = _measured(metrics, name)
+            is_num = isinstance(v, (int, float)) and not isinstance(v, bool)
+            within = is_num and math.isfinite(v) and (v <= limit if rel == "max" else v >= limit)
+            if v is None or not within:
                 out.append(Violation(name, v, limit, key, rel, unit))
-        elif key == "no_mujoco_warnings" and limit:
-            v = _measured(metrics, "mujoco_warnings")
-            if v is None:
-                out.append(Violation("mujoco_warnings", None, 0, key, "max"))
-            elif not (isinstance(v, (int, float)) and not isinstance(v, bool) and v == 0):
-                out.append(Violation("mujoco_warnings", v, 0, key, "max"))
-        elif key == "status_ok" and limit:
-            v = _measured(metrics, "status")
-            if v is None:
-                out.append(Violation("status", None, "ok", key, "eq"))
-            elif v != "ok":
-                out.append(Violation("status", v, "ok", key, "eq"))
     return out
 
 
-__all__ = ["FLAG_BOUNDS", "NUMERIC_BOUNDS", "Bounds", "Violation", "check_bounds", "load_bounds"]
+__all__ = ["FLAGS", "Bounds", "Violation", "check_bounds", "limit_of", "load_bounds"]

@@ -1,16 +1,7 @@
 """Scenario TOML <-> `harness.config.Scenario`, with complete validation before any simulation.
 
-TOML layout mirrors the dataclasses (see `scenarios/paper.toml`, which spells out every default)::
-
-    name = "paper"            # also the default output folder runs/<name>
-    duration = 20.0           # s
-    control_dt = 0.001        # s
-    snr_db = 40.0             # dB, or "none" (or false) for no noise
-    seed = 0
-    transient = 5.0           # s
-    continuous_control = false
-    interaction_forces = [[0.0, 0.0], [0.0, 0.0]]
-    [gains] [master] [slave] [subtask] [trajectory] [initial] [plant] [plant.master] [plant.slave]
+The TOML layout mirrors the dataclasses of `harness.config.scenario` (`scenarios/paper.toml` spells
+out every default; docs/config_reference.md lists every field with its range).
 
 Rules:
 
@@ -18,17 +9,20 @@ Rules:
   ``[plant.master]`` / ``[plant.slave]`` take the value of the resolved *nominal* ``[master]`` /
   ``[slave]``, so a mismatch is written as the difference only (``plant.slave.masses = [...]``).
   ``plant.master = "none"`` (or no such table) means "the plant uses the nominal model".
-* Optional values (``snr_db``, ``initial.slave_q2``, ``plant.master``, ``plant.slave``) are written
-  as the string ``"none"`` when unset; `dump_scenario` writes them that way so that
-  ``load_scenario(dump(x)) == x`` exactly.
+* Optional values (``snr_db``, ``initial.slave_q2``, ``plant.master``, ``plant.slave``, ...) are
+  written as the string ``"none"`` (or false) when unset; `dump_scenario` writes them that way so
+  that ``load_scenario(dump(x)) == x`` exactly.
 * Integers are accepted where floats are expected, booleans never count as numbers, floats are
   never accepted as integers, NaN/inf are rejected everywhere.
 * ``subtask.weights`` defaults to the default weight of each kind in ``subtask.kinds``.
-* ``name`` defaults to the file stem when loading from a file (``"paper"`` otherwise).
+* ``name`` defaults to the file stem when loading from a file (``"paper"`` otherwise); ``transient``
+  to 5 s, or a quarter of a shorter ``duration``.
 
 Overrides are dotted ``key=value`` strings whose value is parsed as a TOML value
 (``plant.segments=16``, ``plant.slave.masses=[1.2,0.7,0.4]``, ``snr_db=30``); a bare word that
-is not valid TOML is taken as a string (``plant.kind=analytic``, ``snr_db=none``).
+is not valid TOML is taken as a string (``plant.kind=analytic``, ``snr_db=none``).  An override of a
+field of an environment object names an existing object (``environment.objects.wall.stiffness=1e5``);
+a new object is added as a whole table (``environment.objects.box2={kind="box"}``).
 
 Every error raises `harness.config.errors.ConfigError` with one line naming the dotted field, its value
 and the allowed range or type.
@@ -37,42 +31,25 @@ and the allowed range or type.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import functools
 import math
+import re
 import tomllib
 from collections.abc import Iterable, Mapping
-from dataclasses import fields, is_dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from controllers.params import MasterParams, SlaveParams, SubtaskSpec
+from controllers.params import SubtaskSpec
 from harness.config.assets import shipped
-from harness.config.checks import BARE_WORD_RE, KEY_RE, NAME_RE, is_none_word, type_name
 from harness.config.errors import ConfigError, short_repr
-from harness.config.scenario import (
-    EnvironmentConfig,
-    PlantConfig,
-    Scenario,
-    TrajectoryConfig,
-)
-from harness.config.schema import (
-    MASTER,
-    PLANT,
-    PLANT_MODELS,
-    SECTIONS,
-    SLAVE,
-    SUBTASK,
-    TABLE_KEYS,
-    TOP,
-    as_table,
-    build_section,
-    check_keys,
-    read_fields,
-)
+from harness.config.scenario import KEY_RE, NAME_RE, EnvironmentConfig, Scenario, TrajectoryConfig
+from harness.config.schema import decode, did_you_mean, fields_of, info, suggest, type_name
 from harness.config.textio import loads_toml, read_toml, toml_literal, write_atomic
 
+BARE_WORD = r"^[A-Za-z_][A-Za-z0-9_.+-]*$"
 REACH_MARGIN = 1e-3  # m, the desired trajectory must stay this far inside the master workspace annulus
 MULTIPLE_RTOL = 1e-9  # relative tolerance for "integer multiple of a time step"
 MAX_SUBSTEPS = 100_000  # control_dt / physics_dt
@@ -249,6 +226,22 @@ def _check_auto_slave_start(scn: Scenario) -> None:
             path="trajectory.center")
 
 
+def _field_checks(scn: Scenario) -> None:
+    """Single-field rules a type cannot say: files exist, times increase, normals are non-zero."""
+    xml = scn.plant.scene_xml
+    if xml is not None and not Path(xml).is_file():
+        raise ConfigError.field("plant.scene_xml", xml, "must be an existing MJCF file (relative paths: from "
+                                "the current directory); file not found")
+    ts = [r[0] for r in scn.operator.targets]
+    if any(t < 0 for t in ts) or any(b <= a for a, b in zip(ts, ts[1:], strict=False)):
+        raise ConfigError.field("operator.targets", [list(r) for r in scn.operator.targets], "must be an "
+                                "array of [t, X, Z] triples (s, m, m) with strictly increasing t >= 0")
+    for o in scn.environment.objects:
+        if o.kind == "plane" and math.hypot(*o.normal) < 1e-9:
+            raise ConfigError.field(f"environment.objects.{o.name}.normal", list(o.normal),
+                                    "must be a non-zero vector")
+
+
 # ---------------------------------------------------------------------------------------------
 # public API
 # ---------------------------------------------------------------------------------------------
@@ -259,14 +252,14 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     key, _, raw = text.partition("=")
     key, raw = key.strip(), raw.strip()
     parts = key.split(".")
-    if not key or not all(KEY_RE.match(p) for p in parts):
+    if not key or not all(re.match(KEY_RE, p) for p in parts):
         raise ConfigError(f"override {text!r}: {key!r} is not a dotted key like plant.segments")
     if not raw:
         raise ConfigError(f"override {text!r}: missing value after '='")
     try:
         value = loads_toml(f"v = {raw}", f"override {short_repr(text, 60)}")["v"]
     except tomllib.TOMLDecodeError as e:
-        if BARE_WORD_RE.match(raw):
+        if re.match(BARE_WORD, raw):
             value = raw
         else:
             raise ConfigError(f"override {text!r}: invalid TOML value {raw!r} ({e})") from None
@@ -275,10 +268,20 @@ def parse_override(text: str) -> tuple[list[str], Any]:
 
 def _apply_override(raw: dict, text: str) -> str:
     parts, value = parse_override(text)
+    if parts[:2] == ["environment", "objects"] and len(parts) > 3:  # a field of an existing object
+        objects = raw.get("environment", {}).get("objects", {}) if isinstance(raw.get("environment"), dict) \
+            else {}
+        names = list(objects) if isinstance(objects, dict) else []
+        if parts[2] not in names:
+            where = ".".join(parts[:3])
+            raise ConfigError(f"override {text!r}: {where}: no such object; "
+                              f"{did_you_mean('environment.objects.' + n for n in suggest(parts[2], names))}"
+                              f"objects: {', '.join(names) or 'none'} (a new object is set as a whole table, "
+                              f"environment.objects.{parts[2]}={{kind=\"box\", ...}})", path=where)
     node = raw
     for i, p in enumerate(parts[:-1]):
         child = node.get(p)
-        if child is None or is_none_word(child):
+        if child is None or (isinstance(child, str) and child.strip().lower() == "none"):
             child = node[p] = {}
         elif not isinstance(child, dict):
             where = ".".join(parts[: i + 1])
@@ -299,7 +302,7 @@ def _read_source(source: str | Path | Mapping | None) -> tuple[dict, str | None,
         raise ConfigError(f"scenario source must be a path or a table, got {type_name(source)}")
     path = shipped(source, "scenarios")  # a shipped name (paper) works from any folder
     raw = read_toml(path, "scenario file")
-    stem = path.stem if NAME_RE.match(path.stem) else None
+    stem = path.stem if re.match(NAME_RE, path.stem) else None
     return raw, str(path), stem
 
 
@@ -346,59 +349,62 @@ def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterabl
         raise (e.with_context(label) if label else e) from None
 
 
-def _scenario_from_dict(raw: Mapping, default_name: str | None) -> Scenario:
-    defaults = Scenario()
-    check_keys(raw, "", list(TOP) + list(SECTIONS))
-    top = read_fields({k: v for k, v in raw.items() if k in TOP}, "", TOP, defaults)
-    for k in TABLE_KEYS:  # table-valued top-level keys: an absent table is read as empty (its defaults)
-        if k not in raw:
-            top[k] = TOP[k](k, {})
+def _prepare(raw: Mapping, default_name: str | None) -> tuple[dict, dict[int, str]]:
+    """The TOML layout -> the schema's: fields in schema order, [controller] given as a name, named
+    [environment.objects.<name>] tables -> a list, [plant.master]/[plant.slave] on top of the nominal
+    [master]/[slave], default sub-task weights per kind.  -> (table, object names)."""
+    order = [f.name for f in info(Scenario).fields]
+    raw = {**{k: raw[k] for k in raw if k not in order}, **{k: raw[k] for k in order if k in raw}}
     if "name" not in raw and default_name:
-        top["name"] = default_name
-    if "transient" not in raw and top["duration"] <= defaults.transient:
+        raw["name"] = default_name
+    ctrl = raw.get("controller")
+    if isinstance(ctrl, str):
+        raw["controller"] = {"name": ctrl.strip()}
+    elif isinstance(ctrl, dict):
+        if isinstance(ctrl.get("name"), str):
+            ctrl["name"] = ctrl["name"].strip()
+        if isinstance(ctrl.get("params"), str) and ctrl["params"].strip().lower() == "none":
+            ctrl["params"] = {}
+    names: dict[int, str] = {}
+    env = raw.get("environment")
+    if isinstance(env, dict) and "objects" in env:
+        objs = env["objects"]
+        if not isinstance(objs, dict):
+            raise ConfigError.field("environment.objects", objs, "must be a table of [environment.objects."
+                                    f"<name>] tables (got {type_name(objs)})")
+        for i, (name, o) in enumerate(objs.items()):
+            names[i] = str(name)
+            if isinstance(o, dict) and "name" in o:
+                raise ConfigError.field(f"environment.objects.{name}.name", o["name"], "unknown key: the "
+                                        f"name of an object is its table's key (environment.objects.{name})")
+        env["objects"] = [{**o, "name": n} if isinstance(o, dict) else o for n, o in objs.items()]
+    plant = raw.get("plant")
+    for sub in ("master", "slave"):
+        if isinstance(plant, dict) and isinstance(plant.get(sub), dict):
+            nominal = raw.get(sub)
+            plant[sub] = {**(nominal if isinstance(nominal, dict) else {}), **plant[sub]}
+    sub = raw.get("subtask")
+    if isinstance(sub, dict) and "weights" not in sub and isinstance(sub.get("kinds"), list):
+        default_w = dict(zip(SubtaskSpec().kinds, SubtaskSpec().weights, strict=True))
+        sub["weights"] = [default_w.get(k, 1.0) if isinstance(k, str) else 1.0 for k in sub["kinds"]]
+    return raw, names
+
+
+def _scenario_from_dict(raw: Mapping, default_name: str | None) -> Scenario:
+    table, names = _prepare(raw, default_name)
+    scn = decode(table, Scenario, names=names, elsewhere=schema_paths())
+    if "transient" not in table and scn.duration <= Scenario.transient:
         # short runs: the default 5 s transient would leave nothing to measure; use a quarter
-        top["transient"] = top["duration"] / 4.0
-
-    def section(name: str) -> Mapping:
-        return as_table(name, raw[name]) if name in raw else {}
-
-    parts: dict[str, Any] = {}
-    for sec in ("gains", "master", "slave", "trajectory", "initial", "faults"):
-        cls, spec = SECTIONS[sec]
-        parts[sec] = build_section(cls, read_fields(section(sec), sec, spec, getattr(defaults, sec)), sec)
-
-    sub_tbl = section("subtask")
-    sub = read_fields(sub_tbl, "subtask", SUBTASK, defaults.subtask)
-    if "weights" not in sub_tbl:
-        default_w = dict(zip(defaults.subtask.kinds, defaults.subtask.weights, strict=True))
-        sub["weights"] = tuple(default_w.get(k, 1.0) for k in sub["kinds"])
-    if len(sub["weights"]) != len(sub["kinds"]):
-        raise ConfigError.field("subtask.weights", list(sub["weights"]),
-                                f"must have one weight per entry of subtask.kinds ({len(sub['kinds'])})")
-    parts["subtask"] = build_section(SubtaskSpec, sub, "subtask")
-
-    plant_tbl = section("plant")
-    check_keys(plant_tbl, "plant", list(PLANT) + list(PLANT_MODELS))
-    plant = read_fields({k: v for k, v in plant_tbl.items() if k in PLANT}, "plant", PLANT, defaults.plant)
-    for sub_name, cls, spec in (("master", MasterParams, MASTER), ("slave", SlaveParams, SLAVE)):
-        path = f"plant.{sub_name}"
-        v = plant_tbl.get(sub_name)
-        if v is None or is_none_word(v):
-            plant[sub_name] = None
-            continue
-        if not isinstance(v, Mapping):
-            raise ConfigError.field(path, v, f'must be a table [{path}] or "none" (got {type_name(v)})')
-        plant[sub_name] = build_section(cls, read_fields(v, path, spec, parts[sub_name]), path)
-    parts["plant"] = build_section(PlantConfig, plant, "plant")
-
-    scn = Scenario(**top, **parts)
+        scn = dataclasses.replace(scn, transient=scn.duration / 4.0)
+    _field_checks(scn)
     _cross_checks(scn)
     return scn
 
 
 @functools.cache
-def _field_names(cls: type) -> tuple[str, ...]:
-    return tuple(f.name for f in fields(cls))
+def schema_paths() -> tuple[str, ...]:
+    """Every settable dotted key of a scenario file (suggestions, tests)."""
+    return tuple(p for p, _, _ in fields_of(Scenario))
 
 
 def _to_toml_value(v: Any) -> Any:
@@ -407,10 +413,12 @@ def _to_toml_value(v: Any) -> Any:
     if type(v) in (bool, int, float, str):  # exact types: numpy scalars (float subclasses) go to .item()
         return v
     if isinstance(v, EnvironmentConfig):  # named objects: [environment.objects.<name>]
-        return {"objects": {o.name: {n: _to_toml_value(getattr(o, n)) for n in _field_names(type(o))
-                                     if n != "name"} for o in v.objects}}
-    if is_dataclass(v) and not isinstance(v, type):
-        return {n: _to_toml_value(getattr(v, n)) for n in _field_names(type(v))}
+        return {"objects": {o.name: {k: x for k, x in _to_toml_value(o).items() if k != "name"}
+                            for o in v.objects}}
+    if dataclasses.is_dataclass(v) and not isinstance(v, type):
+        return {f.name: _to_toml_value(getattr(v, f.name)) for f in info(type(v)).fields}
+    if isinstance(v, dict):
+        return {k: _to_toml_value(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
         return [_to_toml_value(x) for x in v]
     if isinstance(v, np.generic):
@@ -419,7 +427,8 @@ def _to_toml_value(v: Any) -> Any:
 
 
 def scenario_to_dict(scn: Scenario) -> dict[str, Any]:
-    """The fully resolved scenario as a TOML-ready dict (None -> "none", tuples -> lists)."""
+    """The fully resolved scenario as a TOML-ready dict, every schema field in schema order (None ->
+    "none", tuples -> lists)."""
     return _to_toml_value(scn)
 
 
@@ -456,5 +465,5 @@ def dump_scenario(scn: Scenario, path: str | Path) -> Path:
 
 __all__ = [
     "REACH_MARGIN", "dump_scenario", "dumps_scenario", "load_scenario", "parse_override",
-    "scenario_to_dict", "trajectory_radius_range",
+    "scenario_to_dict", "schema_paths", "trajectory_radius_range",
 ]

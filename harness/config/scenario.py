@@ -1,17 +1,21 @@
-"""Typed, frozen scenario configuration (the fully resolved form of a scenario TOML file).
+"""Typed, frozen scenario configuration (the fully resolved form of a scenario TOML file), declared once:
+each field's type, default, allowed range and description (`harness.config.schema` helpers, read by
+msgspec).  The controller side's parameter dataclasses (`controllers.params`, numpy only) keep their
+names, types and defaults; their ranges and descriptions are given here (`MASTER`, `SLAVE`, `GAINS`,
+`SUBTASK`; a test checks them against the dataclasses).
 
 A scenario = controller side (nominal analytic models, gains, sub-tasks) + plant side (which plant,
 its own parameters, which may differ from the nominal ones: that difference is the *mismatch*) +
 trajectory, timing, noise and initial state.  Defaults reproduce the paper scenario (Sec. VI).
-
-Loading/validation from TOML lives in `harness.config.load`; this module only defines the types.
+Loading, overrides, cross-field checks and dumping: `harness.config.load`.
 """
 
-from __future__ import annotations
-
+import math
 from dataclasses import dataclass, field
+from typing import Annotated, Literal
 
 from controllers.params import Gains, MasterParams, SlaveParams, SubtaskSpec
+from harness.config.schema import Meta, checked, doc, integer, num, plain, vec
 
 PLANTS = ("mujoco", "analytic", "cosserat")
 ELASTIC_LAWS = ("analytic", "linear")
@@ -20,6 +24,48 @@ INTEGRATORS = ("implicitfast", "implicit", "euler", "rk4")
 ENV_KINDS = ("plane", "box", "sphere")
 FORCE_MODES = ("exact", "sensed", "ignored")
 NOISE_MODELS = ("per_channel", "per_vector")
+SUBTASKS = ("manipulability", "limits")
+NAME_RE = r"^[A-Za-z0-9_][A-Za-z0-9_.+=,@-]{0,99}$"
+NAME_EXPECT = ("a string of 1-100 letters, digits or _ . + = , @ - (usable as a folder name; no spaces or "
+               "slashes, not starting with '.' or '-')")
+KEY_RE = r"^[A-Za-z_][A-Za-z0-9_-]*$"
+CONTROLLER_RE = r"^(?:[A-Za-z_][A-Za-z0-9_]*|[^\s:]+:[A-Za-z_][A-Za-z0-9_]*)$"
+CONTROLLER_EXPECT = ("a built-in controller name (see 'teleop controllers'), 'path/to/file.py:ClassName' or "
+                     "'package.module:ClassName'")
+POS, NONNEG = {"gt": 0.0}, {"ge": 0.0}
+
+# ranges and descriptions of the controller side's parameter dataclasses (names/defaults: theirs)
+MASTER = {
+    "lengths": vec(2, "m, link lengths l1, l2 (paper Sec. VI)", **POS),
+    "masses": vec(2, "kg, link masses (uniform rods; our proposal)", **POS),
+    "damping": vec(2, "N m s/rad, viscous joint friction", **NONNEG),
+    "gravity": num("m/s^2, gravity along -Z", **NONNEG),
+}
+SLAVE = {
+    "rest_lengths": vec(3, "L0, m, section rest lengths, base to tip", **POS),
+    "masses": vec(3, "kg, section masses, base to tip", **POS),
+    "bending_stiffness": vec(3, "Kb, N m^2, bending stiffness per section", **NONNEG),
+    "extension_stiffness": vec(3, "Ke, N/m, extension stiffness per section", **NONNEG),
+    "extension_damping": vec(3, "N s/m, viscous damping of the section-length rates", **NONNEG),
+    "bending_damping": vec(3, "N m^2 s, viscous damping of the curvature rates", **NONNEG),
+    "slice_inertia": vec(3, "kg m^2 per unit material length, rotary inertia of the cross-sections",
+                         **NONNEG),
+    "gravity": vec(2, "m/s^2, gravity vector (X, Z)"),
+    "max_extension": num("section length range [L0, max_extension * L0]", gt=1.0, le=100.0),
+    "max_bend": num("rad, |k_i d_i| <= max_bend", gt=0.0, le=math.pi),
+    "n_quad": integer("Gauss-Legendre points per section for the energy integrals", ge=2, le=32),
+}
+GAINS = {k: num(f"gain {k} of the paper's law, eq. (39)", **POS) for k in ("k1", "k2", "k3", "k4", "ky", "ks",
+                                                                          "kn")}
+SUBTASK = {
+    "kinds": doc(tuple[Literal[SUBTASKS], ...], "null-space sub-tasks (29)-(33): 'manipulability' (41), "
+                 "'limits'; distinct"),
+    "weights": doc(tuple[Annotated[float, Meta(gt=0.0)], ...], "one weight per kind, each > 0 (default: 1.0 "
+                   "manipulability, 0.05 limits)"),
+    "limit_power": integer("shape of the limits term", ge=1, le=10),
+}
+Master, Slave, GainsSpec, Subtask = (checked(c, s) for c, s in ((MasterParams, MASTER), (SlaveParams, SLAVE),
+                                                                 (Gains, GAINS), (SubtaskSpec, SUBTASK)))
 
 
 @dataclass(frozen=True)
@@ -27,32 +73,36 @@ class TrajectoryConfig:
     """Desired master tip trajectory, paper eq. (40):
     x_d(t) = [cx + ax sin(w t), cz + az cos(w t)] in metres, relative to the master base."""
 
-    center: tuple[float, float] = (0.0, 1.0)  # m
-    amplitude: tuple[float, float] = (0.01, 0.01)  # m
-    omega: float = 1.0  # rad/s
+    center: vec(2, "m; x_d(t) must stay inside the master workspace annulus [|l1 - l2| + 1 mm, "
+                "l1 + l2 - 1 mm] (nominal and plant master)") = (0.0, 1.0)
+    amplitude: vec(2, "m") = (0.01, 0.01)
+    omega: num("rad/s; |omega| < pi / control_dt") = 1.0
 
 
 @dataclass(frozen=True)
 class InitialState:
-    """Initial conditions.  `master_offset` is added to the IK solution for x_d(0) (task-space, m).
-    `slave_q2=None` picks equal straight-ish sections whose tip is at the master's initial tip."""
+    """Initial conditions, both arms at rest."""
 
-    master_offset: tuple[float, float] = (0.0, 0.0)  # m, task-space offset of the master tip
-    master_elbow: int = -1  # sign of the elbow angle q_b of the IK solution (+1 or -1)
-    slave_q2: tuple[float, ...] | None = None  # [d1,d2,d3,k1,k2,k3]; None = automatic
-    slave_curvature: float = 1e-3  # 1/m, "curvatures near 0" used when slave_q2 is None
+    master_offset: vec(2, "m, added to x_d(0) before the master inverse kinematics") = (0.0, 0.0)
+    master_elbow: doc(Literal[-1, 1], "sign of the elbow angle q_b of the IK solution") = -1
+    slave_q2: doc(vec(6, "") | None, '[d1, d2, d3, k1, k2, k3] (m, 1/m); "none" = equal sections under '
+                  "the master tip") = None
+    slave_curvature: num('1/m, section curvature "near 0" used when slave_q2 = "none"') = 1e-3
 
 
 @dataclass(frozen=True)
 class CosseratConfig:
-    """Resolution and numerics of the Cosserat-rod plant (`plant.kind = "cosserat"`,
-    harness.plant.cosserat): the material comes from [plant.slave] and the viscosities of [plant]."""
+    """Resolution and numerics of the Cosserat-rod plant (`plant.kind = "cosserat"`): the material comes
+    from [plant.slave] and the viscosities of [plant]."""
 
-    elements_per_section: int = 10  # rod elements per section
-    dt: float | str = "auto"  # s, rod time step; "auto" = largest control_dt / m below the stable step
-    shear_factor: float = 10.0  # shear stiffness GA as a multiple of EA ("shear stiff")
-    rotary_radius: float = 0.04  # m, disc radius of the rotary inertia when slave.slice_inertia = 0
-    elastic_law: str = "analytic"  # "analytic" (CC-consistent energy) | "linear" (textbook rod)
+    elements_per_section: integer("rod elements per section", ge=2, le=200) = 10
+    dt: doc(num("", gt=0.0, le=0.01) | Literal["auto"], 's, rod time step, or "auto" (largest control_dt / m '
+            "below the stable step)") = "auto"
+    shear_factor: num('shear stiffness GA as a multiple of EA ("shear stiff")', gt=0.0, le=1e6) = 10.0
+    rotary_radius: num("m, disc radius of the rotary inertia when slave.slice_inertia = 0", gt=0.0,
+                       le=1.0) = 0.04
+    elastic_law: doc(Literal[ELASTIC_LAWS], '"analytic" (energy of the CC model) | "linear" '
+                     "(textbook rod)") = "analytic"
 
 
 @dataclass(frozen=True)
@@ -60,136 +110,170 @@ class PlantConfig:
     """The 'true' plant.  For `kind="mujoco"` the master/slave parameters below are what the MJCF is
     built from; the controller keeps using `Scenario.master` / `Scenario.slave` (nominal)."""
 
-    kind: str = "mujoco"  # "mujoco" | "analytic" | "cosserat"
-    master: MasterParams | None = None  # None = same as the nominal model (no mismatch)
-    slave: SlaveParams | None = None  # None = same as the nominal model (no mismatch)
-    actuation: str = "servo"  # "servo" | "torque"   (mujoco only)
-    segments: int = 8  # rigid segments per section N (mujoco only)
-    enforce_cc: bool = False  # CC equality constraints per section (option; README: default plant)
-    physics_dt: float = 0.001  # s, MuJoCo timestep (analytic: RK4 step)
-    integrator: str = "implicitfast"
-    servo_frequency: float = 20.0  # Hz, natural frequency of the segment-joint servos
-    servo_damping_ratio: float = 1.0  # servo damping ratio
-    servo_feedforward: bool = True  # add the analytic T2 (mapped to segment joints) in servo mode
-    actuation_delay: float = 0.0  # s, pure delay of the commands (multiple of control_dt)
-    armature_fraction: float = 0.01  # segment-joint armature as a fraction of the section inertia
-    scene_xml: str | None = None  # alternative scene MJCF (must include master + octarm base); None = mjcf/
-    # material (Kelvin-Voigt) damping of the slave, per section, shared by the Cosserat rod and the
-    # MuJoCo chain (joint damping eta_b / h, eta_a / h for segments of length h)
-    bending_viscosity: tuple[float, float, float] = (0.1, 0.1, 0.1)  # eta_b, N m^2 s
-    extension_viscosity: tuple[float, float, float] = (3.0, 3.0, 3.0)  # eta_a, N s
-    cosserat: CosseratConfig = field(default_factory=CosseratConfig)  # [plant.cosserat]
+    kind: doc(Literal[PLANTS], '"mujoco" | "analytic" (RK4 on the analytic model) | "cosserat" (rod)') = \
+        "mujoco"
+    master: doc(Master | None, '"none" = same as [master]; or a [plant.master] table whose missing keys '
+                "take the nominal [master] value") = None
+    slave: doc(Slave | None, '"none" = same as [slave]; or a [plant.slave] table whose missing keys take '
+               "the nominal [slave] value") = None
+    actuation: doc(Literal[ACTUATIONS], '"servo" | "torque" (mujoco only)') = "servo"
+    segments: integer("rigid segments per section N (mujoco only)", ge=1, le=64) = 8
+    enforce_cc: doc(bool, "equality constraints holding each section at constant curvature (mujoco "
+                    "only)") = False
+    physics_dt: num("s, MuJoCo timestep / RK4 step", gt=0.0, le=0.01) = 0.001
+    integrator: doc(Literal[INTEGRATORS], "MuJoCo integrator") = "implicitfast"
+    servo_frequency: num("Hz, segment-joint servo natural frequency", gt=0.0, le=1000.0) = 20.0
+    servo_damping_ratio: num("segment-joint servo damping ratio", **POS) = 1.0
+    servo_feedforward: doc(bool, "add the analytic T2 (mapped to segment joints) in servo mode") = True
+    actuation_delay: num("s, pure command delay, a multiple of control_dt", **NONNEG) = 0.0
+    armature_fraction: num("segment-joint armature as a fraction of the section inertia", **NONNEG) = 0.01
+    scene_xml: doc(doc(str, "", expect="the path of an existing MJCF scene file") | None,
+                   "alternative scene MJCF file (must include master + octarm base); relative paths "
+                   'from the current directory; "none" = the shipped scene') = None
+    bending_viscosity: vec(3, "eta_b, N m^2 s, material (Kelvin-Voigt) bending viscosity per section; "
+                           "MuJoCo chain: hinge damping eta_b / h", **NONNEG) = (0.1, 0.1, 0.1)
+    extension_viscosity: vec(3, "eta_a, N s, material extension viscosity per section; MuJoCo chain: "
+                             "slide damping eta_a / h", **NONNEG) = (3.0, 3.0, 3.0)
+    cosserat: doc(CosseratConfig, "Cosserat-rod plant (kind = \"cosserat\")") = \
+        field(default_factory=CosseratConfig)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "master", plain(self.master))
+        object.__setattr__(self, "slave", plain(self.slave))
 
 
 @dataclass(frozen=True)
 class FaultConfig:
     """Deliberate controller faults, for checking that a bounds file catches broken controllers
-    (mutation testing of your CI bounds).  Defaults = no fault.
-    e2_sign = -1 flips the sign of the coordination-error feedback in (18) (a sign error);
-    null_space_scale multiplies phi_N (27) (0 = null-space term dropped, 1 = intact)."""
+    (mutation testing of your CI bounds).  Defaults = no fault."""
 
-    e2_sign: int = 1
-    null_space_scale: float = 1.0
+    e2_sign: doc(Literal[-1, 1], "-1 flips the sign of the coordination-error feedback in (18)") = 1
+    null_space_scale: num("multiplies phi_N (27): 0 = null-space term dropped, 1 = intact", ge=0.0,
+                          le=10.0) = 1.0
+
+
+_LEAF = bool | int | float | str
+ParamValue = doc(_LEAF | list[_LEAF | list[_LEAF | list[_LEAF]]], "",
+                 expect="a boolean, number, string or array of these")
 
 
 @dataclass(frozen=True)
 class ControllerConfig:
-    """Which controller runs (see controllers/interface.py and harness/loop/controllers.py).
+    """Which controller runs (controllers/interface.py).  The class and its params are checked by the
+    loop layer when the scenario is loaded through harness.api; the resolved config.toml spells out
+    every parameter."""
 
-    name: a built-in ("paper" = the paper's law (12)-(33), compiled; `teleop controllers` lists the
-    others), or a user class "path/to/file.py:ClassName" / "package.module:ClassName".
-    params: the controller's own parameters (TOML values), validated by its class (`Params`) when the
-    scenario is loaded through harness.api; the resolved config.toml spells out every one of them."""
-
-    name: str = "paper"
-    params: dict = field(default_factory=dict)
+    name: doc(str, '"paper" (the paper\'s law, compiled), another built-in ("teleop controllers") or '
+              '"path/to/file.py:ClassName" / "package.module:ClassName"', pattern=CONTROLLER_RE,
+              expect=CONTROLLER_EXPECT) = "paper"
+    params: doc(dict[doc(str, "", pattern=KEY_RE), ParamValue],
+                "the controller's own parameters (booleans, numbers, strings, arrays)") = \
+        field(default_factory=dict)
 
 
 @dataclass(frozen=True)
 class EnvObject:
-    """One object of the environment the slave can touch (MuJoCo plant), in the slave's task plane:
-    coordinates [X, Z] in metres relative to the Octarm base.  Contact is frictionless (condim 1) and
-    linear: normal force = stiffness * penetration + damping (harness.plant.environment maps these to
-    MuJoCo solref/solimp).  `plane`: infinite wall through `position` with unit `normal` pointing toward
-    the arm (the free side); `box`: centre `position`, half sizes `size` [X, Z], rotated by `angle` about
-    +y; `sphere`: centre `position`, radius size[0]."""
+    """One object of the environment the slave can touch, in the slave's task plane: coordinates
+    [X, Z] in metres relative to the Octarm base.  Contact is frictionless and linear (normal force =
+    stiffness * penetration + damping).  `plane`: infinite wall through `position` with unit `normal`
+    pointing toward the free side; `box`: centre `position`, half sizes `size`, rotated by `angle`
+    about +y; `sphere`: centre `position`, radius size[0]."""
 
-    name: str = "wall"
-    kind: str = "plane"  # "plane" | "box" | "sphere"
-    position: tuple[float, float] = (0.0, 1.2)  # m, slave task frame [X, Z]
-    normal: tuple[float, float] = (0.0, -1.0)  # plane only: direction toward the free side (normalised)
-    size: tuple[float, float] = (0.05, 0.05)  # m, box half sizes [X, Z]; sphere radius = size[0]
-    angle: float = 0.0  # rad, box rotation about +y
-    stiffness: float = 1.0e4  # N/m, normal contact stiffness, > 0
-    damping_ratio: float = 1.0  # critical-damping fraction against the touching body's mass, >= 0
+    name: doc(str, "object name (the key of its [environment.objects.<name>] table)", pattern=NAME_RE,
+              expect=NAME_EXPECT) = "wall"
+    kind: doc(Literal[ENV_KINDS], '"plane" | "box" | "sphere"') = "plane"
+    position: vec(2, "m, slave task frame [X, Z]") = (0.0, 1.2)
+    normal: vec(2, "plane only: direction toward the free side (normalised), non-zero") = (0.0, -1.0)
+    size: vec(2, "m, box half sizes [X, Z]; sphere radius = size[0]", **POS) = (0.05, 0.05)
+    angle: num("rad, box rotation about +y") = 0.0
+    stiffness: num("N/m, normal contact stiffness", **POS) = 1.0e4
+    damping_ratio: num("critical-damping fraction against the touching body's mass", **NONNEG) = 1.0
 
 
 @dataclass(frozen=True)
 class EnvironmentConfig:
     """Objects the slave's segments and tip can touch (none = the paper's free-space scenario)."""
 
-    objects: tuple[EnvObject, ...] = ()
+    objects: doc(tuple[EnvObject, ...], "one [environment.objects.<name>] table per object (see "
+                 "scenarios/contact.toml)", item="<name>") = ()
 
 
 @dataclass(frozen=True)
 class ForceSensingConfig:
     """What the controller gets as F = [F1, F2] in the laws (13), (17).  `exact`: the plant's true
-    interaction forces (operator force at the master handle, constant + contact force at the slave tip);
-    `sensed`: the same through noise (std, N, per component, seeded) -> first-order low-pass (cutoff
-    Hz; none = no filter) -> pure delay (s, multiple of control_dt); `ignored`: F = 0 in the laws."""
+    interaction forces; `sensed`: the same through noise -> first-order low-pass -> pure delay;
+    `ignored`: F = 0 in the laws."""
 
-    mode: str = "exact"  # "exact" | "sensed" | "ignored"
-    noise_std: float = 0.0  # N, white noise per component (sensed mode)
-    cutoff: float | None = None  # Hz, first-order low-pass cutoff; None = unfiltered (sensed mode)
-    delay: float = 0.0  # s, multiple of control_dt (sensed mode)
+    mode: doc(Literal[FORCE_MODES], '"exact" (true forces) | "sensed" (noise, filter, delay) | "ignored" '
+              "(F = 0)") = "exact"
+    noise_std: num("N, white noise per component (sensed mode)", **NONNEG) = 0.0
+    cutoff: doc(num("", **POS) | None, 'Hz, first-order low-pass cutoff (sensed mode); "none" = '
+                "unfiltered") = None
+    delay: num("s, a multiple of control_dt (sensed mode)", **NONNEG) = 0.0
 
 
 @dataclass(frozen=True)
 class SensingConfig:
-    force: ForceSensingConfig = field(default_factory=ForceSensingConfig)
+    force: doc(ForceSensingConfig, "what the laws (13), (17) get as F = [F1, F2]") = \
+        field(default_factory=ForceSensingConfig)
 
 
 @dataclass(frozen=True)
 class OperatorConfig:
-    """The operator's hand on the master handle (MuJoCo plant): a point mass `mass` coupled to the
-    master tip by a grip spring-damper (grip_stiffness, grip_damping) and pulled toward the scripted
-    target by the arm's spring-damper (stiffness, damping).  targets = ((t, X, Z), ...): piecewise-linear
-    target in the master task frame (s, m), held constant outside; empty = the initial tip position."""
+    """The operator's hand on the master handle (MuJoCo plant): a point mass coupled to the master tip
+    by a grip spring-damper and pulled toward the scripted target by the arm's spring-damper."""
 
-    enabled: bool = False
-    mass: float = 0.5  # kg, hand mass
-    stiffness: float = 200.0  # N/m, arm stiffness toward the target
-    damping: float = 20.0  # N s/m, arm damping (absolute hand velocity)
-    grip_stiffness: float = 2000.0  # N/m, hand-handle coupling
-    grip_damping: float = 40.0  # N s/m, hand-handle coupling
-    targets: tuple[tuple[float, float, float], ...] = ()  # (t s, X m, Z m), times increasing
+    enabled: doc(bool, "simulate the operator's hand") = False
+    mass: num("kg, hand mass", **POS) = 0.5
+    stiffness: num("N/m, arm spring toward the target", **NONNEG) = 200.0
+    damping: num("N s/m, arm damper (absolute hand velocity)", **NONNEG) = 20.0
+    grip_stiffness: num("N/m, hand-handle spring", **POS) = 2000.0
+    grip_damping: num("N s/m, hand-handle damper", **NONNEG) = 40.0
+    targets: doc(tuple[vec(3, ""), ...], "[[t, X, Z], ...] (s, m, master task frame), piecewise linear, "
+                 "t >= 0 strictly increasing; [] = hold the initial tip position",
+                 expect="an array of [t, X, Z] triples (s, m, m) with strictly increasing t >= 0") = ()
 
 
 @dataclass(frozen=True)
 class Scenario:
     """One fully resolved run."""
 
-    name: str = "paper"
-    duration: float = 20.0  # s
-    control_dt: float = 0.001  # s (1 kHz), must be a multiple of plant.physics_dt
-    snr_db: float | None = 40.0  # AWGN on fed-back states; None = no noise
-    noise_model: str = "per_channel"  # SNR per signal (running power) | "per_vector" (per-step vector RMS)
-    seed: int = 0
-    transient: float = 5.0  # s, metrics (RMS/max) are taken after this time
-    gains: Gains = field(default_factory=Gains)
-    master: MasterParams = field(default_factory=MasterParams)  # nominal (controller) model
-    slave: SlaveParams = field(default_factory=SlaveParams)  # nominal (controller) model
-    subtask: SubtaskSpec = field(default_factory=SubtaskSpec)
-    trajectory: TrajectoryConfig = field(default_factory=TrajectoryConfig)
-    initial: InitialState = field(default_factory=InitialState)
-    plant: PlantConfig = field(default_factory=PlantConfig)
-    interaction_forces: tuple[tuple[float, float], tuple[float, float]] = ((0.0, 0.0), (0.0, 0.0))  # F1, F2 N
-    continuous_control: bool = False  # analytic plant only: evaluate the control law in every RK4 stage
-    faults: FaultConfig = field(default_factory=FaultConfig)  # deliberate faults (testing bounds)
-    controller: ControllerConfig = field(default_factory=ControllerConfig)  # which control law runs
-    environment: EnvironmentConfig = field(default_factory=EnvironmentConfig)  # contact objects (mujoco)
-    sensing: SensingConfig = field(default_factory=SensingConfig)  # force sensing for the laws
-    operator: OperatorConfig = field(default_factory=OperatorConfig)  # operator hand on the master
+    name: doc(str, "run name; default output folder runs/<name> (default: the file's stem)",
+              pattern=NAME_RE, expect=NAME_EXPECT) = "paper"
+    duration: num("s, simulated time", gt=0.0, le=3600.0) = 20.0
+    control_dt: num("s, control period; an integer multiple of plant.physics_dt", gt=0.0, le=1.0) = 0.001
+    snr_db: doc(num("", ge=0.0, le=200.0) | None, 'dB, AWGN on the fed-back states; "none" = no '
+                "noise") = 40.0
+    noise_model: doc(Literal[NOISE_MODELS], '"per_channel": SNR per signal (running power); "per_vector": '
+                     "per-step RMS of each fed-back vector") = "per_channel"
+    seed: integer("noise seed", ge=0, le=2**63 - 1) = 0
+    transient: num("s, RMS/max metrics are taken after this time, < duration (default: 5, or a quarter "
+                   "of a shorter duration)", ge=0.0, lt=3600.0) = 5.0
+    gains: doc(GainsSpec, "controller gains, paper eq. (39)") = field(default_factory=Gains)
+    master: doc(Master, "NOMINAL master model used by the controller (2-link planar arm)") = \
+        field(default_factory=MasterParams)
+    slave: doc(Slave, "NOMINAL Octarm model used by the controller (3 constant-curvature sections; our "
+               "proposal)") = field(default_factory=SlaveParams)
+    subtask: doc(Subtask, "null-space sub-tasks (29)-(33)") = field(default_factory=SubtaskSpec)
+    trajectory: doc(TrajectoryConfig, "paper eq. (40)") = field(default_factory=TrajectoryConfig)
+    initial: doc(InitialState, "initial state") = field(default_factory=InitialState)
+    plant: doc(PlantConfig, 'the "true" plant the controller drives') = field(default_factory=PlantConfig)
+    interaction_forces: doc(tuple[vec(2, ""), vec(2, "")], "[F1, F2], N, constant tip forces (X, Z) on "
+                            "master, slave") = ((0.0, 0.0), (0.0, 0.0))
+    continuous_control: doc(bool, "analytic plant only: evaluate the control law in every RK4 stage") = False
+    faults: doc(FaultConfig, "deliberate controller faults (testing bounds files)") = \
+        field(default_factory=FaultConfig)
+    controller: doc(ControllerConfig, "which control law runs (a table, or just the name)") = \
+        field(default_factory=ControllerConfig)
+    environment: doc(EnvironmentConfig, "objects the slave can touch (MuJoCo and Cosserat plants)") = \
+        field(default_factory=EnvironmentConfig)
+    sensing: doc(SensingConfig, "force sensing for the laws") = field(default_factory=SensingConfig)
+    operator: doc(OperatorConfig, "the operator's hand on the master handle (MuJoCo plant)") = \
+        field(default_factory=OperatorConfig)
+
+    def __post_init__(self) -> None:
+        for name in ("gains", "master", "slave", "subtask"):
+            object.__setattr__(self, name, plain(getattr(self, name)))
 
     @property
     def plant_master(self) -> MasterParams:

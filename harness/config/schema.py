@@ -1,357 +1,414 @@
-"""The scenario schema: every field of the typed `Scenario` with its checker, and the primitive
-checkers themselves.  A checker takes (dotted path, raw TOML value) and returns the converted value or
-raises a one-line `ConfigError` naming the field, its value and the allowed range.
+"""The one validator of every input file: typed frozen dataclasses whose fields carry their constraints
+and descriptions as `msgspec.Meta` annotations (`harness.config.scenario`, `.bounds`, `.study`, a
+controller's `Params`), decoded by `msgspec.convert`.  This module adds
+what msgspec does not say: unknown keys with "did you mean" (`suggest`, the only such helper),
+non-finite numbers, and the one-line message ``<dotted field> = <value>: must be <range>`` built from
+the field's declared type (`describe`).  `fields_of` lists every field (dotted name, type, default,
+range, description) for the resolved `config.toml` and the reference pages (`harness.config.reference`).
 """
-
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
+import functools
 import math
 import re
-from collections.abc import Iterable, Mapping
-from dataclasses import fields
-from typing import Any
+import typing
+from collections.abc import Iterable, Iterator, Mapping
+from typing import Annotated, Any
 
-from controllers.params import Gains, MasterParams, ParameterError, SlaveParams, SubtaskSpec
-from harness.config.checks import (
-    KEY_RE,
-    NONNEG,
-    POSITIVE,
-    Checker,
-    Range,
-    boolean,
-    choice,
-    integer,
-    is_none_word,
-    matrix,
-    mjcf_path,
-    name_check,
-    num,
-    num_list,
-    optional,
-    str_list,
-    type_name,
-    vec,
-)
+import msgspec
+from msgspec import Meta
+from msgspec import inspect as mi
+
 from harness.config.errors import ConfigError, short_repr
-from harness.config.scenario import (
-    ACTUATIONS,
-    ELASTIC_LAWS,
-    ENV_KINDS,
-    FORCE_MODES,
-    INTEGRATORS,
-    NOISE_MODELS,
-    PLANTS,
-    ControllerConfig,
-    CosseratConfig,
-    EnvironmentConfig,
-    EnvObject,
-    FaultConfig,
-    ForceSensingConfig,
-    InitialState,
-    OperatorConfig,
-    PlantConfig,
-    SensingConfig,
-    TrajectoryConfig,
-)
 
-CONTROLLER_RE = re.compile(r"^(?:[A-Za-z_][A-Za-z0-9_]*|[^\s:]+:[A-Za-z_][A-Za-z0-9_]*)$")
-CONTROLLER_DESC = ("a built-in controller name (see 'teleop controllers'), 'path/to/file.py:ClassName' or "
-                   "'package.module:ClassName'")
-
-
-def _param_value(path: str, v: Any, depth: int = 0) -> Any:
-    """A controller parameter: a TOML boolean, integer, finite float, string or array of these."""
-    if isinstance(v, (bool, int, str)):
-        return v
-    if isinstance(v, float):
-        if not math.isfinite(v):
-            raise ConfigError.field(path, v, "must be finite")
-        return v
-    if isinstance(v, (list, tuple)) and depth < 3:
-        return [_param_value(f"{path}[{i}]", x, depth + 1) for i, x in enumerate(v)]
-    raise ConfigError.field(path, v, f"must be a boolean, number, string or array (got {type_name(v)})")
-
-
-def _controller(path: str, v: Any) -> ControllerConfig:
-    """[controller]: a table {name, params} or just the name.  The class and its params are checked by
-    the loop layer (harness.loop.controllers.resolve_controller): config/ never imports controllers."""
-    if isinstance(v, str):
-        v = {"name": v}
-    if not isinstance(v, Mapping):
-        raise ConfigError.field(path, v, f"must be a table [controller] or a name (got {type_name(v)})")
-    check_keys(v, path, ("name", "params"))
-    name = v.get("name", ControllerConfig.name)
-    if not isinstance(name, str) or not CONTROLLER_RE.match(name.strip()):
-        raise ConfigError.field(f"{path}.name", name, f"must be {CONTROLLER_DESC}")
-    params = v.get("params", {})
-    if is_none_word(params):
-        params = {}
-    if not isinstance(params, Mapping):
-        raise ConfigError.field(f"{path}.params", params, f"must be a table (got {type_name(params)})")
-    out = {}
-    for k, x in params.items():
-        if not isinstance(k, str) or not KEY_RE.match(k):
-            raise ConfigError.field(f"{path}.params", k, "keys must be names like 'gain'")
-        out[k] = _param_value(f"{path}.params.{k}", x)
-    return ControllerConfig(name=name.strip(), params=out)
+NONE_WORDS = ("none",)  # TOML has no null: "none" (or false) unsets an optional field
+_TOKEN = re.compile(r"\.([^.\[\]]+)|\[(\d+|\.\.\.)\]")
 
 
 # ---------------------------------------------------------------------------------------------
-# table-valued top-level keys: [environment], [sensing.force], [operator] (contact issue)
+# declaring fields
 # ---------------------------------------------------------------------------------------------
-ENV_OBJECT: dict[str, Checker] = {
-    "name": name_check, "kind": choice(ENV_KINDS), "position": vec(2), "normal": vec(2),
-    "size": vec(2, POSITIVE), "angle": num(), "stiffness": num(POSITIVE), "damping_ratio": num(NONNEG),
-}
-FORCE_SENSING: dict[str, Checker] = {
-    "mode": choice(FORCE_MODES), "noise_std": num(NONNEG),
-    "cutoff": optional(num(POSITIVE), allow_false=True), "delay": num(NONNEG),
-}
+def num(desc: str, **rng: float) -> Any:
+    """A finite real number (TOML integers accepted) with optional bounds gt/ge/lt/le."""
+    return doc(float, desc, **rng)
 
 
-def _targets(path: str, v: Any) -> tuple[tuple[float, float, float], ...]:
-    desc = "an array of [t, X, Z] triples (s, m, m) with strictly increasing t >= 0"
-    if not isinstance(v, (list, tuple)):
-        raise ConfigError.field(path, v, f"must be {desc} (got {type_name(v)})")
-    rows = tuple(vec(3)(path, r) for r in v)
-    ts = [r[0] for r in rows]
-    if any(t < 0 for t in ts) or any(b <= a for a, b in zip(ts, ts[1:], strict=False)):
-        raise ConfigError.field(path, v, f"must be {desc}")
-    return rows
+def integer(desc: str, **rng: int) -> Any:
+    return doc(int, desc, **rng)
 
 
-OPERATOR: dict[str, Checker] = {
-    "enabled": boolean, "mass": num(POSITIVE), "stiffness": num(NONNEG), "damping": num(NONNEG),
-    "grip_stiffness": num(POSITIVE), "grip_damping": num(NONNEG), "targets": _targets,
-}
+def vec(n: int, desc: str, **rng: float) -> Any:
+    """An array of `n` finite numbers, each within the bounds."""
+    item = Annotated[float, Meta(**rng)] if rng else float
+    return Annotated[tuple[(item,) * n], Meta(description=desc or None)]
 
 
-def _environment(path: str, v: Any) -> EnvironmentConfig:
-    """[environment] with [environment.objects.<name>] tables (named, so that a dotted override such as
-    environment.objects.wall.stiffness=1e5 reaches one object)."""
-    tbl = as_table(path, v)
-    check_keys(tbl, path, ["objects"])
-    objs = as_table(f"{path}.objects", tbl.get("objects", {}))
-    out = []
-    for name, ov in objs.items():
-        p = f"{path}.objects.{name}"
-        name_check(p, name)
-        spec = {k: c for k, c in ENV_OBJECT.items() if k != "name"}
-        kw = read_fields(as_table(p, ov), p, spec, EnvObject())
-        if kw["kind"] == "plane" and math.hypot(*kw["normal"]) < 1e-9:
-            raise ConfigError.field(f"{p}.normal", list(kw["normal"]), "must be a non-zero vector")
-        out.append(EnvObject(name=name, **kw))
-    return EnvironmentConfig(objects=tuple(out))
+_META = ("gt", "ge", "lt", "le", "multiple_of", "pattern", "min_length", "max_length")
 
 
-def _sensing(path: str, v: Any) -> SensingConfig:
-    tbl = as_table(path, v)
-    check_keys(tbl, path, ["force"])
-    p = f"{path}.force"
-    return SensingConfig(force=ForceSensingConfig(**read_fields(as_table(p, tbl.get("force", {})), p,
-                                                                FORCE_SENSING, ForceSensingConfig())))
+def doc(tp: Any, desc: str, **meta: Any) -> Any:
+    """`tp` with a description, msgspec constraints (`pattern`, ...) and extra keys: `expect` (what the
+    error message says the value must be; default: from the type), `unit`, ..."""
+    extra = {k: v for k, v in meta.items() if k not in _META}
+    rules = {k: v for k, v in meta.items() if k in _META}
+    return Annotated[tp, Meta(description=desc or None, extra=extra or None, **rules)]
 
 
-def _operator(path: str, v: Any) -> OperatorConfig:
-    return OperatorConfig(**read_fields(as_table(path, v), path, OPERATOR, OperatorConfig()))
+def checked(cls: type, spec: Mapping[str, Any]) -> type:
+    """A frozen dataclass subclass of `cls` (a numpy-only parameter dataclass of `controllers/`) whose
+    fields take their names and defaults from `cls` and their constrained types from `spec`; the
+    decoded instances are turned back into `cls` (`plain`).  Every field of `cls` needs a spec entry."""
+    own = dataclasses.fields(cls)
+    if set(spec) != {f.name for f in own}:
+        raise TypeError(f"{cls.__name__}: schema fields {sorted(spec)} != dataclass fields")
+    extra = [(f.name, spec[f.name], dataclasses.field(default=f.default, default_factory=f.default_factory))
+             for f in own]
+    return dataclasses.make_dataclass(cls.__name__, extra, bases=(cls,), frozen=True, eq=False,
+                                      namespace={"schema_of": cls})
+
+
+def plain(value: Any) -> Any:
+    """A `checked` subclass instance as an instance of its parameter dataclass (others unchanged)."""
+    base = getattr(type(value), "schema_of", None)
+    if base is None:
+        return value
+    return base(**{f.name: getattr(value, f.name) for f in dataclasses.fields(base)})
 
 
 # ---------------------------------------------------------------------------------------------
-# schema: section -> {field: checker}; every dataclass field must appear (tests check this)
+# type information: what a field accepts, in words
 # ---------------------------------------------------------------------------------------------
-TOP: dict[str, Checker] = {
-    "name": name_check,
-    "duration": num(Range(0.0, 3600.0, lo_open=True)),
-    "control_dt": num(Range(0.0, 1.0, lo_open=True)),
-    "snr_db": optional(num(Range(0.0, 200.0)), allow_false=True),
-    "noise_model": choice(NOISE_MODELS),
-    "seed": integer(0, 2**63 - 1),
-    "transient": num(Range(0.0, 3600.0, hi_open=True)),
-    "continuous_control": boolean,
-    "interaction_forces": matrix(2, 2),
-    "controller": _controller,
-    "environment": _environment,
-    "sensing": _sensing,
-    "operator": _operator,
-}
-TABLE_KEYS = ("environment", "sensing", "operator")  # top-level keys whose value is a table
-
-GAINS: dict[str, Checker] = {f.name: num(POSITIVE) for f in fields(Gains)}
-
-MASTER: dict[str, Checker] = {
-    "lengths": vec(2, POSITIVE),
-    "masses": vec(2, POSITIVE),
-    "damping": vec(2, NONNEG),
-    "gravity": num(NONNEG),
-}
-
-SLAVE: dict[str, Checker] = {
-    "rest_lengths": vec(3, POSITIVE),
-    "masses": vec(3, POSITIVE),
-    "bending_stiffness": vec(3, NONNEG),
-    "extension_stiffness": vec(3, NONNEG),
-    "extension_damping": vec(3, NONNEG),
-    "bending_damping": vec(3, NONNEG),
-    "slice_inertia": vec(3, NONNEG),
-    "gravity": vec(2),
-    "max_extension": num(Range(1.0, 100.0, lo_open=True)),
-    "max_bend": num(Range(0.0, math.pi, lo_open=True)),
-    "n_quad": integer(2, 32),
-}
-
-SUBTASK: dict[str, Checker] = {
-    "kinds": str_list(("manipulability", "limits")),
-    "weights": num_list(POSITIVE),
-    "limit_power": integer(1, 10),
-}
-
-TRAJECTORY: dict[str, Checker] = {
-    "center": vec(2),
-    "amplitude": vec(2),
-    "omega": num(),
-}
-
-INITIAL: dict[str, Checker] = {
-    "master_offset": vec(2),
-    "master_elbow": integer(-1, 1, allowed=(-1, 1)),
-    "slave_q2": optional(vec(6)),
-    "slave_curvature": num(),
-}
-
-PLANT: dict[str, Checker] = {
-    "kind": choice(PLANTS),
-    "actuation": choice(ACTUATIONS),
-    "segments": integer(1, 64),
-    "enforce_cc": boolean,
-    "physics_dt": num(Range(0.0, 0.01, lo_open=True)),
-    "integrator": choice(INTEGRATORS),
-    "servo_frequency": num(Range(0.0, 1000.0, lo_open=True)),
-    "servo_damping_ratio": num(POSITIVE),
-    "servo_feedforward": boolean,
-    "actuation_delay": num(NONNEG),
-    "armature_fraction": num(NONNEG),
-    "scene_xml": optional(mjcf_path),
-}
+@functools.cache
+def info(tp: Any) -> Any:
+    return mi.type_info(tp)
 
 
-def _auto_or(inner: Checker) -> Checker:
-    """"auto" or a value accepted by `inner`."""
-
-    def check(path: str, v: Any) -> Any:
-        if isinstance(v, str) and v == "auto":
-            return "auto"
-        try:
-            return inner(path, v)
-        except ConfigError:
-            raise ConfigError.field(path, v, f'must be "auto" or {inner.desc}') from None
-
-    return check
+def bare(t: Any) -> Any:
+    """The type under `Annotated` metadata."""
+    while isinstance(t, mi.Metadata):
+        t = t.type
+    return t
 
 
-COSSERAT: dict[str, Checker] = {
-    "elements_per_section": integer(2, 200),
-    "dt": _auto_or(num(Range(0.0, 0.01, lo_open=True))),
-    "shear_factor": num(Range(0.0, 1e6, lo_open=True)),
-    "rotary_radius": num(Range(0.0, 1.0, lo_open=True)),
-    "elastic_law": choice(ELASTIC_LAWS),
-}
+def description(t: Any) -> str:
+    return (t.extra_json_schema or {}).get("description", "") if isinstance(t, mi.Metadata) else ""
 
 
-def _cosserat_table(path: str, v: Any) -> CosseratConfig:
-    """The [plant.cosserat] table (missing keys: defaults); its own fields are checked one by one."""
-    tbl = as_table(path, v)
-    return build_section(CosseratConfig, read_fields(tbl, path, COSSERAT, CosseratConfig()), path)
+def _fmt(x: float) -> str:
+    return "pi" if x == math.pi else str(x) if isinstance(x, int) else f"{x:g}"
 
 
-PLANT["bending_viscosity"] = vec(3, NONNEG)  # N m^2 s per section
-PLANT["extension_viscosity"] = vec(3, NONNEG)  # N s per section
-PLANT["cosserat"] = _cosserat_table
-
-FAULTS: dict[str, Checker] = {
-    "e2_sign": integer(-1, 1, allowed=(-1, 1)),
-    "null_space_scale": num(Range(0.0, 10.0)),
-}
-PLANT_MODELS = ("master", "slave")  # optional sub-tables of [plant]
-
-SECTIONS: dict[str, tuple[type, dict[str, Checker]]] = {
-    "gains": (Gains, GAINS),
-    "master": (MasterParams, MASTER),
-    "slave": (SlaveParams, SLAVE),
-    "subtask": (SubtaskSpec, SUBTASK),
-    "trajectory": (TrajectoryConfig, TRAJECTORY),
-    "initial": (InitialState, INITIAL),
-    "plant": (PlantConfig, PLANT),
-    "faults": (FaultConfig, FAULTS),
-}
+def describe_range(t: Any) -> str:
+    """'in (0, 3600]', '> 0', '' for a numeric type's bounds."""
+    lo, lo_open = (t.gt, True) if t.gt is not None else (t.ge, False)
+    hi, hi_open = (t.lt, True) if t.lt is not None else (t.le, False)
+    if lo is not None and hi is not None:
+        return f"in {'(' if lo_open else '['}{_fmt(lo)}, {_fmt(hi)}{')' if hi_open else ']'}"
+    if lo is not None:
+        return f"{'>' if lo_open else '>='} {_fmt(lo)}"
+    if hi is not None:
+        return f"{'<' if hi_open else '<='} {_fmt(hi)}"
+    return ""
 
 
-def schema_paths() -> list[str]:
-    """Every settable dotted key (used for suggestions and tests)."""
-    out = list(TOP)
-    out += [f"sensing.force.{k}" for k in FORCE_SENSING] + [f"operator.{k}" for k in OPERATOR]
-    for sec, (_, spec) in SECTIONS.items():
-        out += [f"{sec}.{k}" for k in spec]
-    for sub, spec in (("master", MASTER), ("slave", SLAVE), ("cosserat", COSSERAT)):
-        out.append(f"plant.{sub}")
-        out += [f"plant.{sub}.{k}" for k in spec]
-    return out
+def describe(t: Any) -> str:
+    """What a value of (msgspec type info) `t` must be, as the end of 'must be ...'."""
+    if isinstance(t, mi.Metadata) and "expect" in (t.extra or {}):
+        return t.extra["expect"]
+    t = bare(t)
+    if isinstance(t, mi.IntType):
+        rng = describe_range(t)
+        return f"an integer {rng}".rstrip() if rng.startswith(("in", ">", "<")) else "an integer"
+    if isinstance(t, mi.FloatType):
+        rng = describe_range(t)
+        return f"a number {rng}" if rng else "a finite number"
+    if isinstance(t, mi.BoolType):
+        return "true or false"
+    if isinstance(t, mi.StrType):
+        return "a string" + (f" matching {t.pattern}" if t.pattern else "")
+    if isinstance(t, mi.LiteralType):
+        if all(isinstance(v, int) for v in t.values):
+            return "one of the integers " + ", ".join(map(str, t.values))
+        return "one of " + ", ".join(repr(v) for v in t.values)
+    if isinstance(t, mi.TupleType):
+        items = [bare(i) for i in t.item_types]
+        if items and all(isinstance(i, mi.FloatType) for i in items):
+            rng = describe_range(items[0])
+            return f"an array of {len(items)} finite numbers" + (f", each {rng}" if rng else "")
+        if items and all(i == items[0] for i in items):
+            return f"an array of {len(items)} arrays of " + describe(items[0]).removeprefix("an array of ")
+        return f"an array of {len(items)} entries"
+    if isinstance(t, (mi.VarTupleType, mi.ListType)):
+        item = bare(t.item_type)
+        if isinstance(item, mi.FloatType):
+            rng = describe_range(item)
+            return "an array of finite numbers" + (f", each {rng}" if rng else "")
+        if isinstance(item, mi.LiteralType):
+            return "an array of distinct strings from " + ", ".join(repr(v) for v in item.values)
+        return "an array of " + describe(item).removeprefix("an ").removeprefix("a ") + "s"
+    if isinstance(t, mi.UnionType):
+        kinds = [u for u in t.types if not isinstance(bare(u), mi.NoneType)]
+        text = " or ".join(describe(k) for k in kinds)
+        return text + ' or "none"' if len(kinds) < len(t.types) else text
+    if isinstance(t, (mi.DataclassType, mi.DictType)):
+        return "a table"
+    return "a valid value"
 
 
-def _suggest(path: str, key: str, siblings: Iterable[str]) -> str:
-    siblings = list(siblings)
-    close = difflib.get_close_matches(key, siblings, n=3, cutoff=0.6)
-    prefix = path.rsplit(".", 1)[0] + "." if "." in path else ""
-    hints = [prefix + c for c in close]
-    # the key may belong to another section (e.g. top-level `segments` -> `plant.segments`)
-    hints += [p for p in schema_paths() if p.rsplit(".", 1)[-1] == key and p != path and p not in hints]
-    allowed = ", ".join(siblings)
-    did = f"did you mean {' or '.join(repr(h) for h in hints[:4])}? " if hints else ""
-    return f"unknown key {path!r}; {did}allowed keys here: {allowed}"
+def type_name(v: Any) -> str:
+    for kind, text in ((type(None), "nothing"), (bool, "a boolean"), (int, "an integer"), (float, "a float"),
+                       (str, "a string"), ((list, tuple), "an array"), (Mapping, "a table")):
+        if isinstance(v, kind):
+            return text
+    return f"a {type(v).__name__}"
 
 
-def check_keys(table: Mapping, prefix: str, allowed: Iterable[str]) -> None:
-    allowed = list(allowed)
-    for k in table:
+def suggest(word: Any, choices: Iterable[str], n: int = 3) -> list[str]:
+    """The close spellings of `word` among `choices` (the one "did you mean" of the harness)."""
+    return difflib.get_close_matches(str(word), list(choices), n=n, cutoff=0.6)
+
+
+def did_you_mean(hints: Iterable[str], key: str = "") -> str:
+    hints = list(hints)
+    alts = " or ".join(repr(h) for h in hints[:4])
+    return f"did you mean {alts}{f' for {key!r}' if key else ''}? " if hints else ""
+
+
+def unknown_keys(prefix: str, bad: Mapping, allowed: Iterable[str],
+                 elsewhere: Iterable[str] = ()) -> ConfigError:
+    """One line for the unknown keys `bad` (key -> value) of the table at `prefix` ("plant." or ""):
+    the close spellings among `allowed`, and the dotted paths of the file (`elsewhere`) where the key
+    belongs, e.g. `plant.segments` for a top-level `segments`."""
+    allowed, elsewhere = list(allowed), list(elsewhere)
+    hints = []
+    for k in bad:
+        close = [prefix + c for c in suggest(k, allowed)]
+        other = [e for e in elsewhere if e.rsplit(".", 1)[-1] == k and e != prefix + k and e not in close]
+        text = did_you_mean(close + other, k if len(bad) > 1 else "")
+        hints.append(text + (f"({k!r} belongs under [{other[0].rsplit('.', 1)[0]}]) " if other else ""))
+    if len(bad) == 1:
+        (k, v), = bad.items()
+        head, path = f"{prefix}{k} = {short_repr(v, 40)}: unknown key", prefix + str(k)
+    else:
+        path = prefix.rstrip(".")
+        head = f"{path or 'file'}: unknown keys {', '.join(map(repr, bad))}"
+    allowed_text = ", ".join(allowed) or "none"
+    return ConfigError(f"{head}; {''.join(hints)}allowed keys here: {allowed_text}", path=path)
+
+
+# ---------------------------------------------------------------------------------------------
+# the schema as a list of fields
+# ---------------------------------------------------------------------------------------------
+def _dataclass_of(t: Any) -> Any:
+    """The dataclass type info inside `t` (through Annotated and Optional), else None."""
+    t = bare(t)
+    if isinstance(t, mi.UnionType):
+        found = [bare(u) for u in t.types if isinstance(bare(u), mi.DataclassType)]
+        return found[0] if found else None
+    return t if isinstance(t, mi.DataclassType) else None
+
+
+def fields_of(cls: type, prefix: str = "", arrays: bool = False) -> Iterator[tuple[str, Any, Any]]:
+    """(dotted name, msgspec type info, default) of every field of `cls` and of its sub-tables; with
+    `arrays`, also of the tables in arrays of tables (`factor[].param`, or as the array's `item` extra
+    says: `environment.objects.<name>.kind`)."""
+    for f in info(cls).fields:
+        path = prefix + f.name
+        default = f.default if f.default is not msgspec.NODEFAULT else \
+            f.default_factory() if f.default_factory is not msgspec.NODEFAULT else msgspec.NODEFAULT
+        yield path, f.type, default
+        sub = _dataclass_of(f.type)
+        if sub is None and arrays and isinstance(bare(f.type), mi.VarTupleType):
+            extra = f.type.extra if isinstance(f.type, mi.Metadata) and f.type.extra else {}
+            item = extra.get("item", "[]")
+            sub, path = _dataclass_of(bare(f.type).item_type), path + (item if item == "[]" else "." + item)
+        if sub is not None:
+            yield from fields_of(sub.cls, path + ".", arrays)
+
+
+# ---------------------------------------------------------------------------------------------
+# decoding
+# ---------------------------------------------------------------------------------------------
+def _check_keys(raw: Any, t: Any, path: str, elsewhere: tuple[str, ...], names: dict | None = None) -> None:
+    t = _dataclass_of(t)
+    if t is None or not isinstance(raw, Mapping):
+        return
+    fields = {f.name: f for f in t.fields}
+    for k in raw:
         if not isinstance(k, str):
-            raise ConfigError(f"{prefix or 'scenario'}: key {short_repr(k)} is not a string", path=prefix)
-        if k not in allowed:
-            path = f"{prefix}.{k}" if prefix else k
-            raise ConfigError(_suggest(path, k, allowed), path=path)
+            raise ConfigError(f"{path or 'file'}: key {short_repr(k)} is not a string", path=path)
+    bad = {k: v for k, v in raw.items() if k not in fields}
+    if bad:
+        raise unknown_keys(f"{path}." if path else "", bad, fields, elsewhere)
+    for k, v in raw.items():
+        p = f"{path}.{k}" if path else k
+        ft = bare(fields[k].type)
+        if isinstance(ft, (mi.VarTupleType, mi.ListType)) and isinstance(v, (list, tuple)):
+            for i, item in enumerate(v):
+                where = f"{p}.{names[i]}" if names and i in names else f"{p}[{i}]"
+                _check_keys(item, ft.item_type, where, elsewhere, names)
+        else:
+            _check_keys(v, fields[k].type, p, elsewhere, names)
 
 
-def as_table(path: str, v: Any) -> Mapping:
-    if not isinstance(v, Mapping):
-        raise ConfigError.field(path, v, f"must be a table [{path}] (got {type_name(v)})")
-    return v
+def _non_finite(raw: Any, tokens: list) -> list | None:
+    """The path (tokens) to the first non-finite float in `raw`, else None."""
+    if isinstance(raw, float) and not math.isfinite(raw):
+        return tokens
+    items = raw.items() if isinstance(raw, Mapping) else enumerate(raw) if isinstance(raw, (list, tuple)) \
+        else ()
+    for k, v in items:
+        found = _non_finite(v, [*tokens, k])
+        if found is not None:
+            return found
+    return None
 
 
-def read_fields(table: Mapping, prefix: str, spec: dict[str, Checker], defaults: Any) -> dict[str, Any]:
-    """Validate `table` against `spec`; missing keys take `getattr(defaults, key)`."""
-    check_keys(table, prefix, spec)
-    out = {}
-    for key, check in spec.items():
-        out[key] = check(f"{prefix}.{key}" if prefix else key, table[key]) if key in table \
-            else getattr(defaults, key)
-    return out
+def _locate(cls: type, raw: Any, tokens: list, names: dict[int, str] | None = None) -> tuple:
+    """-> (dotted field path, raw value of the field, field type, entry tokens below the field)."""
+    t, node, path, value, ftype, rest, hint = bare(info(cls)), raw, "", raw, info(cls), [], cls
+    for tok in tokens:
+        if tok == "..." and isinstance(node, Mapping):
+            tok = _bad_key(node, hint)
+        if isinstance(tok, str):
+            dc = _dataclass_of(t)
+            if dc is not None:
+                f = next((f for f in dc.fields if f.name == tok), None)
+                if f is None:
+                    break
+                t, hint = f.type, typing.get_type_hints(dc.cls, include_extras=True)[tok]
+            elif isinstance(bare(t), mi.DictType):
+                t = bare(t).value_type
+            else:
+                break
+            path = f"{path}.{tok}" if path else tok
+            node = node.get(tok) if isinstance(node, Mapping) else None
+            value, ftype, rest = node, t, []
+        else:
+            bt = bare(t)
+            if isinstance(bt, mi.TupleType) and tok < len(bt.item_types):
+                t = bt.item_types[tok]
+            elif isinstance(bt, (mi.VarTupleType, mi.ListType)):
+                t = bt.item_type
+            else:
+                break
+            node = node[tok] if isinstance(node, (list, tuple)) and tok < len(node) else None
+            if _dataclass_of(t) is not None:  # a table in an array: named by `names` (objects) or index
+                path = f"{path}.{names[tok]}" if names and tok in names else f"{path}[{tok}]"
+                value, ftype, rest = node, t, []
+            else:
+                rest.append((tok, node))
+    return path, value, ftype, rest
 
 
-def build_section(cls: type, kwargs: dict[str, Any], prefix: str) -> Any:
-    """Construct a params dataclass, turning its ParameterError into a ConfigError with the path."""
+def field_error(cls: type, raw: Any, tokens: list, why: str = "", names: dict[int, str] | None = None,
+                prefix: str = "") -> ConfigError:
+    """The one-line error for the field at `tokens` of `raw` (decoded as `cls`)."""
+    path, value, ftype, rest = _locate(cls, raw, tokens, names)
+    path = prefix + path if path else prefix.rstrip(".") or "file"
+    t = bare(ftype)
+    expected = describe(ftype)
+    got = ""
+    if rest:
+        got = f" (entry {rest[0][0]} is {short_repr(rest[0][1], 30)})"
+    elif "length" in why and isinstance(value, (list, tuple)):
+        got = f" (got {len(value)} entries)"
+    elif isinstance(t, mi.LiteralType) and isinstance(value, str):
+        hint = suggest(value, [str(v) for v in t.values], n=1)
+        got = f"; did you mean {hint[0]!r}?" if hint else ""
+    elif why.startswith("Expected `") and ", got `" in why:
+        got = f" (got {type_name(value)})"
+    elif why and not why.startswith(("Expected", "Invalid enum", "Number out of range", "finite")):
+        got = f" ({why})"  # a dataclass' own check (__post_init__)
+    if isinstance(t, mi.DictType) and why.startswith("Expected `str`"):
+        return ConfigError.field(path, value, "keys must be names (letters, digits, _ and -)")
+    if isinstance(t, (mi.DataclassType, mi.DictType)) and not why.startswith("Expected"):
+        owner = why.split(" ", 1)[0].split(".", 1)[0]  # a dataclass' own check names its field
+        if owner and path.endswith(owner) and why.startswith(owner + "."):
+            return ConfigError(path[: len(path) - len(owner)] + why, path=path)
+        return ConfigError(f"{path}: {why}", path=path)
+    if why == "finite":
+        expected = f"finite ({expected})"
+    if isinstance(t, (mi.DataclassType, mi.DictType)):
+        expected = f"a table [{path}]"
+    return ConfigError.field(path, value, f"must be {expected}{got}")
+
+
+def _tokens(where: str) -> list:
+    return [m.group(1) or (m.group(2) if m.group(2) == "..." else int(m.group(2)))
+            for m in _TOKEN.finditer(where)]
+
+
+def _bad_key(table: Mapping, tp: Any) -> str | None:
+    """The first key of `table` whose value a dict type `tp` refuses (msgspec's path says `[...]`)."""
+    for k, v in table.items():
+        try:
+            msgspec.convert({k: v}, tp)
+        except msgspec.ValidationError:
+            return k
+    return None
+
+
+def decode(raw: Any, cls: type, *, prefix: str = "", names: dict[int, str] | None = None,
+           elsewhere: tuple[str, ...] = ()) -> Any:
+    """`raw` (a parsed TOML table) as a `cls` instance, or a one-line ConfigError ("none" or false
+    unset an optional field).  `prefix` is put
+    before every field path; `names` names the tables of an array in messages (index -> name)."""
+    if not isinstance(raw, Mapping):
+        raise ConfigError.field(prefix.rstrip(".") or "file", raw, f"must be a table (got {type_name(raw)})")
+    _check_keys(raw, info(cls), prefix.rstrip("."), elsewhere, names)
+    raw = none_words(raw, info(cls))
+    bad = _non_finite(raw, [])
+    if bad is not None:
+        raise field_error(cls, raw, bad, "finite", names, prefix)
     try:
-        return cls(**kwargs)
-    except ParameterError as e:
-        msg = str(e)
-        owner = msg.split(".", 1)[0]
-        # the dataclass messages start with their own short owner ("master.lengths = ...")
-        path_prefix = prefix.rsplit(".", 1)[0] + "." if "." in prefix else ""
-        msg = path_prefix + msg if owner and prefix.endswith(owner) else f"{prefix}: {msg}"
-        raise ConfigError(msg, path=prefix) from None
-    except (TypeError, ValueError) as e:  # defensive: should be caught by the checkers above
-        raise ConfigError(f"{prefix}: {e}", path=prefix) from None
+        return msgspec.convert(raw, cls)
+    except msgspec.ValidationError as e:
+        why, _, where = str(e).rpartition(" - at ")
+        spot = where.strip("`").split("` in `")[-1]
+        raise field_error(cls, raw, _tokens(spot.removeprefix("$")), why or str(e), names, prefix) from None
+    except (TypeError, ValueError, OverflowError) as e:  # defensive: msgspec reports bad input above
+        raise ConfigError(f"{prefix.rstrip('.') or 'file'}: {' '.join(str(e).split())}") from None
 
 
-# ---------------------------------------------------------------------------------------------
-# cross-field checks
-# ---------------------------------------------------------------------------------------------
+def none_words(raw: Any, t: Any) -> Any:
+    """A copy of `raw` with "none" (and false) replaced by None where the schema allows None."""
+    t0 = bare(t)
+    if isinstance(t0, mi.UnionType) and any(isinstance(u, mi.NoneType) for u in t0.types) and (
+            raw is False or (isinstance(raw, str) and raw.strip().lower() in NONE_WORDS)):
+        return None
+    dc = _dataclass_of(t)
+    if dc is not None and isinstance(raw, Mapping):
+        fs = {f.name: f.type for f in dc.fields}
+        return {k: none_words(v, fs[k]) if k in fs else v for k, v in raw.items()}
+    if isinstance(t0, (mi.VarTupleType, mi.ListType)) and isinstance(raw, list):
+        return [none_words(v, t0.item_type) for v in raw]
+    return raw
+
+
+__all__ = ["ConfigError", "Meta", "checked", "decode", "describe", "did_you_mean", "doc", "field_error",
+           "parse_params",
+           "fields_of", "info", "integer", "none_words", "num", "plain", "suggest", "type_name",
+           "unknown_keys", "vec"]
+
+
+def parse_params(cls: type, raw: Mapping | None) -> Any:
+    """The validated `Params` of a controller class (controllers/interface.py) from its
+    [controller.params] table: missing keys take the defaults, each error one line naming
+    ``controller.params.<key>`` (ConfigError; the class' own ``check()`` may raise ParamsError)."""
+    params, raw = getattr(cls, "Params", None), dict(raw or {})
+    if params is None:
+        if raw:
+            key = sorted(raw)[0]
+            raise ConfigError.field(f"controller.params.{key}", raw[key],
+                                    f"unknown key; controller {getattr(cls, 'name', cls.__name__)!r} takes "
+                                    "no parameters")
+        return None
+    p = decode(raw, params, prefix="controller.params.")
+    check = getattr(p, "check", None)
+    if callable(check):
+        check()
+    return p

@@ -73,14 +73,12 @@ Running, results and summaries: `harness.studies.sweep`.
 
 from __future__ import annotations
 
-import difflib
 import itertools
 import json
 import logging
 import math
 import os
 import re
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -88,19 +86,20 @@ from typing import Any
 from harness.config.assets import shipped
 from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
+from harness.config.schema import decode, did_you_mean, fields_of, suggest, unknown_keys
+from harness.config.study import (  # noqa: F401 - DEFAULT_MAX_CASES, METRIC_NAMES re-exported
+    DEFAULT_MAX_CASES,
+    DISTRIBUTIONS,
+    METRIC_NAMES,
+    PARAM_RE,
+    FactorTable,
+    StudyFile,
+)
 from harness.config.textio import read_toml
 
 log = logging.getLogger(__name__)
 
 
-# Keys of harness.loop.metrics.compute_metrics kept in a row's "metrics" (status/message are row fields).
-METRIC_NAMES = (
-    "e1_rms", "e1_max", "e2_rms", "e2_max", "e2_plant_rms", "e2_plant_max", "deN_rms", "beta_min",
-    "ya_max", "e1_final", "e2_final", "range_violation", "mujoco_warnings", "sim_time_reached",
-    "wall_time", "realtime_factor",
-    "contact_force_peak", "contact_force_rms", "penetration_max", "contact_time", "body_contact_time",
-    "force_tracking_rms",
-)
 LOWER_IS_WORSE = frozenset({"beta_min"})
 # axis labels of the summary plots (units as in harness.loop.metrics)
 METRIC_LABELS = {
@@ -114,13 +113,7 @@ METRIC_LABELS = {
     "penetration_max": "penetration_max [m]", "contact_time": "contact_time [s]",
     "body_contact_time": "body_contact_time [s]", "force_tracking_rms": "force_tracking_rms [N]",
 }
-DISTRIBUTIONS = {
-    "uniform": ("low", "high"), "loguniform": ("low", "high"), "normal": ("mean", "std"),
-    "integers": ("low", "high"),
-}
 DEFAULT_OUT_ROOT = Path("runs") / "sweeps"
-DEFAULT_MAX_CASES = 10000  # [sampling] max_cases / --max-cases
-_PARAM_RE = re.compile(r"^([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)(?:\[(\d+)\])?$")
 
 
 # --- study file -------------------------------------------------------------------------------------
@@ -173,26 +166,6 @@ class Case:
     scenario: Scenario
 
 
-def _check_keys(table: Any, allowed: Sequence[str], where: str,
-                elsewhere: dict[str, str] | None = None) -> None:
-    """Unknown keys of a study table are an error naming them, the allowed ones and, per key, where it
-    belongs (`elsewhere`: key -> table) or the closest allowed spelling."""
-    if not isinstance(table, dict):
-        raise ConfigError(f"{where}: expected a table, got {table!r}")
-    unknown = sorted(set(table) - set(allowed))
-    if unknown:
-        hints = []
-        for k in unknown:
-            if elsewhere and k in elsewhere:
-                hints.append(f"{k!r} belongs under {elsewhere[k]}")
-            else:
-                close = difflib.get_close_matches(str(k), list(allowed), n=1)
-                if close:
-                    hints.append(f"did you mean {close[0]!r} for {k!r}?")
-        hint = f" ({'; '.join(hints)})" if hints else ""
-        raise ConfigError(f"{where}: unknown key(s) {unknown}; allowed: {sorted(allowed)}{hint}")
-
-
 def is_real(v) -> bool:
     return isinstance(v, int | float) and not isinstance(v, bool)
 
@@ -204,9 +177,12 @@ def canon(v) -> str:
 def _parse_dist(spec: dict, where: str) -> dict:
     kind = spec.get("random")
     if kind not in DISTRIBUTIONS:
-        raise ConfigError(f"{where}: random = {kind!r}; expected one of {sorted(DISTRIBUTIONS)}")
+        hint = did_you_mean(suggest(kind, DISTRIBUTIONS)) if isinstance(kind, str) else ""
+        raise ConfigError(f"{where}: random = {kind!r}; {hint}expected one of {sorted(DISTRIBUTIONS)}")
     keys = DISTRIBUTIONS[kind]
-    _check_keys(spec, ("random", *keys), where)
+    bad = {k: v for k, v in spec.items() if k not in ("random", *keys)}
+    if bad:
+        raise unknown_keys(f"{where}.", bad, ("random", *keys))
     missing = [k for k in keys if k not in spec]
     if missing or not all(is_real(spec[k]) for k in keys):
         raise ConfigError(f"{where}: random = {kind!r} needs numbers {list(keys)}, got {spec!r}")
@@ -222,42 +198,31 @@ def _parse_dist(spec: dict, where: str) -> dict:
     return dict(spec)
 
 
-def _parse_factor(i: int, t: Any) -> Factor:
-    where = f"[[factor]] #{i + 1}"
-    _check_keys(t, ("name", "param", "scale", "values"), where)
-    param = t.get("param")
-    if not isinstance(param, str):
-        raise ConfigError(f"{where}: 'param' (a dotted Scenario path) is required")
-    name = t.get("name", param)
+def _parse_factor(t: FactorTable) -> Factor:
+    name = t.name if t.name is not None else t.param
     where = f"[[factor]] {name!r}"
-    if not isinstance(name, str) or not name:
-        raise ConfigError(f"{where}: 'name' must be a non-empty string")
-    m = _PARAM_RE.match(param)
-    if not m:
-        raise ConfigError(f"{where}: param = {param!r} is not a dotted path like 'plant.slave.masses[0]'")
+    m = PARAM_RE.match(t.param)
     path = tuple(m.group(1).split("."))
     index = None if m.group(2) is None else int(m.group(2))
     if path[0] in ("master", "slave"):
         raise ConfigError(
-            f"{where}: param = {param!r} is the controller's nominal model; a mismatch study varies "
-            f"the plant: use 'plant.{param}'")
+            f"{where}: param = {t.param!r} is the controller's nominal model; a mismatch study varies "
+            f"the plant: use 'plant.{t.param}'")
     if path == ("name",):
         raise ConfigError(f"{where}: the scenario name is not a parameter")
-    modes = [k for k in ("scale", "values") if k in t]
+    modes = [k for k in ("scale", "values") if getattr(t, k) is not None]
     if len(modes) != 1:
         raise ConfigError(f"{where}: give exactly one of 'scale' (factors) or 'values' (absolute values)")
     mode = modes[0]
-    spec = t[mode]
+    spec = getattr(t, mode)
     if isinstance(spec, dict):
-        return Factor(name, param, path, index, mode, None, _parse_dist(spec, f"{where}: {mode}"))
-    if not isinstance(spec, list) or not spec:
+        return Factor(name, t.param, path, index, mode, None, _parse_dist(spec, f"{where}: {mode}"))
+    if not spec:
         raise ConfigError(f"{where}: {mode} must be a non-empty list or a {{random = ...}} table")
-    if mode == "scale" and not all(is_real(v) for v in spec):
-        raise ConfigError(f"{where}: scale = {spec!r}: every entry must be a number")
     keys = [canon(v) for v in spec]
     if len(set(keys)) != len(keys):
         raise ConfigError(f"{where}: {mode} = {spec!r} has duplicate entries")
-    return Factor(name, param, path, index, mode, tuple(spec), None)
+    return Factor(name, t.param, path, index, mode, tuple(spec), None)
 
 
 def load_study(source: str | os.PathLike | dict, base_dir: str | os.PathLike | None = None, *,
@@ -267,91 +232,47 @@ def load_study(source: str | os.PathLike | dict, base_dir: str | os.PathLike | N
     `base_dir` resolves a relative `study.scenario` (default: the study file's folder, or cwd).
     `max_cases` replaces [sampling] max_cases (the case count is checked here, before expansion)."""
     if isinstance(source, dict):
-        doc, stem = source, None
+        doc_, stem, label = source, None, None
         base = Path(base_dir) if base_dir is not None else Path.cwd()
     else:
         path = shipped(source, "studies")  # a shipped name (segments) works from any folder
-        doc = read_toml(path, "study file")
-        stem = path.stem
+        doc_, stem, label = read_toml(path, "study file"), path.stem, f"study file {source}"
         base = Path(base_dir) if base_dir is not None else path.resolve().parent
-    study_keys = ("name", "scenario", "set", "metrics", "record", "description")
-    belongs = {k: "[study]" for k in study_keys if k != "scenario"}
-    belongs.update({k: "[sampling]" for k in ("mode", "n", "seed", "max_cases")} | {"param": "[[factor]]"})
-    _check_keys(doc, ("study", "factor", "sampling", "scenario"),
-                "study file" if stem is None else f"study file {source}", belongs)
-    st = doc.get("study", {})
-    _check_keys(st, study_keys, "[study]")
-    name = st.get("name", stem)
-    if not isinstance(name, str) or not re.fullmatch(r"[\w.-]+", name):
-        raise ConfigError(f"[study] name = {name!r}: required; letters, digits, '_', '-', '.' only")
-
-    scenario: Path | dict | None = None
-    if "scenario" in st and "scenario" in doc:
-        raise ConfigError("give either [study] scenario (a file) or an inline [scenario] table, not both")
-    if "scenario" in st:
-        if not isinstance(st["scenario"], str):
-            raise ConfigError(f"[study] scenario = {st['scenario']!r}: must be a path string")
-        scenario = (base / st["scenario"]).resolve()
-    elif "scenario" in doc:
-        if not isinstance(doc["scenario"], dict):
-            raise ConfigError("[scenario] must be a table (an inline base scenario)")
-        scenario = doc["scenario"]
-
-    sets = st.get("set", [])
-    if not (isinstance(sets, list) and all(isinstance(s, str) for s in sets)):
-        raise ConfigError(f"[study] set = {sets!r}: must be a list of 'key=value' strings")
-
-    metrics = st.get("metrics", list(METRIC_NAMES))
-    if not (isinstance(metrics, list) and metrics and all(isinstance(m, str) for m in metrics)):
-        raise ConfigError(f"[study] metrics = {metrics!r}: must be a non-empty list of metric names")
-    bad = [m for m in metrics if m not in METRIC_NAMES]
-    if bad:
-        raise ConfigError(f"[study] metrics: unknown {bad}; known: {list(METRIC_NAMES)}")
-
-    record = None
-    if "record" in st:
-        r = st["record"]
-        _check_keys(r, ("worst", "by", "order"), "[study] record")
-        worst, by = r.get("worst", 1), r.get("by", "e2_rms")
-        if not (isinstance(worst, int) and not isinstance(worst, bool) and worst >= 1):
-            raise ConfigError(f"[study] record.worst = {worst!r}: must be an integer >= 1")
-        if by not in metrics:
-            raise ConfigError(f"[study] record.by = {by!r}: must be one of the collected metrics {metrics}")
-        order = r.get("order", "min" if by in LOWER_IS_WORSE else "max")
-        if order not in ("max", "min"):
-            raise ConfigError(f"[study] record.order = {order!r}: 'max' or 'min'")
-        record = RecordSpec(worst, by, order)
-
-    ftables = doc.get("factor", [])
-    if not isinstance(ftables, list) or not ftables:
+    try:
+        f = decode(doc_, StudyFile, elsewhere=tuple(p for p, _, _ in fields_of(StudyFile)))
+    except ConfigError as e:
+        raise (e.with_context(label) if label else e) from None
+    if not f.factor:
         raise ConfigError("study file: at least one [[factor]] table is required")
-    factors = tuple(_parse_factor(i, t) for i, t in enumerate(ftables))
+    st, sp = f.study, f.sampling
+    name = st.name if st.name is not None else stem
+    if name is None or not re.fullmatch(r"[\w.-]+", name):
+        raise ConfigError(f"[study] name = {name!r}: required; letters, digits, '_', '-', '.' only")
+    if st.scenario is not None and f.scenario is not None:
+        raise ConfigError("give either [study] scenario (a file) or an inline [scenario] table, not both")
+    scenario = (base / st.scenario).resolve() if st.scenario is not None else f.scenario
+    metrics = list(st.metrics)
+    record = None
+    if st.record is not None:
+        r = st.record
+        if r.by not in metrics:
+            raise ConfigError(f"[study] record.by = {r.by!r}: must be one of the collected metrics {metrics}")
+        record = RecordSpec(r.worst, r.by, r.order or ("min" if r.by in LOWER_IS_WORSE else "max"))
+    factors = tuple(_parse_factor(t) for t in f.factor)
     names = [f.name for f in factors]
     if len(set(names)) != len(names):
         raise ConfigError(f"[[factor]] names must be unique, got {names}")
     for a, b in itertools.combinations(factors, 2):
         if a.path == b.path and (a.index is None or b.index is None or a.index == b.index):
             raise ConfigError(f"[[factor]] {a.name!r} and {b.name!r} both set {a.param!r} / {b.param!r}")
-
-    sp = doc.get("sampling", {})
-    _check_keys(sp, ("mode", "n", "seed", "max_cases"), "[sampling]")
-    mode, n, seed = sp.get("mode", "grid"), sp.get("n"), sp.get("seed", 0)
-    max_cases = (check_max_cases(sp.get("max_cases", DEFAULT_MAX_CASES), "[sampling] max_cases")
-                 if max_cases is None else check_max_cases(max_cases, "--max-cases"))
-    if mode not in ("grid", "random"):
-        raise ConfigError(f"[sampling] mode = {mode!r}: 'grid' or 'random'")
-    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
-        raise ConfigError(f"[sampling] seed = {seed!r}: must be an integer >= 0")
-    needs_n = mode == "random" or any(f.is_random for f in factors)
-    if needs_n and not (isinstance(n, int) and not isinstance(n, bool) and n >= 1):
-        raise ConfigError(f"[sampling] n = {n!r}: an integer >= 1 is required for random draws")
-    if not needs_n and n is not None:
+    max_cases = sp.max_cases if max_cases is None else check_max_cases(max_cases, "--max-cases")
+    needs_n = sp.mode == "random" or any(f.is_random for f in factors)
+    if needs_n and sp.n is None:
+        raise ConfigError(f"[sampling] n = {sp.n!r}: an integer >= 1 is required for random draws")
+    if not needs_n and sp.n is not None:
         raise ConfigError("[sampling] n is used only with mode = 'random' or random factors")
-    description = st.get("description", "")
-    if not isinstance(description, str):
-        raise ConfigError(f"[study] description = {description!r}: must be a string")
-    study = Study(name, description, scenario, tuple(sets), tuple(metrics), record, factors, mode, n, seed,
-                  max_cases)
+    study = Study(name, st.description, scenario, tuple(st.set), tuple(metrics), record, factors, sp.mode,
+                  sp.n, sp.seed, max_cases)
     check_case_count(study)
     return study
 
