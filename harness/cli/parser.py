@@ -273,6 +273,22 @@ def build_parser() -> argparse.ArgumentParser:
                      help="output folder (created; must be writable). Default: runs/fidelity.")
     fid.add_argument("--no-progress", action="store_true",
                      help="do not show progress output (default: shown on stderr when available).")
+    fnd = sub.add_parser(
+        "findings", formatter_class=_Formatter, help="rerun the findings and check their claims",
+        description="Rerun the shipped findings (findings/*.toml: runs of a scenario plus the claim as "
+                    "bounds; harness.studies.findings), print claim / measured / holds for each, and write "
+                    "the markdown table the docs' findings page includes and the figures of the runs a "
+                    "finding names.")
+    fnd.add_argument("names", nargs="*", metavar="NAME",
+                     help="finding names (shipped: see findings/) or finding files. Default: all shipped.")
+    fnd.add_argument("--table", metavar="FILE", type=_path, default=Path("docs/findings-table.md"),
+                     help="markdown table to write (parent folders created). "
+                          "Default: docs/findings-table.md.")
+    fnd.add_argument("--figures", metavar="DIR", type=_path, default=Path("docs/figures"),
+                     help="folder for the figures of the runs a finding names. Default: docs/figures.")
+    fnd.add_argument("--no-write", action="store_true",
+                     help="print only; write neither the table nor the figures. Default: write them.")
+    fnd.add_argument("--list", action="store_true", help="list the shipped findings and exit.")
     return parser
 
 
