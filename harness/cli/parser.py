@@ -288,7 +288,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="folder for the figures of the runs a finding names. Default: docs/figures.")
     fnd.add_argument("--no-write", action="store_true",
                      help="print only; write neither the table nor the figures. Default: write them.")
-    fnd.add_argument("--list", action="store_true", help="list the shipped findings and exit.")
+    fnd.add_argument("--list", action="store_true", help="list the shipped findings and exit. Default: run them.")
     return parser
 
 
