@@ -36,6 +36,7 @@ def test_every_shipped_finding_loads():
     ({"run": [{"name": "a", "measure": ["nope"]}], "claim": {"a": {"status_ok": True}}}, "run[0].measure"),
     ({"run": [], "claim": {"x_max": 1.0}}, "run"),
     ({"claim": {}}, "claim"),
+    ({"run": [{"name": "a", "simulate": False}], "claim": {"x_max": 1.0}}, "run[0].simulate"),
 ])
 def test_bad_finding_files_name_the_field(patch, field):
     raw = {**BASE, **patch}

@@ -15,6 +15,7 @@ A finding is one TOML file in the shipped `findings/` folder (package data `harn
     name = "plus10"
     set = ["plant.slave.masses=[1.1,0.77,0.44]"]   # this run's own overrides
     measure = ["diverged"]                         # optional derived measurements (MEASURES below)
+    # simulate = false                             # only the measures (on the scenario), no closed loop
 
     [ratio]                                        # optional: quotient of two measured quantities
     plus20_over_plus10 = ["plus20.e2_rms", "plus10.e2_rms"]
@@ -116,10 +117,71 @@ def _measure_straight(scn, traj) -> dict[str, float]:
             "beta_straight_difference": abs(beta - closed)}
 
 
+ROD_SETTLED_SPEED = 1e-6  # m/s: the rod is at equilibrium when no node moves faster than this
+ROD_SETTLE_CHECK = 0.25  # s between checks of the node speeds
+ROD_SETTLE_MAX = 30.0  # s: give up (the measure is then nan)
+
+
+def _arc_departure(p: np.ndarray) -> float:
+    """Largest distance (m) of the points p (n, 2) from their least-squares circle (algebraic fit);
+    for a nearly straight section (radius above 1e3 m) the distance from the least-squares line."""
+    A = np.c_[2 * p, np.ones(len(p))]
+    c = np.linalg.lstsq(A, (p**2).sum(1), rcond=None)[0]
+    centre = c[:2]
+    R2 = c[2] + centre @ centre
+    if R2 > 0 and np.sqrt(R2) < 1e3:
+        return float(np.abs(np.linalg.norm(p - centre, axis=1) - np.sqrt(R2)).max())
+    q = p - p.mean(0)
+    normal = np.linalg.svd(q)[2][-1]
+    return float(np.abs(q @ normal).max())
+
+
+def _measure_rod_statics(scn, traj) -> dict[str, float]:
+    """The Cosserat rod (the plant's slave parameters, `linear` elastic law, 10 elements per section,
+    servo rest strains at the fidelity study's worst shape: every section at full extension with
+    alternating +-max bends) settling under gravity with the fidelity study's raised damping (eta_b
+    0.3 N m^2 s, eta_a 3 N s) until no node moves faster than ROD_SETTLED_SPEED on average over a
+ROD_SETTLE_CHECK interval.  Returns, in mm:
+    arc_departure (the largest distance of a section's nodes from that section's best-fit circle),
+    chained_cc_tip (the distance between the rod's tip and the tip of its per-section CC fits chained
+    from the base), settle_3s_error (how far the tip still is from equilibrium after a fixed 3 s), and
+    settle_time (s)."""
+    from controllers import slave as slave_model
+    from harness.plant.cosserat import CosseratSlave
+    from harness.studies.fidelity_reference import static_shapes
+
+    slave = scn.plant.slave if scn.plant.slave is not None else scn.slave
+    q2c = static_shapes(slave)["alternating max"]
+    rod = CosseratSlave(slave, actuation="servo", elastic_law="linear", material_damping=(0.3, 3.0))
+    rod.reset(q2c)
+    rod.external_tip_force((0.0, 0.0))
+    chunk = round(ROD_SETTLE_CHECK / rod.dt) * rod.dt
+    t, tip_3s, speed = 0.0, None, np.inf
+    before = rod.centreline()
+    while t < ROD_SETTLE_MAX and (speed > ROD_SETTLED_SPEED or tip_3s is None):
+        rod.step(q2c, chunk)
+        t += chunk
+        now = rod.centreline()
+        speed = float(np.linalg.norm(now - before, axis=1).max() / chunk)  # mean node speed over the chunk
+        before = now
+        if tip_3s is None and t >= 3.0 - 1e-9:
+            tip_3s = rod.tip()
+    if speed > ROD_SETTLED_SPEED:
+        return {"arc_departure": math.nan, "chained_cc_tip": math.nan, "settle_3s_error": math.nan,
+                "settle_time": t}
+    nodes = rod.centreline()[:, [0, 2]]
+    sn = rod.section_nodes
+    arc = max(_arc_departure(nodes[sn[i]:sn[i + 1] + 1]) for i in range(3))
+    chained = float(np.linalg.norm(rod.tip() - slave_model.tip_position(slave, rod.sense()[0])))
+    return {"arc_departure": 1e3 * arc, "chained_cc_tip": 1e3 * chained,
+            "settle_3s_error": 1e3 * float(np.linalg.norm(rod.tip() - tip_3s)), "settle_time": t}
+
+
 MEASURES: dict[str, Callable[[Any, Any], dict[str, float]]] = {
     "diverged": _measure_diverged,
     "eq28": _measure_eq28,
     "straight_manipulability": _measure_straight,
+    "rod_statics": _measure_rod_statics,
 }
 
 # --------------------------------------------------------------------------------------------------
@@ -132,6 +194,7 @@ class RunSpec:
     set: tuple[str, ...] = ()
     measure: tuple[str, ...] = ()
     bounds: Bounds | None = None  # [claim.<name>], the bounds-file format
+    simulate: bool = True  # False: only the measures run (on the scenario), no closed loop
 
 
 @dataclass(frozen=True)
@@ -186,7 +249,7 @@ def finding_from_dict(raw: Mapping, name: str, path: Path | None = None) -> Find
         where = f"run[{i}]"
         if not isinstance(r, Mapping):
             raise ConfigError.field(where, r, "must be a table")
-        _check_keys(r, ("name", "set", "measure"), where)
+        _check_keys(r, ("name", "set", "measure", "simulate"), where)
         rname = r.get("name")
         if not (isinstance(rname, str) and rname.isidentifier()):
             raise ConfigError.field(f"{where}.name", rname, "must be an identifier (letters, digits, _)")
@@ -197,7 +260,13 @@ def finding_from_dict(raw: Mapping, name: str, path: Path | None = None) -> Find
         bounds = None
         if isinstance(claim.get(rname), Mapping):
             bounds = bounds_from_dict({"bounds": dict(claim[rname])}, label=f"claim.{rname}")
-        runs.append(RunSpec(rname, _str_list(r.get("set", []), f"{where}.set"), measures, bounds))
+        sim = r.get("simulate", True)
+        if not isinstance(sim, bool):
+            raise ConfigError.field(f"{where}.simulate", sim, "must be true or false")
+        if not sim and (bounds is not None or not measures):
+            raise ConfigError.field(f"{where}.simulate", sim,
+                                    "false needs a measure and no [claim.<run>] (there are no metrics)")
+        runs.append(RunSpec(rname, _str_list(r.get("set", []), f"{where}.set"), measures, bounds, sim))
     names = [r.name for r in runs]
     if len(set(names)) != len(names):
         raise ConfigError.field("run.name", names, "must be unique")
@@ -305,8 +374,10 @@ def run_finding(f: Finding, keep_trajectories: bool = False) -> FindingResult:
         validate_plant(scn)
         scenarios.append(resolve_controller(scn))
     for r, scn in zip(f.runs, scenarios, strict=True):
-        traj = simulate(scn, progress=False, overlap=False)
-        metrics = compute_metrics(traj, scn)
+        traj, metrics = None, {}
+        if r.simulate:
+            traj = simulate(scn, progress=False, overlap=False)
+            metrics = compute_metrics(traj, scn)
         for k, v in metrics.items():
             res.values[f"{r.name}.{k}"] = v
         for m in r.measure:
