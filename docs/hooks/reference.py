@@ -19,15 +19,34 @@ MARKER = re.compile(r"<!--\s*generated-reference:\s*(\w+)\s*-->")
 KINDS = ("scenario", "bounds", "study")
 
 
+def _toml(v) -> str:
+    """A default value as it is written in a scenario file."""
+    if v is None:
+        return "not set"
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return f'"{v}"'
+    if isinstance(v, (tuple, list)):
+        return "[" + ", ".join(_toml(x) for x in v) + "]"
+    if isinstance(v, float):
+        return repr(round(v, 12))
+    return str(v)
+
+
 def _default(scn, path: str) -> str:
     obj = scn
     for part in path.split("."):
+        if obj is None:
+            return "the nominal model's value"  # plant.master.* / plant.slave.* when not set
         if not hasattr(obj, part):
             return ""
         obj = getattr(obj, part)
     if hasattr(obj, "__dataclass_fields__"):
         return "(table)"
-    text = repr(obj.tolist() if hasattr(obj, "tolist") else obj)
+    text = _toml(obj.tolist() if hasattr(obj, "tolist") else obj)
+    if text == "not set":
+        return "not set"
     return f"`{text}`" if len(text) <= 60 else f"`{text[:57]}...`"
 
 
