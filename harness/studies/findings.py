@@ -136,23 +136,18 @@ def _arc_departure(p: np.ndarray) -> float:
     return float(np.abs(q @ normal).max())
 
 
-def _measure_rod_statics(scn, traj) -> dict[str, float]:
-    """The Cosserat rod (the plant's slave parameters, `linear` elastic law, 10 elements per section,
+def _settled_rod(scn, law: str):
+    """The Cosserat rod (the plant's slave parameters, elastic law `law`, 10 elements per section,
     servo rest strains at the fidelity study's worst shape: every section at full extension with
-    alternating +-max bends) settling under gravity with the fidelity study's raised damping (eta_b
+    alternating +-max bends) settled under gravity with the fidelity study's raised damping (eta_b
     0.3 N m^2 s, eta_a 3 N s) until no node moves faster than ROD_SETTLED_SPEED on average over a
-ROD_SETTLE_CHECK interval.  Returns, in mm:
-    arc_departure (the largest distance of a section's nodes from that section's best-fit circle),
-    chained_cc_tip (the distance between the rod's tip and the tip of its per-section CC fits chained
-    from the base), settle_3s_error (how far the tip still is from equilibrium after a fixed 3 s), and
-    settle_time (s)."""
-    from controllers import slave as slave_model
+    ROD_SETTLE_CHECK interval.  Returns (rod, settle time s, tip after 3 s, converged)."""
     from harness.plant.cosserat import CosseratSlave
     from harness.studies.fidelity_reference import static_shapes
 
     slave = scn.plant.slave if scn.plant.slave is not None else scn.slave
     q2c = static_shapes(slave)["alternating max"]
-    rod = CosseratSlave(slave, actuation="servo", elastic_law="linear", material_damping=(0.3, 3.0))
+    rod = CosseratSlave(slave, actuation="servo", elastic_law=law, material_damping=(0.3, 3.0))
     rod.reset(q2c)
     rod.external_tip_force((0.0, 0.0))
     chunk = round(ROD_SETTLE_CHECK / rod.dt) * rod.dt
@@ -166,15 +161,36 @@ ROD_SETTLE_CHECK interval.  Returns, in mm:
         before = now
         if tip_3s is None and t >= 3.0 - 1e-9:
             tip_3s = rod.tip()
-    if speed > ROD_SETTLED_SPEED:
+    return rod, t, tip_3s, speed <= ROD_SETTLED_SPEED
+
+
+def _measure_rod_statics(scn, traj) -> dict[str, float]:
+    """The rod of `_settled_rod` with the `linear` law (the fidelity study's).  In mm: arc_departure
+    (the largest distance of a section's nodes from that section's best-fit circle), chained_cc_tip
+    (the distance between the rod's tip and the tip of its per-section CC fits chained from the base),
+    settle_3s_error (how far the tip still is from equilibrium after a fixed 3 s); settle_time (s)."""
+    from controllers import slave as slave_model
+
+    rod, t, tip_3s, converged = _settled_rod(scn, "linear")
+    if not converged:
         return {"arc_departure": math.nan, "chained_cc_tip": math.nan, "settle_3s_error": math.nan,
                 "settle_time": t}
     nodes = rod.centreline()[:, [0, 2]]
     sn = rod.section_nodes
     arc = max(_arc_departure(nodes[sn[i]:sn[i + 1] + 1]) for i in range(3))
+    slave = scn.plant.slave if scn.plant.slave is not None else scn.slave
     chained = float(np.linalg.norm(rod.tip() - slave_model.tip_position(slave, rod.sense()[0])))
     return {"arc_departure": 1e3 * arc, "chained_cc_tip": 1e3 * chained,
             "settle_3s_error": 1e3 * float(np.linalg.norm(rod.tip() - tip_3s)), "settle_time": t}
+
+
+def _measure_elastic_laws(scn, traj) -> dict[str, float]:
+    """law_gap (mm): the distance between the tips of the rod of `_settled_rod` with the `linear` and
+    with the `analytic` elastic law (nan if either did not settle)."""
+    a, _, _, ok_a = _settled_rod(scn, "linear")
+    b, _, _, ok_b = _settled_rod(scn, "analytic")
+    gap = 1e3 * float(np.linalg.norm(a.tip() - b.tip())) if ok_a and ok_b else math.nan
+    return {"law_gap": gap}
 
 
 MEASURES: dict[str, Callable[[Any, Any], dict[str, float]]] = {
@@ -182,6 +198,7 @@ MEASURES: dict[str, Callable[[Any, Any], dict[str, float]]] = {
     "eq28": _measure_eq28,
     "straight_manipulability": _measure_straight,
     "rod_statics": _measure_rod_statics,
+    "elastic_laws": _measure_elastic_laws,
 }
 
 # --------------------------------------------------------------------------------------------------
