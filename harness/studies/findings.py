@@ -193,12 +193,46 @@ def _measure_elastic_laws(scn, traj) -> dict[str, float]:
     return {"law_gap": gap}
 
 
+def _settled_chain(scn, enforce_cc: bool):
+    """The MuJoCo chain (the plant's segments and slave parameters) as a passive rod with the `linear`
+    law at the shape of `_settled_rod` (`fidelity_reference.PassiveChain`, material damping 0.01 N m^2 s
+    / 0.3 N s raised 30x while settling), stepped until no body moves faster than ROD_SETTLED_SPEED on
+    average over a ROD_SETTLE_CHECK interval.  Returns (chain, converged)."""
+    from harness.studies.fidelity_reference import SETTLE_DAMPING, PassiveChain, static_shapes
+
+    slave = scn.plant.slave if scn.plant.slave is not None else scn.slave
+    ch = PassiveChain(slave, scn.plant.segments, enforce_cc, 0.01, 0.3)
+    ch.reset(static_shapes(slave)["alternating max"])
+    ch.force((0.0, 0.0))
+    t, speed = 0.0, np.inf
+    before = ch.d.xpos.copy()
+    while t < ROD_SETTLE_MAX and speed > ROD_SETTLED_SPEED and ch.ok():
+        ch.run(ROD_SETTLE_CHECK, SETTLE_DAMPING)
+        t += ROD_SETTLE_CHECK
+        speed = float(np.linalg.norm(ch.d.xpos - before, axis=1).max() / ROD_SETTLE_CHECK)
+        before = ch.d.xpos.copy()
+    return ch, speed <= ROD_SETTLED_SPEED
+
+
+def _measure_chain_vs_rod(scn, traj) -> dict[str, float]:
+    """Tip distances (mm) at equilibrium between the rod of `_settled_rod` (`linear` law) and the chains
+    of `_settled_chain`: free_chain_error (no CC constraints) and cc_chain_error (CC enforced); nan for
+    a body that did not settle."""
+    rod, _, _, ok = _settled_rod(scn, "linear")
+    out = {}
+    for key, cc in (("free_chain_error", False), ("cc_chain_error", True)):
+        ch, settled = _settled_chain(scn, cc)
+        out[key] = 1e3 * float(np.linalg.norm(ch.tip() - rod.tip())) if ok and settled else math.nan
+    return out
+
+
 MEASURES: dict[str, Callable[[Any, Any], dict[str, float]]] = {
     "diverged": _measure_diverged,
     "eq28": _measure_eq28,
     "straight_manipulability": _measure_straight,
     "rod_statics": _measure_rod_statics,
     "elastic_laws": _measure_elastic_laws,
+    "chain_vs_rod": _measure_chain_vs_rod,
 }
 
 # --------------------------------------------------------------------------------------------------
