@@ -357,7 +357,11 @@ def cmd_findings(args: argparse.Namespace) -> int:
         print(findings.report_text(r), flush=True)
         results.append(r)
     if not args.no_write:
-        for path in findings.write_outputs(results, args.table, args.figures):
+        base = Path("docs") if Path("mkdocs.yml").is_file() else Path("runs/findings")
+        table = args.table or base / "findings-table.md"
+        figures = args.figures or base / "figures"
+        # the table of all findings only when all of them ran; one table per finding always
+        for path in findings.write_outputs(results, table, figures, combined=not args.names):
             print(f"wrote {path}")
     held = sum(r.holds for r in results)
     print(f"{held} of {len(results)} findings hold")

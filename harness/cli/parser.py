@@ -282,11 +282,14 @@ def build_parser() -> argparse.ArgumentParser:
                     "finding names.")
     fnd.add_argument("names", nargs="*", metavar="NAME",
                      help="finding names (shipped: see findings/) or finding files. Default: all shipped.")
-    fnd.add_argument("--table", metavar="FILE", type=_path, default=Path("docs/findings-table.md"),
-                     help="markdown table to write (parent folders created). "
-                          "Default: docs/findings-table.md.")
-    fnd.add_argument("--figures", metavar="DIR", type=_path, default=Path("docs/figures"),
-                     help="folder for the figures of the runs a finding names. Default: docs/figures.")
+    fnd.add_argument("--table", metavar="FILE", type=_path, default=None,
+                     help="markdown table of all findings, written when all of them run (and one table per "
+                          "finding, FILE's stem + '-NAME.md', always; parent folders created). Default: "
+                          "docs/findings-table.md in a checkout (a folder with mkdocs.yml, whose findings "
+                          "page includes it), else runs/findings/findings-table.md.")
+    fnd.add_argument("--figures", metavar="DIR", type=_path, default=None,
+                     help="folder for the figures of the runs a finding names. Default: docs/figures in a "
+                          "checkout, else runs/findings/figures.")
     fnd.add_argument("--no-write", action="store_true",
                      help="print only; write neither the table nor the figures. Default: write them.")
     fnd.add_argument("--list", action="store_true",

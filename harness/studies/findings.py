@@ -531,10 +531,12 @@ def findings_table(results: Sequence[FindingResult]) -> str:
     return "\n".join(rows) + "\n"
 
 
-def write_outputs(results: Sequence[FindingResult], table: Path, figures: Path) -> list[Path]:
+def write_outputs(results: Sequence[FindingResult], table: Path, figures: Path,
+                  combined: bool = True) -> list[Path]:
     """Write the findings table (markdown; also `<table stem>-<finding>.md` per finding) and, for the
     runs a finding names in `figures`, the paper's Figs 2-4 as
-    `<figures>/<finding>-<run>-fig{2,3,4}.png` (each file atomically).  Returns the paths."""
+    `<figures>/<finding>-<run>-fig{2,3,4}.png` (each file atomically).  combined=False writes only the
+    per-finding tables (a rerun of some findings must not replace the table of all).  Returns the paths."""
     from harness.config.textio import write_atomic
     from harness.output.plots import fig_beta, fig_e1, fig_e2
 
@@ -551,7 +553,8 @@ def write_outputs(results: Sequence[FindingResult], table: Path, figures: Path) 
     for r in results:  # one table per finding, for pages that show a single one
         one = table.with_name(f"{table.stem}-{r.finding.name}.md")
         written.append(write_atomic(one, findings_table([r])))
-    written.append(write_atomic(table, findings_table(results)))
+    if combined:
+        written.append(write_atomic(table, findings_table(results)))
     return written
 
 
