@@ -103,6 +103,35 @@ def _measure_eq28(scn, traj) -> dict[str, float]:
             "central_difference_error": (h * kn) ** 2 / 6}
 
 
+def _second_order(t, e0, de0, a, b):
+    """Closed-form solution of e'' + a e' + b e = 0 (each column of e0, de0), any damping."""
+    disc = a * a - 4 * b
+    t = t[:, None]
+    if disc < 0:
+        s, w = -a / 2, np.sqrt(-disc) / 2
+        return np.exp(s * t) * (e0 * np.cos(w * t) + (de0 - s * e0) / w * np.sin(w * t))
+    r1, r2 = (-a + np.sqrt(disc)) / 2, (-a - np.sqrt(disc)) / 2
+    c2 = (de0 - r1 * e0) / (r2 - r1)
+    return (e0 - c2) * np.exp(r1 * t) + c2 * np.exp(r2 * t)
+
+
+def _measure_closed_forms(scn, traj) -> dict[str, float]:
+    """The recorded e1 and e2 against the closed-form solutions of (15) (k1, k2) and (21) (k3, k4) from
+    their recorded initial values: the largest deviation relative to the largest initial component."""
+    g = scn.gains
+    out = {}
+    for key, e, de, a, b in (("eq15_error", traj.e1, traj.de1, g.k1, g.k2),
+                             ("eq21_error", traj.e2, traj.de2, g.k3, g.k4)):
+        ref = _second_order(traj.t, e[0], de[0], a, b)
+        out[key] = float(np.abs(e - ref).max() / np.abs(e[0]).max())
+    return out
+
+
+def _measure_beta(scn, traj) -> dict[str, float]:
+    """beta_final, beta_mean: the manipulability (41) at the end of the run and averaged over it."""
+    return {"beta_final": float(traj.beta[-1]), "beta_mean": float(np.mean(traj.beta))}
+
+
 def _measure_straight(scn, traj) -> dict[str, float]:
     """beta (41) of the straight arm at rest lengths, from the controllers' model and from the closed
     form sqrt(3 sum a_i^2), a_i = d_i^2 / 2 + d_i sum_{j>i} d_j (lengths move Z, curvatures move X)."""
@@ -228,6 +257,8 @@ def _measure_chain_vs_rod(scn, traj) -> dict[str, float]:
 
 MEASURES: dict[str, Callable[[Any, Any], dict[str, float]]] = {
     "diverged": _measure_diverged,
+    "closed_forms": _measure_closed_forms,
+    "beta": _measure_beta,
     "eq28": _measure_eq28,
     "straight_manipulability": _measure_straight,
     "rod_statics": _measure_rod_statics,
