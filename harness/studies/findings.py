@@ -478,7 +478,7 @@ def run_finding(f: Finding, keep_trajectories: bool = False) -> FindingResult:
         q = by_key.get(key, key)
         v = _num(res.values.get(q))
         ok = v is not None and math.isfinite(v) and (v <= lim if rel == "max" else v >= lim)
-        res.checks.append(Check(q, rel, lim, v, ok))
+        res.checks.append(Check(q, rel, lim, v, ok, _unit(q).strip()))
     res.wall_time = time.perf_counter() - t0
     return res
 
@@ -526,10 +526,18 @@ def fmt(v: Any) -> str:
     return f"{n:.3e}"
 
 
+MEASURE_UNITS = {"diverged_at": "s", "arc_departure": "mm", "chained_cc_tip": "mm", "settle_3s_error": "mm",
+                 "settle_time": "s", "law_gap": "mm", "free_chain_error": "mm", "cc_chain_error": "mm"}
+
+
 def _unit(quantity: str) -> str:
-    """' m' for the metrics measured in metres (e1_rms, e2_max, ...), else ''."""
-    metric = quantity.rsplit(".", 1)[-1]
-    return " m" if metric.split("_")[0] in ("e1", "e2") and metric.endswith(("_rms", "_max")) else ""
+    """' <unit>' of a run metric (from the bounds table) or a derived measurement, else ''."""
+    from harness.config.bounds import NUMERIC_BOUNDS
+
+    key = quantity.rsplit(".", 1)[-1]
+    units = {metric: unit for metric, _, unit, _ in NUMERIC_BOUNDS.values() if unit}
+    unit = units.get(key) or MEASURE_UNITS.get(key, "")
+    return f" {unit}" if unit else ""
 
 
 def check_text(c: Check) -> str:
