@@ -71,3 +71,16 @@ def test_mkdocs_build_strict(tmp_path):
     assert "load_scenario" in api and "Observation" in api  # the docstrings were rendered
     findings = (tmp_path / "site" / "findings" / "index.html").read_text()
     assert "eq28_sign_typo" in findings  # the generated findings table was included
+
+
+@pytest.mark.slow
+def test_the_controller_example_of_the_guide_runs_on_the_default_plant(tmp_path):
+    page = (ROOT / "docs" / "guide" / "controllers.md").read_text()
+    code = re.search(r"```python\n(.*?)```", page, re.S).group(1)
+    (tmp_path / "my_controller.py").write_text(code)
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    cmd = [sys.executable, "-m", "harness.cli", "run", "--controller", "my_controller.py:TipPD",
+           "--duration", "2", "--no-progress", "--out", "out"]
+    res = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "status ok" in res.stdout
