@@ -56,6 +56,22 @@ def test_a_claim_that_does_not_hold_is_reported():
     assert {c.quantity for c in res.checks if not c.holds} == {"a.e1_rms", "a.e2_rms"}
 
 
+def test_a_finding_whose_measure_fails_does_not_hold():
+    """An exception while running is the finding's error, reported, not a traceback."""
+    raw = {"finding": {"title": "t", "claim": "c", "set": ["plant.kind='analytic'", "snr_db='none'",
+                                                          "duration=0.02", "transient=0.005"]},
+           "run": [{"name": "a", "measure": ["eq28"]}], "claim": {"a_eq28_corrected_max": 1.0}}
+    res = run_finding(finding_from_dict(raw, "short"))  # 20 steps: eq28 needs 32
+    assert not res.holds and "IndexError" in res.error
+
+
+def test_a_bad_override_is_an_input_error_naming_the_finding():
+    raw = {**BASE, "run": [{"name": "a", "set": ["plant.segments=0"]}], "claim": {"a": {"status_ok": True}}}
+    with pytest.raises(ConfigError) as e:
+        run_finding(finding_from_dict(raw, "bad"))
+    assert "finding bad, run a" in str(e.value) and "plant.segments" in str(e.value)
+
+
 @pytest.mark.slow
 def test_every_finding_holds_and_the_docs_table_is_current(tmp_path):
     table = tmp_path / "findings-table.md"

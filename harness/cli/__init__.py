@@ -350,10 +350,11 @@ def cmd_findings(args: argparse.Namespace) -> int:
         for name in findings.available():
             print(f"{name:32s} {findings.load_finding(name).title}")
         return EXIT_OK
-    selected = [findings.load_finding(n) for n in (args.names or findings.available())]  # all checked first
+    selected = [findings.load_finding(n) for n in (args.names or findings.available())]
+    scenarios = [findings.finding_scenarios(f) for f in selected]  # every run validated before any runs
     results = []
-    for f in selected:
-        r = findings.run_finding(f, keep_trajectories=not args.no_write)
+    for f, scns in zip(selected, scenarios, strict=True):
+        r = findings.run_finding(f, keep_trajectories=not args.no_write, scenarios=scns)
         print(findings.report_text(r), flush=True)
         results.append(r)
     if not args.no_write:

@@ -440,21 +440,42 @@ def _num(v: Any) -> float | None:
     return float(v)
 
 
-def run_finding(f: Finding, keep_trajectories: bool = False) -> FindingResult:
-    """Run every run of a finding and check its claim.  A bad scenario override raises ConfigError."""
+def finding_scenarios(f: Finding) -> list:
+    """The validated scenario of each run of a finding (raises ConfigError naming the field)."""
     from harness.config.load import load_scenario
-    from harness.loop import simulate
     from harness.loop.controllers import resolve_controller
-    from harness.loop.metrics import compute_metrics
     from harness.plant import validate_plant
 
+    out = []
+    for r in f.runs:
+        try:
+            scn = load_scenario(f.scenario, [*f.set, *r.set])
+            validate_plant(scn)
+            out.append(resolve_controller(scn))
+        except ConfigError as e:
+            raise e.with_context(f"finding {f.name}, run {r.name}") from None
+    return out
+
+
+def run_finding(f: Finding, keep_trajectories: bool = False, scenarios: list | None = None) -> FindingResult:
+    """Run every run of a finding and check its claim.  A bad scenario override raises ConfigError
+    before anything runs; an exception while running is the result's `error` (the finding then does
+    not hold)."""
     res = FindingResult(f)
     t0 = time.perf_counter()
-    scenarios = []
-    for r in f.runs:  # validate every run before simulating any
-        scn = load_scenario(f.scenario, [*f.set, *r.set])
-        validate_plant(scn)
-        scenarios.append(resolve_controller(scn))
+    scenarios = finding_scenarios(f) if scenarios is None else scenarios
+    try:
+        _run(f, scenarios, res, keep_trajectories)
+    except Exception as e:  # noqa: BLE001 - reported as the finding's error, the other findings go on
+        res.error = f"{type(e).__name__}: {e}"
+    res.wall_time = time.perf_counter() - t0
+    return res
+
+
+def _run(f: Finding, scenarios: list, res: FindingResult, keep_trajectories: bool) -> None:
+    from harness.loop import simulate
+    from harness.loop.metrics import compute_metrics
+
     for r, scn in zip(f.runs, scenarios, strict=True):
         traj, metrics = None, {}
         if r.simulate:
@@ -479,8 +500,6 @@ def run_finding(f: Finding, keep_trajectories: bool = False) -> FindingResult:
         v = _num(res.values.get(q))
         ok = v is not None and math.isfinite(v) and (v <= lim if rel == "max" else v >= lim)
         res.checks.append(Check(q, rel, lim, v, ok, _unit(q).strip()))
-    res.wall_time = time.perf_counter() - t0
-    return res
 
 
 def _bounds_checks(run: str, bounds: Bounds, metrics: Mapping, bad: Mapping[str, Violation]) -> list[Check]:
@@ -505,10 +524,11 @@ def run_findings(names: Iterable[str] = (), say: Callable[[str], None] = lambda 
                  keep_trajectories: bool = False) -> list[FindingResult]:
     """Load (all before running any) and run the named findings (default: every shipped one)."""
     findings = [load_finding(n) for n in (list(names) or available())]
+    scenarios = [finding_scenarios(f) for f in findings]  # every run validated before any runs
     out = []
-    for f in findings:
+    for f, scns in zip(findings, scenarios, strict=True):
         say(f"finding {f.name}: {len(f.runs)} run(s)")
-        out.append(run_finding(f, keep_trajectories))
+        out.append(run_finding(f, keep_trajectories, scns))
     return out
 
 
@@ -561,8 +581,9 @@ def findings_table(results: Sequence[FindingResult]) -> str:
     """The markdown table the docs' findings page includes."""
     rows = ["| finding | claim | measured (limit) | holds |", "|---|---|---|---|"]
     for r in results:
-        parts = [check_text(c) for c in r.checks] + [f"{q} = {fmt(r.values.get(q))}{_unit(q)}"
-                                                   for q in r.finding.show]
+        parts = [f"error: {r.error}"] if r.error else []
+        parts += [check_text(c) for c in r.checks]
+        parts += [f"{q} = {fmt(r.values.get(q))}{_unit(q)}" for q in r.finding.show]
         measured = "<br>".join(p.replace("|", "\\|") for p in parts)
         claim = r.finding.claim.replace("|", "\\|").replace("\n", " ")
         rows.append(f"| **{r.finding.title}** (`{r.finding.name}`) | {claim} | {measured} | "
@@ -597,5 +618,6 @@ def write_outputs(results: Sequence[FindingResult], table: Path, figures: Path,
     return written
 
 
-__all__ = ["MEASURES", "Finding", "FindingResult", "available", "findings_dir", "findings_table",
+__all__ = ["MEASURES", "Finding", "FindingResult", "available", "finding_scenarios", "findings_dir",
+           "findings_table",
            "load_finding", "report_text", "run_finding", "run_findings", "write_outputs"]
