@@ -350,13 +350,8 @@ def cmd_findings(args: argparse.Namespace) -> int:
         for name in findings.available():
             print(f"{name:32s} {findings.load_finding(name).title}")
         return EXIT_OK
-    selected = [findings.load_finding(n) for n in (args.names or findings.available())]
-    scenarios = [findings.finding_scenarios(f) for f in selected]  # every run validated before any runs
-    results = []
-    for f, scns in zip(selected, scenarios, strict=True):
-        r = findings.run_finding(f, keep_trajectories=not args.no_write, scenarios=scns)
-        print(findings.report_text(r), flush=True)
-        results.append(r)
+    results = findings.run_findings(args.names, keep_trajectories=not args.no_write,
+                                    on_result=lambda r: print(findings.report_text(r), flush=True))
     if not args.no_write:
         base = Path("docs") if Path("mkdocs.yml").is_file() else Path("runs/findings")
         table = args.table or base / "findings-table.md"

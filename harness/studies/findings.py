@@ -322,15 +322,16 @@ def _bounds_checks(run: str, bounds: Bounds, metrics: Mapping, bad: Mapping[str,
     return out
 
 
-def run_findings(names: Iterable[str] = (), say: Callable[[str], None] = lambda s: None,
-                 keep_trajectories: bool = False) -> list[FindingResult]:
-    """Load (all before running any) and run the named findings (default: every shipped one)."""
+def run_findings(names: Iterable[str] = (), keep_trajectories: bool = False,
+                 on_result: Callable[[FindingResult], None] = lambda r: None) -> list[FindingResult]:
+    """Load and validate the named findings (default: every shipped one; all before any runs), run
+    them one after another and return their results; `on_result` gets each as it is done."""
     findings = [load_finding(n) for n in (list(names) or available())]
-    scenarios = [finding_scenarios(f) for f in findings]  # every run validated before any runs
+    scenarios = [finding_scenarios(f) for f in findings]
     out = []
     for f, scns in zip(findings, scenarios, strict=True):
-        say(f"finding {f.name}: {len(f.runs)} run(s)")
         out.append(run_finding(f, keep_trajectories, scns))
+        on_result(out[-1])
     return out
 
 
