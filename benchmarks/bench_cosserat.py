@@ -23,8 +23,7 @@ repetitions (the machine is noisy).  Rows, all on the paper scenario (40 dB, ser
                     material damping)
   mujoco CC on      the same with plant.enforce_cc = true
 and the stepped loop's overhead: loop / bare (issue 14 asks <= 1.25).
-Prints a markdown table and writes it into its own section of benchmarks/RESULTS_cosserat.md, between
-the `<!-- bench_cosserat.py: begin/end -->` markers, keeping the rest (unless --no-write).
+Prints a markdown table and replaces benchmarks/results/bench_cosserat.md with it (unless --no-write).
 This is a benchmark, not a test: it asserts nothing.
 """
 
@@ -126,7 +125,8 @@ def main() -> None:
     ap.add_argument("--reps", type=int, default=2, help="repetitions, best kept")
     ap.add_argument("--cpu", type=int, default=-1 if (os.cpu_count() or 1) < 2 else 1,
                     help="index of the CPU to pin to (-1: no pinning)")
-    ap.add_argument("--no-write", action="store_true", help="do not write benchmarks/RESULTS_cosserat.md")
+    ap.add_argument("--no-write", action="store_true",
+                    help="do not write benchmarks/results/bench_cosserat.md")
     ap.add_argument("--clock", choices=("wall", "cpu"), default="wall",
                     help="wall time (default) or the process's CPU time (see above)")
     args = ap.parse_args()
@@ -167,9 +167,9 @@ def main() -> None:
     text = "\n".join(lines)
     print(text)
     if not args.no_write:
-        from results_sections import write_section
+        from results import write_result
 
-        write_section(ROOT / "benchmarks" / "RESULTS_cosserat.md", text, "bench_cosserat.py")
+        write_result(__file__, text)
 
 
 if __name__ == "__main__":

@@ -22,7 +22,7 @@ Reports, in one run:
           inside the workers: wall / CPU > 1 means the worker waited for a core (other processes),
           CPU growing with 2 workers means the two slow each other (caches, memory, frequency); the
           steady-state rate (cases after each worker's first) is what a long sweep approaches.
-Prints markdown; with --write appends the tables to benchmarks/RESULTS.md.  Asserts nothing.
+Prints markdown; with --write replaces benchmarks/results/bench_e2e.md.  Asserts nothing.
 """
 
 from __future__ import annotations
@@ -370,7 +370,7 @@ def main() -> None:
                     help="repetitions of each sweep (default 2; quick 1)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                     help="scenario override for the run (repeatable), e.g. --set duration=100")
-    ap.add_argument("--write", action="store_true", help="append the tables to benchmarks/RESULTS.md")
+    ap.add_argument("--write", action="store_true", help="replace benchmarks/results/bench_e2e.md")
     args = ap.parse_args()
     lines: list[str] = []
 
@@ -394,8 +394,9 @@ def main() -> None:
     load = os.getloadavg()
     out(f"Load average at the end {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}.\n")
     if args.write:
-        with open(ROOT / "benchmarks" / "RESULTS.md", "a", encoding="utf-8") as f:
-            f.write("\n" + "\n".join(lines) + "\n")
+        from results import write_result
+
+        write_result(__file__, "\n".join(lines))
 
 
 if __name__ == "__main__":

@@ -21,8 +21,7 @@ interleaved repetitions (the machine is noisy).  Measures:
            servo run (no Python call overhead), and the remainder of the loop
   N        raw and harness per control step vs segments per section (CC on; CC off diverges with
            the paper's gains for N >= 4: raw mj_step only, servos holding the initial shape)
-Prints markdown tables and writes them into its own section of benchmarks/RESULTS.md, between the
-`<!-- bench_loop.py: begin/end -->` markers, keeping the other sections (unless --no-write).
+Prints markdown tables and replaces benchmarks/results/bench_loop.md with them (unless --no-write).
 This is a benchmark, not a test: it asserts nothing.
 """
 
@@ -400,7 +399,7 @@ def main() -> None:
     ap.add_argument("--reps", type=int, default=3, help="repetitions (best of)")
     ap.add_argument("--cpu", type=int, default=-1 if os.cpu_count() == 1 else 1,
                     help="index of the CPU to pin to (-1: no pinning)")
-    ap.add_argument("--no-write", action="store_true", help="do not write benchmarks/RESULTS.md")
+    ap.add_argument("--no-write", action="store_true", help="do not write benchmarks/results/bench_loop.md")
     ap.add_argument("--no-cold", action="store_true", help="skip the empty-cache compile timing (~1 min)")
     args = ap.parse_args()
     pinned = _pin(args.cpu)
@@ -504,11 +503,9 @@ def main() -> None:
                         note += " (torque: zero commands, chain falls under gravity)"
                     out(f"| {n_seg} | off | {act} | {m.nv} | {raw:.1f} us | - | - | - | {note} |")
     if not args.no_write:
-        from results_sections import write_section
+        from results import write_result
 
-        path = ROOT / "benchmarks" / "RESULTS.md"
-        write_section(path, "\n".join(lines), "bench_loop.py")
-        print(f"\nwritten to {path} (its bench_loop section; the other sections are kept)")
+        write_result(__file__, "\n".join(lines))
 
 
 if __name__ == "__main__":

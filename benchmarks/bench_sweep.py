@@ -14,7 +14,7 @@ every configuration starts from the same warm process (the numba cache and the l
 inherited by forked workers).  The configurations run in turn, --reps times, the order reversed every
 other repetition (the machine is noisy); the speedup is the median of the per-repetition ratios.  The
 line above the table says how the workers start (fork or spawn, `harness.studies.executor.start_method`).
---write puts the output into its own section of benchmarks/RESULTS.md (`results_sections`).
+--write replaces benchmarks/results/bench_sweep.md.
 """
 
 from __future__ import annotations
@@ -91,7 +91,7 @@ def main(argv=None) -> int:
     ap.add_argument("--reps", type=int, default=3, help="repetitions of each configuration (default 3)")
     ap.add_argument("--workers", default=None,
                     help="comma-separated worker counts (default: 1 and os.cpu_count())")
-    ap.add_argument("--write", action="store_true", help="write the output into benchmarks/RESULTS.md")
+    ap.add_argument("--write", action="store_true", help="replace benchmarks/results/bench_sweep.md")
     args = ap.parse_args(argv)
     n_cases = [int(n) for n in args.cases.split(",")]
     ncpu = os.cpu_count() or 1
@@ -134,11 +134,10 @@ def main(argv=None) -> int:
         lines += sweep_table(n, args, counts) + [""]
     print("\n".join(lines))
     if args.write:
-        from results_sections import write_section
+        from results import write_result
 
-        write_section(Path(__file__).resolve().parent / "RESULTS.md",
-                      "## Sweep throughput in one process: `bench_sweep.py`\n\n```\n"
-                      + "\n".join(lines).rstrip() + "\n```\n", "bench_sweep.py")
+        write_result(__file__, "## Sweep throughput in one process: `bench_sweep.py`\n\n```\n"
+                     + "\n".join(lines).rstrip() + "\n```\n")
     return 0
 
 

@@ -15,7 +15,7 @@ Per plant, repeated --reps times in alternating order, in this process on every 
             calls of 100 steps, then the physics thread if its first call is not slower)
 and, once per plant, MuJoCo's two phases (mj_step1, mj_step2) timed from Python on the same commands.
 Ratios are medians of the per-repetition ratios (each repetition measures all four back to back).
-Writes its own section of benchmarks/RESULTS.md (`<!-- bench_threads.py: begin/end -->`) unless --no-write.
+Replaces benchmarks/results/bench_threads.md unless --no-write.
 """
 
 from __future__ import annotations
@@ -100,7 +100,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reps", type=int, default=7)
     ap.add_argument("--quick", action="store_true", help="2-s runs only")
-    ap.add_argument("--no-write", action="store_true", help="do not write benchmarks/RESULTS.md")
+    ap.add_argument("--no-write", action="store_true",
+                    help="do not write benchmarks/results/bench_threads.md")
     args = ap.parse_args(argv)
     cpus = len(os.sched_getaffinity(0))
     base = Scenario()
@@ -164,11 +165,9 @@ def main(argv=None) -> int:
     lines += [f"| {label} | {a:.2f}x | {b:.2f}x | {c:.2f}x |" for label, a, b, c in best]
     print("\n".join(lines[-len(best) - 3:]), flush=True)
     if not args.no_write:
-        from results_sections import write_section
+        from results import write_result
 
-        path = ROOT / "benchmarks" / "RESULTS.md"
-        write_section(path, "\n".join(lines), "bench_threads.py")
-        print(f"\nwritten to {path} (its bench_threads section; the other sections are kept)")
+        write_result(__file__, "\n".join(lines))
     return 0
 
 

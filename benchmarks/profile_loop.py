@@ -9,8 +9,7 @@ tool; it asserts nothing).
 
 loop: `simulate_mujoco` of the paper scenario cut to DURATION seconds (the default plant).  raw: the same
 physics steps by `mujoco.rollout` (MuJoCo's C++ loop) from the same initial state with the logged commands,
-nothing else.  Compare the `mj_*` functions between the two (benchmarks/RESULTS.md, "Where the MuJoCo loop's
-time ... goes").
+nothing else.  Compare the `mj_*` functions between the two.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """MuJoCo-backed validation harness for teleoperating a redundant continuum arm (Octarm) with a
-non-redundant rigid master.  Public API (see the README, "Python API"):
+non-redundant rigid master.  Public API (see the docs, "Python API"):
 
     from harness import load_scenario, run, run_sweep, Trajectory
 

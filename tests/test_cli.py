@@ -41,6 +41,7 @@ OPTIONS = {
     "fidelity": ["--segments", "--out", "--no-progress"],
     "controllers": [],
     "cache": ["--prune", "--clear"],
+    "findings": ["--table", "--figures", "--no-write", "--list", "NAME"],
 }
 
 

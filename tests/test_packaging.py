@@ -27,17 +27,18 @@ from harness.config.load import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
-SOURCES = ("pyproject.toml", "README.md", "harness", "controllers", *KINDS)
+SHIPPED = (*KINDS, "findings")  # findings/: located by harness.studies.findings.findings_dir
+SOURCES = ("pyproject.toml", "README.md", "harness", "controllers", *SHIPPED)
 
 
 def test_every_package_and_asset_folder_is_listed():
     st = PYPROJECT["tool"]["setuptools"]
     on_disk = {".".join(p.parent.relative_to(ROOT).parts) for top in ("harness", "controllers")
                for p in (ROOT / top).rglob("__init__.py")}
-    data = {f"harness._data.{k}" for k in KINDS}
+    data = {f"harness._data.{k}" for k in SHIPPED}
     assert set(st["packages"]) == on_disk | data
-    assert st["package-dir"] == {f"harness._data.{k}": k for k in KINDS}
-    for k in KINDS:
+    assert st["package-dir"] == {f"harness._data.{k}": k for k in SHIPPED}
+    for k in SHIPPED:
         patterns = st["package-data"][f"harness._data.{k}"]
         files = {p.name for p in (ROOT / k).iterdir() if p.is_file()}
         assert files and all(any(Path(f).match(pat) for pat in patterns) for f in files), k
@@ -97,7 +98,8 @@ def test_wheel_install_runs_from_any_folder(wheel, tmp_path):
     probe = ("from harness.config.assets import shipped; from harness.config.bounds import load_bounds; "
              "from harness.config.load import load_scenario; load_bounds('paper_mujoco'); "
              "print(load_scenario('paper').name); print(shipped('paper_mujoco', 'bounds')); "
-             "print(shipped('studies/segments.toml', 'studies'))")
+             "print(shipped('studies/segments.toml', 'studies')); "
+             "from harness.studies.findings import load_finding; print(load_finding('eq28_sign_typo').path)")
     names = subprocess.run([str(py), "-c", probe], cwd=work, env=env, capture_output=True, text=True,
                            timeout=300)
     assert names.returncode == 0, names.stderr

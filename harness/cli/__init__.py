@@ -7,6 +7,7 @@
     teleop controllers                                       list the built-in controllers
     teleop fidelity [--segments 4,8,16,32] [--samples N] [--reference analytic|cosserat]   plant fidelity
     teleop cache [--prune | --clear]                         the compiled-kernel cache: list, prune
+    teleop findings [NAME ...]                               rerun the findings, check their claims
 
 Exit status: 0 success; 1 the run failed (diverged, an output could not be written) or a bound was
 violated; 2 invalid input (scenario, bounds, option, output folder; a file that cannot be written before
@@ -343,6 +344,26 @@ def cmd_fidelity(args: argparse.Namespace) -> int:
     return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
 
 
+def cmd_findings(args: argparse.Namespace) -> int:
+    findings = _import("harness.studies.findings")
+    if args.list:
+        for name in findings.available():
+            print(f"{name:32s} {findings.load_finding(name).title}")
+        return EXIT_OK
+    results = findings.run_findings(args.names, keep_trajectories=not args.no_write,
+                                    on_result=lambda r: print(findings.report_text(r), flush=True))
+    if not args.no_write:
+        base = Path("docs") if Path("mkdocs.yml").is_file() else Path("runs/findings")
+        table = args.table or base / "findings-table.md"
+        figures = args.figures or base / "figures"
+        # the table of all findings only when all of them ran; one table per finding always
+        for path in findings.write_outputs(results, table, figures, combined=not args.names):
+            print(f"wrote {path}")
+    held = sum(r.holds for r in results)
+    print(f"{held} of {len(results)} findings hold")
+    return EXIT_OK if held == len(results) else EXIT_FAIL
+
+
 # ---------------------------------------------------------------------------------------------
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
@@ -374,7 +395,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 COMMANDS = {"run": cmd_run, "check": cmd_check, "models": cmd_models, "sweep": cmd_sweep,
-            "controllers": cmd_controllers, "fidelity": cmd_fidelity, "cache": cmd_cache}
+            "controllers": cmd_controllers, "fidelity": cmd_fidelity, "cache": cmd_cache,
+            "findings": cmd_findings}
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -117,7 +117,7 @@ def _add_record_rate(p: argparse.ArgumentParser) -> None:
     p.add_argument("--record-rate", metavar="HZ|full", type=_record_rate, default=None,
                    help="rate of the 3-D geometry (arms, segments, backbone) in run.rrd, Hz > 0, or 'full' "
                         "for every control step; the time series are always written at the control rate. "
-                        "Default: 100 (chosen by measurement, see README 'Speed').")
+                        "Default: 100 (chosen by measurement, see the docs' Performance page).")
 
 
 def _add_out_and_progress(p: argparse.ArgumentParser, out_help: str) -> None:
@@ -188,7 +188,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "re-running the same command resumes (finished cases are skipped). Also written: "
                     "summary.csv, metric plots (lines for 1-D factors, heatmaps for 2-D grids), "
                     "study.toml (resolved) and optional recordings of the worst cases.",
-        epilog="study file (TOML; see studies/*.toml and the README): [study] name, scenario (base "
+        epilog="study file (TOML; see studies/*.toml and the docs' study file reference): [study] name, "
+               "scenario (base "
                "scenario file), set (overrides for every case), metrics, record = {worst = k, by = METRIC}; "
                "[[factor]] param = any scenario key (e.g. plant.slave.masses[0]) with scale = [...] "
                "(x nominal), values = [...] or scale/values = {random = 'uniform', low, high}; "
@@ -227,7 +228,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser(
         "controllers", formatter_class=_Formatter, help="list the built-in controllers",
         description="List the built-in controllers (name, supported plant actuations, one-line description). "
-                    "Your own: --controller path/to/file.py:ClassName (README 'Bring your own controller').",
+                    "Your own: --controller path/to/file.py:ClassName (docs: guide, Controllers).",
         epilog="Default controller of every scenario: paper (the paper's laws on the compiled fast path).")
 
     cache = sub.add_parser(
@@ -273,6 +274,26 @@ def build_parser() -> argparse.ArgumentParser:
                      help="output folder (created; must be writable). Default: runs/fidelity.")
     fid.add_argument("--no-progress", action="store_true",
                      help="do not show progress output (default: shown on stderr when available).")
+    fnd = sub.add_parser(
+        "findings", formatter_class=_Formatter, help="rerun the findings and check their claims",
+        description="Rerun the shipped findings (findings/*.toml: runs of a scenario plus the claim as "
+                    "bounds; harness.studies.findings), print claim / measured / holds for each, and write "
+                    "the markdown table the docs' findings page includes and the figures of the runs a "
+                    "finding names.")
+    fnd.add_argument("names", nargs="*", metavar="NAME",
+                     help="finding names (shipped: see findings/) or finding files. Default: all shipped.")
+    fnd.add_argument("--table", metavar="FILE", type=_path, default=None,
+                     help="markdown table of all findings, written when all of them run (and one table per "
+                          "finding, FILE's stem + '-NAME.md', always; parent folders created). Default: "
+                          "docs/findings-table.md in a checkout (a folder with mkdocs.yml, whose findings "
+                          "page includes it), else runs/findings/findings-table.md.")
+    fnd.add_argument("--figures", metavar="DIR", type=_path, default=None,
+                     help="folder for the figures of the runs a finding names. Default: docs/figures in a "
+                          "checkout, else runs/findings/figures.")
+    fnd.add_argument("--no-write", action="store_true",
+                     help="print only; write neither the table nor the figures. Default: write them.")
+    fnd.add_argument("--list", action="store_true",
+                     help="list the shipped findings and exit. Default: run them.")
     return parser
 
 

@@ -4,8 +4,8 @@ loop that keeps cases in flight and hands each result to the parent as it finish
 
 Threads (`--executor threads`, the in-process batch path): the compiled loops release the GIL while they
 step (`harness.loop.releases_gil`), so the cases of one process run on every core without worker
-processes, with the same results.  Measured here it is not faster than the forked process pool (README,
-"Sweeps"), so processes stay the default: a crashing case then takes only its worker.
+processes, with the same results.  Processes stay the default: a crashing case then takes only its
+worker (benchmarks/bench_e2e.py measures both).
 """
 
 

@@ -97,7 +97,7 @@ ETAS = (0.0, 0.001, 0.01, 0.1, 1.0)
 
 
 def main(out="runs/stability_map", duration: float = 3.0) -> int:
-    """``python -m harness.studies.stability_map [OUT]``: the README's maps (MAPS over KNS x ETAS),
+    """``python -m harness.studies.stability_map [OUT]``: the stability maps (MAPS over KNS x ETAS),
     stability_map.md and stability_map.png in OUT."""
     import sys
 
