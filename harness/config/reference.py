@@ -1,6 +1,6 @@
 """Markdown reference of the input files, rendered from the schema (field, type, default, allowed
 values, description): `markdown("scenario" | "bounds" | "study")`.  `python -m harness.config.reference`
-prints all three (docs/config_reference.md is that output)."""
+prints all three; the docs' file-reference pages are filled from `markdown` when the site is built."""
 
 from __future__ import annotations
 
