@@ -252,8 +252,11 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from harness.config.assets import shipped
 
     study: Path = shipped(args.study, "studies")
-    if not study.is_file():
+    if not study.exists():
         raise ConfigError(f"study file not found: {study}", path=str(study))
+    if not study.is_file():
+        raise ConfigError(f"study file {study}: not a regular file (a folder, named pipe, device or socket "
+                          "is not read)", path=str(study))
     if args.view is not None:
         return _view_case(study, args.out, args.view)
     sweep = _import("harness.studies.sweep")  # validates the study, then creates and checks the output folder
