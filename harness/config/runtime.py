@@ -9,6 +9,7 @@ import contextlib
 import functools
 import gc
 import os
+import signal
 import sys
 from typing import NoReturn
 
@@ -62,6 +63,33 @@ def overlap_setting() -> bool | None:
     return None
 
 
+def _is_terminal(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError, OSError):  # closed or not a file
+        return False
+
+
+def die_with_parent(sig: int = signal.SIGTERM) -> None:
+    """Ask the kernel to send `sig` to this process when the thread that started it ends (Linux
+    `prctl(PR_SET_PDEATHSIG)`, through ctypes), so that a worker or a helper server never outlives a
+    killed parent.  Call it first thing in the child (or as a `preexec_fn`).  Elsewhere, or without
+    libc, it does nothing.  If the parent is already gone (the child was re-parented), `sig` is sent at
+    once."""
+    if not sys.platform.startswith("linux"):
+        return
+    parent = os.getppid()
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(sig), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent or parent == 1:
+        os.kill(os.getpid(), sig)
+
+
 @functools.cache
 def progress_bar_class() -> type:
     """tqdm's bar without its monitor thread.  tqdm starts a daemon thread ("tqdm_monitor") at the first bar
@@ -69,14 +97,21 @@ def progress_bar_class() -> type:
     the main one must not fork, so the sweep then starts its workers as fresh interpreters
     (`harness.studies.executor.start_method`): measured, every sweep after the first in a process, and a
     sweep after a run, lost the forked start-up.  The monitor only adjusts `miniters` of bars that
-    stall; these bars update every case or chunk.  ImportError when tqdm is missing."""
+    stall; these bars update every case or chunk.  The bars draw only when their stream (stderr by
+    default) is a terminal: in CI logs and redirected output they are off.  ImportError when tqdm is
+    missing."""
     from tqdm import tqdm
 
     class Bar(tqdm):
         monitor_interval = 0  # tqdm.__new__ starts the monitor only for a class with an interval
 
+        def __init__(self, *args, **kwargs):
+            if not _is_terminal(kwargs.get("file") or sys.stderr):
+                kwargs["disable"] = True
+            super().__init__(*args, **kwargs)
+
     return Bar
 
 
-__all__ = ["GC_THRESHOLDS", "OVERLAP_ENV", "end_process", "fast_exit", "overlap_setting",
+__all__ = ["GC_THRESHOLDS", "OVERLAP_ENV", "die_with_parent", "end_process", "fast_exit", "overlap_setting",
            "progress_bar_class", "set_gc_thresholds"]
