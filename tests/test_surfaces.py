@@ -61,3 +61,113 @@ def test_progress_bar_drawn_on_a_terminal():
         with progress_bar_class()(total=3, file=stream, desc="x", mininterval=0) as bar:
             bar.update(3)
         assert ("3/3" in stream.getvalue()) == drawn
+
+
+# ---------------------------------------------------------------------------------------------
+# viewing
+# ---------------------------------------------------------------------------------------------
+def _stderr_lines(capsys) -> list[str]:
+    return [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+
+
+def test_view_without_display_fails_in_one_line_naming_view_web(tmp_path, capsys, monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    out = tmp_path / "v"
+    assert main(["run", "--duration", "0.5", "--view", "--out", str(out), "--no-progress"]) == 1
+    (line,) = _stderr_lines(capsys)
+    assert line.startswith("error: ") and "--view web" in line and "nothing was run" in line
+    assert not any(out.iterdir())  # says it wrote nothing, and did not
+
+
+@pytest.mark.slow
+def test_view_with_a_display_that_fails_is_one_line(tmp_path, capsys, monkeypatch):
+    """A display variable that names no X server: the spawned viewer exits, reported in one line."""
+    monkeypatch.setenv("DISPLAY", ":93")
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["run", "--duration", "0.5", "--view", "--out", str(tmp_path / "v"), "--no-progress"]) == 1
+    (line,) = _stderr_lines(capsys)
+    assert line.startswith("error: --view: the Rerun viewer exited") and "--view web" in line, line
+
+
+def test_web_view_port_taken_is_one_line(tmp_path, capsys):
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        rc = main(["run", "--duration", "0.2", "--view", "web", "--web-port", str(port), "--grpc-port", "0",
+                   "--out", str(tmp_path / "w"), "--no-progress"])
+    assert rc == 1
+    (line,) = _stderr_lines(capsys)
+    assert f"--web-port {port}" in line and "choose another port" in line, line
+
+
+def _listening(port: int) -> set[str]:
+    """Local addresses (hex, as in /proc/net/tcp*) listening on `port`."""
+    found = set()
+    for name in ("/proc/net/tcp", "/proc/net/tcp6"):
+        with open(name) as fh:
+            for row in fh.read().splitlines()[1:]:
+                local, state = row.split()[1], row.split()[3]
+                addr, p = local.rsplit(":", 1)
+                if state == "0A" and int(p, 16) == port:
+                    found.add(addr)
+    return found
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.path.exists("/proc/net/tcp"), reason="reads Linux /proc/net/tcp")
+def test_web_view_binds_localhost_and_prints_the_real_address(tmp_path):
+    import re
+    import signal
+    import subprocess
+    import sys
+    import time
+    import urllib.request
+
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    env.pop("DISPLAY", None)
+    proc = subprocess.Popen([sys.executable, "-m", "harness.cli", "run", "--duration", "0.3", "--view", "web",
+                             "--web-port", "0", "--grpc-port", "0", "--out", str(tmp_path / "w"),
+                             "--no-progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env, cwd=tmp_path)
+    try:
+        url = None
+        deadline = time.monotonic() + 240
+        while url is None and time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            assert line, f"teleop ended early ({proc.wait()}): {proc.stdout.read()}"
+            if line.startswith("serving the web viewer at "):
+                url = line.split()[5]
+        m = re.fullmatch(r"http://127\.0\.0\.1:(\d+)/\?url=rerun%2Bhttp%3A%2F%2F127\.0\.0\.1%3A(\d+)"
+                         r"%2Fproxy", url)
+        assert m, url
+        web, grpc = int(m[1]), int(m[2])
+        assert web != 0 and grpc != 0
+        for port in (web, grpc):
+            assert _listening(port) == {"0100007F"}, (port, _listening(port))  # 127.0.0.1 only
+        with urllib.request.urlopen(f"http://127.0.0.1:{web}/", timeout=10) as r:
+            assert r.status == 200
+        assert (tmp_path / "w" / "metrics.json").is_file()
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(30) == 0
+        time.sleep(0.5)
+        assert not _listening(web) and not _listening(grpc)  # the server stopped with the run
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def test_sweep_view_without_display_does_not_say_opened(tmp_path, capsys, monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    (tmp_path / "recordings").mkdir()
+    (tmp_path / "recordings" / "c0001.rrd").write_bytes(b"")
+    rc = main(["sweep", str(ROOT / "studies" / "segments.toml"), "--out", str(tmp_path), "--view", "c0001"])
+    captured = capsys.readouterr()
+    assert rc == 1 and "opened" not in captured.out
+    (line,) = [ln for ln in captured.err.splitlines() if ln.strip()]
+    assert "no display" in line and "--web-viewer --bind 127.0.0.1" in line, line

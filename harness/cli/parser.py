@@ -50,6 +50,16 @@ def _int_at_least(lo: int) -> Callable[[str], int]:
 _positive_int, _nonnegative_int = _int_at_least(1), _int_at_least(0)
 
 
+def _port(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        v = -1
+    if not 0 <= v <= 65535:
+        raise argparse.ArgumentTypeError(f"expected a port number in [0, 65535], got {text!r}")
+    return v
+
+
 def _path(text: str) -> Path:
     """A path argument; the empty string is rejected (Path('') would silently mean '.')."""
     if not str(text).strip():
@@ -153,7 +163,17 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--view", nargs="?", const="native", choices=("native", "web"), default=None,
                      help="stream the run to a Rerun viewer while it is simulated: 'native' (the default "
                           "with a bare --view) spawns the viewer, 'web' serves Rerun's web viewer and waits "
-                          "for Ctrl-C after the run. run.rrd is written as without it. Default: no viewer.")
+                          "for Ctrl-C after the run. run.rrd is written as without it. Without a display, "
+                          "'native' stops before running with a line naming --view web. Default: no viewer.")
+    run.add_argument("--view-host", metavar="HOST", default="127.0.0.1",
+                     help="address the web viewer (--view web) listens on. Anything but a loopback address "
+                          "serves the run to other machines, without authentication (a warning is printed). "
+                          "Default: 127.0.0.1.")
+    run.add_argument("--web-port", metavar="N", type=_port, default=9090,
+                     help="HTTP port of the web viewer (--view web), 0 for any free port. Default: 9090.")
+    run.add_argument("--grpc-port", metavar="N", type=_port, default=9876,
+                     help="port the web viewer reads the run's data from (--view web), 0 for any free port. "
+                          "Default: 9876.")
     _add_record_rate(run)
 
     check = sub.add_parser(
