@@ -171,3 +171,97 @@ def test_sweep_view_without_display_does_not_say_opened(tmp_path, capsys, monkey
     assert rc == 1 and "opened" not in captured.out
     (line,) = [ln for ln in captured.err.splitlines() if ln.strip()]
     assert "no display" in line and "--web-viewer --bind 127.0.0.1" in line, line
+
+
+# ---------------------------------------------------------------------------------------------
+# sweeps: workers die with their parent
+# ---------------------------------------------------------------------------------------------
+_ORPHAN_SCRIPT = r'''
+import os, re, sys, time
+from pathlib import Path
+from types import SimpleNamespace
+
+from harness.studies import executor
+
+MARK = Path(sys.argv[1])
+
+
+def case_fn(payload):
+    if payload["case_id"] == "boom":
+        if not (MARK / "first").exists():
+            (MARK / "first").write_text(str(os.getpid()))
+            os._exit(9)  # the worker dies: the case is re-run alone in the isolation worker
+        (MARK / "isolated").write_text(str(os.getpid()))
+        re.match(r"(a+)+$", "a" * 60 + "b")  # blocks in C holding the GIL (like a stuck extension)
+    time.sleep(0.2)
+    return {"status": "ok", "message": "", "metrics": {}, "traceback": ""}
+
+
+if __name__ == "__main__":
+    cases = [SimpleNamespace(case_id=c, scenario=None) for c in ("a", "boom", "b")]
+    runner = executor.Runner(2, None)
+    executor.run_cases(runner, case_fn, cases, [], False, lambda case, res: None)
+'''
+
+
+def _descendants(pid: int) -> set[int]:
+    parent = {}
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                with open(f"/proc/{d}/stat") as fh:
+                    parent[int(d)] = int(fh.read().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                pass
+    out, todo = set(), [pid]
+    while todo:
+        p = todo.pop()
+        kids = {c for c, pp in parent.items() if pp == p}
+        out |= kids
+        todo += list(kids)
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads Linux /proc")
+def test_sweep_workers_die_with_a_killed_parent_during_isolation(tmp_path):
+    """kill -9 of the sweep's main process while the isolation worker re-runs a dead worker's case (and
+    blocks holding the GIL): the isolation worker and multiprocessing's resource_tracker end too."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    script = tmp_path / "orphans.py"
+    script.write_text(_ORPHAN_SCRIPT)
+    env = {**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{tmp_path}"}
+    proc = subprocess.Popen([sys.executable, str(script), str(tmp_path)], env=env, cwd=tmp_path,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while not (tmp_path / "isolated").exists():
+            assert proc.poll() is None and time.monotonic() < deadline, "the isolation worker never ran"
+            time.sleep(0.1)
+        time.sleep(0.5)
+        kids = _descendants(proc.pid)
+        isolated = int((tmp_path / "isolated").read_text())
+        assert isolated in kids
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        deadline = time.monotonic() + 5
+        while any(_alive(k) for k in kids) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        left = sorted(k for k in kids if _alive(k))
+    finally:
+        for k in _descendants(proc.pid) | (kids if "kids" in dir() else set()):
+            if _alive(k):
+                os.kill(k, signal.SIGKILL)
+    assert not left, f"processes left after the sweep's parent was killed: {left}"

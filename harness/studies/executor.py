@@ -29,7 +29,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from harness.config.errors import ConfigError
-from harness.config.runtime import end_process, set_gc_thresholds
+from harness.config.runtime import die_with_parent, end_process, set_gc_thresholds
 from harness.config.textio import jsonable
 from harness.studies.study import Case
 
@@ -102,7 +102,10 @@ def _worker_init() -> None:
     # result has been sent by then
     atexit.register(end_process, 0)
     set_gc_thresholds()  # fewer collections while the first case imports the loop and MuJoCo
-    # A killed main process cannot stop its pool: each worker ends itself within PARENT_POLL s.
+    # A killed main process cannot stop its pool: the kernel kills each worker when its parent ends (Linux
+    # parent-death signal; it works while a case blocks holding the GIL); elsewhere each worker ends
+    # itself within PARENT_POLL s.
+    die_with_parent(signal.SIGKILL)
     threading.Thread(target=_watch_parent, args=(os.getppid(),), name="parent-watchdog", daemon=True).start()
 
 
