@@ -265,3 +265,143 @@ def test_sweep_workers_die_with_a_killed_parent_during_isolation(tmp_path):
             if _alive(k):
                 os.kill(k, signal.SIGKILL)
     assert not left, f"processes left after the sweep's parent was killed: {left}"
+
+
+# ---------------------------------------------------------------------------------------------
+# sweeps: outputs, --set, names, links, time limit
+# ---------------------------------------------------------------------------------------------
+TINY_STUDY = """
+[study]
+name = "{name}"
+set = ["duration=0.2", "plant.kind='analytic'"]
+metrics = ["e2_rms", "sim_time_reached"]
+{record}
+[[factor]]
+name = "seed"
+param = "seed"
+values = [0, 1]
+"""
+
+
+def _tiny_study(tmp_path: Path, name: str = "tiny", record: str = "") -> Path:
+    path = tmp_path / "tiny.toml"
+    path.write_text(TINY_STUDY.format(name=name, record=record))
+    return path
+
+
+def _sweep(argv: list[str]) -> int:
+    return main(["sweep", *argv, "--executor", "threads", "--workers", "1", "--no-progress"])
+
+
+def test_sweep_output_failure_after_the_cases_exits_1_and_writes_the_summary(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "recordings").write_text("a file where the recordings folder goes")
+    path = _tiny_study(tmp_path, record='record = {worst = 1, by = "e2_rms"}')
+    assert _sweep([str(path), "--out", str(out)]) == 1
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("error:")]
+    assert len(err) == 1 and "recordings" in err[0], err
+    assert (out / "summary.csv").read_text().count("\n") == 3  # header + 2 cases
+    assert len((out / "results.jsonl").read_text().splitlines()) == 2
+
+
+def test_sweep_set_overrides_the_base_scenario(tmp_path):
+    import tomllib
+
+    out = tmp_path / "out"
+    assert _sweep([str(_tiny_study(tmp_path)), "--out", str(out), "--set", "duration=0.1"]) == 0
+    doc = tomllib.loads((out / "study.toml").read_text())
+    assert doc["study"]["set"][-1] == "duration=0.1" and doc["scenario"]["duration"] == 0.1
+    rows = [__import__("json").loads(ln) for ln in (out / "results.jsonl").read_text().splitlines()]
+    assert len(rows) == 2
+    assert all(r["metrics"]["sim_time_reached"] == pytest.approx(0.1, abs=2e-3) for r in rows)
+
+
+def test_sweep_set_bad_key_is_one_line(tmp_path, capsys):
+    rc = _sweep([str(_tiny_study(tmp_path)), "--out", str(tmp_path / "o"), "--set", "plant.segmnts=4"])
+    assert rc == 2
+    (line,) = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert line.startswith("error: ") and "segmnts" in line, line
+
+
+@pytest.mark.parametrize("name", ["..", "."])
+def test_study_name_cannot_leave_the_output_folder(tmp_path, capsys, monkeypatch, name):
+    monkeypatch.chdir(tmp_path)
+    path = _tiny_study(tmp_path, name=name)
+    assert _sweep([str(path)]) == 2
+    (line,) = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert "[study] name" in line and "only dots" in line, line
+    assert not (tmp_path / "runs").exists()
+
+
+def test_sweep_refuses_a_planted_results_symlink(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep me\n")
+    (out / "results.jsonl").symlink_to(victim)
+    assert _sweep([str(_tiny_study(tmp_path)), "--out", str(out)]) == 2
+    (line,) = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert "symbolic link" in line and "results.jsonl" in line, line
+    assert victim.read_text() == "keep me\n"
+
+
+def test_sweep_refuses_a_planted_lock_symlink(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep me\n")
+    (out / ".lock").symlink_to(victim)
+    assert _sweep([str(_tiny_study(tmp_path)), "--out", str(out)]) == 2
+    (line,) = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert "symbolic link" in line, line
+    assert victim.read_text() == "keep me\n"
+
+
+def test_case_timeout_makes_an_error_row_and_the_others_run(tmp_path, capsys):
+    assert main(["run", "--plant", "analytic", "--duration", "0.1", "--out", str(tmp_path / "warm"),
+                 "--no-progress"]) == 0  # kernels loaded (compiled on a cold cache) before the timed sweep
+    path = tmp_path / "slow.toml"
+    path.write_text(TINY_STUDY.format(name="slow", record="").replace(
+        'name = "seed"\nparam = "seed"\nvalues = [0, 1]', 'name = "duration"\nparam = "duration"\n'
+        'values = [0.1, 3000.0]'))
+    out = tmp_path / "out"
+    assert _sweep([str(path), "--out", str(out), "--case-timeout", "3"]) == 0
+    import json
+
+    lines = (out / "results.jsonl").read_text().splitlines()
+    rows = {r["params"]["duration"]: r for r in map(json.loads, lines)}
+    assert rows[0.1]["status"] == "ok"
+    assert rows[3000.0]["status"] == "error" and "time limit of 3 s" in rows[3000.0]["message"]
+    assert rows[3000.0]["wall_time"] < 60
+
+
+def blocking_case(case: dict) -> dict:
+    """A case function that blocks in C holding the GIL when case_id is 'stuck' (a stuck extension)."""
+    import re
+    import time
+
+    if case["case_id"] == "stuck":
+        re.match(r"(a+)+$", "a" * 60 + "b")
+    time.sleep(0.1)
+    return {"status": "ok", "message": "", "metrics": {}, "traceback": "", "wall_time": 0.1}
+
+
+@pytest.mark.slow
+def test_case_timeout_stops_a_blocked_worker(monkeypatch):
+    from types import SimpleNamespace
+
+    from harness.studies import executor
+
+    monkeypatch.setattr(executor, "HARD_LIMIT_GRACE", 1.0)
+    cases = [SimpleNamespace(case_id=c, scenario=None) for c in ("a", "stuck", "b", "c")]
+    got = {}
+    runner = executor.Runner(2, None)
+    try:
+        executor.run_cases(runner, blocking_case, cases, [], False,
+                           lambda case, res: got.__setitem__(case.case_id, res), time_limit=1.0)
+    finally:
+        runner.close(cancel=True)
+    assert set(got) == {"a", "stuck", "b", "c"}
+    assert got["stuck"]["status"] == "error" and "time limit of 1 s" in got["stuck"]["message"]
+    assert all(got[c]["status"] == "ok" for c in "abc")

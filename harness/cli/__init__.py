@@ -288,7 +288,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         return _view_case(study, args.out, args.view)
     sweep = _import("harness.studies.sweep")  # validates the study, then creates and checks the output folder
     rc = sweep.main_sweep(study, args.out, args.workers, args.scheduler, not args.no_progress,
-                          max_cases=args.max_cases, executor=args.executor)
+                          max_cases=args.max_cases, executor=args.executor, overrides=args.overrides,
+                          case_timeout=args.case_timeout)
     return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
 
 

@@ -50,6 +50,16 @@ def _int_at_least(lo: int) -> Callable[[str], int]:
 _positive_int, _nonnegative_int = _int_at_least(1), _int_at_least(0)
 
 
+def _positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not 0.0 < v < math.inf:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return v
+
+
 def _port(text: str) -> int:
     try:
         v = int(text)
@@ -237,8 +247,20 @@ def build_parser() -> argparse.ArgumentParser:
                        help="refuse a study with more than N cases, checked before the cases are built "
                             "(replaces the study's [sampling] max_cases). "
                             "Default: from the study, else 10000.")
+    sweep.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                       help="override a field of the study's base scenario for every case, after the "
+                            "study's own set (dotted key and TOML value, as 'teleop run --set', e.g. "
+                            "--set duration=2); repeatable. A factor on the same key wins. Part of the "
+                            "resolved study.toml and of the case ids. Default: none.")
+    sweep.add_argument("--case-timeout", metavar="SECONDS", type=_positive_float, default=None,
+                       help="wall-time limit per case, set-up included (a cold kernel cache adds 20-60 s "
+                            "to the first cases of a machine): a case over it becomes a row with status "
+                            "'error' and the other cases run. The case is stopped at its next chunk of "
+                            "steps; on worker processes, one that blocks is stopped 10 s later. "
+                            "Default: no limit.")
     sweep.add_argument("--no-progress", action="store_true",
-                       help="do not show the progress bar (default: shown on stderr).")
+                       help="do not show the progress bar (default: shown on stderr when it is a "
+                            "terminal).")
     sweep.add_argument("--view", metavar="CASE_ID", default=None,
                        help="do not run: open the recording of case CASE_ID of this sweep "
                             "(<out>/recordings/CASE_ID.rrd, written for the worst cases, see record) in a "

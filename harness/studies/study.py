@@ -124,6 +124,15 @@ _PARAM_RE = re.compile(r"^([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)(?:\[(\d+)\])?$")
 
 
 # --- study file -------------------------------------------------------------------------------------
+def check_study_name(name: Any) -> str:
+    """A study name is a folder name inside the output root: letters, digits, '_', '-', '.', not only
+    dots ('.' or '..' would leave the folder); else a one-line ConfigError."""
+    if not isinstance(name, str) or not re.fullmatch(r"[\w.-]+", name) or not name.strip("."):
+        raise ConfigError(f"[study] name = {name!r}: required; letters, digits, '_', '-', '.' only, and not "
+                          "only dots (the name is a folder inside the output folder)")
+    return name
+
+
 @dataclass(frozen=True)
 class Factor:
     name: str
@@ -281,9 +290,7 @@ def load_study(source: str | os.PathLike | dict, base_dir: str | os.PathLike | N
                 "study file" if stem is None else f"study file {source}", belongs)
     st = doc.get("study", {})
     _check_keys(st, study_keys, "[study]")
-    name = st.get("name", stem)
-    if not isinstance(name, str) or not re.fullmatch(r"[\w.-]+", name):
-        raise ConfigError(f"[study] name = {name!r}: required; letters, digits, '_', '-', '.' only")
+    name = check_study_name(st.get("name", stem))
 
     scenario: Path | dict | None = None
     if "scenario" in st and "scenario" in doc:
