@@ -7,6 +7,7 @@ import os
 import threading
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from harness.cli import main
@@ -405,3 +406,118 @@ def test_case_timeout_stops_a_blocked_worker(monkeypatch):
     assert set(got) == {"a", "stuck", "b", "c"}
     assert got["stuck"]["status"] == "error" and "time limit of 1 s" in got["stuck"]["message"]
     assert all(got[c]["status"] == "ok" for c in "abc")
+
+
+# ---------------------------------------------------------------------------------------------
+# what a user sees: obstacles, force arrows, one plane, provenance
+# ---------------------------------------------------------------------------------------------
+def _columns(path: Path, entity: str, column: str) -> list:
+    """Every row of `column` of `entity` in a recording (static and temporal chunks, in file order)."""
+    from rerun.chunk import RrdReader
+
+    out = []
+    for c in RrdReader(path).stream().to_chunks():
+        if c.entity_path == entity:
+            batch = c.to_record_batch()
+            if column in batch.schema.names:
+                out += batch.column(column).to_pylist()
+    return out
+
+
+@pytest.fixture(scope="module")
+def contact_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("contact") / "out"
+    rc = main(["run", str(ROOT / "scenarios" / "contact.toml"), "--duration", "1.5", "--set", "transient=0",
+               "--out", str(out), "--no-progress"])
+    assert rc == 0
+    return out
+
+
+def test_contact_obstacle_is_drawn_in_the_3d_and_2d_views(contact_run):
+    rrd = contact_run / "run.rrd"
+    # the ceiling: plane Z = 0.99 m (slave frame), normal -Z: a slab above it, centred at X = 0
+    (centres,) = _columns(rrd, "/world/slave/obstacles/0", "Boxes3D:centers")
+    (half,) = _columns(rrd, "/world/slave/obstacles/0", "Boxes3D:half_sizes")
+    from harness.output.obstacles import PLANE_THICKNESS
+
+    slave_base = np.array([0.0, 0.3, 0.0])  # octarm_base of the generated MuJoCo model
+    np.testing.assert_allclose(centres[0], slave_base + [0.0, 0.0, 0.99 + PLANE_THICKNESS / 2], atol=1e-6)
+    assert half[0][0] >= 0.5 and half[0][2] == pytest.approx(PLANE_THICKNESS / 2)
+    (strips,) = _columns(rrd, "/traces/obstacles/0", "LineStrips2D:strips")
+    pts = np.array(strips[0])
+    assert np.allclose(pts[:, 1].max(), -0.99, atol=1e-6)  # the wall's face at Z = 0.99 (screen y = -Z)
+
+
+def test_contact_obstacle_is_drawn_in_the_shapes_figure(contact_run, tmp_path):
+    import matplotlib.image as mpimg
+
+    from harness.loop.trajectory import Trajectory  # noqa: F401 - the figure's input type
+    from harness.output import plots
+
+    edge = np.round(np.array(plots.OBSTACLE_EDGE[:3]) * 255)
+
+    def edge_pixels(path: Path) -> int:
+        img = mpimg.imread(path)[..., :3] * 255
+        return int((np.abs(img - edge).max(axis=-1) < 6).sum())
+
+    assert edge_pixels(contact_run / "shapes.png") > 200  # the outline of the ceiling
+    assert edge_pixels(contact_run / "fig3_e2.png") == 0  # the colour is not used elsewhere
+
+
+def test_contact_force_arrows_are_scaled_to_be_seen(contact_run):
+    from harness.output.record_contact import ARROW_LENGTH
+
+    vectors = [np.array(v) for v in _columns(contact_run / "run.rrd", "/world/contact/forces",
+                                             "Arrows3D:vectors") if v]
+    longest = max(float(np.linalg.norm(v, axis=1).max()) for v in vectors)
+    # the largest force of the run is ARROW_LENGTH long (a sixth of the arm); arrows are drawn every
+    # CONTACT_EVERY-th step, so the longest drawn one may be a little shorter
+    assert 0.9 * ARROW_LENGTH <= longest <= ARROW_LENGTH * (1 + 1e-6)
+    (status,) = _columns(contact_run / "run.rrd", "/status", "TextDocument:text")
+    assert "contact force arrows: 1 N =" in status[0]
+
+
+def test_both_arms_are_drawn_in_one_plane(contact_run):
+    """The 3-D view's master tip and slave tip (after the arms' display transforms) lie in one plane Y = const
+    and differ in X-Z by e2_plant = x1 - x2_plant: with e2 of a few mm they are drawn a few mm apart."""
+    import json
+
+    rrd = contact_run / "run.rrd"
+    (tm,) = _columns(rrd, "/world/master", "Transform3D:translation")
+    (ts,) = _columns(rrd, "/world/slave", "Transform3D:translation")
+    master_tip = np.array([p[0] for p in _columns(rrd, "/world/master/tip", "Points3D:positions")]) + tm
+    slave_tip = np.array([p[0] for p in _columns(rrd, "/world/slave/tip", "Points3D:positions")]) + ts
+    assert len(master_tip) == len(slave_tip) > 100
+    np.testing.assert_allclose(master_tip[:, 1], slave_tip[:, 1], atol=1e-6)
+    gap = np.linalg.norm((master_tip - slave_tip)[:, [0, 2]], axis=1)
+    metrics = json.loads((contact_run / "metrics.json").read_text())
+    assert gap.max() <= metrics["e2_plant_max"] + 1e-5
+
+
+def test_version_and_git_revision_in_metrics_and_config(contact_run):
+    import json
+    import subprocess
+    from importlib.metadata import version
+
+    from harness.api import load_scenario
+
+    tool = json.loads((contact_run / "metrics.json").read_text())["tool"]
+    assert tool["name"] == "octarm-teleop" and tool["version"] == version("octarm-teleop")
+    head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True)
+    if head.returncode == 0:  # run from a checkout
+        assert tool["git_revision"] == head.stdout.strip()
+    first = (contact_run / "config.toml").read_text().splitlines()[0]
+    assert first.startswith("# written by octarm-teleop " + tool["version"])
+    assert ("git_revision" not in tool) or tool["git_revision"] in first
+    assert load_scenario(contact_run / "config.toml").name == "contact"  # still a scenario file
+
+
+def test_git_revision_absent_outside_a_checkout_never_an_error(tmp_path):
+    from harness.config.runtime import _git_revision
+
+    assert _git_revision(tmp_path) is None
+    (tmp_path / ".git").write_text("gitdir: /nonexistent/place\n")
+    with pytest.raises(OSError):
+        _git_revision(tmp_path)  # provenance() catches this: the revision is then absent
+    (tmp_path / ".git").write_text("garbage")
+    assert _git_revision(tmp_path) is None

@@ -9,8 +9,10 @@ import contextlib
 import functools
 import gc
 import os
+import re
 import signal
 import sys
+from pathlib import Path
 from typing import NoReturn
 
 # Python's garbage collector in a command's or worker's process: a run imports hundreds of thousands
@@ -90,6 +92,63 @@ def die_with_parent(sig: int = signal.SIGTERM) -> None:
         os.kill(os.getpid(), sig)
 
 
+DIST_NAME = "octarm-teleop"
+
+
+@functools.cache
+def provenance() -> dict[str, str]:
+    """What produced an output: {"version": the installed package's version} (absent when not installed)
+    plus {"git_revision": the commit checked out} when the code runs from a git checkout (read from the
+    .git folder, no git command needed; absent otherwise).  Never raises."""
+    out: dict[str, str] = {}
+    try:
+        from importlib.metadata import version
+
+        out["version"] = version(DIST_NAME)
+    except Exception:  # noqa: BLE001 - not installed (a bare checkout on PYTHONPATH)
+        pass
+    try:
+        rev = _git_revision(Path(__file__).resolve().parents[2])
+    except (OSError, ValueError, UnicodeDecodeError):
+        rev = None
+    if rev:
+        out["git_revision"] = rev
+    return out
+
+
+def _git_revision(root: Path) -> str | None:
+    """The commit of HEAD of the checkout at `root` (a .git folder, or a .git file of a worktree)."""
+    dot = root / ".git"
+    if dot.is_file():  # worktree or submodule: "gitdir: <path>"
+        text = dot.read_text(encoding="utf-8").strip()
+        if not text.startswith("gitdir:"):
+            return None
+        gitdir = (root / text[len("gitdir:"):].strip()).resolve()
+    elif dot.is_dir():
+        gitdir = dot
+    else:
+        return None
+    head = (gitdir / "HEAD").read_text(encoding="utf-8").strip()
+    if not head.startswith("ref:"):
+        return head if re.fullmatch(r"[0-9a-f]{40,64}", head) else None
+    ref = head[len("ref:"):].strip()
+    common = gitdir
+    if (gitdir / "commondir").is_file():  # a worktree keeps its refs in the main repository
+        common = (gitdir / (gitdir / "commondir").read_text(encoding="utf-8").strip()).resolve()
+    for folder in (gitdir, common):
+        f = folder / ref
+        if f.is_file():
+            sha = f.read_text(encoding="utf-8").strip()
+            return sha if re.fullmatch(r"[0-9a-f]{40,64}", sha) else None
+    packed = common / "packed-refs"
+    if packed.is_file():
+        for line in packed.read_text(encoding="utf-8").splitlines():
+            parts = line.split()
+            if len(parts) == 2 and parts[1] == ref and re.fullmatch(r"[0-9a-f]{40,64}", parts[0]):
+                return parts[0]
+    return None
+
+
 @functools.cache
 def progress_bar_class() -> type:
     """tqdm's bar without its monitor thread.  tqdm starts a daemon thread ("tqdm_monitor") at the first bar
@@ -114,4 +173,4 @@ def progress_bar_class() -> type:
 
 
 __all__ = ["GC_THRESHOLDS", "OVERLAP_ENV", "die_with_parent", "end_process", "fast_exit", "overlap_setting",
-           "progress_bar_class", "set_gc_thresholds"]
+           "progress_bar_class", "provenance", "set_gc_thresholds"]

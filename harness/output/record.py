@@ -55,11 +55,13 @@ from harness.output.geometry import (
     task_to_world,
     world_base,
 )
-from harness.output.record_contact import force_series, log_contacts
+from harness.output.obstacles import obstacle_outline, obstacle_solid
+from harness.output.record_contact import ARROW_LENGTH, arrow_scale, force_series, log_contacts
 from harness.output.scene import (
     C_BACKBONE,
     C_DESIRED,
     C_MASTER,
+    C_OBSTACLE,
     C_SECTIONS,
     C_SLAVE,
     C_X,
@@ -70,6 +72,7 @@ from harness.output.scene import (
     TRACE_POINT_RADIUS,
     box_half_size,
     build_blueprint,
+    display_offset,
     trace_points,
 )
 
@@ -136,6 +139,10 @@ def _status_text(traj: Trajectory) -> str:
         f"* steps recorded: {n} ({span})",
         f"* plant: {_plant_name(traj)}",
     ]
+    if has_interaction(traj):
+        scale = arrow_scale(traj)
+        lines.append(f"* contact force arrows: 1 N = {scale * 1e3:.3g} mm (the largest force is "
+                     f"{ARROW_LENGTH * 1e3:.0f} mm long)")
     if traj.message:
         lines += ["", "```", str(traj.message), "```"]
     return "\n".join(lines) + "\n"
@@ -241,12 +248,21 @@ def geometry_every(traj: Trajectory, rate: float) -> int:
 
 
 def log_static(rec: rr.RecordingStream, traj: Trajectory, master_base, slave_base) -> None:
+    meta = traj.meta or {}
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     rec.log("status", rr.TextDocument(_status_text(traj), media_type=rr.MediaType.MARKDOWN), static=True)
     for entity, _, names, colors in _series(traj):
         rec.log(entity, rr.SeriesLines(names=names, colors=colors), static=True)
-    rec.log("world/bases", rr.Points3D([master_base, slave_base], radii=0.02, colors=[C_MASTER, C_SLAVE],
-                                       labels=["master base", "slave base"]), static=True)
+    # both arms drawn in the plane Y = 0 (`scene.display_offset`): the data stay in MuJoCo's world frame,
+    # a static translation of each arm's entities moves them
+    m_off, s_off = display_offset(meta, "master_base"), display_offset(meta, "slave_base")
+    for entity, off in (("world/master", m_off), ("world/desired/master", m_off), ("world/operator", m_off),
+                        ("world/slave", s_off), ("world/desired/slave", s_off), ("world/contact", s_off)):
+        rec.log(entity, rr.Transform3D(translation=off), static=True)
+    rec.log("world/bases", rr.Points3D([master_base + m_off, slave_base + s_off], radii=0.02,
+                                       colors=[C_MASTER, C_SLAVE], labels=["master base", "slave base"]),
+            static=True)
+    log_obstacles(rec, meta.get("environment") or (), slave_base)
     if len(traj):
         idx = _decimate(len(traj), MAX_STATIC_PATH_POINTS)
         xd = np.asarray(traj.xd, dtype=float)[idx]
@@ -269,6 +285,29 @@ def log_static(rec: rr.RecordingStream, traj: Trajectory, master_base, slave_bas
                                                      draw_order=1.0), static=True)
     rec.log("traces/slave", rr.Points2D.from_fields(radii=rr.Radius.ui_points(1.5), colors=C_SLAVE,
                                                     draw_order=2.0), static=True)
+
+
+def log_obstacles(rec: rr.RecordingStream, obstacles, slave_base) -> None:
+    """The environment's objects (static): solids in the 3-D view under world/slave/obstacles (slave task
+    frame placed at the slave base), outlines in the 2-D traces view under traces/obstacles."""
+    for i, ob in enumerate(obstacles):
+        solid = obstacle_solid(ob)
+        label = [str(ob.get("name", i))]
+        solid_fill = rr.components.FillMode.Solid
+        if solid is None:
+            r = float(ob["size"][0])
+            centre = task_to_world(np.asarray(ob["position"], dtype=float), slave_base)
+            shape = rr.Ellipsoids3D(centers=[centre], half_sizes=[[r, r, r]], colors=[C_OBSTACLE],
+                                    labels=label, fill_mode=solid_fill)
+        else:
+            c, half, angle = solid
+            turn = rr.RotationAxisAngle(axis=[0.0, 1.0, 0.0], angle=angle)
+            shape = rr.Boxes3D(centers=[task_to_world(c, slave_base)], half_sizes=[half], colors=[C_OBSTACLE],
+                               rotation_axis_angles=[turn], labels=label, fill_mode=solid_fill)
+        rec.log(f"world/slave/obstacles/{i}", shape, static=True)
+        outline = rr.LineStrips2D([_screen(obstacle_outline(ob))], colors=[C_OBSTACLE],
+                                  radii=rr.Radius.ui_points(1.5), labels=label)
+        rec.log(f"traces/obstacles/{i}", outline, static=True)
 
 
 def _screen(x: np.ndarray) -> np.ndarray:

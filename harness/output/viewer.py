@@ -20,6 +20,7 @@ path (the run's full range of motion is known only at the end; the file's bluepr
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import importlib.util
 import ipaddress
 import os
@@ -234,6 +235,8 @@ class LiveView:
             warnings.warn(f"live view stopped: {self.failed}", stacklevel=2)
 
     def _start(self, part: Trajectory) -> None:
+        if self.scn is not None:
+            part.meta["environment"] = [dataclasses.asdict(o) for o in self.scn.environment.objects]
         framing = self._with_desired_path(part)
         self.rec.send_blueprint(scene.build_blueprint(framing))
         record.log_static(self.rec, framing, geometry.world_base(part.meta, "master_base"),
