@@ -436,16 +436,16 @@ def contact_run(tmp_path_factory):
 def test_contact_obstacle_is_drawn_in_the_3d_and_2d_views(contact_run):
     rrd = contact_run / "run.rrd"
     # the ceiling: plane Z = 0.99 m (slave frame), normal -Z: a slab above it, centred at X = 0
-    (centres,) = _columns(rrd, "/world/slave/obstacles/0", "Boxes3D:centers")
-    (half,) = _columns(rrd, "/world/slave/obstacles/0", "Boxes3D:half_sizes")
+    (centres,) = _columns(rrd, "/world/slave/obstacles/ceiling", "Boxes3D:centers")
+    (half,) = _columns(rrd, "/world/slave/obstacles/ceiling", "Boxes3D:half_sizes")
     from harness.output.obstacles import PLANE_THICKNESS
 
     slave_base = np.array([0.0, 0.3, 0.0])  # octarm_base of the generated MuJoCo model
     np.testing.assert_allclose(centres[0], slave_base + [0.0, 0.0, 0.99 + PLANE_THICKNESS / 2], atol=1e-6)
     assert half[0][0] >= 0.5 and half[0][2] == pytest.approx(PLANE_THICKNESS / 2)
-    (strips,) = _columns(rrd, "/traces/obstacles/0", "LineStrips2D:strips")
+    (strips,) = _columns(rrd, "/traces/obstacles/ceiling", "LineStrips2D:strips")
     pts = np.array(strips[0])
-    assert np.allclose(pts[:, 1].max(), -0.99, atol=1e-6)  # the wall's face at Z = 0.99 (screen y = -Z)
+    assert np.allclose(pts[:, 1], -0.99, atol=1e-6)  # the wall's face: the line Z = 0.99 (screen y = -Z)
 
 
 def test_contact_obstacle_is_drawn_in_the_shapes_figure(contact_run, tmp_path):

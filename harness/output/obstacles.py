@@ -48,3 +48,15 @@ def obstacle_outline(ob: dict, points: int = 64) -> np.ndarray:
     u = np.array([-1.0, 1.0, 1.0, -1.0, -1.0]) * half[0]
     w = np.array([-1.0, -1.0, 1.0, 1.0, -1.0]) * half[2]
     return c + _rot_y(u, w, angle)
+
+
+def obstacle_face(ob: dict) -> np.ndarray:
+    """What the 2-D views draw of an obstacle, (P, 2) task [X, Z]: the surface line of a plane (the side
+    the arm touches, 2 PLANE_HALF_LENGTH long), the closed outline of a box or sphere."""
+    if ob["kind"] != "plane":
+        return obstacle_outline(ob)
+    p = np.asarray(ob["position"], dtype=float)
+    n = np.asarray(ob["normal"], dtype=float)
+    n = n / max(float(np.linalg.norm(n)), 1e-12)
+    t = np.array([-n[1], n[0]])
+    return np.stack([p - PLANE_HALF_LENGTH * t, p + PLANE_HALF_LENGTH * t])

@@ -1,8 +1,8 @@
 """Contact and interaction-force content of the Rerun recording : force time series (true vs
 what the laws got) under ``plots/forces/*`` and, in the 3-D view, the contact points and the contact
 forces ON the arm as arrows (``world/contact/*``, every `CONTACT_EVERY`-th control step, only the
-contacts present at that step; scaled so that the run's largest force is `ARROW_LENGTH` long), plus the
-operator's hand.  Called by `harness.output.record` only for
+contacts present at that step; scaled so that the run's largest force is `ARROW_LENGTH` long, drawn
+`ARROW_FRONT` in front of the arm), plus the operator's hand.  Called by `harness.output.record` only for
 runs with interaction (`harness.output.geometry.has_interaction`)."""
 
 from __future__ import annotations
@@ -14,6 +14,10 @@ from harness.loop.trajectory import Trajectory
 
 CONTACT_EVERY = 10  # control steps between logged contact arrows
 ARROW_LENGTH = 0.2  # m: the largest contact force of the run is drawn this long (a sixth of the arm)
+ARROW_RADIUS = 0.006  # m, shaft radius of the force arrows
+# m towards the viewer's eye (world -Y): a force along the arm (a push on the tip) would otherwise be drawn
+# inside the arm's segment boxes and hidden by them
+ARROW_FRONT = 0.06
 _C_TRUE, _C_SENSED, _C_CONTACT = (200, 40, 40), (60, 120, 220), (230, 60, 30)
 
 
@@ -55,7 +59,8 @@ def log_contacts(rec: rr.RecordingStream, traj: Trajectory, timeline: str, maste
             p, f = pts[k, live, :3], pts[k, live, 3:]
             rec.log("world/contact/points", rr.Points3D(p, radii=0.006, colors=_C_CONTACT))
             rec.log("world/contact/forces",
-                    rr.Arrows3D(origins=p, vectors=f * scale, colors=_C_CONTACT))
+                    rr.Arrows3D(origins=p - [0.0, ARROW_FRONT, 0.0], vectors=f * scale, colors=_C_CONTACT,
+                                radii=ARROW_RADIUS))
         if op:
             x = [master_base[0] + hand[k, 0], master_base[1], master_base[2] + hand[k, 1]]
             rec.log("world/operator/hand", rr.Points3D([x], radii=0.015, colors=(240, 200, 60)))
