@@ -72,23 +72,32 @@ def _is_terminal(stream) -> bool:
         return False
 
 
+@functools.cache
+def parent_death_signal():
+    """libc's `prctl` on Linux (None elsewhere or without libc).  Looked up once: call it in the parent
+    before starting a child whose `preexec_fn` is `die_with_parent`, so that the child (between fork and
+    exec) imports and loads nothing."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        import ctypes
+
+        return ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+
+
 def die_with_parent(sig: int = signal.SIGTERM) -> None:
     """Ask the kernel to send `sig` to this process when the thread that started it ends (Linux
     `prctl(PR_SET_PDEATHSIG)`, through ctypes), so that a worker or a helper server never outlives a
     killed parent.  Call it first thing in the child (or as a `preexec_fn`).  Elsewhere, or without
-    libc, it does nothing.  If the parent is already gone (the child was re-parented), `sig` is sent at
-    once."""
-    if not sys.platform.startswith("linux"):
+    libc, it does nothing.  If the parent ends while the request is made, `sig` is sent at once."""
+    prctl = parent_death_signal()
+    if prctl is None:
         return
     parent = os.getppid()
-    try:
-        import ctypes
-
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, int(sig), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
-    except (OSError, AttributeError):
-        return
-    if os.getppid() != parent or parent == 1:
+    prctl(1, int(sig), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+    if os.getppid() != parent:  # the parent ended before the request took effect
         os.kill(os.getpid(), sig)
 
 
@@ -172,5 +181,5 @@ def progress_bar_class() -> type:
     return Bar
 
 
-__all__ = ["GC_THRESHOLDS", "OVERLAP_ENV", "die_with_parent", "end_process", "fast_exit", "overlap_setting",
-           "progress_bar_class", "provenance", "set_gc_thresholds"]
+__all__ = ["DIST_NAME", "GC_THRESHOLDS", "OVERLAP_ENV", "die_with_parent", "end_process", "fast_exit",
+           "overlap_setting", "parent_death_signal", "progress_bar_class", "provenance", "set_gc_thresholds"]

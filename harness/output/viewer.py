@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
-from harness.config.runtime import die_with_parent
+from harness.config.runtime import die_with_parent, parent_death_signal
 from harness.loop.trajectory import Trajectory
 from harness.output import geometry, record, scene
 
@@ -122,6 +122,7 @@ def _start(cmd: list[str], *, detach: bool) -> tuple[subprocess.Popen, Any]:
     (the native window stays open after the run); else it gets the parent-death signal (Linux), so a
     killed `teleop` does not leave a server behind."""
     log = tempfile.TemporaryFile()
+    parent_death_signal()  # looked up here, not in the forked child
     env = {**os.environ, "RERUN_ANALYTICS": os.environ.get("RERUN_ANALYTICS", "0")}
     proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, env=env,
                             start_new_session=True, preexec_fn=None if detach else die_with_parent)
