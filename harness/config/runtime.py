@@ -106,23 +106,48 @@ DIST_NAME = "octarm-teleop"
 
 @functools.cache
 def provenance() -> dict[str, str]:
-    """What produced an output: {"version": the installed package's version} (absent when not installed)
-    plus {"git_revision": the commit checked out} when the code runs from a git checkout (read from the
-    .git folder, no git command needed; absent otherwise).  Never raises."""
+    """What produced an output: {"version": the package's version} plus {"git_revision": the commit checked
+    out} when the code runs from a git checkout (read from the .git folder, no git command needed; absent
+    otherwise).  The version is the checkout's pyproject.toml when running from a checkout, else the
+    installed package's metadata (absent when neither is found).  Never raises; a few milliseconds from a
+    checkout or a wheel (importlib.metadata, the fallback, scans every installed package: 60-80 ms)."""
     out: dict[str, str] = {}
+    root = Path(__file__).resolve().parents[2]  # the checkout, or site-packages for a wheel
     try:
-        from importlib.metadata import version
+        v = _checkout_version(root) or _wheel_version(root)
+        if v is None:
+            from importlib.metadata import version
 
-        out["version"] = version(DIST_NAME)
-    except Exception:  # noqa: BLE001 - not installed (a bare checkout on PYTHONPATH)
+            v = version(DIST_NAME)
+        out["version"] = v
+    except Exception:  # noqa: BLE001 - not installed and not a checkout: no version
         pass
     try:
-        rev = _git_revision(Path(__file__).resolve().parents[2])
+        rev = _git_revision(root)
     except (OSError, ValueError, UnicodeDecodeError):
         rev = None
     if rev:
         out["git_revision"] = rev
     return out
+
+
+def _checkout_version(root: Path) -> str | None:
+    """[project] version of root/pyproject.toml if it is this package's."""
+    path = root / "pyproject.toml"
+    if not path.is_file():
+        return None
+    import tomllib
+
+    project = tomllib.loads(path.read_text(encoding="utf-8")).get("project", {})
+    return str(project["version"]) if project.get("name") == DIST_NAME and "version" in project else None
+
+
+def _wheel_version(site: Path) -> str | None:
+    """Version in the name of this package's .dist-info folder next to the installed code."""
+    stem = DIST_NAME.replace("-", "_") + "-"
+    for d in site.glob(stem + "*.dist-info"):
+        return d.name[len(stem):-len(".dist-info")]
+    return None
 
 
 def _git_revision(root: Path) -> str | None:
