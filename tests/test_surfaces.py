@@ -521,3 +521,24 @@ def test_git_revision_absent_outside_a_checkout_never_an_error(tmp_path):
         _git_revision(tmp_path)  # provenance() catches this: the revision is then absent
     (tmp_path / ".git").write_text("garbage")
     assert _git_revision(tmp_path) is None
+
+
+def test_web_view_on_another_address_warns(tmp_path, capsys, monkeypatch):
+    """--view-host other than loopback: a warning line says the run is served to other machines (the
+    viewer itself is replaced by a file stream here)."""
+    from harness.output import viewer
+
+    seen = {}
+
+    def to_file(mode, scn, **kw):
+        seen.update(kw, mode=mode)
+        return viewer.LiveView.to_file(tmp_path / "live.rrd", scn)
+
+    monkeypatch.setattr(viewer.LiveView, "open", staticmethod(to_file))
+    rc = main(["run", "--duration", "0.2", "--view", "web", "--view-host", "0.0.0.0",
+               "--out", str(tmp_path / "o"), "--no-progress"])
+    assert rc == 0 and seen["host"] == "0.0.0.0" and seen["mode"] == "web"
+    err = capsys.readouterr().err.splitlines()
+    warn = [ln for ln in err if ln.startswith("warning: --view-host 0.0.0.0")]
+    assert len(warn) == 1 and "every machine" in warn[0], err
+    assert (tmp_path / "o" / "metrics.json").is_file()
