@@ -542,3 +542,13 @@ def test_web_view_on_another_address_warns(tmp_path, capsys, monkeypatch):
     warn = [ln for ln in err if ln.startswith("warning: --view-host 0.0.0.0")]
     assert len(warn) == 1 and "every machine" in warn[0], err
     assert (tmp_path / "o" / "metrics.json").is_file()
+
+
+@pytest.mark.parametrize("host, text", [("no.such.host.invalid", "not an address"),
+                                        ("192.0.2.1", "not an address of this machine")])
+def test_web_view_bad_host_is_one_line(tmp_path, capsys, host, text):
+    rc = main(["run", "--duration", "0.2", "--view", "web", "--view-host", host, "--out", str(tmp_path / "o"),
+               "--no-progress"])
+    assert rc == 1
+    (line,) = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert line.startswith(f"error: --view-host {host}: {text}"), line

@@ -191,14 +191,14 @@ def _open_live_view(args: argparse.Namespace, scn):
     if not args.view:
         return None
     viewer = _import("harness.output.viewer")
-    if args.view == "web" and not viewer.is_loopback(args.view_host):
-        _warn(f"--view-host {args.view_host}: the web viewer and the run's data are served to every machine "
-              f"that can reach this address, without authentication")
     try:
         live = viewer.LiveView.open(args.view, scn, host=args.view_host, web_port=args.web_port,
                                     grpc_port=args.grpc_port)
     except viewer.ViewerUnavailable as e:
         raise _ViewerUnavailable(str(e)) from None
+    if args.view == "web" and not viewer.is_loopback(args.view_host):
+        _warn(f"--view-host {args.view_host}: the web viewer and the run's data are served to every machine "
+              f"that can reach this address, without authentication")
     if live.url:
         print(f"web viewer: {live.url} (listening on {live.listen})", file=sys.stderr)
     return live

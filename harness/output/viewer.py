@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import errno
 import importlib.util
 import ipaddress
 import os
@@ -91,7 +92,11 @@ def _check_free(host: str, port: int, option: str) -> int:
     with socket.socket(family, socket.SOCK_STREAM) as s:
         try:
             s.bind((host, port))
+        except socket.gaierror as e:
+            raise ViewerUnavailable(f"--view-host {host}: not an address ({e.strerror or e})") from None
         except OSError as e:
+            if e.errno == errno.EADDRNOTAVAIL:
+                raise ViewerUnavailable(f"--view-host {host}: not an address of this machine") from None
             raise ViewerUnavailable(f"{option} {port}: cannot listen on {host}:{port} "
                                     f"({e.strerror or e}); choose another port with {option} N") from None
         return s.getsockname()[1]
