@@ -552,3 +552,51 @@ def test_web_view_bad_host_is_one_line(tmp_path, capsys, host, text):
     assert rc == 1
     (line,) = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert line.startswith(f"error: --view-host {host}: {text}"), line
+
+
+@pytest.fixture
+def xvfb_display():
+    """A virtual X display (Xvfb), so that the native viewer is really started; skipped without Xvfb."""
+    import shutil
+    import subprocess
+    import time
+
+    exe = shutil.which("Xvfb")
+    if exe is None:
+        pytest.skip("no Xvfb binary (apt-get install xvfb)")
+    for n in range(70, 90):
+        if not os.path.exists(f"/tmp/.X11-unix/X{n}") and not os.path.exists(f"/tmp/.X{n}-lock"):
+            break
+    proc = subprocess.Popen([exe, f":{n}", "-screen", "0", "1280x800x24"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 20
+    while not os.path.exists(f"/tmp/.X11-unix/X{n}"):
+        assert proc.poll() is None and time.monotonic() < deadline, "Xvfb did not start"
+        time.sleep(0.1)
+    yield f":{n}"
+    proc.terminate()
+    proc.wait(10)
+
+
+@pytest.mark.slow
+def test_native_view_on_a_display_works_or_fails_in_one_line(tmp_path, capsys, monkeypatch, xvfb_display):
+    """On a real X display the native viewer is started: either the run streams to it and writes its
+    outputs (exit 0), or the viewer cannot run there (software GL without the texture formats it needs,
+    as on this machine kind) and that is one line naming --view web, before anything runs."""
+    monkeypatch.setenv("DISPLAY", xvfb_display)
+    out = tmp_path / "v"
+    rc = main(["run", "--duration", "0.5", "--view", "--out", str(out), "--no-progress"])
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    if rc == 0:
+        assert (out / "metrics.json").is_file() and (out / "run.rrd").is_file()
+    else:
+        assert rc == 1 and len(err) == 1, err
+        assert err[0].startswith("error: --view: the Rerun viewer exited") and "--view web" in err[0]
+        assert not any(out.iterdir())
+    # a sweep's recording: opened, or one line without "opened"
+    (tmp_path / "recordings").mkdir()
+    (tmp_path / "recordings" / "c1.rrd").write_bytes(b"")
+    rc = main(["sweep", str(ROOT / "studies" / "segments.toml"), "--out", str(tmp_path), "--view", "c1"])
+    captured = capsys.readouterr()
+    assert (rc == 0 and "opened" in captured.out) or (rc == 1 and "opened" not in captured.out
+                                                      and len(captured.err.strip().splitlines()) == 1)

@@ -25,6 +25,7 @@ import errno
 import importlib.util
 import ipaddress
 import os
+import re
 import shutil
 import signal
 import socket
@@ -51,6 +52,8 @@ LOCALHOST = "127.0.0.1"
 WEB_PORT = 9090  # Rerun's defaults: the web viewer's HTTP port and the data (gRPC) port
 GRPC_PORT = 9876
 START_TIMEOUT = 20.0  # s for a spawned viewer / viewer server to listen
+NATIVE_SETTLE = 2.0  # s a native viewer must stay up after it listens (its window is created after that)
+FLUSH_TIMEOUT = 10.0  # s for the live stream to reach the viewer at the end of a run
 
 
 class ViewerUnavailable(RuntimeError):
@@ -109,10 +112,7 @@ def _wait_listening(proc: subprocess.Popen, host: str, port: int, log, what: str
     deadline = time.monotonic() + START_TIMEOUT
     while time.monotonic() < deadline:
         if proc.poll() is not None:
-            log.seek(0)
-            lines = [ln.strip() for ln in log.read().decode("utf-8", "replace").splitlines() if ln.strip()]
-            raise ViewerUnavailable(f"{what} exited with status {proc.returncode} before it could be used"
-                                    f"{': ' + lines[-1] if lines else ''}")
+            raise _exit_reason(proc, log, what)
         try:
             with socket.create_connection((connect_host, port), timeout=0.5):
                 return
@@ -120,6 +120,27 @@ def _wait_listening(proc: subprocess.Popen, host: str, port: int, log, what: str
             time.sleep(0.1)
     stop_process(proc)
     raise ViewerUnavailable(f"{what} did not listen on {host}:{port} within {START_TIMEOUT:.0f} s")
+
+
+def _exit_reason(proc: subprocess.Popen, log, what: str) -> ViewerUnavailable:
+    log.seek(0)
+    lines = [ln.strip() for ln in log.read().decode("utf-8", "replace").splitlines() if ln.strip()]
+    return ViewerUnavailable(f"{what} exited with status {proc.returncode} before it could be used"
+                             f"{': ' + _plain(lines[-1]) if lines else ''}")
+
+
+def _plain(text: str) -> str:
+    """A log line without terminal colour codes."""
+    return re.sub(r"\x1b\[[0-9;]*m", "", text)
+
+
+def _wait_alive(proc: subprocess.Popen, seconds: float, log, what: str) -> None:
+    """ViewerUnavailable if `proc` exits within `seconds` (e.g. a native viewer whose window cannot be
+    created: it listens first, then fails on the graphics driver)."""
+    with contextlib.suppress(subprocess.TimeoutExpired):
+        proc.wait(seconds)
+    if proc.returncode is not None:
+        raise _exit_reason(proc, log, what)
 
 
 def _start(cmd: list[str], *, detach: bool) -> tuple[subprocess.Popen, Any]:
@@ -190,6 +211,8 @@ class LiveView:
                                detach=True)
             try:
                 _wait_listening(proc, LOCALHOST, port, log, "the Rerun viewer")
+                # it listens before it creates its window, which can still fail (graphics driver)
+                _wait_alive(proc, NATIVE_SETTLE, log, "the Rerun viewer")
             except ViewerUnavailable as e:
                 raise ViewerUnavailable(f"--view: {e}; use --view web to watch in a browser") from None
             rec.connect_grpc(f"rerun+http://{LOCALHOST}:{port}/proxy")
@@ -275,7 +298,7 @@ class LiveView:
         try:
             mb, sb = (geometry.world_base(traj.meta, key) for key in ("master_base", "slave_base"))
             record.log_static(self.rec, traj, mb, sb)
-            self.rec.flush()
+            self.rec.flush(timeout_sec=FLUSH_TIMEOUT)
         except Exception as e:  # noqa: BLE001
             self.failed = f"{type(e).__name__}: {e}"
             warnings.warn(f"live view stopped: {self.failed}", stacklevel=2)
@@ -283,7 +306,7 @@ class LiveView:
     def close(self) -> None:
         try:
             with contextlib.suppress(Exception):
-                self.rec.flush(timeout_sec=5.0)
+                self.rec.flush(timeout_sec=FLUSH_TIMEOUT)
             self.rec.disconnect()
         finally:
             stop_process(self.server)
@@ -307,11 +330,5 @@ def spawn_recording_viewer(path: str | Path, settle: float = 2.0) -> list[str]:
                                 "on PATH)")
     cmd = open_recording(path)
     proc, log = _start(cmd, detach=True)
-    with contextlib.suppress(subprocess.TimeoutExpired):
-        proc.wait(settle)
-    if proc.returncode is not None and proc.returncode != 0:
-        log.seek(0)
-        lines = [ln.strip() for ln in log.read().decode("utf-8", "replace").splitlines() if ln.strip()]
-        raise ViewerUnavailable(f"the Rerun viewer exited with status {proc.returncode}"
-                                f"{': ' + lines[-1] if lines else ''}")
+    _wait_alive(proc, settle, log, "the Rerun viewer")
     return cmd
