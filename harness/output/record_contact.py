@@ -35,23 +35,30 @@ def force_series(traj: Trajectory) -> list[tuple[str, np.ndarray, list[str], lis
     ]
 
 
-def arrow_scale(traj: Trajectory) -> float:
-    """m per N of the contact-force arrows: the largest contact force of the run is ARROW_LENGTH long
-    (ARROW_LENGTH per newton when no contact carries force)."""
+def max_contact_force(traj: Trajectory) -> float:
+    """N, the largest contact force on the arm over `traj` (0 without contacts)."""
     pts = traj.contact_points
     if pts is None or not len(pts):
-        return ARROW_LENGTH
+        return 0.0
     f = np.linalg.norm(np.asarray(pts, dtype=float)[:, :, 3:], axis=-1)
-    fmax = float(np.nanmax(f)) if np.isfinite(f).any() else 0.0
+    return float(np.nanmax(f)) if np.isfinite(f).any() else 0.0
+
+
+def arrow_scale(traj: Trajectory, fmax: float | None = None) -> float:
+    """m per N of the contact-force arrows: the largest contact force (`fmax`, default: of `traj`) is
+    ARROW_LENGTH long (ARROW_LENGTH per newton when no contact carries force)."""
+    fmax = max_contact_force(traj) if fmax is None else fmax
     return ARROW_LENGTH / fmax if fmax > 0 else ARROW_LENGTH
 
 
-def log_contacts(rec: rr.RecordingStream, traj: Trajectory, timeline: str, master_base: np.ndarray) -> None:
-    """Contact points and force arrows (world frame) and the operator's hand point."""
+def log_contacts(rec: rr.RecordingStream, traj: Trajectory, timeline: str, master_base: np.ndarray,
+                 scale: float | None = None) -> None:
+    """Contact points and force arrows (world frame, `scale` m per N, default `arrow_scale(traj)`) and
+    the operator's hand point."""
     pts = traj.contact_points
     hand = traj.hand
     op = hand is not None and np.any(hand != 0)
-    scale = arrow_scale(traj)
+    scale = arrow_scale(traj) if scale is None else scale
     for k in range(0, len(traj), CONTACT_EVERY):
         rec.set_time(timeline, duration=float(traj.t[k]))
         if pts is not None:

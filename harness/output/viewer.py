@@ -44,7 +44,7 @@ import rerun as rr
 
 from harness.config.runtime import die_with_parent, parent_death_signal
 from harness.loop.trajectory import Trajectory
-from harness.output import geometry, record, scene
+from harness.output import geometry, record, record_contact, scene
 
 VIEW_MODES = ("native", "web")
 DESIRED_PATH_POINTS = 400
@@ -181,6 +181,7 @@ class LiveView:
         self.chunks = 0
         self.failed: str | None = None
         self._first: Trajectory | None = None
+        self._fmax = 0.0  # N, the largest contact force streamed so far
 
     # -- construction ----------------------------------------------------------------------------
     @classmethod
@@ -258,6 +259,10 @@ class LiveView:
             mb, sb = (geometry.world_base(part.meta, key) for key in ("master_base", "slave_base"))
             record.log_series(self.rec, part, 500)
             record.log_spatial(self.rec, part, mb, sb, 500, 1)
+            if geometry.has_interaction(part):  # arrows scaled by the largest force streamed so far
+                self._fmax = max(self._fmax, record_contact.max_contact_force(part))
+                record_contact.log_contacts(self.rec, part, scene.TIMELINE, mb,
+                                            record_contact.arrow_scale(part, self._fmax))
             self.chunks += 1
         except Exception as e:  # noqa: BLE001 - the viewer must never stop a run
             self.failed = f"{type(e).__name__}: {e}"
@@ -288,7 +293,8 @@ class LiveView:
                                                      "de1", "de2", "beta", "ya", "deN", "T1", "T2", "u2")}
         fields["xd"] = np.concatenate([part.xd, xd])
         extra = {k: (None if getattr(part, k) is None else getattr(part, k)[idx])
-                 for k in ("x2_plant", "body_pos", "body_quat", "master_pos")}
+                 for k in ("x2_plant", "body_pos", "body_quat", "master_pos", "F_true", "F_sensed", "contact",
+                           "hand", "contact_points")}
         return Trajectory(**fields, **extra, status="running", message="", meta=dict(part.meta))
 
     def finish(self, traj: Trajectory) -> None:
