@@ -600,3 +600,16 @@ def test_native_view_on_a_display_works_or_fails_in_one_line(tmp_path, capsys, m
     captured = capsys.readouterr()
     assert (rc == 0 and "opened" in captured.out) or (rc == 1 and "opened" not in captured.out
                                                       and len(captured.err.strip().splitlines()) == 1)
+
+
+def test_live_view_of_a_contact_run_streams_the_obstacle_and_forces(tmp_path, monkeypatch):
+    from harness.output import viewer
+
+    monkeypatch.setattr(viewer.LiveView, "open", staticmethod(
+        lambda mode, scn, **kw: viewer.LiveView.to_file(tmp_path / "live.rrd", scn)))
+    assert main(["run", str(ROOT / "scenarios" / "contact.toml"), "--duration", "1.5", "--set", "transient=0",
+                 "--view", "--out", str(tmp_path / "o"), "--no-progress"]) == 0
+    live = tmp_path / "live.rrd"
+    assert _columns(live, "/world/slave/obstacles/ceiling", "Boxes3D:half_sizes")
+    assert _columns(live, "/traces/obstacles/ceiling", "LineStrips2D:strips")
+    assert len(_columns(live, "/plots/forces/F2", "Scalars:scalars")) == 1500
