@@ -8,8 +8,8 @@
     teleop fidelity [--segments 4,8,16,32] [--samples N] [--reference analytic|cosserat]   plant fidelity
     teleop cache [--prune | --clear]                         the compiled-kernel cache: list, prune
 
-Exit status: 0 success; 1 the run failed (diverged, an output could not be written) or a bound was
-violated; 2 invalid input (scenario, bounds, option, output folder; a file that cannot be written before
+Exit status: 0 success; 1 the run failed (diverged, an output could not be written), a bound was
+violated or the viewer of `--view` could not be opened; 2 invalid input (scenario, bounds, option, output folder; a file that cannot be written before
 anything ran); 130 interrupted (SIGINT/SIGTERM).
 Invalid input is reported as a single ``error: ...`` line on stderr, never a traceback.
 

@@ -167,7 +167,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "run.rrd (Rerun recording) and the PNG figures. Outputs are written even when the run "
                     "diverges or is interrupted (Ctrl-C / SIGTERM stop the run cleanly; a second Ctrl-C "
                     "aborts).",
-        epilog="exit status: 0 ok; 1 diverged / outputs not written; 2 invalid input; 130 interrupted.")
+        epilog="exit status: 0 ok; 1 diverged / outputs not written / the --view viewer could not be opened "
+               "(then nothing ran); 2 invalid input; 130 interrupted.")
     _add_scenario_options(run)
     _add_out_and_progress(run, "output folder (created; must be writable). Default: runs/<scenario name>.")
     run.add_argument("--view", nargs="?", const="native", choices=("native", "web"), default=None,
@@ -223,9 +224,10 @@ def build_parser() -> argparse.ArgumentParser:
                "[[factor]] param = any scenario key (e.g. plant.slave.masses[0]) with scale = [...] "
                "(x nominal), values = [...] or scale/values = {random = 'uniform', low, high}; "
                "[sampling] mode = 'grid' | 'random', n, seed. "
-               "exit status: 0 every case has a row (diverged cases are rows too); 1 cases unfinished or "
-               "the executor failed; 2 invalid study, option or output folder; 130 interrupted (re-run to "
-               "resume).")
+               "exit status: 0 every case has a row (diverged cases are rows too); 1 cases unfinished, "
+               "the executor failed, or an output (recordings, summary) could not be written after the "
+               "cases ran (the rest, summary.csv included, is written); 2 invalid study, option or output "
+               "folder; 130 interrupted (re-run to resume).")
     sweep.add_argument("study", metavar="STUDY.toml", type=_path, help="study file describing the sweep.")
     sweep.add_argument("--out", metavar="DIR", type=_path, default=None,
                        help="output folder (created; must be writable; an existing sweep folder is "
