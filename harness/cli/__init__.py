@@ -9,8 +9,8 @@
     teleop cache [--prune | --clear]                         the compiled-kernel cache: list, prune
 
 Exit status: 0 success; 1 the run failed (diverged, an output could not be written), a bound was
-violated or the viewer of `--view` could not be opened; 2 invalid input (scenario, bounds, option, output folder; a file that cannot be written before
-anything ran); 130 interrupted (SIGINT/SIGTERM).
+violated or the viewer of `--view` could not be opened; 2 invalid input (scenario, bounds, option,
+output folder; a file that cannot be written before anything ran); 130 interrupted (SIGINT/SIGTERM).
 Invalid input is reported as a single ``error: ...`` line on stderr, never a traceback.
 
 The simulation back ends are imported lazily so that ``--help`` and input validation are fast.
