@@ -150,8 +150,10 @@ def _start(cmd: list[str], *, detach: bool) -> tuple[subprocess.Popen, Any]:
     log = tempfile.TemporaryFile()
     parent_death_signal()  # looked up here, not in the forked child
     env = {**os.environ, "RERUN_ANALYTICS": os.environ.get("RERUN_ANALYTICS", "0")}
+    posix = os.name == "posix"
     proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, env=env,
-                            start_new_session=True, preexec_fn=None if detach else die_with_parent)
+                            start_new_session=True,
+                            preexec_fn=die_with_parent if posix and not detach else None)
     return proc, log
 
 
@@ -159,13 +161,19 @@ def stop_process(proc: subprocess.Popen | None, timeout: float = 5.0) -> None:
     """Terminate a started viewer server (its whole process group) and reap it."""
     if proc is None or proc.poll() is not None:
         return
-    with contextlib.suppress(ProcessLookupError, PermissionError):
-        os.killpg(proc.pid, signal.SIGTERM)
+
+    def kill(sig) -> None:
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            if hasattr(os, "killpg"):
+                os.killpg(proc.pid, sig)
+            else:  # Windows: no process groups to signal
+                proc.kill()
+
+    kill(signal.SIGTERM)
     try:
         proc.wait(timeout)
     except subprocess.TimeoutExpired:
-        with contextlib.suppress(ProcessLookupError, PermissionError):
-            os.killpg(proc.pid, signal.SIGKILL)
+        kill(getattr(signal, "SIGKILL", signal.SIGTERM))
         proc.wait(timeout)
 
 
