@@ -355,6 +355,8 @@ def run_cases(runner: Runner, case_fn: Callable, cases: Sequence[Case], metrics:
             if not done and hard is not None:  # a case blocks past its limit: stop the pool
                 now = time.monotonic()
                 late = [f for f in inflight if now - started[f] >= hard]
+                if not late:  # woke up a little early
+                    continue
                 runner.close(cancel=True)
                 for fut in list(inflight):
                     case = inflight.pop(fut)
