@@ -22,6 +22,10 @@ Outputs (folder `out`, default `runs/sweeps/<name>/`)
     deterministic for a given seed).  The worker returns the file's bytes, so recordings also work
     on a remote Dask cluster without a shared file system.
 
+Nothing is written through a symbolic link planted in the folder (results.jsonl, .lock, recordings/:
+refused in one line).  Output failures after the cases ran (recordings, summary) are listed in
+`SweepResult.failures` (exit 1) and the other outputs are still written.
+
 Interrupts: Ctrl-C / SIGTERM cancel the pending cases, stop the workers and raise `SweepInterrupted`
 (a `KeyboardInterrupt`); every finished row is already on disk and a later run resumes.  A worker
 process that dies (segfault, out of memory) breaks the process pool: the cases that were in flight
