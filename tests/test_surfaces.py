@@ -613,3 +613,23 @@ def test_live_view_of_a_contact_run_streams_the_obstacle_and_forces(tmp_path, mo
     assert _columns(live, "/world/slave/obstacles/ceiling", "Boxes3D:half_sizes")
     assert _columns(live, "/traces/obstacles/ceiling", "LineStrips2D:strips")
     assert len(_columns(live, "/plots/forces/F2", "Scalars:scalars")) == 1500
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/zero"), reason="needs /dev/zero")
+@pytest.mark.parametrize("kind", ["device", "socket"])
+def test_device_or_socket_as_scenario_is_refused_in_one_line(tmp_path, capsys, kind):
+    import socket
+
+    if kind == "device":
+        path, sock = Path("/dev/zero"), None
+    else:
+        path = tmp_path / "s.toml"
+        sock = socket.socket(socket.AF_UNIX)
+        sock.bind(str(path))
+    try:
+        assert _main_within(["run", str(path), "--out", str(tmp_path / "o"), "--no-progress"], 20.0) == 2
+    finally:
+        if sock is not None:
+            sock.close()
+    (line,) = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert "not a regular file" in line and str(path) in line, line

@@ -10,6 +10,7 @@ pipes, devices, sockets), are refused with a one-line ConfigError.
 from __future__ import annotations
 
 import contextlib
+import errno
 import math
 import os
 import stat
@@ -61,7 +62,13 @@ def _open_regular(path: Path, what: str):
     """Open `path` for reading only if it is a regular file (after symlinks): a named pipe, device or
     socket is refused with a one-line ConfigError instead of blocking or reading without end.  Opened
     non-blocking and checked on the open descriptor, so the check and the read see the same file."""
-    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except OSError as e:
+        if e.errno == errno.ENXIO:  # a socket (or a device without its driver): no file to read
+            raise ConfigError(f"{what} {path}: not a regular file (a named pipe, device or socket is "
+                              "not read)", path=str(path)) from None
+        raise
     try:
         st = os.fstat(fd)
         if stat.S_ISDIR(st.st_mode):
