@@ -72,7 +72,7 @@ def _open_regular(path: Path, what: str):
     try:
         st = os.fstat(fd)
         if stat.S_ISDIR(st.st_mode):
-            raise IsADirectoryError(21, "Is a directory", str(path))
+            raise IsADirectoryError(errno.EISDIR, "Is a directory", str(path))
         if not stat.S_ISREG(st.st_mode):
             raise ConfigError(f"{what} {path}: not a regular file (a named pipe, device or socket is "
                               "not read)", path=str(path))
