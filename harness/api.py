@@ -14,6 +14,7 @@ controller (`[controller]`: class, actuation, params; harness.loop.controllers),
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import signal
@@ -87,6 +88,25 @@ def stop_on_signals(stop: threading.Event | None) -> Iterator[list[int]]:
         stop.clear()
 
 
+def tool_info() -> dict[str, str]:
+    """metrics.json's "tool": the package name, its version and the git revision of the checkout the code
+    runs from (each absent when unknown; `harness.config.runtime.provenance`)."""
+    from harness.config.runtime import DIST_NAME, provenance
+
+    return {"name": DIST_NAME, **provenance()}
+
+
+def write_config(scn: Scenario, path: Path) -> Path:
+    """config.toml: the fully resolved scenario (`load_scenario(path) == scn`) under a comment naming the
+    tool's version and git revision (when known)."""
+    from harness.config.textio import write_atomic
+
+    info = tool_info()
+    what = " ".join([info["name"], *([info["version"]] if "version" in info else []),
+                     *([f"(git {info['git_revision']})"] if "git_revision" in info else [])])
+    return write_atomic(path, f"# written by {what}\n" + _load.dumps_scenario(scn))
+
+
 RUN_OUTPUTS = ("config.toml", "run.rrd", "metrics.json")  # + the figures (harness.output.names.FIGURES)
 
 
@@ -142,7 +162,7 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
         plant = build_plant(scn)
     if out is not None:  # first, so the configuration is on disk whatever happens next
         clear_run_outputs(out)
-        _load.dump_scenario(scn, out / "config.toml")
+        write_config(scn, out / "config.toml")
         written.append(out / "config.toml")
     prefetch: list = []  # Rerun and matplotlib are imported on the other core while the loop runs
 
@@ -156,6 +176,7 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
         traj = loop.simulate(scn, plant=plant, progress=progress, on_chunk=on_chunk,
                              on_running=start_prefetch if out is not None else None)
     interrupted = bool(received) or traj.status == "interrupted"
+    traj.meta["environment"] = [dataclasses.asdict(o) for o in scn.environment.objects]  # drawn by outputs
 
     def metrics_of():
         from harness.loop.metrics import compute_metrics
@@ -180,7 +201,7 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
         def write_metrics() -> Path:
             from harness.config.textio import write_atomic
 
-            final = dict(doc, outputs=[p.name for p in written] + ["metrics.json"],
+            final = dict(doc, tool=tool_info(), outputs=[p.name for p in written] + ["metrics.json"],
                          outputs_failed=list(dict.fromkeys(failed)), output_errors=list(failures))
             text = json.dumps(jsonable(final), indent=2, allow_nan=False) + "\n"
             return write_atomic(out / "metrics.json", text)

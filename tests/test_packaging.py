@@ -11,6 +11,7 @@ MJCF and its scenarios can only come from the wheel (the test checks where they 
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -113,3 +114,6 @@ def test_wheel_install_runs_from_any_folder(wheel, tmp_path):
                          capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, run.stderr
     assert (work / "o" / "run.rrd").stat().st_size > 0
+    # provenance from the wheel: its version, no git revision (not a checkout), never an error
+    tool = json.loads((work / "o" / "metrics.json").read_text())["tool"]
+    assert tool == {"name": "octarm-teleop", "version": wheel.name.split("-")[1]}

@@ -9,9 +9,9 @@
     teleop cache [--prune | --clear]                         the compiled-kernel cache: list, prune
     teleop findings [NAME ...]                               rerun the findings, check their claims
 
-Exit status: 0 success; 1 the run failed (diverged, an output could not be written) or a bound was
-violated; 2 invalid input (scenario, bounds, option, output folder; a file that cannot be written before
-anything ran); 130 interrupted (SIGINT/SIGTERM).
+Exit status: 0 success; 1 the run failed (diverged, an output could not be written), a bound was
+violated or the viewer of `--view` could not be opened; 2 invalid input (scenario, bounds, option,
+output folder; a file that cannot be written before anything ran); 130 interrupted (SIGINT/SIGTERM).
 Invalid input is reported as a single ``error: ...`` line on stderr, never a traceback.
 
 The simulation back ends are imported lazily so that ``--help`` and input validation are fast.
@@ -118,6 +118,10 @@ class _Unavailable(RuntimeError):
     """A lazily imported back end (simulation, plotting, ...) is missing."""
 
 
+class _ViewerUnavailable(RuntimeError):
+    """`--view` could not open its viewer (one line)."""
+
+
 def _fmt_value(v: Any) -> str:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         return str(v)
@@ -183,24 +187,47 @@ def _run_exit_code(traj, failures: list[str], interrupted: bool, wrote: bool = T
 # ---------------------------------------------------------------------------------------------
 # commands
 # ---------------------------------------------------------------------------------------------
+def _open_live_view(args: argparse.Namespace, scn):
+    """The live view of `teleop run --view` (None without --view); ViewerUnavailable before anything runs."""
+    if not args.view:
+        return None
+    viewer = _import("harness.output.viewer")
+    try:
+        live = viewer.LiveView.open(args.view, scn, host=args.view_host, web_port=args.web_port,
+                                    grpc_port=args.grpc_port)
+    except viewer.ViewerUnavailable as e:
+        raise _ViewerUnavailable(str(e)) from None
+    if args.view == "web" and not viewer.is_loopback(args.view_host):
+        _warn(f"--view-host {args.view_host}: the web viewer and the run's data are served to every machine "
+              f"that can reach this address, without authentication")
+    if live.url:
+        print(f"web viewer: {live.url} (listening on {live.listen})", file=sys.stderr)
+    return live
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     scn = load_from_args(args)
     out = prepare_out_dir(args.out if args.out is not None else Path("runs") / scn.name)
-    live = _import("harness.output.viewer").LiveView.open(args.view, scn) if args.view else None
-    if live is not None and live.url:
-        print(f"web viewer: {live.url}", file=sys.stderr)
-    traj, _, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress, live=live,
-                                                         record_rate=args.record_rate)
-    rc = _run_exit_code(traj, failures, interrupted)
-    if live is not None:
-        if live.failed:
-            _warn(f"live view: {live.failed}")
-        if live.url and not interrupted:
-            print(f"serving the web viewer at {live.url} - Ctrl-C to stop", file=sys.stderr)
-            with contextlib.suppress(KeyboardInterrupt):
-                while not threading.Event().wait(0.5):  # short waits: Ctrl-C is handled promptly
-                    pass
-        live.close()
+    try:
+        live = _open_live_view(args, scn)
+    except _ViewerUnavailable as e:
+        _err(f"{e} (nothing was run, no outputs written)")
+        return EXIT_FAIL
+    try:
+        traj, _, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress,
+                                                             live=live, record_rate=args.record_rate)
+        rc = _run_exit_code(traj, failures, interrupted)
+        if live is not None:
+            if live.failed:
+                _warn(f"live view: {live.failed}")
+            if live.url and not interrupted:
+                print(f"serving the web viewer at {live.url} - Ctrl-C to stop", file=sys.stderr)
+                with contextlib.suppress(KeyboardInterrupt):
+                    while not threading.Event().wait(0.5):  # short waits: Ctrl-C is handled promptly
+                        pass
+    finally:
+        if live is not None:
+            live.close()
     return rc
 
 
@@ -253,13 +280,17 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from harness.config.assets import shipped
 
     study: Path = shipped(args.study, "studies")
-    if not study.is_file():
+    if not study.exists():
         raise ConfigError(f"study file not found: {study}", path=str(study))
+    if not study.is_file():
+        raise ConfigError(f"study file {study}: not a regular file (a folder, named pipe, device or socket "
+                          "is not read)", path=str(study))
     if args.view is not None:
         return _view_case(study, args.out, args.view)
     sweep = _import("harness.studies.sweep")  # validates the study, then creates and checks the output folder
     rc = sweep.main_sweep(study, args.out, args.workers, args.scheduler, not args.no_progress,
-                          max_cases=args.max_cases, executor=args.executor)
+                          max_cases=args.max_cases, executor=args.executor, overrides=args.overrides,
+                          case_timeout=args.case_timeout)
     return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
 
 
@@ -300,8 +331,6 @@ def cmd_cache(args: argparse.Namespace) -> int:
 
 def _view_case(study: Path, out: Path | None, case_id: str) -> int:
     """`teleop sweep STUDY --view CASE_ID`: open a case's recording in a spawned Rerun viewer."""
-    import subprocess
-
     if out is None:
         out = Path("runs") / "sweeps" / _import("harness.studies.sweep").load_study(study).name
     path = out / "recordings" / f"{case_id}.rrd"
@@ -310,8 +339,12 @@ def _view_case(study: Path, out: Path | None, case_id: str) -> int:
         raise ConfigError(f"--view {case_id}: no recording {path} (recorded cases: "
                           f"{', '.join(have) or 'none'}; re-run the case with 'teleop run --view')",
                           path="--view")
-    cmd = _import("harness.output.viewer").open_recording(path)
-    subprocess.Popen(cmd, start_new_session=True, stdin=subprocess.DEVNULL)
+    viewer = _import("harness.output.viewer")
+    try:
+        cmd = viewer.spawn_recording_viewer(path)
+    except viewer.ViewerUnavailable as e:
+        _err(f"--view {case_id}: {e}")
+        return EXIT_FAIL
     print(f"opened {path} ({' '.join(cmd)})")
     return EXIT_OK
 

@@ -50,6 +50,26 @@ def _int_at_least(lo: int) -> Callable[[str], int]:
 _positive_int, _nonnegative_int = _int_at_least(1), _int_at_least(0)
 
 
+def _positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not 0.0 < v < math.inf:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return v
+
+
+def _port(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        v = -1
+    if not 0 <= v <= 65535:
+        raise argparse.ArgumentTypeError(f"expected a port number in [0, 65535], got {text!r}")
+    return v
+
+
 def _path(text: str) -> Path:
     """A path argument; the empty string is rejected (Path('') would silently mean '.')."""
     if not str(text).strip():
@@ -147,13 +167,24 @@ def build_parser() -> argparse.ArgumentParser:
                     "run.rrd (Rerun recording) and the PNG figures. Outputs are written even when the run "
                     "diverges or is interrupted (Ctrl-C / SIGTERM stop the run cleanly; a second Ctrl-C "
                     "aborts).",
-        epilog="exit status: 0 ok; 1 diverged / outputs not written; 2 invalid input; 130 interrupted.")
+        epilog="exit status: 0 ok; 1 diverged / outputs not written / the --view viewer could not be opened "
+               "(then nothing ran); 2 invalid input; 130 interrupted.")
     _add_scenario_options(run)
     _add_out_and_progress(run, "output folder (created; must be writable). Default: runs/<scenario name>.")
     run.add_argument("--view", nargs="?", const="native", choices=("native", "web"), default=None,
                      help="stream the run to a Rerun viewer while it is simulated: 'native' (the default "
                           "with a bare --view) spawns the viewer, 'web' serves Rerun's web viewer and waits "
-                          "for Ctrl-C after the run. run.rrd is written as without it. Default: no viewer.")
+                          "for Ctrl-C after the run. run.rrd is written as without it. Without a display, "
+                          "'native' stops before running with a line naming --view web. Default: no viewer.")
+    run.add_argument("--view-host", metavar="HOST", default="127.0.0.1",
+                     help="address the web viewer (--view web) listens on. Anything but a loopback address "
+                          "serves the run to other machines, without authentication (a warning is printed). "
+                          "Default: 127.0.0.1.")
+    run.add_argument("--web-port", metavar="N", type=_port, default=9090,
+                     help="HTTP port of the web viewer (--view web), 0 for any free port. Default: 9090.")
+    run.add_argument("--grpc-port", metavar="N", type=_port, default=9876,
+                     help="port the web viewer reads the run's data from (--view web), 0 for any free port. "
+                          "Default: 9876.")
     _add_record_rate(run)
 
     check = sub.add_parser(
@@ -194,9 +225,10 @@ def build_parser() -> argparse.ArgumentParser:
                "[[factor]] param = any scenario key (e.g. plant.slave.masses[0]) with scale = [...] "
                "(x nominal), values = [...] or scale/values = {random = 'uniform', low, high}; "
                "[sampling] mode = 'grid' | 'random', n, seed. "
-               "exit status: 0 every case has a row (diverged cases are rows too); 1 cases unfinished or "
-               "the executor failed; 2 invalid study, option or output folder; 130 interrupted (re-run to "
-               "resume).")
+               "exit status: 0 every case has a row (diverged cases are rows too); 1 cases unfinished, "
+               "the executor failed, or an output (recordings, summary) could not be written after the "
+               "cases ran (the rest, summary.csv included, is written); 2 invalid study, option or output "
+               "folder; 130 interrupted (re-run to resume).")
     sweep.add_argument("study", metavar="STUDY.toml", type=_path, help="study file describing the sweep.")
     sweep.add_argument("--out", metavar="DIR", type=_path, default=None,
                        help="output folder (created; must be writable; an existing sweep folder is "
@@ -218,8 +250,20 @@ def build_parser() -> argparse.ArgumentParser:
                        help="refuse a study with more than N cases, checked before the cases are built "
                             "(replaces the study's [sampling] max_cases). "
                             "Default: from the study, else 10000.")
+    sweep.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                       help="override a field of the study's base scenario for every case, after the "
+                            "study's own set (dotted key and TOML value, as 'teleop run --set', e.g. "
+                            "--set duration=2); repeatable. A factor on the same key wins. Part of the "
+                            "resolved study.toml and of the case ids. Default: none.")
+    sweep.add_argument("--case-timeout", metavar="SECONDS", type=_positive_float, default=None,
+                       help="wall-time limit per case, set-up included (a cold kernel cache adds 20-60 s "
+                            "to the first cases of a machine): a case over it becomes a row with status "
+                            "'error' and the other cases run. The case is stopped at its next chunk of "
+                            "steps; on worker processes, one that blocks is stopped 10 s later. "
+                            "Default: no limit.")
     sweep.add_argument("--no-progress", action="store_true",
-                       help="do not show the progress bar (default: shown on stderr).")
+                       help="do not show the progress bar (default: shown on stderr when it is a "
+                            "terminal).")
     sweep.add_argument("--view", metavar="CASE_ID", default=None,
                        help="do not run: open the recording of case CASE_ID of this sweep "
                             "(<out>/recordings/CASE_ID.rrd, written for the worst cases, see record) in a "

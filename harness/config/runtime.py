@@ -9,7 +9,10 @@ import contextlib
 import functools
 import gc
 import os
+import re
+import signal
 import sys
+from pathlib import Path
 from typing import NoReturn
 
 # Python's garbage collector in a command's or worker's process: a run imports hundreds of thousands
@@ -62,6 +65,124 @@ def overlap_setting() -> bool | None:
     return None
 
 
+def _is_terminal(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError, OSError):  # closed or not a file
+        return False
+
+
+@functools.cache
+def parent_death_signal():
+    """libc's `prctl` on Linux (None elsewhere or without libc).  Looked up once: call it in the parent
+    before starting a child whose `preexec_fn` is `die_with_parent`, so that the child (between fork and
+    exec) imports and loads nothing."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        import ctypes
+
+        return ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+
+
+def die_with_parent(sig: int = signal.SIGTERM) -> None:
+    """Ask the kernel to send `sig` to this process when the thread that started it ends (Linux
+    `prctl(PR_SET_PDEATHSIG)`, through ctypes), so that a worker or a helper server never outlives a
+    killed parent.  Call it first thing in the child (or as a `preexec_fn`).  Elsewhere, or without
+    libc, it does nothing.  If the parent ends while the request is made, `sig` is sent at once."""
+    prctl = parent_death_signal()
+    if prctl is None:
+        return
+    parent = os.getppid()
+    prctl(1, int(sig), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+    if os.getppid() != parent:  # the parent ended before the request took effect
+        os.kill(os.getpid(), sig)
+
+
+DIST_NAME = "octarm-teleop"
+
+
+@functools.cache
+def provenance() -> dict[str, str]:
+    """What produced an output: {"version": the package's version} plus {"git_revision": the commit checked
+    out} when the code runs from a git checkout (read from the .git folder, no git command needed; absent
+    otherwise).  The version is the checkout's pyproject.toml when running from a checkout, else the
+    installed package's metadata (absent when neither is found).  Never raises; a few milliseconds from a
+    checkout or a wheel (importlib.metadata, the fallback, scans every installed package: 60-80 ms)."""
+    out: dict[str, str] = {}
+    root = Path(__file__).resolve().parents[2]  # the checkout, or site-packages for a wheel
+    try:
+        v = _checkout_version(root) or _wheel_version(root)
+        if v is None:
+            from importlib.metadata import version
+
+            v = version(DIST_NAME)
+        out["version"] = v
+    except Exception:  # noqa: BLE001 - not installed and not a checkout: no version
+        pass
+    try:
+        rev = _git_revision(root)
+    except (OSError, ValueError, UnicodeDecodeError):
+        rev = None
+    if rev:
+        out["git_revision"] = rev
+    return out
+
+
+def _checkout_version(root: Path) -> str | None:
+    """[project] version of root/pyproject.toml if it is this package's."""
+    path = root / "pyproject.toml"
+    if not path.is_file():
+        return None
+    import tomllib
+
+    project = tomllib.loads(path.read_text(encoding="utf-8")).get("project", {})
+    return str(project["version"]) if project.get("name") == DIST_NAME and "version" in project else None
+
+
+def _wheel_version(site: Path) -> str | None:
+    """Version in the name of this package's .dist-info folder next to the installed code."""
+    stem = DIST_NAME.replace("-", "_") + "-"
+    for d in site.glob(stem + "*.dist-info"):
+        return d.name[len(stem):-len(".dist-info")]
+    return None
+
+
+def _git_revision(root: Path) -> str | None:
+    """The commit of HEAD of the checkout at `root` (a .git folder, or a .git file of a worktree)."""
+    dot = root / ".git"
+    if dot.is_file():  # worktree or submodule: "gitdir: <path>"
+        text = dot.read_text(encoding="utf-8").strip()
+        if not text.startswith("gitdir:"):
+            return None
+        gitdir = (root / text[len("gitdir:"):].strip()).resolve()
+    elif dot.is_dir():
+        gitdir = dot
+    else:
+        return None
+    head = (gitdir / "HEAD").read_text(encoding="utf-8").strip()
+    if not head.startswith("ref:"):
+        return head if re.fullmatch(r"[0-9a-f]{40,64}", head) else None
+    ref = head[len("ref:"):].strip()
+    common = gitdir
+    if (gitdir / "commondir").is_file():  # a worktree keeps its refs in the main repository
+        common = (gitdir / (gitdir / "commondir").read_text(encoding="utf-8").strip()).resolve()
+    for folder in (gitdir, common):
+        f = folder / ref
+        if f.is_file():
+            sha = f.read_text(encoding="utf-8").strip()
+            return sha if re.fullmatch(r"[0-9a-f]{40,64}", sha) else None
+    packed = common / "packed-refs"
+    if packed.is_file():
+        for line in packed.read_text(encoding="utf-8").splitlines():
+            parts = line.split()
+            if len(parts) == 2 and parts[1] == ref and re.fullmatch(r"[0-9a-f]{40,64}", parts[0]):
+                return parts[0]
+    return None
+
+
 @functools.cache
 def progress_bar_class() -> type:
     """tqdm's bar without its monitor thread.  tqdm starts a daemon thread ("tqdm_monitor") at the first bar
@@ -69,14 +190,21 @@ def progress_bar_class() -> type:
     the main one must not fork, so the sweep then starts its workers as fresh interpreters
     (`harness.studies.executor.start_method`): measured, every sweep after the first in a process, and a
     sweep after a run, lost the forked start-up.  The monitor only adjusts `miniters` of bars that
-    stall; these bars update every case or chunk.  ImportError when tqdm is missing."""
+    stall; these bars update every case or chunk.  The bars draw only when their stream (stderr by
+    default) is a terminal: in CI logs and redirected output they are off.  ImportError when tqdm is
+    missing."""
     from tqdm import tqdm
 
     class Bar(tqdm):
         monitor_interval = 0  # tqdm.__new__ starts the monitor only for a class with an interval
 
+        def __init__(self, *args, **kwargs):
+            if not _is_terminal(kwargs.get("file") or sys.stderr):
+                kwargs["disable"] = True
+            super().__init__(*args, **kwargs)
+
     return Bar
 
 
-__all__ = ["GC_THRESHOLDS", "OVERLAP_ENV", "end_process", "fast_exit", "overlap_setting",
-           "progress_bar_class", "set_gc_thresholds"]
+__all__ = ["DIST_NAME", "GC_THRESHOLDS", "OVERLAP_ENV", "die_with_parent", "end_process", "fast_exit",
+           "overlap_setting", "parent_death_signal", "progress_bar_class", "provenance", "set_gc_thresholds"]

@@ -3,14 +3,17 @@ output is written: `atomic_path` / `write_atomic` (a temporary name in the same 
 place only when complete, so that a final name never holds a partial file).
 
 Input limits (every loader: scenario, bounds, study files and `--set` values): documents larger than
-`MAX_DOCUMENT_BYTES` or nested deeper than `MAX_DEPTH` are refused with a one-line ConfigError.
+`MAX_DOCUMENT_BYTES` or nested deeper than `MAX_DEPTH`, and files that are not regular files (named
+pipes, devices, sockets), are refused with a one-line ConfigError.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import math
 import os
+import stat
 import tomllib
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -55,12 +58,38 @@ def loads_toml(text: str, what: str) -> dict:
     return check_document(doc, what)
 
 
+def _open_regular(path: Path, what: str):
+    """Open `path` for reading only if it is a regular file (after symlinks): a named pipe, device or
+    socket is refused with a one-line ConfigError instead of blocking or reading without end.  Opened
+    non-blocking and checked on the open descriptor, so the check and the read see the same file."""
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except OSError as e:
+        if e.errno == errno.ENXIO:  # a socket (or a device without its driver): no file to read
+            raise ConfigError(f"{what} {path}: not a regular file (a named pipe, device or socket is "
+                              "not read)", path=str(path)) from None
+        raise
+    try:
+        st = os.fstat(fd)
+        if stat.S_ISDIR(st.st_mode):
+            raise IsADirectoryError(errno.EISDIR, "Is a directory", str(path))
+        if not stat.S_ISREG(st.st_mode):
+            raise ConfigError(f"{what} {path}: not a regular file (a named pipe, device or socket is "
+                              "not read)", path=str(path))
+        if hasattr(os, "set_blocking"):
+            os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
 def read_toml(path: str | Path, what: str) -> dict:
     """Parse a TOML file; every failure is a one-line ConfigError naming `what` ("scenario file"...).
     Files over MAX_DOCUMENT_BYTES or nested deeper than MAX_DEPTH are refused."""
     path = Path(path)
     try:
-        with path.open("rb") as fh:
+        with _open_regular(path, what) as fh:
             data = fh.read(MAX_DOCUMENT_BYTES + 1)
         if len(data) > MAX_DOCUMENT_BYTES:
             raise ConfigError(f"{what} {path}: larger than the limit of {MAX_DOCUMENT_BYTES} bytes",

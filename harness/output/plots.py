@@ -29,6 +29,7 @@ from harness.output.decimate import envelope
 from harness.output.geometry import has_interaction
 from harness.output.layout import fix_layout
 from harness.output.names import FIGURES  # what write_figures writes (forces.png only with interaction)
+from harness.output.obstacles import obstacle_outline
 
 DPI = 130
 # Time-series lines are drawn from their min/max envelope at this many columns per inch of figure
@@ -37,6 +38,7 @@ DPI = 130
 COLUMNS_PER_INCH = 2 * DPI
 FULL_RESOLUTION = False  # True: draw every sample (reference for comparisons)
 _SEC_COLORS = ("tab:green", "tab:purple", "tab:brown")
+OBSTACLE_FACE, OBSTACLE_EDGE = (0.6, 0.63, 0.72, 0.35), (0.35, 0.38, 0.5, 1.0)
 
 
 def _new_figure(figsize) -> Figure:
@@ -238,6 +240,17 @@ def _base_xz(meta: dict, key: str) -> np.ndarray:
     return np.zeros(3) if b is None else np.asarray(b, dtype=float).reshape(3)
 
 
+def _draw_obstacles(ax, obstacles, slave_base: np.ndarray) -> None:
+    """The environment's objects as filled outlines in world X-Z (slave task frame at the slave base)."""
+    from matplotlib.patches import Polygon
+
+    for j, ob in enumerate(obstacles):
+        xz = obstacle_outline(ob) + slave_base[[0, 2]]
+        ax.add_patch(Polygon(xz, closed=True, facecolor=OBSTACLE_FACE, edgecolor=OBSTACLE_EDGE, hatch="//",
+                             lw=1.0, label="obstacle" if j == 0 else None, zorder=0))
+        ax.update_datalim(xz)
+
+
 def fig_shapes(traj: Trajectory, path: Path, lengths=(0.6, 0.6), instants: int = 5) -> Path:
     meta = traj.meta or {}
     lengths = meta.get("master_lengths", lengths)
@@ -278,6 +291,7 @@ def fig_shapes(traj: Trajectory, path: Path, lengths=(0.6, 0.6), instants: int =
         ax.plot([], [], "kx", ms=7, label="desired tip x_d (40)")
         ax.plot(*mb[[0, 2]], "ks", ms=7)
         ax.plot(*sb[[0, 2]], "ks", ms=7)
+    _draw_obstacles(ax, meta.get("environment") or (), sb)
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("world X [m]")
     ax.set_ylabel("world Z [m]")

@@ -22,9 +22,16 @@ is right-handed, Z up, like MuJoCo):
     world/slave/backbone                 analytic constant-curvature backbone of the sensed q2
     world/slave/tip                      plant tip (x2_plant; analytic x2 on the analytic plant)
     world/desired/master, .../slave      the desired path x_d (static)
+    world/slave/obstacles/NAME           the environment's objects (static solids; harness.output.obstacles)
+    world/contact/points, .../forces     contact points and forces on the arm (record_contact)
     traces/desired, traces/master,       2-D tip traces in task space (each arm relative to its own base)
     traces/slave                         as (X, -Z) (2-D views have y down, so Z points up on screen)
+    traces/obstacles/NAME                outlines of the environment's objects in the slave's task plane
     status                               run status and message (static text)
+
+Positions are MuJoCo's world frame; a static `Transform3D` on world/master, world/slave (and the
+desired paths, contacts and operator of each arm) moves each arm's base into the plane Y = 0, so both arms
+are drawn in one plane (`harness.output.scene.display_offset`).
 
 The blueprint and the scene geometry (colours, arm points, framing of the views) are
 `harness.output.scene`.
@@ -55,11 +62,13 @@ from harness.output.geometry import (
     task_to_world,
     world_base,
 )
-from harness.output.record_contact import force_series, log_contacts
+from harness.output.obstacles import obstacle_face, obstacle_solid
+from harness.output.record_contact import ARROW_LENGTH, arrow_scale, force_series, log_contacts
 from harness.output.scene import (
     C_BACKBONE,
     C_DESIRED,
     C_MASTER,
+    C_OBSTACLE,
     C_SECTIONS,
     C_SLAVE,
     C_X,
@@ -70,6 +79,7 @@ from harness.output.scene import (
     TRACE_POINT_RADIUS,
     box_half_size,
     build_blueprint,
+    display_offset,
     trace_points,
 )
 
@@ -136,6 +146,10 @@ def _status_text(traj: Trajectory) -> str:
         f"* steps recorded: {n} ({span})",
         f"* plant: {_plant_name(traj)}",
     ]
+    if has_interaction(traj):
+        scale = arrow_scale(traj)
+        lines.append(f"* contact force arrows: 1 N = {scale * 1e3:.3g} mm (the largest force is "
+                     f"{ARROW_LENGTH * 1e3:.0f} mm long)")
     if traj.message:
         lines += ["", "```", str(traj.message), "```"]
     return "\n".join(lines) + "\n"
@@ -241,12 +255,25 @@ def geometry_every(traj: Trajectory, rate: float) -> int:
 
 
 def log_static(rec: rr.RecordingStream, traj: Trajectory, master_base, slave_base) -> None:
+    meta = traj.meta or {}
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     rec.log("status", rr.TextDocument(_status_text(traj), media_type=rr.MediaType.MARKDOWN), static=True)
     for entity, _, names, colors in _series(traj):
         rec.log(entity, rr.SeriesLines(names=names, colors=colors), static=True)
-    rec.log("world/bases", rr.Points3D([master_base, slave_base], radii=0.02, colors=[C_MASTER, C_SLAVE],
-                                       labels=["master base", "slave base"]), static=True)
+    # both arms drawn in the plane Y = 0 (`scene.display_offset`): the data stay in MuJoCo's world frame,
+    # a static translation of each arm's entities moves them
+    m_off, s_off = display_offset(meta, "master_base"), display_offset(meta, "slave_base")
+    for entity, off in (("world/master", m_off), ("world/desired/master", m_off), ("world/operator", m_off),
+                        ("world/slave", s_off), ("world/desired/slave", s_off), ("world/contact", s_off)):
+        rec.log(entity, rr.Transform3D(translation=off), static=True)
+    shown = [master_base + m_off, slave_base + s_off]
+    if np.linalg.norm(shown[0] - shown[1]) < 0.05:  # one place: one label that can be read
+        rec.log("world/bases", rr.Points3D([shown[1]], radii=0.02, colors=[C_SLAVE],
+                                           labels=["master and slave base"]), static=True)
+    else:
+        rec.log("world/bases", rr.Points3D(shown, radii=0.02, colors=[C_MASTER, C_SLAVE],
+                                           labels=["master base", "slave base"]), static=True)
+    log_obstacles(rec, meta.get("environment") or (), slave_base)
     if len(traj):
         idx = _decimate(len(traj), MAX_STATIC_PATH_POINTS)
         xd = np.asarray(traj.xd, dtype=float)[idx]
@@ -269,6 +296,29 @@ def log_static(rec: rr.RecordingStream, traj: Trajectory, master_base, slave_bas
                                                      draw_order=1.0), static=True)
     rec.log("traces/slave", rr.Points2D.from_fields(radii=rr.Radius.ui_points(1.5), colors=C_SLAVE,
                                                     draw_order=2.0), static=True)
+
+
+def log_obstacles(rec: rr.RecordingStream, obstacles, slave_base) -> None:
+    """The environment's objects (static): solids in the 3-D view under world/slave/obstacles (slave task
+    frame placed at the slave base), outlines in the 2-D traces view under traces/obstacles."""
+    for ob in obstacles:  # named by their entity path (a label would cover what touches them)
+        solid = obstacle_solid(ob)
+        solid_fill = rr.components.FillMode.Solid
+        if solid is None:
+            r = float(ob["size"][0])
+            centre = task_to_world(np.asarray(ob["position"], dtype=float), slave_base)
+            shape = rr.Ellipsoids3D(centers=[centre], half_sizes=[[r, r, r]], colors=[C_OBSTACLE],
+                                    fill_mode=solid_fill)
+        else:
+            c, half, angle = solid
+            turn = rr.RotationAxisAngle(axis=[0.0, 1.0, 0.0], angle=angle)
+            shape = rr.Boxes3D(centers=[task_to_world(c, slave_base)], half_sizes=[half], colors=[C_OBSTACLE],
+                               rotation_axis_angles=[turn], fill_mode=solid_fill)
+        name = rr.escape_entity_path_part(str(ob["name"]))
+        rec.log(f"world/slave/obstacles/{name}", shape, static=True)
+        outline = rr.LineStrips2D([_screen(obstacle_face(ob))], colors=[C_OBSTACLE],
+                                  radii=rr.Radius.ui_points(1.5))
+        rec.log(f"traces/obstacles/{name}", outline, static=True)
 
 
 def _screen(x: np.ndarray) -> np.ndarray:

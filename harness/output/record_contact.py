@@ -1,7 +1,8 @@
-"""Contact and interaction-force content of the Rerun recording (issue 16): force time series (true vs
+"""Contact and interaction-force content of the Rerun recording : force time series (true vs
 what the laws got) under ``plots/forces/*`` and, in the 3-D view, the contact points and the contact
 forces ON the arm as arrows (``world/contact/*``, every `CONTACT_EVERY`-th control step, only the
-contacts present at that step), plus the operator's hand.  Called by `harness.output.record` only for
+contacts present at that step; scaled so that the run's largest force is `ARROW_LENGTH` long, drawn
+`ARROW_FRONT` in front of the arm), plus the operator's hand.  Called by `harness.output.record` only for
 runs with interaction (`harness.output.geometry.has_interaction`)."""
 
 from __future__ import annotations
@@ -12,7 +13,11 @@ import rerun as rr
 from harness.loop.trajectory import Trajectory
 
 CONTACT_EVERY = 10  # control steps between logged contact arrows
-ARROW_SCALE = 0.005  # m per N of contact force in the 3-D view
+ARROW_LENGTH = 0.2  # m: the largest contact force of the run is drawn this long (a sixth of the arm)
+ARROW_RADIUS = 0.006  # m, shaft radius of the force arrows
+# m towards the viewer's eye (world -Y): a force along the arm (a push on the tip) would otherwise be drawn
+# inside the arm's segment boxes and hidden by them
+ARROW_FRONT = 0.06
 _C_TRUE, _C_SENSED, _C_CONTACT = (200, 40, 40), (60, 120, 220), (230, 60, 30)
 
 
@@ -30,11 +35,30 @@ def force_series(traj: Trajectory) -> list[tuple[str, np.ndarray, list[str], lis
     ]
 
 
-def log_contacts(rec: rr.RecordingStream, traj: Trajectory, timeline: str, master_base: np.ndarray) -> None:
-    """Contact points and force arrows (world frame) and the operator's hand point."""
+def max_contact_force(traj: Trajectory) -> float:
+    """N, the largest contact force on the arm over `traj` (0 without contacts)."""
+    pts = traj.contact_points
+    if pts is None or not len(pts):
+        return 0.0
+    f = np.linalg.norm(np.asarray(pts, dtype=float)[:, :, 3:], axis=-1)
+    return float(np.nanmax(f)) if np.isfinite(f).any() else 0.0
+
+
+def arrow_scale(traj: Trajectory, fmax: float | None = None) -> float:
+    """m per N of the contact-force arrows: the largest contact force (`fmax`, default: of `traj`) is
+    ARROW_LENGTH long (ARROW_LENGTH per newton when no contact carries force)."""
+    fmax = max_contact_force(traj) if fmax is None else fmax
+    return ARROW_LENGTH / fmax if fmax > 0 else ARROW_LENGTH
+
+
+def log_contacts(rec: rr.RecordingStream, traj: Trajectory, timeline: str, master_base: np.ndarray,
+                 scale: float | None = None) -> None:
+    """Contact points and force arrows (world frame, `scale` m per N, default `arrow_scale(traj)`) and
+    the operator's hand point."""
     pts = traj.contact_points
     hand = traj.hand
     op = hand is not None and np.any(hand != 0)
+    scale = arrow_scale(traj) if scale is None else scale
     for k in range(0, len(traj), CONTACT_EVERY):
         rec.set_time(timeline, duration=float(traj.t[k]))
         if pts is not None:
@@ -42,7 +66,8 @@ def log_contacts(rec: rr.RecordingStream, traj: Trajectory, timeline: str, maste
             p, f = pts[k, live, :3], pts[k, live, 3:]
             rec.log("world/contact/points", rr.Points3D(p, radii=0.006, colors=_C_CONTACT))
             rec.log("world/contact/forces",
-                    rr.Arrows3D(origins=p, vectors=f * ARROW_SCALE, colors=_C_CONTACT))
+                    rr.Arrows3D(origins=p - [0.0, ARROW_FRONT, 0.0], vectors=f * scale, colors=_C_CONTACT,
+                                radii=ARROW_RADIUS))
         if op:
             x = [master_base[0] + hand[k, 0], master_base[1], master_base[2] + hand[k, 1]]
             rec.log("world/operator/hand", rr.Points3D([x], radii=0.015, colors=(240, 200, 60)))

@@ -20,6 +20,7 @@ from harness.output.geometry import (
     task_to_world,
     world_base,
 )
+from harness.output.obstacles import OBSTACLE_HALF_DEPTH
 
 TIMELINE = "sim_time"  # the duration timeline of every recording
 
@@ -38,6 +39,14 @@ VIEWER_FOV_Y = np.radians(55.0)  # vertical field of view of the viewer's 3-D ey
 FRAME_MIN_ASPECT = 0.75  # the eye distance fits the content in 3-D views down to this width / height
 FRAME_MARGIN = 0.12  # fraction of the content extent added on each side
 TRACE_POINT_RADIUS = rr.Radius.ui_points(2.5)  # on-screen size: the traces stay visible at any zoom
+# obstacles of the environment (traj.meta["environment"]: `dataclasses.asdict` of each
+# harness.config.scenario.EnvObject, set by whoever runs the scenario and writes outputs)
+C_OBSTACLE = (150, 160, 190, 150)  # RGBA: translucent, the arm stays visible behind it
+def display_offset(meta: dict, key: str) -> np.ndarray:
+    """World translation that moves an arm's base (meta[key]) into the plane Y = 0 in the 3-D view, so that
+    both arms (whose bases MuJoCo places at different Y) are drawn in one plane: with the perspective eye,
+    the slave's tip then shows where the master's is whenever their task-space positions agree."""
+    return np.array([0.0, -float(world_base(meta, key)[1]), 0.0])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -99,7 +108,14 @@ def frame_eye(traj: Trajectory) -> rrb.EyeControls3D:
     c = 0.5 * (lo + hi)
     half_x, half_z = 0.5 * (hi - lo)[[0, 2]] * (1.0 + 2.0 * FRAME_MARGIN)
     dist = max(half_z, half_x / FRAME_MIN_ASPECT) / np.tan(0.5 * VIEWER_FOV_Y)  # from the nearest plane
-    pos = [c[0], lo[1] - dist, c[2]]
+    # both arms are drawn in the plane Y = 0 (`display_offset`); the nearest geometry is about half the
+    # thickest body (or an obstacle's half depth) in front of it
+    near = 0.5 * (hi[1] - lo[1] - abs(world_base(traj.meta or {}, "master_base")[1]
+                                       - world_base(traj.meta or {}, "slave_base")[1]))
+    if (traj.meta or {}).get("environment"):
+        near = max(near, OBSTACLE_HALF_DEPTH)
+    c[1] = 0.0
+    pos = [c[0], -max(near, 0.0) - dist, c[2]]
     return rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=pos, look_target=[c[0], c[1], c[2]],
                              eye_up=[0.0, 0.0, 1.0])
 

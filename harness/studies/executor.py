@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import atexit
 import concurrent.futures as cf
+import dataclasses
 import importlib
 import logging
 import math
@@ -29,7 +30,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from harness.config.errors import ConfigError
-from harness.config.runtime import end_process, set_gc_thresholds
+from harness.config.runtime import die_with_parent, end_process, set_gc_thresholds
 from harness.config.textio import jsonable
 from harness.studies.study import Case
 
@@ -41,11 +42,37 @@ def _error_result(e: BaseException) -> dict:
             "traceback": "".join(traceback.format_exception(e))}
 
 
+class CaseTimeout(RuntimeError):
+    """A case ran longer than the sweep's per-case time limit."""
+
+
+def check_case_timeout(value) -> float | None:
+    """The per-case time limit in seconds (None: no limit); ConfigError unless a positive finite number."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < math.inf:
+        raise ConfigError(f"--case-timeout = {value!r}: must be a positive number of seconds",
+                          path="--case-timeout")
+    return float(value)
+
+
+def _deadline_check(t0: float, limit: float):
+    """on_chunk callback raising CaseTimeout once `limit` seconds have passed since t0."""
+    def check(part) -> None:
+        if time.perf_counter() - t0 > limit:
+            t = float(part.t[-1]) if len(part) else 0.0
+            raise CaseTimeout(f"the case exceeded the time limit of {limit:g} s (--case-timeout) at "
+                              f"t = {t:.3f} s of simulated time")
+    return check
+
+
 def run_case(case: dict) -> dict:
     """Worker: simulate one case and compute its metrics.  Never raises (an exception gives status
     "error" with the message and traceback); a diverged run keeps the Trajectory's status.
 
-    case: {"case_id", "scenario": Scenario, "metrics": [names], "record": bool}.
+    case: {"case_id", "scenario": Scenario, "metrics": [names], "record": bool, "time_limit": s or None}.
+    With a time limit the loop checks it after each chunk of steps (`CaseTimeout`: status "error"); a case
+    that blocks inside a step is stopped by the parent (`run_cases`).
     Returns {"case_id", "status", "message", "metrics", "wall_time", "traceback"} (+ "recording":
     the .rrd bytes when case["record"])."""
     t0 = time.perf_counter()
@@ -56,13 +83,16 @@ def run_case(case: dict) -> dict:
 
         scn = case["scenario"]
         # a sweep keeps every core busy with cases: no second thread per case (it would spin-wait for a core)
-        traj = simulate(scn, progress=False, overlap=False)
+        limit = case.get("time_limit")
+        traj = simulate(scn, progress=False, overlap=False,
+                        on_chunk=_deadline_check(t0, limit) if limit else None)
         metrics = compute_metrics(traj, scn)
         out.update(status=traj.status, message=traj.message,
                    metrics={k: jsonable(metrics.get(k)) for k in case["metrics"]})
         if case.get("record"):
             from harness.output.record import write_recording
 
+            traj.meta["environment"] = [dataclasses.asdict(o) for o in scn.environment.objects]
             with tempfile.TemporaryDirectory(prefix="sweep-rec-") as tmp:
                 path = Path(tmp) / f"{case.get('case_id')}.rrd"
                 write_recording(traj, path)
@@ -102,7 +132,10 @@ def _worker_init() -> None:
     # result has been sent by then
     atexit.register(end_process, 0)
     set_gc_thresholds()  # fewer collections while the first case imports the loop and MuJoCo
-    # A killed main process cannot stop its pool: each worker ends itself within PARENT_POLL s.
+    # A killed main process cannot stop its pool: the kernel kills each worker when its parent ends (Linux
+    # parent-death signal; it works while a case blocks holding the GIL); elsewhere each worker ends
+    # itself within PARENT_POLL s.
+    die_with_parent(signal.SIGKILL)
     threading.Thread(target=_watch_parent, args=(os.getppid(),), name="parent-watchdog", daemon=True).start()
 
 
@@ -274,38 +307,72 @@ def _stop_threads(ex: cf.ThreadPoolExecutor, cancel: bool) -> None:
         STOP.clear()
 
 
-def _payload(case: Case, metrics: Sequence[str], record: bool) -> dict:
-    return {"case_id": case.case_id, "scenario": case.scenario, "metrics": list(metrics), "record": record}
+def _payload(case: Case, metrics: Sequence[str], record: bool, time_limit: float | None = None) -> dict:
+    return {"case_id": case.case_id, "scenario": case.scenario, "metrics": list(metrics), "record": record,
+            "time_limit": time_limit}
+
+
+HARD_LIMIT_GRACE = 10.0  # s past the per-case time limit before the parent stops a worker that blocks
+
+
+def _timeout_result(limit: float) -> dict:
+    return {"status": "error", "traceback": "", "message":
+            f"the case exceeded the time limit of {limit:g} s (--case-timeout) and did not return; its "
+            f"worker was stopped {HARD_LIMIT_GRACE:g} s later"}
 
 
 def run_cases(runner: Runner, case_fn: Callable, cases: Sequence[Case], metrics: Sequence[str],
-               record: bool, on_result: Callable[[Case, dict], None]) -> None:
+               record: bool, on_result: Callable[[Case, dict], None],
+               time_limit: float | None = None) -> None:
     """Run cases through the runner, calling on_result(case, result) in the parent as each finishes.
     An exception raised by case_fn counts as the case's result (status "error"); a dead process pool
-    re-runs the cases that were in flight one by one to find the one that kills its worker."""
+    re-runs the cases that were in flight one by one to find the one that kills its worker.
+
+    time_limit: seconds per case.  The worker stops a case over it at its next chunk of steps; on the
+    process pool, a case still running HARD_LIMIT_GRACE s later (blocked inside a step) gets an error row,
+    the pool's workers are stopped and the other cases in flight run again."""
     queue = deque(cases)
     inflight: dict[cf.Future, Case] = {}
+    started: dict[cf.Future, float] = {}
+    hard = time_limit + HARD_LIMIT_GRACE if time_limit and runner.kind == "processes" else None
     try:
         while queue or inflight:
             ex = runner.executor()
             while queue and len(inflight) < runner.window:
                 case = queue.popleft()
                 try:
-                    fut = ex.submit(_call, case_fn, _payload(case, metrics, record))
+                    fut = ex.submit(_call, case_fn, _payload(case, metrics, record, time_limit))
                 except cf.BrokenExecutor:  # a worker died since the last wait: its futures say which
                     queue.appendleft(case)
                     break
                 inflight[fut] = case
+                started[fut] = time.monotonic()
             if not inflight:  # broken before anything was in flight: nothing to blame, a fresh pool
                 runner.close(cancel=True)
                 continue
-            done, _ = cf.wait(inflight, return_when=cf.FIRST_COMPLETED)
+            wait = None if hard is None else max(0.1, min(started.values()) + hard - time.monotonic())
+            done, _ = cf.wait(inflight, timeout=wait, return_when=cf.FIRST_COMPLETED)
+            if not done and hard is not None:  # a case blocks past its limit: stop the pool
+                now = time.monotonic()
+                late = [f for f in inflight if now - started[f] >= hard]
+                if not late:  # woke up a little early
+                    continue
+                runner.close(cancel=True)
+                for fut in list(inflight):
+                    case = inflight.pop(fut)
+                    if fut in late:
+                        on_result(case, _timeout_result(time_limit))
+                    else:
+                        queue.appendleft(case)  # innocent: runs again in the fresh pool
+                started.clear()
+                continue
             if any(not f.cancelled() and isinstance(f.exception(), cf.BrokenExecutor) for f in done):
                 cf.wait(inflight)  # a broken pool fails every future at once
                 done = set(inflight)
             suspects = []
             for fut in done:
                 case = inflight.pop(fut)
+                started.pop(fut, None)
                 if fut.cancelled():
                     raise RuntimeError(f"case {case.case_id} was cancelled by the executor "
                                        "(scheduler or workers lost?); run again to resume")
@@ -323,7 +390,8 @@ def run_cases(runner: Runner, case_fn: Callable, cases: Sequence[Case], metrics:
                 log.warning("a worker process died; re-running %d case(s) one at a time", len(suspects))
                 runner.close(cancel=True)
                 for case in suspects:
-                    on_result(case, _isolated(case_fn, _payload(case, metrics, record)))
+                    on_result(case, _isolated(case_fn, _payload(case, metrics, record, time_limit),
+                                              hard))
     finally:
         for fut in inflight:
             fut.cancel()
@@ -333,9 +401,10 @@ def _probe() -> int:
     return os.getpid()
 
 
-def _isolated(case_fn: Callable, payload: dict) -> dict:
+def _isolated(case_fn: Callable, payload: dict, hard: float | None = None) -> dict:
     """Run one case alone in a fresh 1-process pool whose worker has first run a no-op, so that a
-    dead worker is this case's doing (else: SweepError, e.g. workers that cannot start)."""
+    dead worker is this case's doing (else: SweepError, e.g. workers that cannot start).  hard: seconds
+    after which a case that has not returned is an error row (its worker is stopped)."""
     ex = _process_pool(1)
     try:
         try:
@@ -344,7 +413,9 @@ def _isolated(case_fn: Callable, payload: dict) -> dict:
             raise SweepError(
                 "worker processes die before running any case (if run_sweep is called from a script, "
                 "guard the call with `if __name__ == '__main__':`)") from None
-        return ex.submit(_call, case_fn, payload).result()
+        return ex.submit(_call, case_fn, payload).result(timeout=hard)
+    except cf.TimeoutError:
+        return _timeout_result(payload["time_limit"])
     except cf.BrokenExecutor:
         return {"status": "error", "traceback": "", "message":
                 "the worker process died while running this case (segfault, abort or out of memory)"}

@@ -44,17 +44,37 @@ def read_results(path: str | os.PathLike) -> dict[str, dict]:
     return rows
 
 
+def refuse_link(path: Path) -> None:
+    """ConfigError (one line) if `path` is a symbolic link: a sweep writes its results into its own
+    folder only, never through a link planted there."""
+    if path.is_symlink():
+        raise ConfigError(f"{path}: is a symbolic link; a sweep does not read or write results through a "
+                          "link (remove it, or choose another --out)", path=str(path))
+
+
+def open_no_follow(path: Path, flags: int, mode: int = 0o644) -> int:
+    """os.open that refuses a symbolic link at `path` (O_NOFOLLOW where the system has it)."""
+    refuse_link(path)
+    try:
+        return os.open(path, flags | getattr(os, "O_NOFOLLOW", 0), mode)
+    except OSError as e:
+        if path.is_symlink():  # planted between the check and the open
+            refuse_link(path)
+        raise OSError(e.errno, e.strerror, str(path)) from None
+
+
 class ResultsWriter:
-    """Appends rows to results.jsonl, one fsynced line each; cuts a torn tail off first."""
+    """Appends rows to results.jsonl, one fsynced line each; cuts a torn tail off first.  A symbolic
+    link at the table's name is refused (ConfigError), never followed."""
 
     def __init__(self, path: Path):
-        if path.exists():
-            data = path.read_bytes()
-            keep = data.rfind(b"\n") + 1
-            if keep != len(data):
-                with open(path, "r+b") as fh:
-                    fh.truncate(keep)
-        self._fh = open(path, "ab")
+        fd = open_no_follow(path, os.O_RDWR | os.O_CREAT)
+        self._fh = os.fdopen(fd, "r+b")
+        data = self._fh.read()
+        keep = data.rfind(b"\n") + 1
+        if keep != len(data):
+            self._fh.truncate(keep)
+        self._fh.seek(0, os.SEEK_END)
 
     def append(self, row: dict) -> None:
         self._fh.write((json.dumps(row, allow_nan=False) + "\n").encode())
@@ -81,7 +101,7 @@ class OutputLock:
     """Exclusive lock on the output folder: two sweeps must not append to the same table."""
 
     def __init__(self, out: Path):
-        self._fh = open(out / ".lock", "w")
+        self._fh = os.fdopen(open_no_follow(out / ".lock", os.O_WRONLY | os.O_CREAT), "w")
         try:
             import fcntl
 

@@ -117,6 +117,15 @@ DEFAULT_OUT_ROOT = Path("runs") / "sweeps"
 
 
 # --- study file -------------------------------------------------------------------------------------
+def check_study_name(name: Any) -> str:
+    """A study name is a folder name inside the output root: letters, digits, '_', '-', '.', not only
+    dots ('.' or '..' would leave the folder); else a one-line ConfigError."""
+    if not isinstance(name, str) or not re.fullmatch(r"[\w.-]+", name) or not name.strip("."):
+        raise ConfigError(f"[study] name = {name!r}: required; letters, digits, '_', '-', '.' only, and not "
+                          "only dots (the name is a folder inside the output folder)")
+    return name
+
+
 @dataclass(frozen=True)
 class Factor:
     name: str
@@ -245,9 +254,7 @@ def load_study(source: str | os.PathLike | dict, base_dir: str | os.PathLike | N
     if not f.factor:
         raise ConfigError("study file: at least one [[factor]] table is required")
     st, sp = f.study, f.sampling
-    name = st.name if st.name is not None else stem
-    if name is None or not re.fullmatch(r"[\w.-]+", name):
-        raise ConfigError(f"[study] name = {name!r}: required; letters, digits, '_', '-', '.' only")
+    name = check_study_name(st.name if st.name is not None else stem)
     if st.scenario is not None and f.scenario is not None:
         raise ConfigError("give either [study] scenario (a file) or an inline [scenario] table, not both")
     scenario = (base / st.scenario).resolve() if st.scenario is not None else f.scenario

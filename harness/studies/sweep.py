@@ -22,6 +22,10 @@ Outputs (folder `out`, default `runs/sweeps/<name>/`)
     deterministic for a given seed).  The worker returns the file's bytes, so recordings also work
     on a remote Dask cluster without a shared file system.
 
+Nothing is written through a symbolic link planted in the folder (results.jsonl, .lock, recordings/:
+refused in one line).  Output failures after the cases ran (recordings, summary) are listed in
+`SweepResult.failures` (exit 1) and the other outputs are still written.
+
 Interrupts: Ctrl-C / SIGTERM cancel the pending cases, stop the workers and raise `SweepInterrupted`
 (a `KeyboardInterrupt`); every finished row is already on disk and a later run resumes.  A worker
 process that dies (segfault, out of memory) breaks the process pool: the cases that were in flight
@@ -44,14 +48,22 @@ from typing import Any
 
 import tomli_w
 
+from harness.config.errors import ConfigError
 from harness.config.load import scenario_to_dict
 from harness.config.runtime import progress_bar_class
 from harness.config.scenario import Scenario
 from harness.config.textio import OutputError, describe_os_error, prepare_out_dir, write_atomic
 from harness.output.prefetch import prefetch_output_imports
 from harness.studies.cases import expand_cases, load_base
-from harness.studies.executor import Runner, SweepError, pick_executor, run_case, run_cases
-from harness.studies.results import RESULTS, OutputLock, ResultsWriter, make_row, read_results
+from harness.studies.executor import (
+    Runner,
+    SweepError,
+    check_case_timeout,
+    pick_executor,
+    run_case,
+    run_cases,
+)
+from harness.studies.results import RESULTS, OutputLock, ResultsWriter, make_row, read_results, refuse_link
 from harness.studies.study import (
     DEFAULT_OUT_ROOT,
     METRIC_LABELS,
@@ -60,6 +72,7 @@ from harness.studies.study import (
     Study,
     check_case_count,
     check_max_cases,
+    check_study_name,
     is_real,
     load_study,
 )
@@ -94,6 +107,7 @@ class SweepResult:
     recordings: list[Path] = dataclasses.field(default_factory=list)
     summary: list[Path] = dataclasses.field(default_factory=list)
     executor: str = ""  # "processes" | "threads" | "dask": what ran the cases (`pick_executor`)
+    failures: list[str] = dataclasses.field(default_factory=list)  # outputs that could not be written
     # wall seconds of this call's phases: "setup" (from the call: study, cases, output folder, workers),
     # "cases" (first submit to last result), "recordings" (the worst cases re-run), "summary" (summary.csv,
     # plots, the wait for their imports)
@@ -136,7 +150,8 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
               workers: int | None = None, scheduler: str | None = None, progress: bool = True,
               case_fn: Callable[[dict], dict] = run_case,
               on_row: Callable[[dict], None] | None = None, max_cases: int | None = None,
-              executor: str = "processes") -> SweepResult:
+              executor: str = "processes", overrides: Sequence[str] = (),
+              case_timeout: float | None = None) -> SweepResult:
     """Run (or resume) a study.  Every case is built and validated before anything runs.
 
     out: output folder (default runs/sweeps/<name>); workers: number of cases run at once (default all
@@ -145,8 +160,15 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
     release the GIL; `harness.studies.executor.pick_executor`); results are the same.  case_fn: the worker
     function (top-level, picklable; default `run_case`); on_row(row): called in the parent after
     each row is on disk.  max_cases: overrides the study's [sampling] max_cases (the case count is
-    checked before expansion).  Raises ConfigError for a bad study, an unreachable scheduler (checked
-    before any file is written) or an unusable output folder; SweepInterrupted on Ctrl-C/SIGTERM."""
+    checked before expansion).  overrides: 'key=value' scenario overrides (the dotted syntax of `teleop run
+    --set`) applied to the study's base scenario after its [study] set, before the factors (a factor of
+    the same key wins); they are part of study.toml and of the case ids.  case_timeout: seconds a case
+    may take (its wall time in the worker, set-up included); a case over it becomes a row with status
+    "error" and the others run (`harness.studies.executor.run_cases`).  Raises ConfigError for a bad
+    study, an unreachable scheduler (checked before any file is written), an unusable output folder or a
+    symbolic link at results.jsonl; SweepInterrupted on Ctrl-C/SIGTERM.  Output failures after the cases
+    ran (recordings, summary) do not raise: they are listed in `SweepResult.failures`, and whatever could
+    be written is."""
     clock = [time.perf_counter()]  # SweepResult.timings: each lap adds the time since the last one
 
     def lap(phase: str) -> None:
@@ -160,6 +182,13 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
         study = load_study(study, max_cases=max_cases)
     if max_cases is not None:
         study = dataclasses.replace(study, max_cases=max_cases)
+    check_study_name(study.name)
+    if overrides:
+        if isinstance(overrides, str) or not all(isinstance(o, str) for o in overrides):
+            raise ConfigError(f"overrides = {overrides!r}: must be a list of 'key=value' strings",
+                              path="--set")
+        study = dataclasses.replace(study, set=(*study.set, *overrides))
+    case_timeout = check_case_timeout(case_timeout)
     check_case_count(study)
     base = load_base(study)
     cases = expand_cases(study, base)
@@ -179,6 +208,7 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
                   "(re-runnable as a study file).\n")
         write_atomic(out / "study.toml", (header + tomli_w.dumps(_study_document(study, base))).encode())
         table = out / RESULTS
+        refuse_link(table)
         known = read_results(table)
         todo = [c for c in cases if c.case_id not in known]
         result = SweepResult(study, out, cases, {c.case_id: known[c.case_id] for c in cases
@@ -199,7 +229,11 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
             if row["status"] == "interrupted":  # the case did not finish: not a result, re-run it later
                 result.unfinished += 1
                 return
-            writer.append(row)
+            try:
+                writer.append(row)
+            except OSError as e:  # e.g. a full disk: stop, the rows on disk are kept, a re-run resumes
+                raise SweepError(f"cannot append to {table}: {describe_os_error(e)}; "
+                                 f"{len(result.rows)} rows kept, re-run to resume") from None
             result.rows[case.case_id] = row
             result.ran += 1
             bar.update(1)
@@ -213,17 +247,23 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
         prefetch = prefetch_output_imports(SUMMARY_IMPORTS) if todo else None
         try:
             lap("setup")
-            run_cases(runner, case_fn, todo, study.metrics, False, on_result)
+            run_cases(runner, case_fn, todo, study.metrics, False, on_result, time_limit=case_timeout)
             bar.close()
             lap("cases")
             if prefetch is not None:
                 prefetch.join()  # the summary's imports; before any later fork (no import lock held)
             lap("summary")
             if study.record and result.complete:
-                result.recordings = _record_worst(study, result, runner, case_fn)
+                try:
+                    result.recordings = _record_worst(study, result, runner, case_fn, case_timeout)
+                except OutputError as e:  # the summary is still written
+                    result.failures.append(str(e))
             runner.close()
             lap("recordings")
-            result.summary = write_summary(study, cases, result.rows, out)
+            try:
+                result.summary = write_summary(study, cases, result.rows, out)
+            except OutputError as e:
+                result.failures.append(str(e))
             lap("summary")
         except KeyboardInterrupt:
             runner.close(cancel=True)
@@ -252,8 +292,12 @@ def _worst(study: Study, cases: Sequence[Case], rows: dict[str, dict]) -> list[C
     return ranked[: spec.worst]
 
 
-def _record_worst(study: Study, result: SweepResult, runner: Runner, case_fn: Callable) -> list[Path]:
+def _record_worst(study: Study, result: SweepResult, runner: Runner, case_fn: Callable,
+                  case_timeout: float | None = None) -> list[Path]:
     folder = result.out / "recordings"
+    if folder.is_symlink():
+        raise OutputError(f"{folder}: is a symbolic link; recordings are not written through a link",
+                          path=str(folder))
     try:
         folder.mkdir(exist_ok=True)
     except OSError as e:
@@ -273,7 +317,7 @@ def _record_worst(study: Study, result: SweepResult, runner: Runner, case_fn: Ca
 
     if todo:
         log.info("recording the %d worst case(s) by %s", len(todo), study.record.by)
-        run_cases(runner, case_fn, todo, study.metrics, True, on_result)
+        run_cases(runner, case_fn, todo, study.metrics, True, on_result, time_limit=case_timeout)
     return written
 
 
@@ -283,13 +327,16 @@ EXIT_INTERRUPTED = 130  # as `teleop run` (harness.cli)
 
 def main_sweep(study_path: str | os.PathLike, out: str | os.PathLike | None = None,
                workers: int | None = None, scheduler: str | None = None, progress: bool = True,
-               max_cases: int | None = None, executor: str = "processes") -> int:
-    """`teleop sweep`: 0 when every case has a row (diverged/error cases are data), 1 when cases are
-    unfinished or the executor failed, 130 when interrupted (SIGINT/SIGTERM; re-run to resume).  A bad
+               max_cases: int | None = None, executor: str = "processes", overrides: Sequence[str] = (),
+               case_timeout: float | None = None) -> int:
+    """`teleop sweep`: 0 when every case has a row (diverged/error cases are data) and every output was
+    written, 1 when cases are unfinished, the executor failed or an output (recordings, summary) could
+    not be written after the cases ran, 130 when interrupted (SIGINT/SIGTERM; re-run to resume).  A bad
     study or an unusable output folder raises ConfigError before anything runs."""
     try:
         res = run_sweep(study_path, out=out, workers=workers, scheduler=scheduler, progress=progress,
-                        max_cases=max_cases, executor=executor)
+                        max_cases=max_cases, executor=executor, overrides=overrides,
+                        case_timeout=case_timeout)
     except SweepError as e:
         print(f"error: {e}", file=sys.stderr)
         return 1
@@ -307,7 +354,9 @@ def main_sweep(study_path: str | os.PathLike, out: str | os.PathLike | None = No
           f"{res.skipped} already done -> {res.out}", file=sys.stderr)
     for p in res.recordings:
         print(f"recording: {p}", file=sys.stderr)
+    for f in res.failures:
+        print(f"error: {f}", file=sys.stderr)
     if not res.complete:
         print(f"{res.unfinished} case(s) did not finish; run again to resume", file=sys.stderr)
         return 1
-    return 0
+    return 1 if res.failures else 0
