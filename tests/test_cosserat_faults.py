@@ -113,7 +113,7 @@ def test_run_stop_flag_interrupts_the_rod_within_a_control_step():
 def test_rod_blow_up_is_a_divergence_not_an_exception():
     """A 1.4 kN tip load crushes a 3-element rod within 20 ms: `step` returns False (never raises) and
     never reports success on an exploded state."""
-    s = CosseratSlave(P, elements_per_section=3)
+    s = CosseratSlave(P, elements_per_section=3, shear_factor=10.0)
     s.reset(Q0)
     s.external_tip_force([1e3, -1e3])
     far = 10.0 * sum(P.rest_lengths)
@@ -129,7 +129,8 @@ def test_rod_blow_up_is_a_divergence_not_an_exception():
 
 def test_blow_up_inside_the_rod_step_is_reported_as_diverged_with_its_time():
     scn = load_scenario(None, ["plant.kind=cosserat", "plant.cosserat.elements_per_section=3",
-                               "control_dt=0.01", "duration=0.3", "interaction_forces=[[0,0],[1000,-1000]]"])
+                               "plant.cosserat.shear_factor=10", "control_dt=0.01", "duration=0.3",
+                               "interaction_forces=[[0,0],[1000,-1000]]"])
     tr = simulate(scn)
     assert tr.status == "diverged", tr.message
     assert "plant state" in tr.message and "at t = " in tr.message

@@ -50,7 +50,7 @@ class CosseratConfig:
 
     elements_per_section: int = 10  # rod elements per section
     dt: float | str = "auto"  # s, rod time step; "auto" = largest control_dt / m below the stable step
-    shear_factor: float = 10.0  # shear stiffness GA as a multiple of EA ("shear stiff")
+    shear_factor: float = 100.0  # shear stiffness GA as a multiple of EA (docs/rod-convergence.md)
     rotary_radius: float = 0.04  # m, disc radius of the rotary inertia when slave.slice_inertia = 0
     elastic_law: str = "analytic"  # "analytic" (CC-consistent energy) | "linear" (textbook rod)
 

@@ -22,6 +22,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from controllers.params import SlaveParams
@@ -32,7 +34,7 @@ EXPLODING_LENGTHS = 10.0  # a node farther than this many rod lengths from the b
 SAFETY = 0.5  # stable_dt's factor on the CFL-type estimate
 DEFAULT_ELEMENTS = 10
 DEFAULT_ETA_A = 3.0  # N s, extension viscosity per section
-DEFAULT_SHEAR_FACTOR = 10.0
+DEFAULT_SHEAR_FACTOR = 100.0  # docs/rod-convergence.md
 DEFAULT_ROTARY_RADIUS = 0.04  # m
 
 
@@ -66,6 +68,14 @@ def stable_dt(params: SlaveParams, elements_per_section: int = DEFAULT_ELEMENTS,
     return float(SAFETY * dts.min())
 
 
+def auto_dt(control_dt: float, stable: float) -> float:
+    """The largest control_dt / m (m integer) that is <= stable (s)."""
+    m = max(1, math.ceil(control_dt / stable))
+    while control_dt / m > stable:
+        m += 1
+    return control_dt / m
+
+
 class RodStopped(KeyboardInterrupt):
     """`CosseratSlave.step` stopped between batches because its `stop` flag is set."""
 
@@ -82,5 +92,5 @@ def check_steps_per_control(dt: float, control_dt: float) -> int:
     return m
 
 
-__all__ = ["BATCH_STEPS", "EXPLODING_LENGTHS", "MAX_STEPS_PER_CONTROL", "RodStopped",
+__all__ = ["BATCH_STEPS", "EXPLODING_LENGTHS", "MAX_STEPS_PER_CONTROL", "RodStopped", "auto_dt",
            "check_steps_per_control", "stable_dt"]

@@ -41,7 +41,7 @@ from controllers import slave as slave_model
 from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
 from harness.plant.cosserat import contact as rod_contact
-from harness.plant.cosserat.rod import CosseratSlave, check_steps_per_control, stable_dt
+from harness.plant.cosserat.rod import CosseratSlave, auto_dt, check_steps_per_control, stable_dt
 from harness.plant.initial import InitialStateError, initial_state
 
 MASTER_BASE = np.array([0.0, -0.3, 0.0])  # m, world (as mjcf/master.xml)
@@ -121,7 +121,7 @@ def rod_dt(scn: Scenario) -> tuple[float, float]:
                     np.asarray(scn.plant.extension_viscosity, dtype=float))
     cdt = scn.control_dt
     if c.dt == "auto":
-        dt = cdt / math.ceil(cdt / sdt - 1e-9)
+        dt = auto_dt(cdt, sdt)
     else:
         dt = float(c.dt)
         if dt > sdt:
