@@ -6,14 +6,17 @@
   factor 0.5 (not calibrated against measured divergence limits).
 * Cost: a configuration that needs more than `MAX_STEPS_PER_CONTROL` = 1000 rod steps per control step
   (per 1 ms for the rod alone) is refused before anything runs (`check_steps_per_control`, one line).
-  The default rod needs 11; the finest allowed discretization (200 elements per section) about 20 times
-  that; 1000 leaves a margin of about 4 over it for stiffer or lighter materials, and caps a 20-s run
-  at 1 ms control steps at 2e7 rod steps (minutes, not days).  Lighter or stiffer sections need
-  proportionally smaller steps: a configuration past the limit is almost always a unit error (masses
-  in tonnes, stiffness in N/mm).
+  The default rod (10 elements per section) needs 14 rod steps per 1 ms; the step falls as 1 / n^2 with
+  n elements per section once the explicit extension damping sets it: 50 elements need 254, 100 need
+  1004 (refused: lower plant.extension_viscosity or use fewer elements).  At the limit one control step
+  costs 1000 rod steps, about 70 times the default's (a 20-s run at 10 elements: minutes instead of
+  seconds; each rod step costs more with more elements).  The limit keeps every configuration up to 50
+  elements per section with a margin of 4, and refuses masses or stiffnesses off by orders of magnitude
+  (a unit error: masses of 1e-6 kg need about 1e7 rod steps per control step).
 * Interrupts: `step` runs its rod steps in compiled batches of at most `BATCH_STEPS`; between batches
   Python's signal handlers run (Ctrl-C) and, if `stop` (an Event, e.g. the harness's run-stop flag) is
-  set, `step` raises `RodStopped` (a KeyboardInterrupt) with the state of the last whole batch.
+  set after a batch, `step` raises `RodStopped` (a KeyboardInterrupt) with the state of that batch: a
+  run stops within one control step of the first Ctrl-C, and a second Ctrl-C within one batch.
 * Divergence: a non-finite node position, velocity or angular velocity, a node farther than
   `EXPLODING_LENGTHS` rod lengths from the base, or an arithmetic exception of the compiled step
   (ZeroDivisionError on a collapsed element, FloatingPointError, OverflowError) ends `step` with False:
@@ -87,8 +90,8 @@ def check_steps_per_control(dt: float, control_dt: float) -> int:
     if m > MAX_STEPS_PER_CONTROL:
         raise ValueError(f"plant.cosserat.dt = {float(dt)!r}: {m} rod steps of {dt:.3g} s per control step "
                          f"of {control_dt:g} s, more than the limit {MAX_STEPS_PER_CONTROL}: the sections "
-                         f"are too light or too stiff for an explicit rod (check slave masses and "
-                         f"stiffnesses, elements_per_section, shear_factor)")
+                         f"are too light or too stiff for an explicit rod (check the slave masses and "
+                         f"stiffnesses, elements_per_section, shear_factor, extension_viscosity)")
     return m
 
 

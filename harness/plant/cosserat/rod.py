@@ -479,7 +479,7 @@ class CosseratSlave:
             self.time = self._steps * self.dt
             if not ok:
                 return False
-            if left and self.stop is not None and self.stop.is_set():
+            if self.stop is not None and self.stop.is_set():
                 raise RodStopped(f"rod stopped at t = {self.time:.6g} s")
         return True
 
