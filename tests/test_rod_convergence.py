@@ -67,3 +67,12 @@ def test_default_rod_first_mode_is_near_the_euler_bernoulli_target():
     f_eb = rc.beam_first_mode(replace(P, gravity=(0.0, 0.0)), None, 0.0)[0]
     f = rc.rod_first_mode(P, 10, DEFAULT_SHEAR_FACTOR, DEFAULT_ROTARY_RADIUS)
     assert abs(f / f_eb - 1.0) < 0.005
+
+
+def test_result_page_names_its_command_and_the_current_defaults():
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "rod-convergence.md").read_text()
+    assert "`python -m harness.studies.rod_convergence`" in text
+    assert f"`plant.cosserat.shear_factor = {DEFAULT_SHEAR_FACTOR:g}`" in text
+    assert f"`plant.cosserat.rotary_radius = {DEFAULT_ROTARY_RADIUS:g}` m" in text
