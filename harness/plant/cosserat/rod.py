@@ -106,7 +106,7 @@ A chain of rigid segments of length h discretizing the same rod gets hinge dampi
 `hinge_damping`, `slide_damping`.  Default: eta_b = 0.1 N m^2 s and eta_a = 3 N s in every
 section (`DEFAULT_ETA_B`, `DEFAULT_ETA_A`, = the scenario's plant.bending_viscosity /
 extension_viscosity), i.e. c_k = 0.03 and c_d = 10 in SlaveParams units: first bending mode
-1.27 Hz with a damping ratio of 11 % (`benchmarks/modal_cosserat.py`; README "Cosserat plant").
+1.28 Hz with a damping ratio of 11 % (`benchmarks/modal_cosserat.py`; README "Cosserat plant").
 
 Actuation
 ---------
