@@ -98,7 +98,8 @@ class CosseratConfig:
     elements_per_section: integer("rod elements per section", ge=2, le=200) = 10
     dt: doc(num("", gt=0.0, le=0.01) | Literal["auto"], 's, rod time step, or "auto" (largest control_dt / m '
             "below the stable step)") = "auto"
-    shear_factor: num('shear stiffness GA as a multiple of EA ("shear stiff")', gt=0.0, le=1e6) = 10.0
+    shear_factor: num("shear stiffness GA as a multiple of EA (docs/rod-convergence.md)", gt=0.0,
+                       le=1e6) = 100.0
     rotary_radius: num("m, disc radius of the rotary inertia when slave.slice_inertia = 0", gt=0.0,
                        le=1.0) = 0.04
     elastic_law: doc(Literal[ELASTIC_LAWS], '"analytic" (energy of the CC model) | "linear" '

@@ -149,6 +149,8 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
     cname = getattr(ctrl, "name", type(ctrl).__name__)
     error, failed = "", False
     plant.reset(s0)
+    if hasattr(plant, "stop"):  # a plant with long inner loops (the rod) checks the stop flag itself
+        plant.stop = STOP
     try:
         ctrl.reset(scn, s0)
     except ControllerFailure as exc:

@@ -4,6 +4,7 @@
 * `kernels`: its compiled step (loads, position Verlet, CC fit, rest strains, active loads, contact);
 * `plant`: `CosseratPlant`, the scenario's plant (protocol `harness.plant.stepped.SteppedPlant`);
 * `contact`: the environment objects acting on every rod node;
+* `limits`: the explicit stable step, the refused configurations, interrupts and divergence;
 * `pyelastica`: the PyElastica internals the kernels call, behind a version guard.
 """
 

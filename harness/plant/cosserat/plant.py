@@ -41,7 +41,7 @@ from controllers import slave as slave_model
 from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
 from harness.plant.cosserat import contact as rod_contact
-from harness.plant.cosserat.rod import CosseratSlave, stable_dt
+from harness.plant.cosserat.rod import CosseratSlave, auto_dt, check_steps_per_control, stable_dt
 from harness.plant.initial import InitialStateError, initial_state
 
 MASTER_BASE = np.array([0.0, -0.3, 0.0])  # m, world (as mjcf/master.xml)
@@ -121,15 +121,20 @@ def rod_dt(scn: Scenario) -> tuple[float, float]:
                     np.asarray(scn.plant.extension_viscosity, dtype=float))
     cdt = scn.control_dt
     if c.dt == "auto":
-        return cdt / math.ceil(cdt / sdt - 1e-9), sdt
-    dt = float(c.dt)
-    if dt > sdt:
-        raise ConfigError.field("plant.cosserat.dt", c.dt, f"too large for {c.elements_per_section} "
-                                f"elements per section: must be <= {sdt:.4g} s (or \"auto\")")
-    m = round(cdt / dt)
-    if m < 1 or abs(m * dt - cdt) > 1e-9 * cdt:
-        raise ConfigError.field("plant.cosserat.dt", c.dt,
-                                f"must divide control_dt = {cdt:g} s into an integer number of steps")
+        dt = auto_dt(cdt, sdt)
+    else:
+        dt = float(c.dt)
+        if dt > sdt:
+            raise ConfigError.field("plant.cosserat.dt", c.dt, f"too large for {c.elements_per_section} "
+                                    f"elements per section: must be <= {sdt:.4g} s (or \"auto\")")
+        m = round(cdt / dt)
+        if m < 1 or abs(m * dt - cdt) > 1e-9 * cdt:
+            raise ConfigError.field("plant.cosserat.dt", c.dt,
+                                    f"must divide control_dt = {cdt:g} s into an integer number of steps")
+    try:
+        check_steps_per_control(dt, cdt)
+    except ValueError as exc:
+        raise ConfigError.field("plant.cosserat.dt", c.dt, str(exc).split(": ", 1)[1]) from None
     return dt, sdt
 
 
@@ -218,11 +223,26 @@ class CosseratPlant:
             ok = self.slave.step(self._T2, dt)
         return 0 if ok else 8
 
-    def true_state(self, out: np.ndarray) -> None:
+    def true_state(self, out: np.ndarray) -> int:
+        """out (16,) <- [q1, dq1, q2, dq2]; 8 (diverged) if the rod's CC fit fails arithmetically."""
         out[0:4] = self._m
-        self.slave.sense_into(self._q2, self._dq2)  # CC fit, shared with the servo feed-forward
+        try:
+            self.slave.sense_into(self._q2, self._dq2)  # CC fit, shared with the servo feed-forward
+        except ArithmeticError:
+            return 8
         out[4:10] = self._q2
         out[10:16] = self._dq2
+        return 0
+
+    @property
+    def stop(self):
+        """The run's stop flag (an Event or None): once set, the rod stops between batches of its steps
+        (`CosseratSlave.step` raises `RodStopped`, a KeyboardInterrupt)."""
+        return self.slave.stop
+
+    @stop.setter
+    def stop(self, flag) -> None:
+        self.slave.stop = flag
 
     def forces(self, F: np.ndarray, contact: np.ndarray) -> None:
         """True interaction forces ON the robots F (4,) [F1x, F1z, F2x, F2z] N (F2 = constant + contact force

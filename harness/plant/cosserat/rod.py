@@ -3,7 +3,7 @@
 API
 ---
     plant = CosseratSlave(params: SlaveParams, elements_per_section=10, dt=None,
-                          material_damping=None, shear_factor=10.0, actuation="servo",
+                          material_damping=None, shear_factor=100.0, actuation="servo",
                           rotary_radius=0.04, elastic_law="analytic")
     plant.reset(q2, dq2=None)           # CC shape of q2 at rest-strain equilibrium (servo), time = 0
     plant.step(command (6,), duration, feedforward=None) -> bool   # False if the state diverged
@@ -12,7 +12,10 @@ API
     plant.external_tip_force(F (2,))                     # constant tip force [FX, FZ], N (held)
     plant.section_nodes -> (4,) int                      # node indices of the section boundaries
     plant.time, plant.dt, plant.stable_dt                # s
+    plant.stop                                           # None or an Event: set -> `step` raises RodStopped
     stable_dt(params, elements_per_section, ...)         # explicit-stability estimate, s
+    check_steps_per_control(dt, control_dt) -> int       # rod steps per control step, ValueError above
+                                                         # MAX_STEPS_PER_CONTROL
     material_damping_from_slave(params) -> (eta_b (3,), eta_a (3,))
     hinge_damping(eta_b, h), slide_damping(eta_a, h)     # MuJoCo chain joint damping from the material
 Bad settings raise `ValueError` with one line naming the field, its value and the allowed range
@@ -36,7 +39,7 @@ extension_stiffness, m = masses):
 
     EI_i = Kb_i                        (N m^2; twist GJ_i = 2/3 EI_i, Poisson 0.5)
     EA_i = Ke_i L0_i                   (N; so 1/2 EA (d/L0 - 1)^2 L0 = 1/2 Ke (d - L0)^2)
-    GA_i = shear_factor * EA_i         (N; "shear stiff": default 10, shear adds < 1 % compliance)
+    GA_i = shear_factor * EA_i         (N; default 100: shear lowers the first mode by 0.08 %)
     rho A_i = m_i / L0_i               (kg/m of rest length: each section's mass uniform on it)
     rho I_i = slice_inertia_i or rho A_i rotary_radius^2 / 4   (kg m; rotary inertia, a disc)
 
@@ -103,7 +106,7 @@ A chain of rigid segments of length h discretizing the same rod gets hinge dampi
 `hinge_damping`, `slide_damping`.  Default: eta_b = 0.1 N m^2 s and eta_a = 3 N s in every
 section (`DEFAULT_ETA_B`, `DEFAULT_ETA_A`, = the scenario's plant.bending_viscosity /
 extension_viscosity), i.e. c_k = 0.03 and c_d = 10 in SlaveParams units: first bending mode
-1.27 Hz with a damping ratio of 11 % (`benchmarks/modal_cosserat.py`; README "Cosserat plant").
+1.28 Hz with a damping ratio of 11 % (`benchmarks/modal_cosserat.py`; README "Cosserat plant").
 
 Actuation
 ---------
@@ -135,12 +138,11 @@ Time stepping
 Position Verlet (PyElastica's `PositionVerlet` order: half drift, loads, kick, half drift) with
 PyElastica's update kernels, compiled into one loop (`cosserat_rod.run_steps`); `stepper =
 "pyelastica"` runs `PositionVerlet.step_single_instance` on the PyElastica memory block instead
-(same numbers, slower; used to check the compiled loop).  `stable_dt` is a CFL-type estimate:
-min over sections of 2 / omega_max (axial and shear waves 2 c / h, c = sqrt(EA / rho A),
-sqrt(GA / rho A); element rotation omega^2 = GA / rho I + 4 EI / (rho I h^2)), reduced for the
-explicit extension damping by sqrt(1 + zeta^2) - zeta, times a safety factor 0.5 (not yet calibrated
-against measured divergence limits).  The
-default dt is the largest 1 ms / m below it.
+(same numbers, slower; used to check the compiled loop).  The default dt is the largest 1 ms / m below
+`stable_dt`.
+
+The explicit step (`stable_dt`), refused configurations, interrupts and divergence:
+`harness.plant.cosserat.limits`.
 """
 
 from __future__ import annotations
@@ -154,13 +156,22 @@ from elastica.timestepper.symplectic_steppers import PositionVerlet
 from controllers.cc import backbone_points
 from controllers.params import SlaveParams
 from harness.plant.cosserat import kernels as kr
+from harness.plant.cosserat.limits import (
+    BATCH_STEPS,
+    DEFAULT_ELEMENTS,
+    DEFAULT_ETA_A,
+    DEFAULT_ETA_B,
+    DEFAULT_ROTARY_RADIUS,
+    DEFAULT_SHEAR_FACTOR,
+    EXPLODING_LENGTHS,
+    MAX_STEPS_PER_CONTROL,
+    RodStopped,
+    _material,
+    auto_dt,
+    check_steps_per_control,
+    stable_dt,
+)
 
-DEFAULT_ELEMENTS = 10
-DEFAULT_ETA_B = 0.1  # N m^2 s, bending viscosity per section
-DEFAULT_ETA_A = 3.0  # N s, extension viscosity per section
-DEFAULT_SHEAR_FACTOR = 10.0
-DEFAULT_ROTARY_RADIUS = 0.04  # m
-SAFETY = 0.5
 FIT_ITERATIONS = 16
 _BASE_DT = 1e-3
 
@@ -183,36 +194,6 @@ def hinge_damping(eta_b, h):
 def slide_damping(eta_a, h):
     """Slide damping (N s/m) of a segment of rest length h of a rod of extension viscosity eta_a."""
     return np.asarray(eta_a, dtype=float) / np.asarray(h, dtype=float)
-
-
-def _material(params: SlaveParams, shear_factor: float, rotary_radius: float):
-    L0 = np.asarray(params.rest_lengths, dtype=float)
-    EI = np.asarray(params.bending_stiffness, dtype=float)
-    EA = np.asarray(params.extension_stiffness, dtype=float) * L0
-    rhoA = np.asarray(params.masses, dtype=float) / L0
-    si = np.asarray(params.slice_inertia, dtype=float)
-    rhoI = np.where(si > 0, si, rhoA * rotary_radius**2 / 4.0)
-    return L0, EI, EA, shear_factor * EA, rhoA, rhoI
-
-
-def stable_dt(params: SlaveParams, elements_per_section: int = DEFAULT_ELEMENTS,
-              shear_factor: float = DEFAULT_SHEAR_FACTOR, rotary_radius: float = DEFAULT_ROTARY_RADIUS,
-              eta_a=DEFAULT_ETA_A) -> float:
-    """Largest explicit step (s) estimated stable for these settings (see module docstring)."""
-    L0, EI, EA, GA, rhoA, rhoI = _material(params, shear_factor, rotary_radius)
-    eta_a = np.broadcast_to(np.asarray(eta_a, dtype=float), (3,))
-    h = L0 / elements_per_section
-    w_ax = 2.0 * np.sqrt(EA / rhoA) / h
-    w_sh = 2.0 * np.sqrt(GA / rhoA) / h
-    w_rot = np.sqrt(GA / rhoI + 4.0 * EI / (rhoI * h * h))
-    z_ax = eta_a * w_ax / (2.0 * EA)
-    z_sh = eta_a * w_sh / (2.0 * GA)
-    dts = np.concatenate([
-        2.0 / w_ax * (np.sqrt(1 + z_ax**2) - z_ax),
-        2.0 / w_sh * (np.sqrt(1 + z_sh**2) - z_sh),
-        2.0 / w_rot,
-    ])
-    return float(SAFETY * dts.min())
 
 
 def _rot_y(p: float) -> np.ndarray:
@@ -265,7 +246,8 @@ class CosseratSlave:
                 raise _err("material_damping", material_damping, "every entry must be finite and >= 0")
         self.stable_dt = stable_dt(params, n, shear_factor, rotary_radius, eta_a)
         if dt is None:
-            dt = _BASE_DT / math.ceil(_BASE_DT / self.stable_dt - 1e-9)
+            dt = auto_dt(_BASE_DT, self.stable_dt)
+            check_steps_per_control(dt, _BASE_DT)
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
             raise _err("dt", dt, "must be a finite number > 0")
         if dt > self.stable_dt:
@@ -279,6 +261,8 @@ class CosseratSlave:
         self.shear_factor = float(shear_factor)
         self.analytic_law = elastic_law == "analytic"
         self.stepper = stepper
+        self.stop = None  # an Event (or anything with is_set()): set -> `step` raises RodStopped
+        self._far = EXPLODING_LENGTHS * float(np.sum(params.rest_lengths))  # m, exploding-state radius
         self.section_nodes = np.array([0, n, 2 * n, 3 * n], dtype=np.int64)
         self._build(rotary_radius)
         self.reset(np.concatenate([params.rest_lengths, np.zeros(3)]))
@@ -482,22 +466,47 @@ class CosseratSlave:
             self._set_active(None if feedforward is None else self._vec6("feedforward", feedforward))
         else:
             self._set_active(command)
+        self._fit_valid = False  # the rod moves: a cached CC fit is stale
+        left = m
+        while left > 0:
+            n = min(left, BATCH_STEPS)
+            try:
+                ok = self._run(n) and self._sane()
+            except ArithmeticError:  # ZeroDivisionError on a collapsed element, FloatingPointError, ...
+                ok = False
+            left -= n
+            self._steps += n
+            self.time = self._steps * self.dt
+            if not ok:
+                return False
+            if self.stop is not None and self.stop.is_set():
+                raise RodStopped(f"rod stopped at t = {self.time:.6g} s")
+        return True
+
+    def _run(self, n: int) -> bool:
+        """n rod steps; False if the positions are not finite."""
+        b = self._b
         if self.stepper == "numba":
-            b = self._b
-            ok = kr.run_steps(m, self.dt, b.position_collection, b.velocity_collection, b.director_collection,
-                              b.omega_collection, b.acceleration_collection, b.alpha_collection, b.mass,
-                              b.mass_second_moment_of_inertia, b.inv_mass_second_moment_of_inertia,
-                              *self._load_args()[5:], b.internal_forces, b.internal_torques,
-                              b.external_forces, b.external_torques)
-        else:
-            t = np.float64(self.time)
-            for _ in range(m):
-                t = self._verlet.step_single_instance(self._b, t, np.float64(self.dt))
-            ok = bool(np.all(np.isfinite(self._b.position_collection)))
-        self._fit_valid = False  # the rod has moved: a cached CC fit is stale
-        self._steps += m
-        self.time = self._steps * self.dt
-        return bool(ok)
+            return kr.run_steps(n, self.dt, b.position_collection, b.velocity_collection,
+                                b.director_collection, b.omega_collection, b.acceleration_collection,
+                                b.alpha_collection, b.mass,
+                                b.mass_second_moment_of_inertia, b.inv_mass_second_moment_of_inertia,
+                                *self._load_args()[5:], b.internal_forces, b.internal_torques,
+                                b.external_forces, b.external_torques)
+        t = np.float64(self.time)
+        for _ in range(n):
+            t = self._verlet.step_single_instance(b, t, np.float64(self.dt))
+        return True
+
+    def _sane(self) -> bool:
+        """Node positions, velocities and element angular velocities finite, every node within
+        EXPLODING_LENGTHS rod lengths of the base."""
+        b = self._b
+        pos = b.position_collection
+        if not (np.isfinite(pos).all() and np.isfinite(b.velocity_collection).all()
+                and np.isfinite(b.omega_collection).all()):
+            return False
+        return float(np.abs(pos).max()) <= self._far
 
     def sense(self) -> tuple[np.ndarray, np.ndarray]:
         """(q2, dq2): least-squares CC fit of each section's nodes and its first-order rates."""
@@ -528,5 +537,6 @@ class CosseratSlave:
         return self._b.position_collection.T.copy()
 
 
-__all__ = ["CosseratSlave", "DEFAULT_ELEMENTS", "DEFAULT_ETA_A", "DEFAULT_ETA_B", "hinge_damping",
+__all__ = ["BATCH_STEPS", "DEFAULT_ELEMENTS", "DEFAULT_ETA_A", "DEFAULT_ETA_B", "MAX_STEPS_PER_CONTROL",
+           "CosseratSlave", "RodStopped", "auto_dt", "check_steps_per_control", "hinge_damping",
            "material_damping_from_slave", "slide_damping", "stable_dt"]
