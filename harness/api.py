@@ -144,17 +144,8 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
         clear_run_outputs(out)
         _load.dump_scenario(scn, out / "config.toml")
         written.append(out / "config.toml")
-    prefetch: list = []  # Rerun and matplotlib are imported on the other core while the loop runs
-
-    def start_prefetch():
-        from harness.output.prefetch import prefetch_output_imports
-
-        prefetch.append(prefetch_output_imports())
-        return prefetch[-1]  # the MuJoCo loop's physics thread may start when it ends (overlap_plan)
-
     with stop_on_signals(common.STOP if handle_signals else None) as received:
-        traj = loop.simulate(scn, plant=plant, progress=progress, on_chunk=on_chunk,
-                             on_running=start_prefetch if out is not None else None)
+        traj = loop.simulate(scn, plant=plant, progress=progress, on_chunk=on_chunk)
     interrupted = bool(received) or traj.status == "interrupted"
 
     def metrics_of():
@@ -173,8 +164,6 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
         doc = metrics if metrics is not None else {"status": traj.status, "message": traj.message,
                                                     "metrics_error": failures[-1] if failures else ""}
 
-        for th in prefetch:
-            th.join()  # no import lock may be held by another thread when the writers fork
         written += _write_outputs(traj, out, record_rate, attempt)
 
         def write_metrics() -> Path:
@@ -255,7 +244,7 @@ def _write_outputs(traj: Any, out: Path, record_rate: float | None, attempt: Cal
 
 def _split_figures(names: list[str]) -> tuple[list[str], list[str]]:
     """The figures this process draws and those a second process draws, about half the drawing each
-    (the measured costs: `benchmarks/bench_e2e.py`)."""
+    (the measured costs: `benchmarks/bench_core.py`)."""
     theirs = [n for n in names if n in FIGURES_IN_CHILD]
     return [n for n in names if n not in theirs], theirs
 

@@ -152,11 +152,11 @@ _NO_ALLOCATION_MUJOCO_SCRIPT = textwrap.dedent("""
     from harness.config.scenario import Scenario
     from harness.loop.mujoco_loop import simulate_mujoco
 
-    simulate_mujoco(Scenario(duration=0.01), overlap=False)  # compile or load
+    simulate_mujoco(Scenario(duration=0.01))  # compile or load
     counts = []
     for duration in (0.01, 0.3):
         before = rtsys.get_allocation_stats()
-        tr = simulate_mujoco(Scenario(duration=duration), overlap=False)
+        tr = simulate_mujoco(Scenario(duration=duration))
         after = rtsys.get_allocation_stats()
         assert tr.status == "ok" and len(tr) == round(duration * 1000), (tr.status, len(tr))
         counts.append(after.alloc - before.alloc)

@@ -33,7 +33,7 @@ from controllers.params import ParameterError
 from harness.cli.parser import EXIT_FAIL, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, build_parser
 from harness.cli.parser import one_line as _one_line
 from harness.config.errors import ConfigError
-from harness.config.runtime import fast_exit, overlap_setting, set_gc_thresholds
+from harness.config.runtime import fast_exit, set_gc_thresholds
 from harness.config.textio import jsonable, prepare_out_dir
 
 # (module, attribute) of exception types that mean "invalid input" (exit 2).  Looked up in
@@ -354,7 +354,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help(sys.stderr)
         return EXIT_USAGE
     try:
-        overlap_setting()  # a bad TELEOP_OVERLAP is an input error before anything runs
         return COMMANDS[args.command](args)
     except KeyboardInterrupt:
         _err("interrupted")
@@ -382,7 +381,7 @@ if __name__ == "__main__":  # pragma: no cover
 
 
 def prepare_process() -> None:
-    """What the `teleop` command sets up before `main()` (also used by benchmarks/bench_e2e.py, so that
+    """What the `teleop` command sets up before `main()` (also used by benchmarks/bench_core.py, so that
     it measures the command as users run it): the collector thresholds
     `harness.config.runtime.GC_THRESHOLDS`, and MuJoCo's OpenGL rendering off unless MUJOCO_GL says
     otherwise (the harness draws with Rerun and matplotlib; `import mujoco` then skips looking for

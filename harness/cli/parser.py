@@ -133,9 +133,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "rigid master.",
         epilog="exit status: 0 ok; 1 run failed (diverged, outputs not written) or bounds violated; "
                "2 invalid input; 130 interrupted (SIGINT/SIGTERM). "
-               "Set TELEOP_DEBUG=1 to print tracebacks of output-writing failures; TELEOP_OVERLAP=1 / 0 to "
-               "force the MuJoCo loop's physics thread on / off (default: tried when a core is free for it, "
-               "kept if faster). "
+               "Set TELEOP_DEBUG=1 to print tracebacks of output-writing failures. "
                "Run 'teleop COMMAND --help' for the options of each command.")
     parser.add_argument("--version", action=_VersionAction, help="print the package version and exit.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands")

@@ -1,5 +1,5 @@
 """Process-level settings shared by the `teleop` command and the sweep's pool workers: the garbage
-collector's thresholds, the fast end of a process, the TELEOP_OVERLAP switch and the progress bars.  Nothing
+collector's thresholds, the fast end of a process and the progress bars.  Nothing
 here knows of plants or runs."""
 
 from __future__ import annotations
@@ -44,24 +44,6 @@ def fast_exit(rc: int) -> NoReturn:
         end_process(rc)
 
 
-OVERLAP_ENV = "TELEOP_OVERLAP"
-
-
-def overlap_setting() -> bool | None:
-    """$TELEOP_OVERLAP: True ("1": the MuJoCo loop's physics thread on), False ("0": off) or None (unset or
-    empty: where a core is free and it is faster, `harness.loop.mujoco_loop.overlap_plan`).  Anything else
-    raises ConfigError naming the variable and its values (checked by `teleop` before any command runs)."""
-    from harness.config.errors import ConfigError
-
-    env = os.environ.get(OVERLAP_ENV, "").strip()
-    if env in ("0", "1"):
-        return env == "1"
-    if env:
-        raise ConfigError.field(OVERLAP_ENV, env, "1 (physics thread on), 0 (off), or unset (on when a core "
-                                "is free)")
-    return None
-
-
 @functools.cache
 def progress_bar_class() -> type:
     """tqdm's bar without its monitor thread.  tqdm starts a daemon thread ("tqdm_monitor") at the first bar
@@ -78,5 +60,4 @@ def progress_bar_class() -> type:
     return Bar
 
 
-__all__ = ["GC_THRESHOLDS", "OVERLAP_ENV", "end_process", "fast_exit", "overlap_setting",
-           "progress_bar_class", "set_gc_thresholds"]
+__all__ = ["GC_THRESHOLDS", "end_process", "fast_exit", "progress_bar_class", "set_gc_thresholds"]

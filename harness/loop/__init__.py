@@ -28,20 +28,10 @@ def releases_gil(scn) -> bool:
     return jit_wanted()
 
 
-def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None, on_running=None,
-             overlap: bool | None = None):
+def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None):
     """Run one scenario on `plant` (default: the plant `scn.plant` describes); returns the Trajectory.
     on_chunk: optional callable receiving each finished chunk of control steps as a `Trajectory`
-    (e.g. a live viewer, `harness.output.viewer.LiveView`).  on_running: optional callable called
-    once, without arguments, when the loop's start-up (numba loading its kernels, model set-up) is over:
-    after the first chunk of steps, or, in the compiled MuJoCo loop, as soon as its kernel is loaded.
-    Background work started then (the output imports, `harness.output.prefetch`) does not compete with
-    the start-up for the GIL; on_running may return that work's thread, and on 2 CPUs the MuJoCo loop's
-    physics thread (overlap) starts when it ends.  Not called by the Python-stepped loop on plants that
-    release the GIL at every step (`simulate_stepped`): there such work would stall every step.
-    overlap: the compiled MuJoCo loop steps MuJoCo in a second thread (same numbers, less time, more CPU;
-    `harness.loop.mujoco_loop.simulate_mujoco`); None = when and while a core is free for it.  Ignored by
-    the other loops.
+    (e.g. a live viewer, `harness.output.viewer.LiveView`).
 
     A run that diverges or is interrupted (`harness.loop.common.STOP`) returns everything up to that
     point, with `status` and `message` saying what happened and when."""
@@ -58,14 +48,11 @@ def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None, on_r
 
             plant = stepped_plant(scn, plant)
         return simulate_stepped(scn, plant, progress=progress,
-                                controller="interface" if python_ctrl else None, on_chunk=on_chunk,
-                                on_running=on_running)
+                                controller="interface" if python_ctrl else None, on_chunk=on_chunk)
     if plant.kind == "analytic":
         from harness.loop.analytic_loop import simulate_analytic
 
-        return simulate_analytic(scn, progress=progress, plant=plant, on_chunk=on_chunk,
-                                 on_running=on_running)
+        return simulate_analytic(scn, progress=progress, plant=plant, on_chunk=on_chunk)
     from harness.loop.mujoco_loop import simulate_mujoco
 
-    return simulate_mujoco(scn, progress=progress, plant=plant, on_chunk=on_chunk, on_running=on_running,
-                           overlap=overlap)
+    return simulate_mujoco(scn, progress=progress, plant=plant, on_chunk=on_chunk)

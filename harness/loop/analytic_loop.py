@@ -27,11 +27,10 @@ from harness.plant.analytic import AnalyticPlant
 
 
 def simulate_analytic(scn: Scenario, progress: bool = False,
-                      plant: AnalyticPlant | None = None, on_chunk=None, on_running=None) -> Trajectory:
+                      plant: AnalyticPlant | None = None, on_chunk=None) -> Trajectory:
     """Closed loop on the analytic plant (plant params may differ from the controller's).
     plant: the plant's parameters (default: the scenario's plant side); on_chunk: optional callable
-    receiving each finished chunk of steps as a `Trajectory` (e.g. a live viewer); on_running: called
-    once after the first chunk (`harness.loop.simulate`)."""
+    receiving each finished chunk of steps as a `Trajectory` (e.g. a live viewer)."""
     if plant is None:
         plant = AnalyticPlant(scn.plant_master, scn.plant_slave)
     n = scn.n_steps
@@ -64,9 +63,6 @@ def simulate_analytic(scn: Scenario, progress: bool = False,
                 part = Trajectory.from_rows(rows[k:done])
                 part.meta.update(run_meta(scn, 0.0))
                 on_chunk(part)
-            if on_running is not None:
-                on_running, start = None, on_running
-                start()
             if status != 0:
                 break
             k = k1

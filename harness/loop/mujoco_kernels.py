@@ -21,19 +21,7 @@ from harness.loop.force_kernels import (
     sense_forces,
 )
 from harness.loop.kernels import R_E1, R_E2, ROW_W, RUNAWAY, control_step
-from harness.loop.native import (  # noqa: F401 - MJ_FUNCS: re-exported for the loop's callers
-    MJ_FUNCS,
-    MJ_KINEMATICS_FN,
-    MJ_STEP_FN,
-    SYNC_GO,
-    SYNC_S1,
-    SYNC_S2,
-    copy_geometry,
-    mj_call,
-    sync_load,
-    sync_store,
-    sync_wait,
-)
+from harness.loop.native import MJ_KINEMATICS_FN, MJ_STEP_FN, copy_geometry, mj_call
 from harness.plant.chain_map import (
     chain_elastic_correction,
     chain_force_from_T2,
@@ -45,7 +33,7 @@ from harness.plant.chain_map import (
 
 # =============================================================================================
 # MuJoCo plant: the whole control loop compiled, calling MuJoCo's C functions by address
-# (`harness.loop.native`: the addresses, the calls, and the physics thread's synchronisation)
+# (`harness.loop.native`: the addresses and the calls)
 # =============================================================================================
 def sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state):
     """True (noise-free) state (16,) [q1, dq1, q2, dq2] from MuJoCo joints; qc, vc (n_chain,) work."""
@@ -105,7 +93,7 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
                  c_qadr, c_dadr, c_act, R, C, L0, eargs,
                  servo, feedforward, kv_over_kp, traj, noise, noise_scale, F, mpk_c, spk_c, nodes,
                  weights, gains, spec, ref, cmdbuf, delay, rows, qpos_hist, cmd_log, geo_in, geo_out, wnum,
-                 fargs, sync):
+                 fargs):
     """Control steps k0..k1-1 on the MuJoCo plant (model/data pointers mptr, dptr; mjfn = MJ_FUNCS;
     qpos, qvel, ctrl, qfrc are numpy views of the same MjData).  Per step: sense -> noise -> both laws
     -> record -> commands (delayed by `delay` control steps through the ring buffer cmdbuf (delay+1, 2+2n)) ->
@@ -116,18 +104,12 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
     or, if geo_out = (body_pos, body_quat, master_pos, tip) has rows, `copy_geometry` fills them from the
     kinematics MuJoCo computed inside the first mj_step of the step (the start state: valid for the
     single-stage integrators, not RK4), geo_in = (xpos, xquat, site_xpos, xanchor, bodies, gids).
-    wnum: MuJoCo's warning counters, checked after every mj_step: a view of mjData.warning.number, or, with
-    the physics thread, the copy it takes after each mj_step2 (`physics_server`'s wsnap).
+    wnum: MuJoCo's warning counters (a view of mjData.warning.number), checked after every mj_step.
     fargs = (sensordata, cadr (ContactMap.adr or empty), Fconst (4,) constant tip forces (F2 is applied by
     the caller through xfrc_applied, F1 here through qfrc_applied = J1^T F1), fmode, fnoise, fstd, falpha,
     fdelay, fbuf, ffilt (`sense_forces`), op_on, op, targets, hand (4,), target (2,) (operator, see
     `harness.loop.force_kernels`), mpk_p (plant master, packed), cpts (k1 - k0, np, 6) contact points or
     0 rows): the laws get the sensed F (`sense_forces`) instead of F (kept in the signature).
-    sync: int64 (0,) = this thread steps MuJoCo (mj_step); (SYNC_SIZE,) = the thread of `physics_server`
-    (same MjData, same sync) steps it in MuJoCo's two phases, mj_step2 when asked (sync[SYNC_GO]) and then at
-    once mj_step1 of the new state, which runs while this thread computes the next control step (mj_step1
-    reads neither ctrl nor qfrc_applied; mj_step1 + mj_step2 = mj_step's numbers).  This thread writes
-    sync[SYNC_GO] only.
     Returns (status, completed steps); status 6 = non-finite or exploding MuJoCo state, 7 = a MuJoCo
     warning was raised during the last completed step (whose row is recorded)."""
     (sensordata, cadr, Fconst, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, op_on, op, targets, hand,
@@ -169,8 +151,6 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
     live = geo_out[0].shape[0] > 0
     nu = ctrl.shape[0]
     nv = qfrc.shape[0]
-    par = sync.shape[0] > 0
-    gen = sync_load(sync, SYNC_GO) if par else 0  # physics steps done in the run
     for k in range(k0, k1):
         sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state)
         for i in range(16):
@@ -203,9 +183,7 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
                         or (abs(r[R_E2]) + abs(r[R_E2 + 1]) > RUNAWAY)):
             st = 4
         if st != 0:  # the last recorded step is not stepped: its geometry row from its kinematics
-            if par:  # the physics thread's mj_step1 of this state copies it: wait for it to be done
-                sync_wait(sync, SYNC_S1, gen, mjfn)
-            elif live:
+            if live:
                 mj_call(mjfn[MJ_KINEMATICS_FN], mptr, dptr)
                 copy_geometry(geo_in, k - k0, geo_out)
             return st, k - k0 + 1
@@ -242,14 +220,9 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
                     lr[i] = ctrl[i]
                 for i in range(nv):
                     lr[nu + i] = qfrc[i]
-            if par:  # (the physics thread copies the geometry rows, from its mj_step1)
-                gen += 1
-                sync_store(sync, SYNC_GO, gen)
-                sync_wait(sync, SYNC_S2, gen, mjfn)
-            else:
-                mj_call(mjfn[MJ_STEP_FN], mptr, dptr)
-                if live and s == 0:
-                    copy_geometry(geo_in, k - k0, geo_out)
+            mj_call(mjfn[MJ_STEP_FN], mptr, dptr)
+            if live and s == 0:
+                copy_geometry(geo_in, k - k0, geo_out)
             for w in range(wnum.shape[0]):
                 if wnum[w] != 0:  # any MuJoCo warning stops the run: it must never pass silently
                     return 7, k - k0 + 1

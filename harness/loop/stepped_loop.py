@@ -119,18 +119,11 @@ class PaperController:
 
 
 def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
-                     controller: Controller | None = None, on_chunk=None, on_running=None) -> Trajectory:
+                     controller: Controller | None = None, on_chunk=None) -> Trajectory:
     """Run the scenario on a stepped plant; returns the Trajectory (possibly cut short).
     controller: a loop `Controller` (default `PaperController`), or `"interface"` for the scenario's
     `controllers.interface.Controller` (`harness.loop.interface_adapter.InterfaceController`).
     on_chunk: optional callable receiving every CHUNK steps as a `Trajectory` (time series only).
-    on_running: called once after the first CHUNK steps (`harness.loop.simulate`), only if the plant
-    says `overlap_imports = True` (`harness.plant.stepped.SteppedPlant`): this loop runs Python at every
-    step, and a plant that releases the GIL at every step (MuJoCo's `mj_step` binding, the compiled
-    analytic step) would then wait for the import thread at every step.  Measured on the 5-s paper run:
-    the loop 1.5 -> 3.3 s (analytic, `paper_interface`) and 2.9 -> 4.5 s (MuJoCo, `dls_ik`) beside the
-    1.2-s imports, which cost less after the loop; the Cosserat plant, whose steps hold the GIL, waits
-    0.2 s for them.
 
     traj.x2_plant: the plant's own slave tip (n, 2); traj.master_pos: (n, 3, 3) if the plant's
     geometry has "master"; every other geometry array goes to traj.meta["geometry"][name] (n, ...).
@@ -138,8 +131,6 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
     geometry instead.
     Timings: meta "build_time" (controller and plant reset), "wall_time" (the loop)."""
     tb = time.perf_counter()
-    if not getattr(plant, "overlap_imports", False):
-        on_running = None
     n = scn.n_steps
     dt = scn.control_dt
     s0 = initial_state(scn)
@@ -257,9 +248,6 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
                     part = Trajectory.from_rows(rows[k + 1 - CHUNK:k + 1])
                     part.meta.update(run_meta(scn, 0.0))
                     on_chunk(part)
-                if on_running is not None:
-                    on_running, start = None, on_running
-                    start()
                 if STOP.is_set():
                     interrupted = True
                     break

@@ -40,9 +40,6 @@ class SteppedPlant(Protocol):
     kind: str  # plant kind, as in Scenario.plant.kind (e.g. "cosserat")
     actuation: str  # "servo" (tracks q2_ref, T2 feed-forward) | "torque" (applies T2)
     physics_dt: float  # s, the plant's own step; control_dt is a multiple of it
-    # Optional (not part of the check): `overlap_imports = True` if `advance` holds the GIL while it steps,
-    # so that other Python threads (the output imports of `harness.output.prefetch`) may run beside the
-    # loop without stalling it at every step (`harness.loop.stepped_loop.simulate_stepped`).
 
     def reset(self, state0: np.ndarray) -> None:
         """Both arms at rest at state0 (16,) = [q1, dq1, q2, dq2] (time 0, commands cleared)."""

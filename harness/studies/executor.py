@@ -56,7 +56,7 @@ def run_case(case: dict) -> dict:
 
         scn = case["scenario"]
         # a sweep keeps every core busy with cases: no second thread per case (it would spin-wait for a core)
-        traj = simulate(scn, progress=False, overlap=False)
+        traj = simulate(scn, progress=False)
         metrics = compute_metrics(traj, scn)
         out.update(status=traj.status, message=traj.message,
                    metrics={k: jsonable(metrics.get(k)) for k in case["metrics"]})
