@@ -48,8 +48,8 @@ from harness.config.scenario import PlantConfig, Scenario
 from harness.loop.analytic_loop import simulate_analytic
 from harness.loop.common import common_arrays, initial_state, noise_table
 from harness.loop.fast import K
-from harness.loop.native import MJ_FUNCS
 from harness.loop.mujoco_loop import make_plant, simulate_mujoco
+from harness.loop.native import MJ_FUNCS
 from harness.loop.trajectory import ROW_WIDTH
 from harness.output.record import write_recording
 

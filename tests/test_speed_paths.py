@@ -18,8 +18,8 @@ import pytest
 from controllers import slave as slave_model
 from harness.config.scenario import PlantConfig, Scenario
 from harness.loop.fast import K
-from harness.loop.native import MJ_FUNCS
 from harness.loop.mujoco_loop import BACKBONE_POINTS, chain_body_ids, make_plant, simulate_mujoco
+from harness.loop.native import MJ_FUNCS
 
 
 def _python_geometry(scn, m, cmap, qpos_hist, q2):
