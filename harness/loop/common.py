@@ -1,4 +1,4 @@
-"""What every closed loop shares: the stop flag and status codes, the initial state, the desired
+"""What every closed loop shares: the stop flag, the initial state, the desired
 trajectory, the seeded noise table, the controller-side packed arrays and the run metadata.
 
 Used by the plant-specific loops (`harness.loop.analytic_loop`, `harness.loop.mujoco_loop`); it
@@ -22,30 +22,20 @@ from harness.loop.fast import K
 from harness.loop.trajectory import Trajectory
 from harness.plant.initial import InitialStateError
 from harness.plant.initial import initial_state as _initial_state
+from harness.plant.status import Status
 
 STOP = threading.Event()  # set from a signal handler to stop a run cleanly
 CHUNK = 250  # control steps per compiled call between progress/interrupt checks
 
-STATUS_TEXT = {
-    1: "non-finite state or command",
-    2: "master Jacobian J1 singular",
-    3: "slave J2 J2^T singular",
-    4: "runaway tracking error (|e| > 1 m)",
-    5: "slave section length <= 0",
-    6: "non-finite or exploding MuJoCo state (|x| > 1e6)",
-    7: "MuJoCo warning",
-    8: "non-finite or exploding plant state (|x| > 1e6)",
-}
-
-
 def set_outcome(traj: Trajectory, status: int, interrupted: bool, error: str = "", detail: str = "") -> None:
     """Set traj.status/message from a loop's end: an exception text (`error`), a kernel status code
-    (STATUS_TEXT, plus `detail`), an interrupt, or nothing (status stays "ok")."""
+    (`harness.plant.status.Status`, plus `detail`), an interrupt, or nothing (status stays "ok")."""
     t_end = float(traj.t[-1]) if len(traj) else 0.0
     if error:
         traj.status, cause = "error", error
     elif status != 0:
-        traj.status, cause = "diverged", STATUS_TEXT.get(status, "unknown") + detail
+        known = status in Status._value2member_map_
+        traj.status, cause = "diverged", (Status(status).text if known else "unknown") + detail
     elif interrupted:
         traj.status, cause = "interrupted", "interrupted"
     else:

@@ -37,8 +37,9 @@ from controllers.interface import (
 )
 from harness.config.errors import ConfigError
 from harness.config.scenario import ControllerConfig, Scenario
-from harness.loop.common import STATUS_TEXT, common_arrays, initial_state
+from harness.loop.common import common_arrays, initial_state
 from harness.loop.fast import K
+from harness.plant.status import Status
 
 COMPILED = "paper"  # the name that selects the compiled fast path
 
@@ -64,7 +65,7 @@ class PaperController(Controller):
         st = K.control_laws(*self.args, obs.sensed, obs.x_d, obs.dx_d, obs.ddx_d, obs.F, a.T1, a.T2, a.u2,
                             a.deN, self.minfo, self.sinfo)
         if st != 0:
-            raise ControllerDiverged(STATUS_TEXT[st], code=st)
+            raise ControllerDiverged(Status(st).text, code=st)
         return a
 
 

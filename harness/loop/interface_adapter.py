@@ -20,8 +20,9 @@ import numpy as np
 
 from controllers.interface import ControllerDiverged, Observation
 from harness.config.scenario import Scenario
-from harness.loop.common import STATUS_TEXT, common_arrays
+from harness.loop.common import common_arrays
 from harness.loop.controllers import make_controller
+from harness.plant.status import Status
 
 SHAPES = (("T1", 2), ("T2", 6), ("u2", 6), ("deN", 6))
 REF_SHAPES = (("q2_ref", 6), ("dq2_ref", 6))
@@ -93,7 +94,7 @@ class InterfaceController:
         try:
             act = self.ctrl.step(obs)
         except ControllerDiverged as e:
-            code = e.code if e.code in STATUS_TEXT and e.code != 0 else -1
+            code = e.code if e.code in Status._value2member_map_ and e.code != 0 else -1
             self.diverged = f"controller {name!r} stopped: {_line(e)} at step {k} (t = {t:.3f} s)"
             act = getattr(self.ctrl, "action", None)
             if act is None:

@@ -4,11 +4,8 @@ Everything that happens once per control step and is not MuJoCo's `mj_step` live
 that the Python side of the loop is one kernel call plus `mj_step`:
   sensing noise -> master law -> slave law -> record row (and, for the analytic plant, RK4).
 
-Status codes returned by the kernels (STATUS_TEXT in harness.loop.common):
-0 ok, 1 non-finite state or command, 2 master Jacobian singular, 3 slave J2 J2^T singular,
-4 runaway error (|e1| or |e2| above the limit), 5 slave section length <= 0, 6 non-finite or
-exploding MuJoCo state, 7 a MuJoCo warning (counted by MuJoCo in mjData.warning; checked after
-every mj_step, so the run stops at the step that raised it).
+Status codes returned by the kernels: `harness.plant.status` (ST_* here; a MuJoCo warning is counted by
+MuJoCo in mjData.warning and checked after every mj_step, so the run stops at the step that raised it).
 """
 
 from __future__ import annotations
@@ -35,6 +32,14 @@ from controllers.scratch import scratch, scratch_zeros
 from controllers.subtasks import limits_kernel
 from controllers.tip import tip_kinematics
 from harness.plant.analytic import plant_accel
+from harness.plant.status import (
+    ST_MASTER_SINGULAR,
+    ST_NONFINITE,
+    ST_OK,
+    ST_RUNAWAY,
+    ST_SECTION_LENGTH,
+    ST_SLAVE_SINGULAR,
+)
 
 # record row layout (must match harness.loop.trajectory.ROW_FIELDS)
 R_T, R_Q1, R_DQ1, R_Q2, R_DQ2, R_XD, R_X1, R_X2 = 0, 1, 3, 5, 11, 17, 19, 21
@@ -82,12 +87,12 @@ def control_laws(mpk, spk, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F
     dq2 = sensed[10:16]
     det1 = master_control_kernel(mpk, gains, q1, dq1, xd, dxd, ddxd, F[0:2], T1, minfo)
     if det1 == 0.0:
-        return 2
+        return ST_MASTER_SINGULAR
     det2 = slave_control_kernel(spk, nodes, weights, gains, spec, q2, dq2, minfo[0:2], minfo[8:10],
                                 minfo[6:8], F[2:4], T2, u2, deN, sinfo)
     if det2 <= DET_MIN:
-        return 3
-    return 0
+        return ST_SLAVE_SINGULAR
+    return ST_OK
 
 
 def record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row):
@@ -252,7 +257,7 @@ def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale
                 if st != 0:
                     return st, k - k0 + 1
             if not plant_accel(mpk_p, spk_p, nodes, weights, state, T1, T2, Fp, k1s):
-                return 1, k - k0 + 1
+                return ST_NONFINITE, k - k0 + 1
             for i in range(16):
                 tmp[i] = state[i] + 0.5 * h * k1s[i]
             if continuous:
@@ -260,14 +265,14 @@ def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale
                 control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
                              T1, T2, u2, deN, minfo, sinfo)
             if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k2s):
-                return 1, k - k0 + 1
+                return ST_NONFINITE, k - k0 + 1
             for i in range(16):
                 tmp[i] = state[i] + 0.5 * h * k2s[i]
             if continuous:
                 control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
                              T1, T2, u2, deN, minfo, sinfo)
             if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k3s):
-                return 1, k - k0 + 1
+                return ST_NONFINITE, k - k0 + 1
             for i in range(16):
                 tmp[i] = state[i] + h * k3s[i]
             if continuous:
@@ -275,19 +280,19 @@ def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale
                 control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
                              T1, T2, u2, deN, minfo, sinfo)
             if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k4s):
-                return 1, k - k0 + 1
+                return ST_NONFINITE, k - k0 + 1
             for i in range(16):
                 state[i] += h / 6.0 * (k1s[i] + 2.0 * k2s[i] + 2.0 * k3s[i] + k4s[i])
         for i in range(16):
             if not np.isfinite(state[i]):
-                return 1, k - k0 + 1
+                return ST_NONFINITE, k - k0 + 1
         for i in range(3):
             if state[4 + i] <= 0.0:
-                return 5, k - k0 + 1
+                return ST_SECTION_LENGTH, k - k0 + 1
         r = rows[k - k0]
         if (abs(r[R_E1]) + abs(r[R_E1 + 1]) > RUNAWAY) or (abs(r[R_E2]) + abs(r[R_E2 + 1]) > RUNAWAY):
-            return 4, k - k0 + 1
-    return 0, k1 - k0
+            return ST_RUNAWAY, k - k0 + 1
+    return ST_OK, k1 - k0
 
 
 KERNELS = ("add_noise", "add_noise_channel", "sense_state", "control_laws", "record_row", "record_row_info",

@@ -29,6 +29,7 @@ from harness.plant.chain_map import (
     chain_joints_rate_add,
     chain_sense,
 )
+from harness.plant.status import ST_MUJOCO_STATE, ST_MUJOCO_WARNING, ST_OK, ST_RUNAWAY, ST_SECTION_LENGTH
 
 
 # =============================================================================================
@@ -155,10 +156,10 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
         sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state)
         for i in range(16):
             if not np.isfinite(state[i]) or abs(state[i]) > 1e6:
-                return 6, k - k0
+                return ST_MUJOCO_STATE, k - k0
         for i in range(3):
             if state[4 + i] <= 0.0:
-                return 5, k - k0
+                return ST_SECTION_LENGTH, k - k0
         t = k * dt
         r = rows[k - k0]
         read_contact(sensordata, cadr, F2c, r[R_CI:R_CI + CONTACT_INFO], cpts[k - k0] if cpts.shape[0] > 0
@@ -181,7 +182,7 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
                 qpos_hist[k - k0, i] = qpos[i]
         if st == 0 and ((abs(r[R_E1]) + abs(r[R_E1 + 1]) > RUNAWAY)
                         or (abs(r[R_E2]) + abs(r[R_E2 + 1]) > RUNAWAY)):
-            st = 4
+            st = ST_RUNAWAY
         if st != 0:  # the last recorded step is not stepped: its geometry row from its kinematics
             if live:
                 mj_call(mjfn[MJ_KINEMATICS_FN], mptr, dptr)
@@ -225,8 +226,8 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
                 copy_geometry(geo_in, k - k0, geo_out)
             for w in range(wnum.shape[0]):
                 if wnum[w] != 0:  # any MuJoCo warning stops the run: it must never pass silently
-                    return 7, k - k0 + 1
-    return 0, k1 - k0
+                    return ST_MUJOCO_WARNING, k - k0 + 1
+    return ST_OK, k1 - k0
 
 
 def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):

@@ -43,6 +43,7 @@ from harness.loop.native import MJ_FUNCS
 from harness.loop.trajectory import ROW_WIDTH, Trajectory
 from harness.plant.chain_map import ChainMap
 from harness.plant.mujoco_model import MujocoPlant
+from harness.plant.status import Status
 
 # Control steps per compiled call between progress, interrupt and warning checks (and per live-view chunk):
 # 1000 steps are 50-100 ms at N = 8.  The numbers do not depend on where the calls split the run
@@ -150,7 +151,7 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
                 if wnum.any():
                     warned = warning_counts(wnum)
                     if status == 0:  # the kernel stops at the step that raised it; never pass silently
-                        status = 7
+                        status = Status.MUJOCO_WARNING
                 if status != 0:
                     break
                 k = k1

@@ -24,7 +24,7 @@ The loop over control steps is Python, and each step is a few compiled calls.  P
                                                 the sensed q2 of the commanding step (MuJoCo torque map)
     status = plant.advance(control_dt)
 
-Statuses are those of `harness.loop.common.STATUS_TEXT` (1 non-finite command, 2/3 singular, 4
+Statuses are those of `harness.plant.status.Status` (1 non-finite command, 2/3 singular, 4
 runaway, 5 section length <= 0, 8 non-finite or exploding plant state, ...); the run stops at the
 first non-zero one, keeps every recorded row and says why (`set_outcome`).  `harness.loop.common.STOP`
 interrupts between steps.  Per-step buffers are preallocated; the glue around the plant and the

@@ -27,6 +27,7 @@ from harness.config.scenario import Scenario
 from harness.loop.common import common_arrays, initial_state
 from harness.loop.fast import K
 from harness.loop.mujoco_loop import _Geometry, _plant_geometry, make_plant, warning_counts
+from harness.plant.status import Status
 
 
 class MujocoStepped:
@@ -58,9 +59,9 @@ class MujocoStepped:
         K.sense_mujoco(d.qpos, d.qvel, c.master_qpos_adr, c.master_dof_adr, c.chain_qpos_adr, c.chain_dof_adr,
                        c.R, c.L0, self.qc, self.vc, state)
         if not np.all(np.isfinite(state)) or np.any(np.abs(state) > 1e6):
-            return 6
+            return Status.MUJOCO_STATE
         if np.any(state[4:7] <= 0.0):
-            return 5
+            return Status.SECTION_LENGTH
         return 0
 
     def command(self, T1, T2, q2_ref, dq2_ref, q2_sensed) -> None:
@@ -90,7 +91,7 @@ class MujocoStepped:
             mujoco.mj_step(self.m, d)
             if wnum.any():
                 self.warned = warning_counts(d.warning.number)
-                return 7
+                return Status.MUJOCO_WARNING
         return 0
 
     def slave_tip(self) -> np.ndarray:
@@ -158,12 +159,12 @@ class AnalyticStepped:
                     np.multiply(src, scale * h, out=tmp)
                     tmp += s
                 if not K.plant_accel(*args, tmp, self.T1, self.T2, self.F, out):
-                    return 1
+                    return Status.NONFINITE
             s += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
         if not np.all(np.isfinite(s)):
-            return 1
+            return Status.NONFINITE
         if np.any(s[4:7] <= 0.0):
-            return 5
+            return Status.SECTION_LENGTH
         return 0
 
     def slave_tip(self) -> np.ndarray:
