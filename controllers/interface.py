@@ -64,7 +64,7 @@ class ParamsError(ValueError):
 
 class ControllerDiverged(RuntimeError):
     """Raised by a controller that detects that it cannot continue (e.g. a singular Jacobian); the run
-    stops with status "diverged" (not "error").  `code` is a harness status code (harness.plant.status.Status)."""
+    stops with status "diverged" (not "error").  `code`: a status code of harness.plant.status."""
 
     def __init__(self, message: str, code: int = 0) -> None:
         super().__init__(message)
