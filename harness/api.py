@@ -36,13 +36,28 @@ DEBUG_ENV = "TELEOP_DEBUG"  # set to 1 to print tracebacks of output-writing fai
 def load_scenario(source: str | os.PathLike | Mapping | None = None, overrides: Iterable[str] = (), *,
                   labels: Iterable[str | None] | None = None) -> Scenario:
     """Read and validate a scenario (TOML path, parsed table or None = the paper scenario), apply the
-    dotted `key=value` overrides, and check that its plant can be built.  Raises `ConfigError`."""
+    dotted `key=value` overrides, and check that its plant can be built.  Raises `ConfigError`.
+    The plant built for the check is kept for the next `run_scenario` of the returned scenario (built once
+    per run)."""
     from harness.loop.controllers import resolve_controller
-    from harness.plant import validate_plant
+    from harness.plant import build_plant
 
     scn = _load.load_scenario(source, overrides, labels=labels)
-    validate_plant(scn)
-    return resolve_controller(scn)
+    plant = build_plant(scn)
+    scn = resolve_controller(scn)
+    _BUILT[:] = [(scn, plant)]
+    return scn
+
+
+# (scenario, plant): the plant `load_scenario` built for its check, used once by `run_scenario` of that very
+# scenario object (the controller's parameters, which resolve_controller may fill in, do not enter a plant)
+_BUILT: list[tuple[Scenario, Any]] = []
+
+
+def _plant_built_for(scn: Scenario) -> Any:
+    if _BUILT and _BUILT[0][0] is scn:
+        return _BUILT.pop()[1]
+    return None
 
 
 @dataclass
@@ -138,6 +153,8 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
             failed.append(what)
         return None
 
+    if plant is None:
+        plant = _plant_built_for(scn)
     if plant is None:
         plant = build_plant(scn)
     if out is not None:  # first, so the configuration is on disk whatever happens next

@@ -98,7 +98,7 @@ def test_singular_slave_jacobian_is_detected():
     with pytest.raises(FloatingPointError, match="singular"):
         slave_control(SlaveParams(), Gains(), SubtaskSpec(), q, np.zeros(6), np.array([0.0, 1.0]),
                       np.zeros(2), np.zeros(2))
-    a = sim.common_arrays(Scenario())
+    a = sim.compile_model(Scenario())._asdict()
     state = np.concatenate([[0.5, 1.1, 0.0, 0.0], q, np.zeros(6)])
     outs = [np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6), np.zeros(10), np.zeros(11)]
     xd = np.array([0.0, 1.0])

@@ -101,7 +101,7 @@ _NO_ALLOCATION_SCRIPT = textwrap.dedent("""
     import numpy as np
     from numba.core.runtime import rtsys
     from harness.config.scenario import Scenario
-    from harness.loop.common import common_arrays, initial_state, noise_table
+    from harness.loop.common import compile_model, initial_state, noise_table
     from harness.loop.fast import kernels
     from harness.loop.trajectory import ROW_WIDTH
     from controllers import master
@@ -109,7 +109,7 @@ _NO_ALLOCATION_SCRIPT = textwrap.dedent("""
     K = kernels(True)
     scn = Scenario(duration=0.2)
     n = scn.n_steps
-    a = common_arrays(scn)
+    a = compile_model(scn)._asdict()
     rows = np.zeros((n, ROW_WIDTH))
     mpk_p, spk_p = master.packed(scn.plant_master), scn.plant_slave.packed()
 

@@ -314,13 +314,13 @@ def test_noise_free_record_rows_equal_recomputed_rows(kind):
     """Without noise the record row reuses the control laws' kinematics (record_row_info): the rows
     equal record_row recomputed from the true state, bit for bit."""
     from harness.loop import simulate
-    from harness.loop.common import common_arrays
+    from harness.loop.common import compile_model
     from harness.loop.trajectory import ROW_SLICES, ROW_WIDTH
 
     scn = Scenario(duration=0.2, snr_db=None, plant=PlantConfig(kind=kind, segments=4))
     tr = simulate(scn)
     assert tr.status == "ok"
-    a = common_arrays(scn)
+    a = compile_model(scn)._asdict()
     row = np.zeros(ROW_WIDTH)
     xd, dxd, ddxd = np.empty(2), np.empty(2), np.empty(2)
     for k in range(0, len(tr), 7):

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from harness.config.load import load_scenario
+from harness.loop.common import compile_model
 from harness.loop.fast import kernels
 from harness.loop.kernels import R_E1, R_E2, RUNAWAY
 from harness.loop.stepped_loop import simulate_stepped
@@ -204,7 +205,7 @@ def test_the_three_controller_paths_of_the_stepped_loop_agree(extra):
     scn = load_scenario(None, ["plant.kind=mujoco", "duration=0.3", "plant.actuation_delay=0.002",
                                "interaction_forces=[[0.5, -1.0], [0.2, 0.4]]", *extra])
     ctrls = (PaperController, Fused, Plain)
-    runs = [simulate_stepped(scn, stepped_plant(scn), controller=c()) for c in ctrls]
+    runs = [simulate_stepped(scn, stepped_plant(scn, compile_model(scn)), controller=c()) for c in ctrls]
     assert all(r.status == "ok" and len(r) == scn.n_steps for r in runs)
     for f in ("q1", "q2", "T1", "T2", "u2", "F_true", "F_sensed", "e2"):
         for r in runs[1:]:

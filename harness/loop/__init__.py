@@ -35,6 +35,9 @@ def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None):
 
     A run that diverges or is interrupted (`harness.loop.common.STOP`) returns everything up to that
     point, with `status` and `message` saying what happened and when."""
+    from harness.loop.common import compile_model
+
+    model = compile_model(scn)  # once per run: every loop, adapter and controller context reads it
     if plant is None:
         from harness.plant import build_plant
 
@@ -46,13 +49,14 @@ def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None):
         if not hasattr(plant, "advance"):  # the MuJoCo / analytic plant: its Python-stepped adapter
             from harness.loop.stepped_plants import stepped_plant
 
-            plant = stepped_plant(scn, plant)
+            plant = stepped_plant(scn, model, plant)
         return simulate_stepped(scn, plant, progress=progress,
-                                controller="interface" if python_ctrl else None, on_chunk=on_chunk)
+                                controller="interface" if python_ctrl else None, on_chunk=on_chunk,
+                                model=model)
     if plant.kind == "analytic":
         from harness.loop.analytic_loop import simulate_analytic
 
-        return simulate_analytic(scn, progress=progress, plant=plant, on_chunk=on_chunk)
+        return simulate_analytic(scn, progress=progress, plant=plant, on_chunk=on_chunk, model=model)
     from harness.loop.mujoco_loop import simulate_mujoco
 
-    return simulate_mujoco(scn, progress=progress, plant=plant, on_chunk=on_chunk)
+    return simulate_mujoco(scn, progress=progress, plant=plant, on_chunk=on_chunk, model=model)

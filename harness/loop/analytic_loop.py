@@ -15,8 +15,8 @@ from harness.loop.aot import A
 from harness.loop.common import (
     CHUNK,
     STOP,
-    common_arrays,
-    initial_state,
+    RunModel,
+    compile_model,
     noise_table,
     progress_bar,
     run_meta,
@@ -27,20 +27,22 @@ from harness.plant.analytic import AnalyticPlant
 
 
 def simulate_analytic(scn: Scenario, progress: bool = False,
-                      plant: AnalyticPlant | None = None, on_chunk=None) -> Trajectory:
+                      plant: AnalyticPlant | None = None, on_chunk=None,
+                      model: RunModel | None = None) -> Trajectory:
     """Closed loop on the analytic plant (plant params may differ from the controller's).
     plant: the plant's parameters (default: the scenario's plant side); on_chunk: optional callable
-    receiving each finished chunk of steps as a `Trajectory` (e.g. a live viewer)."""
+    receiving each finished chunk of steps as a `Trajectory` (e.g. a live viewer); model: the scenario's
+    `RunModel` (default: compiled here)."""
     if plant is None:
         plant = AnalyticPlant(scn.plant_master, scn.plant_slave)
     n = scn.n_steps
-    state = initial_state(scn)
+    a = model if model is not None else compile_model(scn)
+    state = a.s0.copy()
     noise, scale = noise_table(scn, n)
-    a = common_arrays(scn)
     rows = np.zeros((n, ROW_WIDTH))
-    # constant interaction forces: the plant feels a["F"]; the laws get them unless ignored
-    Fc = np.zeros(4) if scn.sensing.force.mode == "ignored" else a["F"]
-    rows[:, ROW_SLICES["F_true"]] = a["F"]
+    # constant interaction forces: the plant feels a.F; the laws get them unless ignored
+    Fc = np.zeros(4) if scn.sensing.force.mode == "ignored" else a.F
+    rows[:, ROW_SLICES["F_true"]] = a.F
     rows[:, ROW_SLICES["F_sensed"]] = Fc
     mpk_p = master_model.packed(plant.master)
     spk_p = plant.slave.packed()
@@ -54,8 +56,8 @@ def simulate_analytic(scn: Scenario, progress: bool = False,
         while k < n:
             k1 = min(n, k + CHUNK)
             status, m = A.analytic_chunk(state, k, k1, scn.control_dt, nsub, scn.continuous_control,
-                                         a["traj"], noise, scale, Fc, a["F"], a["mpk_c"], a["spk_c"], mpk_p,
-                                         spk_p, a["nodes"], a["weights"], a["gains"], a["spec"], rows[k:k1])
+                                         a.traj, noise, scale, Fc, a.F, a.mpk_c, a.spk_c, mpk_p,
+                                         spk_p, a.nodes, a.weights, a.gains, a.spec, rows[k:k1])
             done = k + m
             if bar is not None:
                 bar.update(m)

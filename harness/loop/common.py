@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import threading
 from functools import partial
+from typing import NamedTuple
 
 import numpy as np
 
@@ -93,15 +94,36 @@ def progress_bar(enabled: bool, total: int, desc: str):
     return bar(total=total, desc=desc, unit="step", unit_scale=True, leave=False)
 
 
-def common_arrays(scn: Scenario):
-    """Packed controller-side arrays shared by both plants."""
+class RunModel(NamedTuple):
+    """A scenario compiled once per run (frozen, like Pinocchio's / MuJoCo's model): the controller-side
+    packed parameters, the quadrature, the constant forces, the desired trajectory and the initial state.
+    The loops, the plants' adapters and the controller context read it; per-run buffers (noise table,
+    record rows, command ring) are made by each run.
+
+    mpk_c: master params (`controllers.master.packed`), spk_c: slave params (`SlaveParams.packed`),
+    nodes, weights: Gauss-Legendre on [0, 1] (slave.n_quad,), gains: packed gains + [e2_sign,
+    null_space_scale], spec: packed sub-task (`controllers.subtasks.pack_subtask`), F (4,) N: constant
+    tip forces [F1, F2], traj (5,): desired-trajectory parameters, s0 (16,): [q1, dq1, q2, dq2] at t = 0."""
+
+    mpk_c: np.ndarray
+    spk_c: np.ndarray
+    nodes: np.ndarray
+    weights: np.ndarray
+    gains: np.ndarray
+    spec: np.ndarray
+    F: np.ndarray
+    traj: np.ndarray
+    s0: np.ndarray
+
+
+def compile_model(scn: Scenario) -> RunModel:
+    """The `RunModel` of `scn` (raises SimulationError when the start is impossible)."""
     nodes, weights = gauss_legendre01(scn.slave.n_quad)
     F = np.array([*scn.interaction_forces[0], *scn.interaction_forces[1]], dtype=float)
-    return dict(
+    return RunModel(
         mpk_c=master_model.packed(scn.master), spk_c=scn.slave.packed(), nodes=nodes, weights=weights,
         gains=np.concatenate([scn.gains.packed(), [float(scn.faults.e2_sign), scn.faults.null_space_scale]]),
-        spec=pack_subtask(scn.subtask, scn.slave), F=F,
-        traj=trajectory_params(scn))
+        spec=pack_subtask(scn.subtask, scn.slave), F=F, traj=trajectory_params(scn), s0=initial_state(scn))
 
 
 def run_meta(scn: Scenario, wall: float) -> dict:

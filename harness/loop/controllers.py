@@ -37,7 +37,7 @@ from controllers.interface import (
 )
 from harness.config.errors import ConfigError
 from harness.config.scenario import ControllerConfig, Scenario
-from harness.loop.common import common_arrays, initial_state
+from harness.loop.common import RunModel, compile_model
 from harness.loop.fast import K
 from harness.plant.status import Status
 
@@ -188,8 +188,9 @@ def is_compiled(scn: Scenario) -> bool:
     return scn.controller.name == COMPILED
 
 
-def make_controller(scn: Scenario):
-    """(instance, context) for a run: the class instantiated and the context its `reset` receives."""
+def make_controller(scn: Scenario, model: RunModel | None = None):
+    """(instance, context) for a run: the class instantiated and the context its `reset` receives.
+    model: the scenario's `RunModel` (default: compiled here)."""
     cfg = scn.controller
     cls = load_class(cfg.name)
     try:
@@ -197,12 +198,12 @@ def make_controller(scn: Scenario):
     except ParamsError as e:
         raise ConfigError(str(e), path=f"controller.params.{e.key}") from None
     ctrl = cls()
-    a = common_arrays(scn)
+    a = model if model is not None else compile_model(scn)
     ctx = ControllerContext(
         dt=scn.control_dt, n_steps=scn.n_steps, actuation=plant_actuation(scn), plant=scn.plant.kind,
         master=scn.master, slave=scn.slave, gains=scn.gains, subtask=scn.subtask,
-        F=a["F"].reshape(2, 2).copy(), seed=scn.seed, params=params,
-        models=NominalModels(scn.master, scn.slave, scn.subtask, kernels=K), q0=initial_state(scn),
+        F=a.F.reshape(2, 2).copy(), seed=scn.seed, params=params,
+        models=NominalModels(scn.master, scn.slave, scn.subtask, kernels=K), q0=a.s0.copy(),
         faults=(scn.faults.e2_sign, scn.faults.null_space_scale))
     return ctrl, ctx
 

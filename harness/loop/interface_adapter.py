@@ -20,7 +20,7 @@ import numpy as np
 
 from controllers.interface import ControllerDiverged, Observation
 from harness.config.scenario import Scenario
-from harness.loop.common import common_arrays
+from harness.loop.common import RunModel
 from harness.loop.controllers import make_controller
 from harness.plant.status import Status
 
@@ -61,11 +61,12 @@ def check_action(act, name: str, k: int, t: float, servo: bool) -> str:
 
 class InterfaceController:
     """The scenario's `controllers.interface.Controller` (built-in or user class) as the loop's
-    controller: ``reset(scn, state0)``, ``step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN) -> int``."""
+    controller: ``reset(model)``, ``step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN) -> int``."""
 
-    def __init__(self, scn: Scenario) -> None:
+    def __init__(self, scn: Scenario, model: RunModel) -> None:
         self.name = scn.controller.name
-        self.ctrl, self.ctx = make_controller(scn)
+        self.F = model.F
+        self.ctrl, self.ctx = make_controller(scn, model)
         self.servo = self.ctx.actuation == "servo"
         self.obs = Observation()
         self.use_ref = False
@@ -73,8 +74,8 @@ class InterfaceController:
         self.diverged = ""
         self.k = 0
 
-    def reset(self, scn: Scenario, state0: np.ndarray) -> None:
-        self.obs.F[:] = common_arrays(scn)["F"]
+    def reset(self, model: RunModel) -> None:
+        self.obs.F[:] = model.F
         self.k = 0
         try:
             self.ctrl.reset(self.ctx)

@@ -30,8 +30,8 @@ from harness.config.scenario import Scenario
 from harness.loop.aot import A
 from harness.loop.common import (
     STOP,
-    common_arrays,
-    initial_state,
+    RunModel,
+    compile_model,
     noise_table,
     progress_bar,
     run_meta,
@@ -66,17 +66,18 @@ def warning_counts(numbers: np.ndarray) -> dict[str, int]:
     return out
 
 
-def make_plant(scn: Scenario, plant: MujocoPlant | None = None
+def make_plant(scn: Scenario, plant: MujocoPlant | None = None, s0: np.ndarray | None = None
                ) -> tuple[mujoco.MjModel, mujoco.MjData, ChainMap]:
-    """Compiled plant model, data at the scenario's initial state, and its ChainMap.
-    plant: an already built `MujocoPlant` of this scenario (default: built here)."""
+    """Compiled plant model, data at the scenario's initial state s0 (16,) (default: computed here), and its
+    ChainMap.  plant: an already built `MujocoPlant` of this scenario (default: built here)."""
     if plant is None:
         plant = MujocoPlant.build(scn)
     m, cmap = plant.model, plant.cmap
     m.opt.timestep = scn.plant.physics_dt
     m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
     d = mujoco.MjData(m)
-    s0 = initial_state(scn)
+    if s0 is None:
+        s0 = compile_model(scn).s0
     d.qpos[cmap.master_qpos_adr] = s0[0:2]
     d.qvel[cmap.master_dof_adr] = s0[2:4]
     cmap.set_q2(d, s0[4:10], s0[10:16])
@@ -85,17 +86,21 @@ def make_plant(scn: Scenario, plant: MujocoPlant | None = None
 
 
 def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray | None = None,
-                    plant: MujocoPlant | None = None, on_chunk=None) -> Trajectory:
+                    plant: MujocoPlant | None = None, on_chunk=None, model: RunModel | None = None
+                    ) -> Trajectory:
     """Run the scenario on the MuJoCo plant; returns the Trajectory (possibly cut short).
 
     cmd_log: optional (n_steps * substeps, nu + nv) array that receives, for every mj_step, the
     [ctrl, qfrc_applied] applied before it (to replay the same physics with raw mj_step).
     on_chunk: optional callable receiving each finished chunk of steps as a `Trajectory` (with the plant
-    geometry when the integrator provides it in the loop, see `_chunk`)."""
+    geometry when the integrator provides it in the loop, see `_chunk`).  model: the scenario's `RunModel`
+    (default: compiled here)."""
+    a = model if model is not None else compile_model(scn)
+    s0 = a.s0
     tb = time.perf_counter()
     if plant is None:
         plant = MujocoPlant.build(scn)
-    m, d, cmap = make_plant(scn, plant)
+    m, d, cmap = make_plant(scn, plant, s0)
     build_time = time.perf_counter() - tb
     n = scn.n_steps
     sub = scn.substeps
@@ -104,7 +109,6 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     elif cmd_log.shape != (n * sub, m.nu + m.nv):
         raise ValueError(f"cmd_log must have shape {(n * sub, m.nu + m.nv)}, got {cmd_log.shape}")
     log = cmd_log.shape[0] > 0
-    a = common_arrays(scn)
     noise, scale = noise_table(scn, n)
     rows = np.zeros((n, ROW_WIDTH))
     geo = _Geometry(m, d, cmap, n, live=scn.plant.integrator in LIVE_GEOMETRY_INTEGRATORS)
@@ -112,11 +116,10 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     nchain = cmap.n_chain
     kv_over_kp = (np.divide(cmap.servo_kv, cmap.servo_kp, out=np.zeros(nchain), where=cmap.servo_kp > 0)
                   if servo else np.zeros(nchain))
-    s0 = initial_state(scn)
     ref = np.concatenate([s0[4:10], s0[10:16]])  # servo reference [q_ref, dq_ref]
     delay = int(round(scn.plant.actuation_delay / scn.control_dt))
     cmdbuf = np.zeros((delay + 1, 2 + 2 * nchain))
-    force = ForceArgs(scn, m, d, cmap, plant.contact, n, s0, a["F"])
+    force = ForceArgs(scn, m, d, cmap, plant.contact, n, s0, a.F)
     bar = progress_bar(progress, n, f"MuJoCo plant (N={cmap.n_segments}, {scn.plant.actuation})")
     status, done, k = 0, 0, 0
     interrupted = False
@@ -128,8 +131,8 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
             m._address, d._address, MJ_FUNCS, k, k1, sub, scn.control_dt, d.qpos, d.qvel, d.ctrl,
             d.qfrc_applied, cmap.master_qpos_adr, cmap.master_dof_adr, cmap.master_actuator_ids,
             cmap.chain_qpos_adr, cmap.chain_dof_adr, cmap.chain_actuator_ids, cmap.R, cmap.C, cmap.L0,
-            cmap.elastic_args, servo, scn.plant.servo_feedforward, kv_over_kp, a["traj"], noise,
-            scale, a["F"], a["mpk_c"], a["spk_c"], a["nodes"], a["weights"], a["gains"], a["spec"],
+            cmap.elastic_args, servo, scn.plant.servo_feedforward, kv_over_kp, a.traj, noise,
+            scale, a.F, a.mpk_c, a.spk_c, a.nodes, a.weights, a.gains, a.spec,
             ref, cmdbuf, delay, rows[k:k1], geo.qpos_hist[k:k1],
             cmd_log[k * sub:k1 * sub] if log else cmd_log, geo.inputs, geo.outputs(k, k1), wnum,
             force.args(k, k1))

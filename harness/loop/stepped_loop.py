@@ -33,7 +33,7 @@ two compiled calls (`harness.loop.stepped_kernels`); a plant with `record(k)` / 
 Cosserat rod, the MuJoCo adapter) keeps its own recording, otherwise the plant geometry is copied into
 (n, ...) arrays (`plant.geometry()` returns the same arrays every call).
 
-Controller interface (`Controller`): `reset(scn, state0)` once, then per step
+Controller interface (`Controller`): `reset(model)` once, then per step
 `step(t, sensed (16,), xd, dxd, ddxd (2,), out_T1 (2,), out_T2 (6,), out_u2 (6,), out_deN (6,)) -> int`
 filling the master torques T1 (N m), the slave generalized forces T2 ([N, N m^2], eq. 18; servo
 plants use it as feed-forward), the slave input u2 (eq. 18, the servo reference's acceleration) and
@@ -55,8 +55,8 @@ from harness.config.scenario import Scenario
 from harness.loop.common import (
     CHUNK,
     STOP,
-    common_arrays,
-    initial_state,
+    RunModel,
+    compile_model,
     noise_table,
     progress_bar,
     run_meta,
@@ -75,7 +75,7 @@ class Controller(Protocol):
 
     name: str
 
-    def reset(self, scn: Scenario, state0: np.ndarray) -> None: ...
+    def reset(self, model: RunModel) -> None: ...
 
     def step(self, t: float, sensed: np.ndarray, xd: np.ndarray, dxd: np.ndarray, ddxd: np.ndarray,
              T1: np.ndarray, T2: np.ndarray, u2: np.ndarray, deN: np.ndarray) -> int: ...
@@ -93,10 +93,10 @@ class PaperController:
         self.minfo = np.empty(MASTER_INFO)
         self.sinfo = np.empty(SLAVE_INFO)
 
-    def reset(self, scn: Scenario, state0: np.ndarray) -> None:
-        a = common_arrays(scn)
-        self._args = (a["mpk_c"], a["spk_c"], a["nodes"], a["weights"], a["gains"], a["spec"])
-        self.F = a["F"]
+    def reset(self, model: RunModel) -> None:
+        a = model
+        self._args = (a.mpk_c, a.spk_c, a.nodes, a.weights, a.gains, a.spec)
+        self.F = a.F
         self._control_step = K.control_step  # looked up once, not per step
 
     def step(self, t, sensed, xd, dxd, ddxd, T1, T2, u2, deN) -> int:
@@ -119,7 +119,8 @@ class PaperController:
 
 
 def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
-                     controller: Controller | None = None, on_chunk=None) -> Trajectory:
+                     controller: Controller | None = None, on_chunk=None, model: RunModel | None = None
+                     ) -> Trajectory:
     """Run the scenario on a stepped plant; returns the Trajectory (possibly cut short).
     controller: a loop `Controller` (default `PaperController`), or `"interface"` for the scenario's
     `controllers.interface.Controller` (`harness.loop.interface_adapter.InterfaceController`).
@@ -133,23 +134,24 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
     tb = time.perf_counter()
     n = scn.n_steps
     dt = scn.control_dt
-    s0 = initial_state(scn)
+    model = model if model is not None else compile_model(scn)
+    s0 = model.s0
     if controller == "interface":
-        controller = InterfaceController(scn)
+        controller = InterfaceController(scn, model)
     ctrl = controller if controller is not None else PaperController()
     cname = getattr(ctrl, "name", type(ctrl).__name__)
     error, failed = "", False
     plant.reset(s0)
     try:
-        ctrl.reset(scn, s0)
+        ctrl.reset(model)
     except ControllerFailure as exc:
         error, failed, n = str(exc), True, 0
     fused = getattr(ctrl, "fused_step", None)  # optional one-call fast path (the paper controller)
     own_ref = hasattr(ctrl, "use_ref")  # the controller may give the servo reference directly
     build_time = time.perf_counter() - tb
     noise, scale = noise_table(scn, scn.n_steps)
-    a = common_arrays(scn)
-    traj_p, mpk, gains, spec = a["traj"], a["mpk_c"], a["gains"], a["spec"]
+    a = model
+    traj_p, mpk, gains, spec = a.traj, a.mpk_c, a.gains, a.spec
     rows = np.zeros((n, ROW_WIDTH))
     own_geo = hasattr(plant, "finish")
     tips = np.zeros((0 if own_geo else n, 2))
@@ -159,7 +161,7 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
     # the true tip forces each step, else the constant ones; the paper controller (its `F`) gets them in
     # `exact` sensing mode, zeros in `ignored` ("sensed" needs the MuJoCo plant: config check)
     plant_forces = getattr(plant, "forces", None)
-    Ftrue, cinfo = a["F"].copy(), np.zeros(5)
+    Ftrue, cinfo = a.F.copy(), np.zeros(5)
     Fctl = getattr(ctrl, "F", None)
     ignored = scn.sensing.force.mode == "ignored"
     # without a controller F, F_sensed records F_true: the check kernel copies it into a scratch

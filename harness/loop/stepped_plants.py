@@ -24,7 +24,7 @@ import numpy as np
 
 from controllers import master as master_model
 from harness.config.scenario import Scenario
-from harness.loop.common import common_arrays, initial_state
+from harness.loop.common import RunModel
 from harness.loop.fast import K
 from harness.loop.mujoco_loop import _Geometry, _plant_geometry, make_plant, warning_counts
 from harness.plant.status import Status
@@ -35,8 +35,8 @@ class MujocoStepped:
 
     kind = "mujoco"
 
-    def __init__(self, scn: Scenario, plant=None) -> None:
-        self.m, self.d, self.cmap = make_plant(scn, plant)
+    def __init__(self, scn: Scenario, model: RunModel, plant=None) -> None:
+        self.m, self.d, self.cmap = make_plant(scn, plant, model.s0)
         c = self.cmap
         self.n = c.n_chain
         self.actuation = scn.plant.actuation
@@ -118,18 +118,17 @@ class AnalyticStepped:
     kind = "analytic"
     actuation = "torque"
 
-    def __init__(self, scn: Scenario, plant=None) -> None:
+    def __init__(self, scn: Scenario, model: RunModel, plant=None) -> None:
         from harness.plant.analytic import AnalyticPlant
 
         if plant is None:
             plant = AnalyticPlant(scn.plant_master, scn.plant_slave)
-        a = common_arrays(scn)
         self.mpk = master_model.packed(plant.master)
         self.spk = plant.slave.packed()
-        self.nodes, self.weights, self.F = a["nodes"], a["weights"], a["F"]
+        self.nodes, self.weights, self.F = model.nodes, model.weights, model.F
         self.nsub = max(1, scn.substeps)
         self.physics_dt = scn.control_dt / self.nsub
-        self.state = initial_state(scn)
+        self.state = model.s0.copy()
         self.T1, self.T2 = np.zeros(2), np.zeros(6)
         self.ks = [np.empty(16) for _ in range(4)]
         self.tmp = np.empty(16)
@@ -180,13 +179,13 @@ class AnalyticStepped:
         pass
 
 
-def stepped_plant(scn: Scenario, plant=None):
+def stepped_plant(scn: Scenario, model: RunModel, plant=None):
     """The scenario's plant as a `SteppedPlant`: `plant` itself if it is one (the Cosserat rod), else the
     Python-stepped adapter of the analytic or MuJoCo plant."""
     if plant is not None and hasattr(plant, "advance"):
         return plant
     if scn.plant.kind == "analytic":
-        return AnalyticStepped(scn, plant)
+        return AnalyticStepped(scn, model, plant)
     if scn.plant.kind == "mujoco":
-        return MujocoStepped(scn, plant)
+        return MujocoStepped(scn, model, plant)
     raise NotImplementedError(f"plant.kind = {scn.plant.kind!r} has no Python-stepped adapter yet")
