@@ -5,6 +5,7 @@ failure mode is one line; controller sweeps; CLI selection."""
 
 from __future__ import annotations
 
+import ast
 import csv
 import json
 import textwrap
@@ -322,3 +323,28 @@ def test_controller_comparison_sweep_writes_one_row_per_case(tmp_path):
         assert len(list(csv.DictReader(fh))) == 6
     assert (tmp_path / "metric_vs_slave_mass.png").is_file()
     assert res is not None
+
+
+# --------------------------------------------------------------------------------- examples as documented
+def _documented_commands(path: Path) -> list[list[str]]:
+    """The `teleop ...` commands of an example's docstring (backslash continuations joined)."""
+    import shlex
+
+    text = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
+    text = text.replace("\\\n", " ")
+    return [shlex.split(line.strip())[1:] for line in text.splitlines() if line.strip().startswith("teleop ")]
+
+
+@pytest.mark.parametrize("example", sorted((ROOT / "examples" / "controllers").glob("*.py")),
+                         ids=lambda p: p.name)
+def test_every_example_command_works_as_written(example, tmp_path, monkeypatch, capsys):
+    """Each command an example's docstring gives succeeds as written (cut to 0.3 s; outputs in tmp),
+    from the checkout's root, where its paths are relative to."""
+    monkeypatch.chdir(ROOT)
+    commands = _documented_commands(example)
+    assert commands, f"{example.name} documents no teleop command"
+    for i, argv in enumerate(commands):
+        if "--duration" in argv:
+            argv[argv.index("--duration") + 1] = "0.3"
+        extra = ["--out", str(tmp_path / f"c{i}")] if argv[0] == "run" else []
+        assert main([*argv, *extra, "--no-progress"]) == 0, (example.name, argv, capsys.readouterr())
