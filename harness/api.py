@@ -7,7 +7,7 @@
     traj = run(scn, out="runs/mine")      # ... and writes run.rrd, figures, metrics.json, config.toml
 
 `load_scenario` validates everything, including the plant (scene MJCF, model compilation) and the
-controller (`[controller]`: class, actuation, params; harness.loop.controllers), before anything runs.
+controller (`[controller]`: class, actuation, params; harness.config.controller), before anything runs.
 `run` takes a path, a table, a `Scenario` or None (the paper scenario).
 """
 
@@ -39,7 +39,7 @@ def load_scenario(source: str | os.PathLike | Mapping | None = None, overrides: 
     dotted `key=value` overrides, and check that its plant can be built.  Raises `ConfigError`.
     The plant built for the check is kept for the next `run_scenario` of the returned scenario (built once
     per run)."""
-    from harness.loop.controllers import resolve_controller
+    from harness.config.controller import resolve_controller
     from harness.plant import build_plant
 
     scn = _load.load_scenario(source, overrides, labels=labels)
@@ -282,7 +282,7 @@ def run(scenario: Scenario | str | os.PathLike | Mapping | None = None, override
     if isinstance(scenario, Scenario):
         if overrides:
             raise TypeError("overrides apply to a scenario file or table, not to a Scenario object")
-        from harness.loop.controllers import resolve_controller
+        from harness.config.controller import resolve_controller
         from harness.plant import validate_plant
 
         validate_plant(scenario)

@@ -1,4 +1,4 @@
-"""The controller interface (controllers/interface.py, harness/loop/controllers.py, interface_loop.py):
+"""The controller interface (controllers/interface.py, harness/config/controller.py, interface_loop.py):
 the paper's law through the interface equals the compiled loop bit for bit; an independent numpy
 re-implementation of the paper's law (written here from the equations) matches it to 1e-9; every
 failure mode is one line; controller sweeps; CLI selection."""
@@ -23,7 +23,7 @@ from harness.api import load_scenario
 from harness.cli import main
 from harness.config.errors import ConfigError
 from harness.loop import simulate
-from harness.loop.controllers import make_controller
+from harness.loop.interface_adapter import make_controller
 from harness.loop.trajectory import ROW_FIELDS
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -287,7 +287,7 @@ def test_cli_selection_by_name_and_path_writes_resolved_params(tmp_path, capsys)
 
 
 def test_teleop_controllers_lists_builtins(capsys):
-    from harness.loop.controllers import BUILTINS
+    from controllers.baselines import BUILTINS
 
     assert main(["controllers"]) == 0
     out = capsys.readouterr().out.splitlines()
@@ -348,3 +348,21 @@ def test_every_example_command_works_as_written(example, tmp_path, monkeypatch, 
             argv[argv.index("--duration") + 1] = "0.3"
         extra = ["--out", str(tmp_path / f"c{i}")] if argv[0] == "run" else []
         assert main([*argv, *extra, "--no-progress"]) == 0, (example.name, argv, capsys.readouterr())
+
+
+def test_a_controller_declaring_its_plants_is_refused_elsewhere_in_one_line(tmp_path):
+    """A controller that declares `plants` is refused on another plant kind before anything runs, with one
+    line naming the field and what it needs."""
+    src = tmp_path / "only_analytic.py"
+    src.write_text(textwrap.dedent("""
+        from controllers.baselines import PaperNoNullSpace
+
+        class OnlyAnalytic(PaperNoNullSpace):
+            plants = ("analytic",)
+    """))
+    name = f"{src}:OnlyAnalytic"
+    assert load_scenario(None, [f'controller.name="{name}"', "plant.kind=analytic"]).controller.name == name
+    with pytest.raises(ConfigError) as e:
+        load_scenario(None, [f'controller.name="{name}"'])
+    assert "runs on plant.kind 'analytic' only, not 'mujoco'" in str(e.value)
+    assert "\n" not in str(e.value)

@@ -104,7 +104,7 @@ def test_singular_slave_jacobian_is_detected():
     xd = np.array([0.0, 1.0])
     status = K.control_laws(a["mpk_c"], a["spk_c"], a["nodes"], a["weights"], a["gains"], a["spec"], state,
                             xd, np.zeros(2), np.zeros(2), a["F"], *outs)
-    from harness.plant.status import Status
+    from controllers.status import Status
 
     assert status == Status.SLAVE_SINGULAR
     assert Status(status).text == "slave J2 J2^T singular"

@@ -30,7 +30,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from controllers.baselines import paper_master_law
-from controllers.interface import Action, Controller, ControllerContext, ControllerDiverged, Observation, check_range
+from controllers.interface import (
+    Action,
+    Controller,
+    ControllerContext,
+    ControllerDiverged,
+    Observation,
+    check_range,
+)
 
 DET_MIN = 1e-14  # det(J J^T) at or below this: singular
 

@@ -263,7 +263,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def cmd_controllers(args: argparse.Namespace) -> int:  # noqa: ARG001
-    registry = _import("harness.loop.controllers")
+    registry = _import("harness.config.controller")
     items = registry.describe_builtins()
     width = max(len(n) for n, _, _ in items)
     for name, desc, acts in items:

@@ -94,7 +94,7 @@ class FaultConfig:
 
 @dataclass(frozen=True)
 class ControllerConfig:
-    """Which controller runs (see controllers/interface.py and harness/loop/controllers.py).
+    """Which controller runs (see controllers/interface.py and harness/config/controller.py).
 
     name: a built-in ("paper" = the paper's law (12)-(33), compiled; `teleop controllers` lists the
     others), or a user class "path/to/file.py:ClassName" / "package.module:ClassName".

@@ -76,7 +76,7 @@ def _param_value(path: str, v: Any, depth: int = 0) -> Any:
 
 def _controller(path: str, v: Any) -> ControllerConfig:
     """[controller]: a table {name, params} or just the name.  The class and its params are checked by
-    the loop layer (harness.loop.controllers.resolve_controller): config/ never imports controllers."""
+    the loop layer (harness.config.controller.resolve_controller): config/ never imports controllers."""
     if isinstance(v, str):
         v = {"name": v}
     if not isinstance(v, Mapping):

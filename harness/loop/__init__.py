@@ -42,7 +42,9 @@ def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None):
         from harness.plant import build_plant
 
         plant = build_plant(scn)
-    python_ctrl = scn.controller.name != "paper"  # a controllers.interface.Controller (loop/controllers.py)
+    from harness.loop.interface_adapter import is_compiled
+
+    python_ctrl = not is_compiled(scn)  # a controllers.interface.Controller, stepped from Python
     if python_ctrl or hasattr(plant, "advance"):  # the one Python-level loop, on a SteppedPlant
         from harness.loop.stepped_loop import simulate_stepped
 
@@ -50,9 +52,7 @@ def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None):
             from harness.loop.stepped_plants import stepped_plant
 
             plant = stepped_plant(scn, model, plant)
-        return simulate_stepped(scn, plant, progress=progress,
-                                controller="interface" if python_ctrl else None, on_chunk=on_chunk,
-                                model=model)
+        return simulate_stepped(scn, plant, progress=progress, on_chunk=on_chunk, model=model)
     if plant.kind == "analytic":
         from harness.loop.analytic_loop import simulate_analytic
 

@@ -16,6 +16,7 @@ import numpy as np
 from controllers import master as master_model
 from controllers import slave as slave_model
 from controllers.slave import gauss_legendre01
+from controllers.status import Status
 from controllers.subtasks import pack_subtask
 from harness.config.runtime import progress_bar_class
 from harness.config.scenario import Scenario
@@ -23,14 +24,13 @@ from harness.loop.fast import K
 from harness.loop.trajectory import Trajectory
 from harness.plant.initial import InitialStateError
 from harness.plant.initial import initial_state as _initial_state
-from harness.plant.status import Status
 
 STOP = threading.Event()  # set from a signal handler to stop a run cleanly
 CHUNK = 250  # control steps per compiled call between progress/interrupt checks
 
 def set_outcome(traj: Trajectory, status: int, interrupted: bool, error: str = "", detail: str = "") -> None:
     """Set traj.status/message from a loop's end: an exception text (`error`), a kernel status code
-    (`harness.plant.status.Status`, plus `detail`), an interrupt, or nothing (status stays "ok")."""
+    (`controllers.status.Status`, plus `detail`), an interrupt, or nothing (status stays "ok")."""
     t_end = float(traj.t[-1]) if len(traj) else 0.0
     if error:
         traj.status, cause = "error", error

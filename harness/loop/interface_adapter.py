@@ -18,11 +18,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from controllers.interface import ControllerDiverged, Observation
+from controllers.interface import (
+    ControllerContext,
+    ControllerDiverged,
+    NominalModels,
+    Observation,
+    ParamsError,
+)
+from controllers.status import Status
+from harness.config.controller import is_compiled, load_class, parse_params, plant_actuation
+from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
-from harness.loop.common import RunModel
-from harness.loop.controllers import make_controller
-from harness.plant.status import Status
+from harness.loop.common import RunModel, compile_model
+from harness.loop.fast import K
 
 SHAPES = (("T1", 2), ("T2", 6), ("u2", 6), ("deN", 6))
 REF_SHAPES = (("q2_ref", 6), ("dq2_ref", 6))
@@ -65,10 +73,10 @@ class InterfaceController:
 
     def __init__(self, scn: Scenario, model: RunModel) -> None:
         self.name = scn.controller.name
-        self.F = model.F
         self.ctrl, self.ctx = make_controller(scn, model)
         self.servo = self.ctx.actuation == "servo"
         self.obs = Observation()
+        self.F = self.obs.F  # (4,) N, the sensed tip forces: the loop writes them here before each step
         self.use_ref = False
         self.ref = np.zeros(12)  # [q2_ref, dq2_ref] of the last action with use_ref
         self.diverged = ""
@@ -118,3 +126,26 @@ class InterfaceController:
             self.ref[0:6] = act.q2_ref
             self.ref[6:12] = act.dq2_ref
         return code
+
+
+def make_controller(scn: Scenario, model: RunModel | None = None):
+    """(instance, context) for a run: the class instantiated and the context its `reset` receives.
+    model: the scenario's `RunModel` (default: compiled here)."""
+    cfg = scn.controller
+    cls = load_class(cfg.name)
+    try:
+        params = parse_params(cls, cfg.params)
+    except ParamsError as e:
+        raise ConfigError(str(e), path=f"controller.params.{e.key}") from None
+    ctrl = cls()
+    a = model if model is not None else compile_model(scn)
+    ctx = ControllerContext(
+        dt=scn.control_dt, n_steps=scn.n_steps, actuation=plant_actuation(scn), plant=scn.plant.kind,
+        master=scn.master, slave=scn.slave, gains=scn.gains, subtask=scn.subtask,
+        F=a.F.reshape(2, 2).copy(), seed=scn.seed, params=params,
+        models=NominalModels(scn.master, scn.slave, scn.subtask, kernels=K), q0=a.s0.copy(),
+        faults=(scn.faults.e2_sign, scn.faults.null_space_scale))
+    return ctrl, ctx
+
+
+__all__ = ["ControllerFailure", "InterfaceController", "is_compiled", "make_controller"]

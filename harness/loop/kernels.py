@@ -4,7 +4,7 @@ Everything that happens once per control step and is not MuJoCo's `mj_step` live
 that the Python side of the loop is one kernel call plus `mj_step`:
   sensing noise -> master law -> slave law -> record row (and, for the analytic plant, RK4).
 
-Status codes returned by the kernels: `harness.plant.status` (ST_* here; a MuJoCo warning is counted by
+Status codes returned by the kernels: `controllers.status` (ST_* here; a MuJoCo warning is counted by
 MuJoCo in mjData.warning and checked after every mj_step, so the run stops at the step that raised it).
 """
 
@@ -13,7 +13,6 @@ from __future__ import annotations
 import numpy as np
 
 from controllers.control import (
-    DET_MIN,
     MASTER_INFO,
     MI_DE1,
     MI_E1,
@@ -24,22 +23,19 @@ from controllers.control import (
     SI_X2,
     SI_YA,
     SLAVE_INFO,
-    master_control_kernel,
-    slave_control_kernel,
+    control_laws,
 )
 from controllers.master import master_kernel
 from controllers.scratch import scratch, scratch_zeros
-from controllers.subtasks import limits_kernel
-from controllers.tip import tip_kinematics
-from harness.plant.analytic import plant_accel
-from harness.plant.status import (
-    ST_MASTER_SINGULAR,
+from controllers.status import (
     ST_NONFINITE,
     ST_OK,
     ST_RUNAWAY,
     ST_SECTION_LENGTH,
-    ST_SLAVE_SINGULAR,
 )
+from controllers.subtasks import limits_kernel
+from controllers.tip import tip_kinematics
+from harness.plant.analytic import plant_accel
 
 # record row layout (must match harness.loop.trajectory.ROW_FIELDS)
 R_T, R_Q1, R_DQ1, R_Q2, R_DQ2, R_XD, R_X1, R_X2 = 0, 1, 3, 5, 11, 17, 19, 21
@@ -76,23 +72,6 @@ def add_noise_channel(state, noise, k, scale, out):
         noise[0, 16 + i] += state[i] * state[i]
         std = np.sqrt(noise[0, 16 + i] / (k + 1)) * scale
         out[i] = state[i] + std * noise[k, i]
-
-
-def control_laws(mpk, spk, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F, T1, T2, u2, deN,
-                 minfo, sinfo):
-    """Both controllers on a sensed state (16,) = [q1, dq1, q2, dq2].  Returns a status code."""
-    q1 = sensed[0:2]
-    dq1 = sensed[2:4]
-    q2 = sensed[4:10]
-    dq2 = sensed[10:16]
-    det1 = master_control_kernel(mpk, gains, q1, dq1, xd, dxd, ddxd, F[0:2], T1, minfo)
-    if det1 == 0.0:
-        return ST_MASTER_SINGULAR
-    det2 = slave_control_kernel(spk, nodes, weights, gains, spec, q2, dq2, minfo[0:2], minfo[8:10],
-                                minfo[6:8], F[2:4], T2, u2, deN, sinfo)
-    if det2 <= DET_MIN:
-        return ST_SLAVE_SINGULAR
-    return ST_OK
 
 
 def record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row):
@@ -295,5 +274,5 @@ def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale
     return ST_OK, k1 - k0
 
 
-KERNELS = ("add_noise", "add_noise_channel", "sense_state", "control_laws", "record_row", "record_row_info",
+KERNELS = ("add_noise", "add_noise_channel", "sense_state", "record_row", "record_row_info",
            "control_step", "desired", "analytic_chunk")

@@ -12,6 +12,7 @@ from controllers.cc import backbone_points
 from controllers.control import MASTER_INFO, SLAVE_INFO
 from controllers.master import master_kernel
 from controllers.scratch import scratch, scratch_zeros
+from controllers.status import ST_MUJOCO_STATE, ST_MUJOCO_WARNING, ST_OK, ST_RUNAWAY, ST_SECTION_LENGTH
 from harness.loop.force_kernels import (
     CONTACT_INFO,
     operator_advance,
@@ -29,7 +30,6 @@ from harness.plant.chain_map import (
     chain_joints_rate_add,
     chain_sense,
 )
-from harness.plant.status import ST_MUJOCO_STATE, ST_MUJOCO_WARNING, ST_OK, ST_RUNAWAY, ST_SECTION_LENGTH
 
 
 # =============================================================================================

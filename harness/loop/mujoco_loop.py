@@ -26,6 +26,7 @@ import time
 import mujoco
 import numpy as np
 
+from controllers.status import Status
 from harness.config.scenario import Scenario
 from harness.loop.aot import A
 from harness.loop.common import (
@@ -43,7 +44,6 @@ from harness.loop.native import MJ_FUNCS
 from harness.loop.trajectory import ROW_WIDTH, Trajectory
 from harness.plant.chain_map import ChainMap
 from harness.plant.mujoco_model import MujocoPlant
-from harness.plant.status import Status
 
 # Control steps per compiled call between progress, interrupt and warning checks (and per live-view chunk):
 # 1000 steps are 50-100 ms at N = 8.  The numbers do not depend on where the calls split the run

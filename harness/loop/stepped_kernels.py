@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import math
 
+from controllers.status import ST_NONFINITE, ST_PLANT_STATE, ST_RUNAWAY, ST_SECTION_LENGTH
 from harness.loop.kernels import R_E1, R_E2, RUNAWAY, control_step
-from harness.plant.status import ST_NONFINITE, ST_PLANT_STATE, ST_RUNAWAY, ST_SECTION_LENGTH
 
 
 def stepped_state_check(state, exploding, Ftrue, Fctl, ignored):

@@ -23,11 +23,11 @@ import mujoco
 import numpy as np
 
 from controllers import master as master_model
+from controllers.status import Status
 from harness.config.scenario import Scenario
 from harness.loop.common import RunModel
 from harness.loop.fast import K
 from harness.loop.mujoco_loop import _Geometry, _plant_geometry, make_plant, warning_counts
-from harness.plant.status import Status
 
 
 class MujocoStepped:

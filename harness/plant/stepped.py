@@ -12,7 +12,7 @@ Per control step of length control_dt, the loop calls, in this order:
     ... noise, controller, record ...
     plant.record(k)  or  slave_tip(), geometry()   # the recording's plant geometry at time t
     plant.command(T1, T2, q2_ref, dq2_ref, q2_sensed)   # held until the next call
-    status = plant.advance(control_dt)       # 0, or a harness.plant.status.Status code
+    status = plant.advance(control_dt)       # 0, or a controllers.status.Status code
     ... at the end: plant.finish(traj, done) if the plant has `record` / `finish`
 
 Units: q1 (rad), dq1 (rad/s), q2 = [d1, d2, d3 (m), k1, k2, k3 (1/m)] and its rates; T1 (N m) master
