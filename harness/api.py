@@ -27,10 +27,9 @@ from typing import Any
 
 from harness.config import load as _load
 from harness.config.errors import ConfigError
+from harness.config.runtime import options
 from harness.config.scenario import Scenario
 from harness.config.textio import jsonable
-
-DEBUG_ENV = "TELEOP_DEBUG"  # set to 1 to print tracebacks of output-writing failures
 
 
 def load_scenario(source: str | os.PathLike | Mapping | None = None, overrides: Iterable[str] = (), *,
@@ -146,7 +145,7 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
         try:
             return fn()
         except Exception as e:  # noqa: BLE001 - write whatever else exists, report below
-            if os.environ.get(DEBUG_ENV):
+            if options().debug:  # TELEOP_DEBUG=1
                 traceback.print_exc()
             failures.append(f"{what}: {' '.join(str(e).split())}" if isinstance(e, ConfigError)
                             else f"{what}: {type(e).__name__}: {e}")

@@ -33,7 +33,7 @@ from controllers.params import ParameterError
 from harness.cli.parser import EXIT_FAIL, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, build_parser
 from harness.cli.parser import one_line as _one_line
 from harness.config.errors import ConfigError
-from harness.config.runtime import fast_exit, set_gc_thresholds
+from harness.config.runtime import RuntimeOptions, fast_exit, set_gc_thresholds, using_options
 from harness.config.textio import jsonable, prepare_out_dir
 
 # (module, attribute) of exception types that mean "invalid input" (exit 2).  Looked up in
@@ -343,6 +343,12 @@ def cmd_fidelity(args: argparse.Namespace) -> int:
     return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
 
 
+def cmd_stability_map(args: argparse.Namespace) -> int:
+    out = prepare_out_dir(args.out)
+    smap = _import("harness.studies.stability_map")
+    return int(smap.main(out, args.duration))
+
+
 # ---------------------------------------------------------------------------------------------
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
@@ -354,7 +360,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help(sys.stderr)
         return EXIT_USAGE
     try:
-        return COMMANDS[args.command](args)
+        with using_options(RuntimeOptions.from_env()):  # the TELEOP_* switches, read once
+            return COMMANDS[args.command](args)
     except KeyboardInterrupt:
         _err("interrupted")
         return EXIT_INTERRUPTED
@@ -373,7 +380,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 COMMANDS = {"run": cmd_run, "check": cmd_check, "models": cmd_models, "sweep": cmd_sweep,
-            "controllers": cmd_controllers, "fidelity": cmd_fidelity, "cache": cmd_cache}
+            "controllers": cmd_controllers, "fidelity": cmd_fidelity, "cache": cmd_cache,
+            "stability-map": cmd_stability_map}
 
 
 if __name__ == "__main__":  # pragma: no cover

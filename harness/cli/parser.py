@@ -50,6 +50,17 @@ def _int_at_least(lo: int) -> Callable[[str], int]:
 _positive_int, _nonnegative_int = _int_at_least(1), _int_at_least(0)
 
 
+def _positive_float(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}") from None
+    if not (v > 0.0 and v < float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {v}")
+    return v
+
+
 def _path(text: str) -> Path:
     """A path argument; the empty string is rejected (Path('') would silently mean '.')."""
     if not str(text).strip():
@@ -244,6 +255,17 @@ def build_parser() -> argparse.ArgumentParser:
     what.add_argument("--clear", action="store_true",
                       help="remove every cache folder (the next run compiles again, 20-60 s). "
                            "Default: keep them.")
+
+    smap = sub.add_parser(
+        "stability-map", formatter_class=_Formatter, help="survival map over null-space gain x rod damping",
+        description="Run the paper scenario over a grid of the null-space gain k_n (eq. 27-28) and the "
+                    "bending viscosity eta_b, for the free chain and the CC chain, servo and torque "
+                    "(harness.studies.stability_map): the time each cell survives and its e2_rms. Writes "
+                    "stability_map.md and stability_map.png.")
+    smap.add_argument("--duration", metavar="S", type=_positive_float, default=3.0,
+                      help="simulated seconds per cell, > 0. Default: 3.")
+    smap.add_argument("--out", metavar="DIR", type=_path, default=Path("runs/stability_map"),
+                      help="output folder (created; must be writable). Default: runs/stability_map.")
 
     fid = sub.add_parser(
         "fidelity", formatter_class=_Formatter, help="plant-fidelity study over MuJoCo segment counts",

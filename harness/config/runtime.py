@@ -1,16 +1,59 @@
-"""Process-level settings shared by the `teleop` command and the sweep's pool workers: the garbage
-collector's thresholds, the fast end of a process and the progress bars.  Nothing
-here knows of plants or runs."""
+"""Process-level settings shared by the `teleop` command and the sweep's pool workers: the runtime options
+(`RuntimeOptions`, from the TELEOP_* environment variables), the garbage collector's thresholds, the fast
+end of a process and the progress bars.  Nothing here knows of plants or runs."""
 
 from __future__ import annotations
 
 import atexit
 import contextlib
+import dataclasses
 import functools
 import gc
 import os
 import sys
+from collections.abc import Iterator, Mapping
+from pathlib import Path
 from typing import NoReturn
+
+
+@dataclasses.dataclass(frozen=True)
+class RuntimeOptions:
+    """How this process runs the kernels and reports failures (not what it simulates).
+
+    cache_dir: root of the compiled-kernel cache ($TELEOP_CACHE_DIR, else $XDG_CACHE_HOME/octarm-teleop,
+    else ~/.cache/octarm-teleop); jit: compile the kernels with numba (False: TELEOP_NO_JIT=1, the
+    interpreted kernels, same maths, slow); aot: use the ahead-of-time loop modules (False: TELEOP_NO_AOT=1,
+    numba's JIT); debug: print tracebacks of output-writing failures (TELEOP_DEBUG=1)."""
+
+    cache_dir: Path
+    jit: bool = True
+    aot: bool = True
+    debug: bool = False
+
+    @classmethod
+    def from_env(cls, env: Mapping[str, str] = os.environ) -> RuntimeOptions:
+        root = env.get("TELEOP_CACHE_DIR") or os.path.join(
+            env.get("XDG_CACHE_HOME") or os.path.join(Path.home(), ".cache"), "octarm-teleop")
+        return cls(cache_dir=Path(root), jit=env.get("TELEOP_NO_JIT", "0") != "1",
+                   aot=env.get("TELEOP_NO_AOT", "0") != "1", debug=bool(env.get("TELEOP_DEBUG")))
+
+
+_OPTIONS: list[RuntimeOptions] = []  # set by `using_options` (the `teleop` command: read once at its start)
+
+
+def options() -> RuntimeOptions:
+    """The options in force: those `using_options` set, else read from the environment now."""
+    return _OPTIONS[-1] if _OPTIONS else RuntimeOptions.from_env()
+
+
+@contextlib.contextmanager
+def using_options(opts: RuntimeOptions) -> Iterator[RuntimeOptions]:
+    """Run the block with `opts` as the process' runtime options (`options()`)."""
+    _OPTIONS.append(opts)
+    try:
+        yield opts
+    finally:
+        _OPTIONS.remove(opts)
 
 # Python's garbage collector in a command's or worker's process: a run imports hundreds of thousands
 # of long-lived objects (numba, MuJoCo, Rerun, matplotlib) and each full collection traverses all of
@@ -60,4 +103,5 @@ def progress_bar_class() -> type:
     return Bar
 
 
-__all__ = ["GC_THRESHOLDS", "end_process", "fast_exit", "progress_bar_class", "set_gc_thresholds"]
+__all__ = ["GC_THRESHOLDS", "RuntimeOptions", "end_process", "fast_exit", "options", "progress_bar_class",
+           "set_gc_thresholds", "using_options"]

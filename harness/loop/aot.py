@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.config.runtime import options
 from harness.loop import fast
 
 log = logging.getLogger(__name__)
@@ -224,8 +225,8 @@ class Entry:
         return fn(*args)
 
     def _resolve(self, key: str, args: tuple):
-        jit = os.environ.get("TELEOP_NO_JIT", "0") != "1"
-        if not jit or os.environ.get("TELEOP_NO_AOT", "0") == "1":
+        opts = options()
+        if not opts.jit or not opts.aot:
             return getattr(fast.K, self.name)
         modname = module_name(self.name, key)
         try:

@@ -25,13 +25,13 @@ from __future__ import annotations
 
 import hashlib
 import inspect
-import os
 import threading
 import types
 from functools import cache
 from pathlib import Path
 
 from controllers import cc, control, master, moments, slave, subtasks, tip
+from harness.config.runtime import options
 
 MODULES = [cc, tip, moments, slave, master, subtasks, control]
 
@@ -55,9 +55,7 @@ def _extra_modules():
 def cache_root() -> Path:
     """Root folder of the compiled kernels: $TELEOP_CACHE_DIR, else $XDG_CACHE_HOME/octarm-teleop, else
     ~/.cache/octarm-teleop."""
-    root = os.environ.get("TELEOP_CACHE_DIR") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME") or os.path.join(Path.home(), ".cache"), "octarm-teleop")
-    return Path(root)
+    return options().cache_dir
 
 
 @cache
@@ -81,7 +79,7 @@ def source_digest() -> str:
 
 def jit_wanted() -> bool:
     """Whether the kernels are compiled: False when TELEOP_NO_JIT=1 (the interpreted kernels)."""
-    return os.environ.get("TELEOP_NO_JIT", "0") != "1"
+    return options().jit
 
 
 _BUILDING = threading.Lock()
