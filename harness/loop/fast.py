@@ -38,18 +38,15 @@ MODULES = [cc, tip, moments, slave, master, subtasks, control]
 
 def _extra_modules():
     """Kernel modules of harness/ (plant maps, analytic plant, loops), compiled the same way."""
-    import importlib
+    from harness.loop import force_kernels, kernels, native, stepped_kernels
+    from harness.plant import analytic
 
-    names = ("harness.plant.chain_map", "harness.plant.analytic", "harness.loop.kernels",
-             "harness.loop.force_kernels", "harness.loop.native", "harness.loop.mujoco_kernels",
-             "harness.loop.stepped_kernels")
-    mods = []
-    for name in names:
-        try:
-            mods.append(importlib.import_module(name))
-        except ImportError:  # pragma: no cover - e.g. mujoco missing: its kernels are unavailable
-            pass
-    return mods
+    try:
+        from harness.loop import mujoco_kernels
+        from harness.plant import chain_map
+    except ImportError:  # pragma: no cover - mujoco missing: its kernels are unavailable
+        return [analytic, kernels, force_kernels, native, stepped_kernels]
+    return [chain_map, analytic, kernels, force_kernels, native, mujoco_kernels, stepped_kernels]
 
 
 def cache_root() -> Path:
