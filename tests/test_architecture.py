@@ -170,7 +170,7 @@ def test_modules_stay_small():
 # Modules that import by a name computed at run time, and why that is no way around the layer rules.
 DYNAMIC_ALLOWED = {
     "harness.config.controller": "the user-controller loader (file.py:Class, module:Class)",
-    "harness.loop.aot": "loads its own compiled extension modules from the kernel cache (not project modules)",
+    "harness.loop.aot": "loads its compiled extension modules from the kernel cache (not project code)",
     "harness.cli": "its lazy `_import(name)`; every call passes a literal, counted as an import above",
     "harness.studies.executor": "imports WARM_MODULES (a literal tuple of harness modules, checked below)",
 }
