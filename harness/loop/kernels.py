@@ -44,6 +44,25 @@ ROW_W = 53
 RUNAWAY = 1.0  # m: |e1| or |e2| beyond this is a runaway (the workspace is ~1 m)
 
 
+# --- the per-step glue every loop body shares (the compiled loops and the Python-stepped loop) ---------
+def runaway(row):
+    """True when the record row's |e1| or |e2| (1-norm, m) exceeds RUNAWAY."""
+    return (abs(row[R_E1]) + abs(row[R_E1 + 1]) > RUNAWAY) or (abs(row[R_E2]) + abs(row[R_E2 + 1]) > RUNAWAY)
+
+
+def section_collapsed(state):
+    """True when a section length q2[0:3] = state[4:7] (m) is <= 0."""
+    return state[4] <= 0.0 or state[5] <= 0.0 or state[6] <= 0.0
+
+
+def servo_reference_step(ref, u2, dt):
+    """The servo reference ref (12,) = [q2_ref, dq2_ref] after one control step dt (s) with the slave
+    input u2 (6,) (eq. 18): semi-implicit Euler, dq2_ref += u2 dt, then q2_ref += dq2_ref dt."""
+    for a in range(6):
+        ref[6 + a] += u2[a] * dt
+        ref[a] += ref[6 + a] * dt
+
+
 def add_noise(state, noise_row, scale, out):
     """AWGN at a given SNR on each fed-back vector (q1, dq1, q2, dq2 = state[0:2], [2:4], [4:10],
     [10:16]): std = rms(vector) * scale, scale = 10^(-SNR/20) (signal power measured per step;
@@ -265,14 +284,12 @@ def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale
         for i in range(16):
             if not np.isfinite(state[i]):
                 return ST_NONFINITE, k - k0 + 1
-        for i in range(3):
-            if state[4 + i] <= 0.0:
-                return ST_SECTION_LENGTH, k - k0 + 1
-        r = rows[k - k0]
-        if (abs(r[R_E1]) + abs(r[R_E1 + 1]) > RUNAWAY) or (abs(r[R_E2]) + abs(r[R_E2 + 1]) > RUNAWAY):
+        if section_collapsed(state):
+            return ST_SECTION_LENGTH, k - k0 + 1
+        if runaway(rows[k - k0]):
             return ST_RUNAWAY, k - k0 + 1
     return ST_OK, k1 - k0
 
 
-KERNELS = ("add_noise", "add_noise_channel", "sense_state", "record_row", "record_row_info",
-           "control_step", "desired", "analytic_chunk")
+KERNELS = ("runaway", "section_collapsed", "servo_reference_step", "add_noise", "add_noise_channel",
+           "sense_state", "record_row", "record_row_info", "control_step", "desired", "analytic_chunk")

@@ -21,7 +21,7 @@ from harness.loop.force_kernels import (
     read_contact,
     sense_forces,
 )
-from harness.loop.kernels import R_E1, R_E2, ROW_W, RUNAWAY, control_step
+from harness.loop.kernels import ROW_W, control_step, runaway, section_collapsed, servo_reference_step
 from harness.loop.native import MJ_KINEMATICS_FN, MJ_STEP_FN, copy_geometry, mj_call
 from harness.plant.chain_map import (
     chain_elastic_correction,
@@ -56,9 +56,7 @@ def mujoco_commands(servo, feedforward, dt, q2s, T2, u2, ref, C, R, L0, kv_over_
     into the target), feed-forward = virtual-work map of T2 at q_ref (if enabled)."""
     n = C.shape[0]
     if servo:
-        for a in range(6):
-            ref[6 + a] += u2[a] * dt
-            ref[a] += ref[6 + a] * dt
+        servo_reference_step(ref, u2, dt)
         chain_joints_from_q2(ref[0:6], C, L0, cmd[2:2 + n])
         chain_joints_rate_add(ref[0:6], ref[6:12], C, kv_over_kp, cmd[2:2 + n])
         if feedforward:
@@ -157,9 +155,8 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
         for i in range(16):
             if not np.isfinite(state[i]) or abs(state[i]) > 1e6:
                 return ST_MUJOCO_STATE, k - k0
-        for i in range(3):
-            if state[4 + i] <= 0.0:
-                return ST_SECTION_LENGTH, k - k0
+        if section_collapsed(state):
+            return ST_SECTION_LENGTH, k - k0
         t = k * dt
         r = rows[k - k0]
         read_contact(sensordata, cadr, F2c, r[R_CI:R_CI + CONTACT_INFO], cpts[k - k0] if cpts.shape[0] > 0
@@ -180,8 +177,7 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
         if hist:
             for i in range(qpos.shape[0]):
                 qpos_hist[k - k0, i] = qpos[i]
-        if st == 0 and ((abs(r[R_E1]) + abs(r[R_E1 + 1]) > RUNAWAY)
-                        or (abs(r[R_E2]) + abs(r[R_E2 + 1]) > RUNAWAY)):
+        if st == 0 and runaway(r):
             st = ST_RUNAWAY
         if st != 0:  # the last recorded step is not stepped: its geometry row from its kinematics
             if live:
