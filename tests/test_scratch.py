@@ -109,15 +109,13 @@ _NO_ALLOCATION_SCRIPT = textwrap.dedent("""
     K = kernels(True)
     scn = Scenario(duration=0.2)
     n = scn.n_steps
-    a = compile_model(scn)._asdict()
+    model = compile_model(scn)
     rows = np.zeros((n, ROW_WIDTH))
-    mpk_p, spk_p = master.packed(scn.plant_master), scn.plant_slave.packed()
+    plant = (scn.control_dt, 1, False, master.packed(scn.plant_master), scn.plant_slave.packed())
 
     def run(k0, k1, state):
         noise, scale = noise_table(scn, n)  # fresh: its running power sums are updated in place
-        return K.analytic_chunk(state, k0, k1, scn.control_dt, 1, False, a["traj"], noise, scale, a["F"],
-                                a["F"], a["mpk_c"], a["spk_c"], mpk_p, spk_p, a["nodes"],
-                                a["weights"], a["gains"], a["spec"], rows)
+        return K.analytic_chunk(k0, k1, model, plant, (state, noise, scale, model.F, rows))
 
     run(0, 1, initial_state(scn))  # compile or load
     counts = []

@@ -47,6 +47,7 @@ def simulate_analytic(scn: Scenario, progress: bool = False,
     mpk_p = master_model.packed(plant.master)
     spk_p = plant.slave.packed()
     nsub = max(1, scn.substeps)
+    plant_args = (scn.control_dt, nsub, scn.continuous_control, mpk_p, spk_p)
     bar = progress_bar(progress, n, "analytic plant")
     status, done, k = 0, 0, 0
     t0 = time.perf_counter()
@@ -55,9 +56,7 @@ def simulate_analytic(scn: Scenario, progress: bool = False,
     try:
         while k < n:
             k1 = min(n, k + CHUNK)
-            status, m = A.analytic_chunk(state, k, k1, scn.control_dt, nsub, scn.continuous_control,
-                                         a.traj, noise, scale, Fc, a.F, a.mpk_c, a.spk_c, mpk_p,
-                                         spk_p, a.nodes, a.weights, a.gains, a.spec, rows[k:k1])
+            status, m = A.analytic_chunk(k, k1, a, plant_args, (state, noise, scale, Fc, rows[k:k1]))
             done = k + m
             if bar is not None:
                 bar.update(m)

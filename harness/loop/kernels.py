@@ -212,15 +212,19 @@ def desired(traj, t, xd, dxd, ddxd):
     ddxd[1] = -traj[3] * w * w * c
 
 
-def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale, F, Fp,
-                   mpk_c, spk_c, mpk_p, spk_p, nodes, weights, gains, spec, rows):
-    """Run control steps k0..k1-1 of the closed loop on the analytic plant, in place on state (16,).
+def analytic_chunk(k0, k1, model, plant, data):
+    """Run control steps k0..k1-1 of the closed loop on the analytic plant, in place on the state.
 
-    Controller uses the nominal packed params (mpk_c, spk_c), the plant its own (mpk_p, spk_p).
+    model: the run's `harness.loop.common.RunModel` (the controller's nominal packed params mpk_c, spk_c,
+    quadrature, gains, sub-task, Fp (4,) the interaction forces the plant feels (1), desired trajectory);
+    plant: (dt control period (s), nsub, continuous, mpk_p, spk_p: the plant's own packed params);
+    data: (state (16,), noise, noise_scale, F (4,) = [F1, F2] the laws get (13), (17), rows of this chunk).
     Zero-order hold of the commands over the control step (nsub RK4 steps of dt/nsub) unless
     `continuous`, where both laws are evaluated in every RK4 stage on the true state (no noise).
-    F (4,) = [F1, F2] the laws get (13), (17); Fp (4,) the interaction forces the plant feels (1).
     Returns (status, number of completed steps)."""
+    mpk_c, spk_c, nodes, weights, gains, spec, Fp, traj, _s0 = model
+    dt, nsub, continuous, mpk_p, spk_p = plant
+    state, noise, noise_scale, F, rows = data
     # the control step's arrays: made here, not by a shared helper (a scratch array lives in the frame that
     # makes it: a helper would hand back arrays over its finished frame)
     T1 = scratch_zeros(2)

@@ -88,15 +88,19 @@ def master_tip_state(mpk, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, 
         vm[i] = J1[i, 0] * dq1[0] + J1[i, 1] * dq1[1]
 
 
-def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc, m_qadr, m_dadr, m_act,
-                 c_qadr, c_dadr, c_act, R, C, L0, eargs,
-                 servo, feedforward, kv_over_kp, traj, noise, noise_scale, F, mpk_c, spk_c, nodes,
-                 weights, gains, spec, ref, cmdbuf, delay, rows, qpos_hist, cmd_log, geo_in, geo_out, wnum,
-                 fargs):
-    """Control steps k0..k1-1 on the MuJoCo plant (model/data pointers mptr, dptr; mjfn = MJ_FUNCS;
-    qpos, qvel, ctrl, qfrc are numpy views of the same MjData).  Per step: sense -> noise -> both laws
-    -> record -> commands (delayed by `delay` control steps through the ring buffer cmdbuf (delay+1, 2+2n)) ->
-    `substeps` x (elastic correction + mj_step).  eargs: ChainMap.elastic_args (constant tuple).
+def mujoco_chunk(k0, k1, model, plant, data, fargs):
+    """Control steps k0..k1-1 on the MuJoCo plant.
+
+    model: the run's `harness.loop.common.RunModel` (mpk_c, spk_c, nodes, weights, gains, spec, F, traj,
+    s0);
+    plant: the MuJoCo plant's constants (mptr, dptr: mjModel*, mjData* addresses; mjfn = MJ_FUNCS; substeps;
+    dt: control period (s); m_qadr, m_dadr, m_act: master joint qpos/dof addresses and actuators; c_qadr,
+    c_dadr, c_act: the chain's; R, C, L0, eargs (ChainMap.elastic_args): the chain map; servo, feedforward,
+    kv_over_kp (n,): the actuation);
+    data: the run's buffers (qpos, qvel, ctrl, qfrc: numpy views of the MjData; noise, noise_scale;
+    ref (12,); cmdbuf; delay; rows, qpos_hist, cmd_log: this chunk's rows; geo_in, geo_out; wnum).
+    Per step: sense -> noise -> both laws -> record -> commands (delayed by `delay` control steps through
+    the ring buffer cmdbuf (delay+1, 2+2n)) -> `substeps` x (elastic correction + mj_step).
     cmd_log (rows, nu + nv): if it has rows ((k1 - k0) * substeps), row (k - k0) * substeps + s receives
     [ctrl, qfrc] exactly as applied before that mj_step (for a raw-MuJoCo replay); 0 rows = off.
     Recording geometry: qpos_hist (k1 - k0, nq) receives qpos at the start of each step (0 rows = off),
@@ -111,6 +115,11 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
     0 rows): the laws get the sensed F (`sense_forces`) instead of F (kept in the signature).
     Returns (status, completed steps); status 6 = non-finite or exploding MuJoCo state, 7 = a MuJoCo
     warning was raised during the last completed step (whose row is recorded)."""
+    mpk_c, spk_c, nodes, weights, gains, spec, F, traj, _s0 = model
+    (mptr, dptr, mjfn, substeps, dt, m_qadr, m_dadr, m_act, c_qadr, c_dadr, c_act, R, C, L0, eargs, servo,
+     feedforward, kv_over_kp) = plant
+    (qpos, qvel, ctrl, qfrc, noise, noise_scale, ref, cmdbuf, delay, rows, qpos_hist, cmd_log, geo_in,
+     geo_out, wnum) = data
     (sensordata, cadr, Fconst, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, op_on, op, targets, hand,
      target, mpk_p, cpts) = fargs
     F2c = scratch_zeros(2)

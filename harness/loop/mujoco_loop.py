@@ -126,16 +126,16 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     warned: dict[str, int] = {}
     wnum = d.warning.number  # view of MuJoCo's warning counters
 
+    plant_args = (m._address, d._address, MJ_FUNCS, sub, scn.control_dt, cmap.master_qpos_adr,
+                  cmap.master_dof_adr, cmap.master_actuator_ids, cmap.chain_qpos_adr, cmap.chain_dof_adr,
+                  cmap.chain_actuator_ids, cmap.R, cmap.C, cmap.L0, cmap.elastic_args, servo,
+                  scn.plant.servo_feedforward, kv_over_kp)
+
     def chunk(k: int, k1: int):
-        return A.mujoco_chunk(
-            m._address, d._address, MJ_FUNCS, k, k1, sub, scn.control_dt, d.qpos, d.qvel, d.ctrl,
-            d.qfrc_applied, cmap.master_qpos_adr, cmap.master_dof_adr, cmap.master_actuator_ids,
-            cmap.chain_qpos_adr, cmap.chain_dof_adr, cmap.chain_actuator_ids, cmap.R, cmap.C, cmap.L0,
-            cmap.elastic_args, servo, scn.plant.servo_feedforward, kv_over_kp, a.traj, noise,
-            scale, a.F, a.mpk_c, a.spk_c, a.nodes, a.weights, a.gains, a.spec,
-            ref, cmdbuf, delay, rows[k:k1], geo.qpos_hist[k:k1],
-            cmd_log[k * sub:k1 * sub] if log else cmd_log, geo.inputs, geo.outputs(k, k1), wnum,
-            force.args(k, k1))
+        data = (d.qpos, d.qvel, d.ctrl, d.qfrc_applied, noise, scale, ref, cmdbuf, delay, rows[k:k1],
+                geo.qpos_hist[k:k1], cmd_log[k * sub:k1 * sub] if log else cmd_log, geo.inputs,
+                geo.outputs(k, k1), wnum)
+        return A.mujoco_chunk(k, k1, a, plant_args, data, force.args(k, k1))
 
     tl = time.perf_counter()
     chunk(0, 0)  # no step: numba loads the kernel (on-disk cache) with the run's argument types
