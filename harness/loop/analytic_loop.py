@@ -14,7 +14,7 @@ from harness.config.scenario import Scenario
 from harness.loop.aot import A
 from harness.loop.common import (
     CHUNK,
-    STOP,
+    ChunkRun,
     RunModel,
     compile_model,
     noise_table,
@@ -49,34 +49,25 @@ def simulate_analytic(scn: Scenario, progress: bool = False,
     nsub = max(1, scn.substeps)
     plant_args = (scn.control_dt, nsub, scn.continuous_control, mpk_p, spk_p)
     bar = progress_bar(progress, n, "analytic plant")
-    status, done, k = 0, 0, 0
+
+    def part(k: int, done: int) -> None:
+        piece = Trajectory.from_rows(rows[k:done])
+        piece.meta.update(run_meta(scn, 0.0))
+        on_chunk(piece)
+
+    run = ChunkRun(n, CHUNK, bar, part if on_chunk is not None else None)
     t0 = time.perf_counter()
-    interrupted = False
     error = ""
     try:
-        while k < n:
-            k1 = min(n, k + CHUNK)
-            status, m = A.analytic_chunk(k, k1, a, plant_args, (state, noise, scale, Fc, rows[k:k1]))
-            done = k + m
-            if bar is not None:
-                bar.update(m)
-            if on_chunk is not None and m:
-                part = Trajectory.from_rows(rows[k:done])
-                part.meta.update(run_meta(scn, 0.0))
-                on_chunk(part)
-            if status != 0:
-                break
-            k = k1
-            if STOP.is_set():
-                interrupted = True
-                break
+        run.run(lambda k, k1: A.analytic_chunk(k, k1, a, plant_args, (state, noise, scale, Fc, rows[k:k1])))
     except KeyboardInterrupt:
-        interrupted = True
+        run.interrupted = True
     except Exception as exc:  # keep what was computed; report the cause
         error = f"{type(exc).__name__}: {exc}"
     finally:
         if bar is not None:
             bar.close()
+    status, done, interrupted = run.status, run.done, run.interrupted
     traj = Trajectory.from_rows(rows[:done])
     traj.meta.update(run_meta(scn, time.perf_counter() - t0))
     set_outcome(traj, status, interrupted, error)

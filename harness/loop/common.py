@@ -84,6 +84,35 @@ def noise_table(scn: Scenario, n: int) -> tuple[np.ndarray, float]:
     return normals, float(10.0 ** (-scn.snr_db / 20.0))
 
 
+class ChunkRun:
+    """Drives a compiled loop over a run's control steps in calls of `size` steps (`run`), keeping where it is
+    (status, done, interrupted) up to date, so that a caller that catches an exception still knows how many
+    steps were recorded."""
+
+    def __init__(self, n: int, size: int, bar=None, on_part=None):
+        self.n, self.size, self.bar, self.on_part = n, size, bar, on_part
+        self.status, self.done, self.interrupted = 0, 0, False
+
+    def run(self, call) -> None:
+        """call(k, k1) -> (status, steps done) runs steps k..k1-1.  After each call: the progress bar,
+        on_part(k, done) when steps were done; stops at a non-zero status or when STOP is set."""
+        k = 0
+        while k < self.n:
+            k1 = min(self.n, k + self.size)
+            self.status, m = call(k, k1)
+            self.done = k + m
+            if self.bar is not None:
+                self.bar.update(m)
+            if self.on_part is not None and m:
+                self.on_part(k, self.done)
+            if self.status != 0:
+                return
+            k = k1
+            if STOP.is_set():
+                self.interrupted = True
+                return
+
+
 def progress_bar(enabled: bool, total: int, desc: str):
     if not enabled:
         return None

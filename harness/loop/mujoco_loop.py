@@ -30,7 +30,7 @@ from controllers.status import Status
 from harness.config.scenario import Scenario
 from harness.loop.aot import A
 from harness.loop.common import (
-    STOP,
+    ChunkRun,
     RunModel,
     compile_model,
     noise_table,
@@ -121,8 +121,6 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     cmdbuf = np.zeros((delay + 1, 2 + 2 * nchain))
     force = ForceArgs(scn, m, d, cmap, plant.contact, n, s0, a.F)
     bar = progress_bar(progress, n, f"MuJoCo plant (N={cmap.n_segments}, {scn.plant.actuation})")
-    status, done, k = 0, 0, 0
-    interrupted = False
     warned: dict[str, int] = {}
     wnum = d.warning.number  # view of MuJoCo's warning counters
 
@@ -135,35 +133,28 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
         data = (d.qpos, d.qvel, d.ctrl, d.qfrc_applied, noise, scale, ref, cmdbuf, delay, rows[k:k1],
                 geo.qpos_hist[k:k1], cmd_log[k * sub:k1 * sub] if log else cmd_log, geo.inputs,
                 geo.outputs(k, k1), wnum)
-        return A.mujoco_chunk(k, k1, a, plant_args, data, force.args(k, k1))
+        status, mdone = A.mujoco_chunk(k, k1, a, plant_args, data, force.args(k, k1))
+        if wnum.any():
+            warned.update(warning_counts(wnum))
+            if status == 0:  # the kernel stops at the step that raised it; never pass silently
+                status = Status.MUJOCO_WARNING
+        return status, mdone
 
     tl = time.perf_counter()
     chunk(0, 0)  # no step: numba loads the kernel (on-disk cache) with the run's argument types
     load_time = time.perf_counter() - tl
+    def part(k: int, done: int) -> None:
+        on_chunk(_chunk(scn, m, cmap, geo, rows, k, done))
+
+    run = ChunkRun(n, MUJOCO_CHUNK, bar, part if on_chunk is not None else None)
     with WarningSink() as sink:  # MuJoCo's warning text raised by this run
         try:
             t0 = time.perf_counter()
-            while k < n:
-                k1 = min(n, k + MUJOCO_CHUNK)
-                status, mdone = chunk(k, k1)
-                done = k + mdone
-                if bar is not None:
-                    bar.update(mdone)
-                if on_chunk is not None and mdone:
-                    on_chunk(_chunk(scn, m, cmap, geo, rows, k, done))
-                if wnum.any():
-                    warned = warning_counts(wnum)
-                    if status == 0:  # the kernel stops at the step that raised it; never pass silently
-                        status = Status.MUJOCO_WARNING
-                if status != 0:
-                    break
-                k = k1
-                if STOP.is_set():
-                    interrupted = True
-                    break
+            run.run(chunk)
         finally:
             if bar is not None:
                 bar.close()
+    status, done, interrupted = run.status, run.done, run.interrupted
     wall = time.perf_counter() - t0
     traj = Trajectory.from_rows(rows[:done])
     if force.cpts.shape[0]:
