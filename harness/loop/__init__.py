@@ -1,14 +1,16 @@
-"""The closed loop: the paper's controllers (on the nominal analytic models) driving a plant.
+"""The closed loop: a controller (on the nominal analytic models) driving a plant.
 
-`simulate(scn, plant=None)` is the one entry point: it takes a scenario and a plant
-(`harness.plant.build_plant(scn)` when not given) and returns the in-memory `Trajectory`.  The
-paper's controller on the analytic and MuJoCo plants runs in the compiled loops
-`harness.loop.analytic_loop` / `harness.loop.mujoco_loop`; everything else (a Python controller on any
-plant, any controller on a plant stepped from Python such as the Cosserat rod) runs in the one
-Python-level loop `harness.loop.stepped_loop` (plants: `harness.loop.stepped_plants`); what they
-share (initial state, noise, status codes, stop flag) is `harness.loop.common`; the compiled
-kernels are `harness.loop.kernels` / `harness.loop.mujoco_kernels`, compiled by `harness.loop.fast`.
-The loop knows nothing of files, recordings or sweeps.
+`simulate(scn, plant=None)` is the one entry point: it compiles the scenario once into a `RunModel`
+(`harness.loop.common.compile_model`), takes a plant (`harness.plant.build_plant(scn)` when not given) and
+returns the in-memory `Trajectory`.  The paper's law (registered as "paper") on the analytic and MuJoCo
+plants runs in the compiled loops `harness.loop.analytic_loop` / `harness.loop.mujoco_loop`; every other
+controller (`controllers.interface.Controller`) on any plant, and any controller on a plant stepped from
+Python such as the Cosserat rod, runs in the one Python-level loop `harness.loop.stepped_loop` (plants:
+`harness.loop.stepped_plants`).  What they share (the run model, noise, the chunk driver, the stop flag) is
+`harness.loop.common`; the per-step glue (runaway and section-length checks, servo reference) and the
+compiled kernels are `harness.loop.kernels` / `harness.loop.mujoco_kernels`, compiled by
+`harness.loop.fast`.  Status codes: `controllers.status`.  The loop knows nothing of files, recordings or
+sweeps.
 """
 
 from __future__ import annotations
