@@ -212,6 +212,54 @@ def desired(traj, t, xd, dxd, ddxd):
     ddxd[1] = -traj[3] * w * w * c
 
 
+def plant_substeps(state, t, h, nsub, continuous, model, F, mpk_p, spk_p, T1, T2, u2, deN, minfo, sinfo, xd,
+                   dxd, ddxd, k1s, k2s, k3s, k4s, tmp):
+    """nsub RK4 steps of h (s) of the analytic plant (`harness.plant.analytic.plant_accel`: its packed
+    params mpk_p, spk_p, the forces model.F it feels (1)) from time t, in place on state (16,).  The
+    commands T1 (2,), T2 (6,) are held over the steps (zero-order hold) unless `continuous`: then both
+    laws (model's nominal params, F (4,) the forces they get) are evaluated on every RK4 stage's state (no
+    noise), writing T1, T2, u2, deN, minfo, sinfo, xd, dxd, ddxd.  k1s..k4s, tmp (16,): work.
+    Returns ST_OK, ST_NONFINITE or a law's status."""
+    mpk_c, spk_c, nodes, weights, gains, spec, Fp, traj, _s0 = model
+    for j in range(nsub):
+        ts = t + j * h
+        # RK4 stage 1
+        if continuous:
+            desired(traj, ts, xd, dxd, ddxd)
+            st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, state, xd, dxd, ddxd, F,
+                              T1, T2, u2, deN, minfo, sinfo)
+            if st != 0:
+                return st
+        if not plant_accel(mpk_p, spk_p, nodes, weights, state, T1, T2, Fp, k1s):
+            return ST_NONFINITE
+        for i in range(16):
+            tmp[i] = state[i] + 0.5 * h * k1s[i]
+        if continuous:
+            desired(traj, ts + 0.5 * h, xd, dxd, ddxd)
+            control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
+                         T1, T2, u2, deN, minfo, sinfo)
+        if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k2s):
+            return ST_NONFINITE
+        for i in range(16):
+            tmp[i] = state[i] + 0.5 * h * k2s[i]
+        if continuous:
+            control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
+                         T1, T2, u2, deN, minfo, sinfo)
+        if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k3s):
+            return ST_NONFINITE
+        for i in range(16):
+            tmp[i] = state[i] + h * k3s[i]
+        if continuous:
+            desired(traj, ts + h, xd, dxd, ddxd)
+            control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
+                         T1, T2, u2, deN, minfo, sinfo)
+        if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k4s):
+            return ST_NONFINITE
+        for i in range(16):
+            state[i] += h / 6.0 * (k1s[i] + 2.0 * k2s[i] + 2.0 * k3s[i] + k4s[i])
+    return ST_OK
+
+
 def analytic_chunk(k0, k1, model, plant, data):
     """Run control steps k0..k1-1 of the closed loop on the analytic plant, in place on the state.
 
@@ -249,42 +297,10 @@ def analytic_chunk(k0, k1, model, plant, data):
                           xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, rows[k - k0])
         if st != 0:
             return st, k - k0 + 1
-        for j in range(nsub):
-            ts = t + j * h
-            # RK4 stage 1
-            if continuous:
-                desired(traj, ts, xd, dxd, ddxd)
-                st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, state, xd, dxd, ddxd, F,
-                                  T1, T2, u2, deN, minfo, sinfo)
-                if st != 0:
-                    return st, k - k0 + 1
-            if not plant_accel(mpk_p, spk_p, nodes, weights, state, T1, T2, Fp, k1s):
-                return ST_NONFINITE, k - k0 + 1
-            for i in range(16):
-                tmp[i] = state[i] + 0.5 * h * k1s[i]
-            if continuous:
-                desired(traj, ts + 0.5 * h, xd, dxd, ddxd)
-                control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
-                             T1, T2, u2, deN, minfo, sinfo)
-            if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k2s):
-                return ST_NONFINITE, k - k0 + 1
-            for i in range(16):
-                tmp[i] = state[i] + 0.5 * h * k2s[i]
-            if continuous:
-                control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
-                             T1, T2, u2, deN, minfo, sinfo)
-            if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k3s):
-                return ST_NONFINITE, k - k0 + 1
-            for i in range(16):
-                tmp[i] = state[i] + h * k3s[i]
-            if continuous:
-                desired(traj, ts + h, xd, dxd, ddxd)
-                control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
-                             T1, T2, u2, deN, minfo, sinfo)
-            if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k4s):
-                return ST_NONFINITE, k - k0 + 1
-            for i in range(16):
-                state[i] += h / 6.0 * (k1s[i] + 2.0 * k2s[i] + 2.0 * k3s[i] + k4s[i])
+        st = plant_substeps(state, t, h, nsub, continuous, model, F, mpk_p, spk_p, T1, T2, u2, deN, minfo,
+                            sinfo, xd, dxd, ddxd, k1s, k2s, k3s, k4s, tmp)
+        if st != ST_OK:
+            return st, k - k0 + 1
         for i in range(16):
             if not np.isfinite(state[i]):
                 return ST_NONFINITE, k - k0 + 1
@@ -295,5 +311,6 @@ def analytic_chunk(k0, k1, model, plant, data):
     return ST_OK, k1 - k0
 
 
-KERNELS = ("runaway", "section_collapsed", "servo_reference_step", "add_noise", "add_noise_channel",
-           "sense_state", "record_row", "record_row_info", "control_step", "desired", "analytic_chunk")
+KERNELS = ("runaway", "section_collapsed", "servo_reference_step", "plant_substeps", "add_noise",
+           "add_noise_channel", "sense_state", "record_row", "record_row_info", "control_step", "desired",
+           "analytic_chunk")

@@ -10,8 +10,8 @@ paper's law through the interface gives the compiled loop's numbers bit for bit:
   into qfrc_applied and `mujoco.mj_step` (the Python binding of the same C function), MuJoCo warnings
   (status 7).  The servo reference and the actuation delay are the loop's (as in the compiled loop:
   the commands of step k - delay, each mapped with its own step's q2).
-* `AnalyticStepped`: RK4 of `harness.plant.analytic.plant_accel` with the commands held over the control
-  step (as `analytic_chunk` without continuous control).
+* `AnalyticStepped`: the RK4 of `analytic_chunk` (`harness.loop.kernels.plant_substeps`) with the commands
+  held over the control step.
 
 Both record their own geometry (`record(k)`, `finish(traj, done)`) instead of per-step
 `slave_tip()` / `geometry()`.
@@ -23,6 +23,7 @@ import mujoco
 import numpy as np
 
 from controllers import master as master_model
+from controllers.control import MASTER_INFO, SLAVE_INFO
 from controllers.status import Status
 from harness.config.scenario import Scenario
 from harness.loop.common import RunModel
@@ -123,15 +124,16 @@ class AnalyticStepped:
 
         if plant is None:
             plant = AnalyticPlant(scn.plant_master, scn.plant_slave)
+        self.model = model
         self.mpk = master_model.packed(plant.master)
         self.spk = plant.slave.packed()
-        self.nodes, self.weights, self.F = model.nodes, model.weights, model.F
         self.nsub = max(1, scn.substeps)
         self.physics_dt = scn.control_dt / self.nsub
         self.state = model.s0.copy()
         self.T1, self.T2 = np.zeros(2), np.zeros(6)
-        self.ks = [np.empty(16) for _ in range(4)]
-        self.tmp = np.empty(16)
+        # the law's buffers of `plant_substeps` (unused: the commands are held) and its RK4 work arrays
+        self.work = (np.zeros(4), np.zeros(6), np.zeros(6), np.zeros(MASTER_INFO), np.zeros(SLAVE_INFO),
+                     np.zeros(2), np.zeros(2), np.zeros(2), *(np.empty(16) for _ in range(5)))
 
     def reset(self, state0: np.ndarray) -> None:
         self.state[:] = state0
@@ -145,21 +147,13 @@ class AnalyticStepped:
         self.T2[:] = T2
 
     def advance(self, dt: float) -> int:
-        s, tmp = self.state, self.tmp
+        s = self.state
         nsub = max(1, round(dt / self.physics_dt))
-        h = dt / nsub
-        k1, k2, k3, k4 = self.ks
-        args = (self.mpk, self.spk, self.nodes, self.weights)
-        for _ in range(nsub):
-            for src, scale, out in ((s, 0.0, k1), (k1, 0.5, k2), (k2, 0.5, k3), (k3, 1.0, k4)):
-                if scale == 0.0:
-                    tmp[:] = s
-                else:
-                    np.multiply(src, scale * h, out=tmp)
-                    tmp += s
-                if not K.plant_accel(*args, tmp, self.T1, self.T2, self.F, out):
-                    return Status.NONFINITE
-            s += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        F, u2, deN, minfo, sinfo, xd, dxd, ddxd, *ks = self.work
+        st = K.plant_substeps(s, 0.0, dt / nsub, nsub, False, self.model, F, self.mpk, self.spk, self.T1,
+                              self.T2, u2, deN, minfo, sinfo, xd, dxd, ddxd, *ks)
+        if st != Status.OK:
+            return Status(st)
         if not np.all(np.isfinite(s)):
             return Status.NONFINITE
         if np.any(s[4:7] <= 0.0):
