@@ -48,15 +48,21 @@ def sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, stat
 
 
 def mujoco_commands(servo, feedforward, dt, q2s, T2, u2, ref, C, R, L0, kv_over_kp, cmd):
-    """Command vector cmd = [master torque (2), chain ctrl (n), chain feedforward force (n)].
-
-    Torque actuation: chain ctrl = virtual-work map of T2 at the sensed q2s (motors).
-    Servo actuation: integrate the reference q2 with u2 (semi-implicit Euler, ref = [q_ref, dq_ref]),
-    ctrl = joints(q_ref) + (kv/kp) A(q_ref) dq_ref (position servo with velocity feed-forward folded
-    into the target), feed-forward = virtual-work map of T2 at q_ref (if enabled)."""
-    n = C.shape[0]
+    """Command vector cmd = [master torque (2), chain ctrl (n), chain feedforward force (n)] after the servo
+    reference ref (12,) = [q_ref, dq_ref] took the step dt with u2 (servo actuation; `chain_commands`)."""
     if servo:
         servo_reference_step(ref, u2, dt)
+    chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, cmd)
+
+
+def chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, cmd):
+    """The chain's part of cmd = [master torque (2), chain ctrl (n), chain feedforward force (n)].
+
+    Torque actuation: chain ctrl = virtual-work map of T2 at the sensed q2s (motors).
+    Servo actuation: ctrl = joints(q_ref) + (kv/kp) A(q_ref) dq_ref (position servo with velocity
+    feed-forward folded into the target), feed-forward = virtual-work map of T2 at q_ref (if enabled)."""
+    n = C.shape[0]
+    if servo:
         chain_joints_from_q2(ref[0:6], C, L0, cmd[2:2 + n])
         chain_joints_rate_add(ref[0:6], ref[6:12], C, kv_over_kp, cmd[2:2 + n])
         if feedforward:
@@ -250,7 +256,8 @@ def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):
 
 # the kernels that allocate on the heap (run-time sizes), compiled with numba's runtime (harness.loop.fast)
 HEAP_KERNELS = ("mujoco_chunk", "backbone_world")
-KERNELS = ("sense_mujoco", "mujoco_commands", "master_tip_state", "mujoco_chunk", "replay_commands")
+KERNELS = ("sense_mujoco", "mujoco_commands", "chain_commands", "master_tip_state", "mujoco_chunk",
+           "replay_commands")
 
 
 # =============================================================================================

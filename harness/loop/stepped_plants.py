@@ -48,6 +48,7 @@ class MujocoStepped:
         self.kv_over_kp = (np.divide(c.servo_kv, c.servo_kp, out=np.zeros(self.n), where=c.servo_kp > 0)
                            if self.servo else np.zeros(self.n))
         self.cmd = np.zeros(2 + 2 * self.n)  # [master torque, chain ctrl (n), chain feed-forward (n)]
+        self.ref = np.zeros(12)  # [q2_ref, dq2_ref] of the command being mapped
         self.qc, self.vc, self.corr = np.empty(self.n), np.empty(self.n), np.empty(self.n)
         self.geo = _Geometry(self.m, self.d, c, scn.n_steps, live=False)
         self.warned: dict[str, int] = {}
@@ -66,19 +67,12 @@ class MujocoStepped:
         return 0
 
     def command(self, T1, T2, q2_ref, dq2_ref, q2_sensed) -> None:
-        c, n, cmd = self.cmap, self.n, self.cmd
+        c, cmd, ref = self.cmap, self.cmd, self.ref
         cmd[0] = T1[0]
         cmd[1] = T1[1]
-        if self.servo:
-            K.chain_joints_from_q2(q2_ref, c.C, c.L0, cmd[2:2 + n])
-            K.chain_joints_rate_add(q2_ref, dq2_ref, c.C, self.kv_over_kp, cmd[2:2 + n])
-            if self.ff:
-                K.chain_force_from_T2(q2_ref, T2, c.R, cmd[2 + n:2 + 2 * n])
-            else:
-                cmd[2 + n:] = 0.0
-        else:
-            K.chain_force_from_T2(q2_sensed, T2, c.R, cmd[2:2 + n])
-            cmd[2 + n:] = 0.0
+        ref[0:6] = q2_ref
+        ref[6:12] = dq2_ref
+        K.chain_commands(self.servo, self.ff, q2_sensed, T2, ref, c.C, c.R, c.L0, self.kv_over_kp, cmd)
 
     def advance(self, dt: float) -> int:
         d, c, n, use = self.d, self.cmap, self.n, self.cmd
