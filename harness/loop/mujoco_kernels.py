@@ -47,6 +47,17 @@ def sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, stat
     chain_sense(qc, vc, R, L0, state[4:10], state[10:16])
 
 
+def mujoco_state_status(state):
+    """Status of the sensed true state (16,) of the MuJoCo plant: ST_MUJOCO_STATE if an entry is not finite
+    or above 1e6 in magnitude, ST_SECTION_LENGTH if a section length is <= 0, else ST_OK."""
+    for i in range(16):
+        if not np.isfinite(state[i]) or abs(state[i]) > 1e6:
+            return ST_MUJOCO_STATE
+    if section_collapsed(state):
+        return ST_SECTION_LENGTH
+    return ST_OK
+
+
 def mujoco_commands(servo, feedforward, dt, q2s, T2, u2, ref, C, R, L0, kv_over_kp, cmd):
     """Command vector cmd = [master torque (2), chain ctrl (n), chain feedforward force (n)] after the servo
     reference ref (12,) = [q_ref, dq_ref] took the step dt with u2 (servo actuation; `chain_commands`)."""
@@ -167,11 +178,9 @@ def mujoco_chunk(k0, k1, model, plant, data, fargs):
     nv = qfrc.shape[0]
     for k in range(k0, k1):
         sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state)
-        for i in range(16):
-            if not np.isfinite(state[i]) or abs(state[i]) > 1e6:
-                return ST_MUJOCO_STATE, k - k0
-        if section_collapsed(state):
-            return ST_SECTION_LENGTH, k - k0
+        st = mujoco_state_status(state)
+        if st != ST_OK:
+            return st, k - k0
         t = k * dt
         r = rows[k - k0]
         read_contact(sensordata, cadr, F2c, r[R_CI:R_CI + CONTACT_INFO], cpts[k - k0] if cpts.shape[0] > 0
@@ -256,8 +265,8 @@ def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):
 
 # the kernels that allocate on the heap (run-time sizes), compiled with numba's runtime (harness.loop.fast)
 HEAP_KERNELS = ("mujoco_chunk", "backbone_world")
-KERNELS = ("sense_mujoco", "mujoco_commands", "chain_commands", "master_tip_state", "mujoco_chunk",
-           "replay_commands")
+KERNELS = ("sense_mujoco", "mujoco_state_status", "mujoco_commands", "chain_commands", "master_tip_state",
+           "mujoco_chunk", "replay_commands")
 
 
 # =============================================================================================

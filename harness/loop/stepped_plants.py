@@ -60,11 +60,7 @@ class MujocoStepped:
         d, c = self.d, self.cmap
         K.sense_mujoco(d.qpos, d.qvel, c.master_qpos_adr, c.master_dof_adr, c.chain_qpos_adr, c.chain_dof_adr,
                        c.R, c.L0, self.qc, self.vc, state)
-        if not np.all(np.isfinite(state)) or np.any(np.abs(state) > 1e6):
-            return Status.MUJOCO_STATE
-        if np.any(state[4:7] <= 0.0):
-            return Status.SECTION_LENGTH
-        return 0
+        return Status(K.mujoco_state_status(state))
 
     def command(self, T1, T2, q2_ref, dq2_ref, q2_sensed) -> None:
         c, cmd, ref = self.cmap, self.cmd, self.ref
