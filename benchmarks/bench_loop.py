@@ -45,10 +45,10 @@ import numpy as np
 from controllers.control import MASTER_INFO, SLAVE_INFO
 from harness.config.scenario import PlantConfig, Scenario
 from harness.loop.analytic_loop import simulate_analytic
-from harness.loop.common import common_arrays, initial_state, noise_table
+from harness.loop.common import compile_model, initial_state, noise_table
 from harness.loop.fast import K
-from harness.loop.mujoco_kernels import MJ_FUNCS
 from harness.loop.mujoco_loop import make_plant, simulate_mujoco
+from harness.loop.native import MJ_FUNCS
 from harness.loop.trajectory import ROW_WIDTH
 from harness.output.record import write_recording
 
@@ -262,7 +262,7 @@ def parts_us(scn: Scenario, log: np.ndarray, reps: int) -> dict[str, float]:
         K.replay_commands(m._address, d._address, MJ_FUNCS, d.ctrl, d.qfrc_applied,
                           log[k * sub:(k + 1) * sub])
     T = _part_timers()
-    a = common_arrays(scn)
+    a = compile_model(scn)._asdict()
     noise, scale = noise_table(scn, n)
     if scale == 0.0:
         noise = np.zeros((n, 16))

@@ -46,7 +46,7 @@ def main(argv=None) -> int:
         np.save(args.log, log[:len(tr) * scn.substeps])
         print(f"{len(tr)} steps, status {tr.status}: {args.log}")
     elif args.mode == "loop":
-        tr = simulate_mujoco(scn, overlap=False)  # serial: one thread, as the profilers count it
+        tr = simulate_mujoco(scn)
         print(f"{len(tr)} steps, status {tr.status}")
     else:
         import mujoco

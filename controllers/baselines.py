@@ -7,11 +7,12 @@ master tip x1:
 * `PaperNoNullSpace`   -- the paper's slave law (17)-(18) with the null-space term dropped:
                           u2 = J2^+ (ddx_d + k1 de1 + k2 e1 + k3 de2 + k4 e2 - dJ2 dq2), phi_N = 0
                           (no sub-task (29)-(33), no de_N (23)); torque and servo plants.
+* `PaperController`    -- the paper's whole law (12)-(13), (17)-(18), (23)-(33); the harness runs it under
+                          the name "paper" in its compiled fast path (same numbers).
 * `DampedLeastSquaresIK` -- closed-loop resolved-rate inverse kinematics with a damped
                           least-squares inverse (Wampler 1986; Nakamura & Hanafusa 1986) on the servo
                           reference; servo plants only.
 
-The paper's full law is `harness.loop.controllers.PaperController` (it calls the compiled kernels).
 A Jacobian-transpose PD with gravity compensation is the worked user example
 (examples/controllers/jacobian_transpose.py).
 """
@@ -22,7 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .control import MASTER_INFO, SLAVE_INFO
 from .interface import Action, Controller, ControllerContext, ControllerDiverged, Observation, check_range
+from .status import Status
 
 DET_MIN = 1e-14  # det(J J^T) at or below this: singular (as controllers.control.DET_MIN)
 
@@ -36,10 +39,34 @@ def paper_master_law(models, gains, obs: Observation, T1: np.ndarray) -> tuple:
     de1 = obs.dx_d - dx1
     a1 = obs.ddx_d + gains.k1 * de1 + gains.k2 * e1
     if J1[0, 0] * J1[1, 1] - J1[0, 1] * J1[1, 0] == 0.0:
-        raise ControllerDiverged("master Jacobian J1 singular", code=2)
+        raise ControllerDiverged(Status.MASTER_SINGULAR.text, code=Status.MASTER_SINGULAR)
     u1 = np.linalg.solve(J1, a1 - Jd1 @ obs.dq1)  # (13)
     T1[:] = M1 @ u1 + N1 - J1.T @ obs.F1  # (12)
     return x1.copy(), dx1, a1
+
+
+class PaperController(Controller):
+    """The paper's law (12)-(13), (17)-(18) with the null-space terms (23)-(33), on the nominal models
+    (`NominalModels.paper_law`: the kernel the harness' compiled loops call, so a run through this
+    interface gives their numbers bit for bit).  The harness recognises it under the name "paper" and
+    runs it in its compiled fast path; "paper_interface" runs this class step by step."""
+
+    name = "paper"
+    description = "the paper's law (12)-(13), (17)-(18) with null-space terms (23)-(33)"
+    actuations = ("torque", "servo")
+
+    def reset(self, ctx: ControllerContext) -> None:
+        super().reset(ctx)
+        self.gains = np.concatenate([ctx.gains.packed(), [float(ctx.faults[0]), float(ctx.faults[1])]])
+        self.minfo, self.sinfo = np.empty(MASTER_INFO), np.empty(SLAVE_INFO)
+
+    def step(self, obs: Observation) -> Action:
+        a = self.action
+        st = self.ctx.models.paper_law(self.gains, obs.sensed, obs.x_d, obs.dx_d, obs.ddx_d, obs.F, a.T1,
+                                       a.T2, a.u2, a.deN, self.minfo, self.sinfo)
+        if st != Status.OK:
+            raise ControllerDiverged(Status(st).text, code=st)
+        return a
 
 
 class PaperNoNullSpace(Controller):
@@ -65,7 +92,7 @@ class PaperNoNullSpace(Controller):
         de2 = dx1 - J2 @ obs.dq2
         A = J2 @ J2.T
         if A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0] <= DET_MIN:
-            raise ControllerDiverged("slave J2 J2^T singular", code=3)
+            raise ControllerDiverged(Status.SLAVE_SINGULAR.text, code=Status.SLAVE_SINGULAR)
         v = a1 + g.k3 * de2 + g.k4 * e2 - Jd2 @ obs.dq2
         a.u2[:] = J2.T @ np.linalg.solve(A, v)  # (18), phi_N = 0
         M2, N2 = ctx.models.slave_dynamics(obs.q2, obs.dq2)
@@ -125,6 +152,15 @@ class DampedLeastSquaresIK(Controller):
         return a
 
 
-BUILTIN_BASELINES = (PaperNoNullSpace, DampedLeastSquaresIK)
+# The registry of built-in controllers: name -> class.  "paper" runs in the harness' compiled fast path;
+# "paper_interface" is the same class stepped through the interface (for comparison and debugging).
+BUILTINS: dict[str, type[Controller]] = {
+    "paper": PaperController,
+    "paper_interface": PaperController,
+    "paper_no_null": PaperNoNullSpace,
+    "dls_ik": DampedLeastSquaresIK,
+}
+FAST_PATH = "paper"  # the registered name whose law the harness runs compiled
 
-__all__ = ["BUILTIN_BASELINES", "DampedLeastSquaresIK", "PaperNoNullSpace", "paper_master_law"]
+__all__ = ["BUILTINS", "FAST_PATH", "DampedLeastSquaresIK", "PaperController", "PaperNoNullSpace",
+           "paper_master_law"]

@@ -12,8 +12,8 @@ prints +kn, a sign typo: with +kn the null-space error would grow).
 
 dJ2^+ is exact: d/dt [J^T A^-1] = dJ^T A^-1 - J^T A^-1 dA A^-1, A = J J^T, dA = dJ J^T + J dJ^T.
 
-Kernels are numba-compatible (compiled by `harness.loop.fast`); `master_control` / `slave_control` are
-the readable pure-numpy entry points returning dictionaries.
+Kernels are numba-compatible (compiled by `harness.loop.fast`); `slave_control` is a readable pure-numpy
+entry point returning a dictionary.
 """
 
 from __future__ import annotations
@@ -22,10 +22,10 @@ import numpy as np
 
 from .cc import gram_terms
 from .master import master_kernel
-from .master import packed as master_packed
-from .params import Gains, MasterParams, SlaveParams, SubtaskSpec
+from .params import Gains, SlaveParams, SubtaskSpec
 from .scratch import scratch, scratch_zeros
 from .slave import gauss_legendre01, mass_nle_kernel
+from .status import ST_MASTER_SINGULAR, ST_OK, ST_SLAVE_SINGULAR
 from .subtasks import pack_subtask, subtask_kernel
 from .tip import tip_kinematics
 
@@ -233,20 +233,30 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
     return det
 
 
-KERNELS = ("master_control_kernel", "pinv_terms", "slave_control_kernel")
+def control_laws(mpk, spk, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F, T1, T2, u2, deN,
+                 minfo, sinfo):
+    """The paper's law: master (12)-(13) and slave (17)-(18) with the null-space terms (23)-(33) on a sensed
+    state (16,) = [q1, dq1, q2, dq2], desired tip xd, dxd, ddxd (2,) (40) and tip forces F (4,) N.  Writes
+    T1 (2,), T2 (6,), u2 (6,), deN (6,), minfo (MASTER_INFO,), sinfo (SLAVE_INFO,).  Returns a status code
+    (`controllers.status`: ST_OK, ST_MASTER_SINGULAR, ST_SLAVE_SINGULAR)."""
+    q1 = sensed[0:2]
+    dq1 = sensed[2:4]
+    q2 = sensed[4:10]
+    dq2 = sensed[10:16]
+    det1 = master_control_kernel(mpk, gains, q1, dq1, xd, dxd, ddxd, F[0:2], T1, minfo)
+    if det1 == 0.0:
+        return ST_MASTER_SINGULAR
+    det2 = slave_control_kernel(spk, nodes, weights, gains, spec, q2, dq2, minfo[0:2], minfo[8:10],
+                                minfo[6:8], F[2:4], T2, u2, deN, sinfo)
+    if det2 <= DET_MIN:
+        return ST_SLAVE_SINGULAR
+    return ST_OK
+
+
+KERNELS = ("master_control_kernel", "pinv_terms", "slave_control_kernel", "control_laws")
 
 
 # --------------------------------------------------------------------------------------------- API
-def master_control(p: MasterParams, gains: Gains, q1, dq1, xd, dxd, ddxd, F1=(0.0, 0.0)) -> dict:
-    """Master law (12)-(13).  Returns dict with T1 (2,), x1, e1, de1, a1, dx1 (2,)."""
-    T1, info = np.zeros(2), np.empty(MASTER_INFO)
-    f = [np.ascontiguousarray(v, dtype=float) for v in (q1, dq1, xd, dxd, ddxd, F1)]
-    det = master_control_kernel(master_packed(p), gains.packed(), *f, T1, info)
-    if det == 0.0:
-        raise FloatingPointError("master Jacobian J1 is singular (elbow straight)")
-    return {"T1": T1, "x1": info[0:2], "e1": info[2:4], "de1": info[4:6], "a1": info[6:8], "dx1": info[8:10]}
-
-
 def slave_control(p: SlaveParams, gains: Gains, spec: SubtaskSpec, q2, dq2, x1, dx1, a1,
                   F2=(0.0, 0.0)) -> dict:
     """Slave law (17)-(18) with null-space terms.  Returns dict with T2, u2, deN (6,), x2, e2, de2

@@ -64,7 +64,7 @@ class ParamsError(ValueError):
 
 class ControllerDiverged(RuntimeError):
     """Raised by a controller that detects that it cannot continue (e.g. a singular Jacobian); the run
-    stops with status "diverged" (not "error").  `code` is a harness status code (STATUS_TEXT)."""
+    stops with status "diverged" (not "error").  `code`: a status code of controllers.status."""
 
     def __init__(self, message: str, code: int = 0) -> None:
         super().__init__(message)
@@ -117,7 +117,8 @@ class NominalModels:
             kernels = types.SimpleNamespace(master_kernel=master.master_kernel,
                                             tip_kinematics=tip.tip_kinematics,
                                             mass_nle_kernel=slave.mass_nle_kernel,
-                                            pinv_terms=control.pinv_terms)
+                                            pinv_terms=control.pinv_terms,
+                                            control_laws=control.control_laws)
         self._k = kernels
         self.master_params, self.slave_params = master_p, slave_p
         self.mpk = master.packed(master_p)
@@ -154,6 +155,14 @@ class NominalModels:
         """Static generalized forces G2(q2) + K2(q2) (6,): gravity and elasticity, = N2 at dq2 = 0."""
         self._k.mass_nle_kernel(self.spk, q2, self._zero, self.nodes, self.weights, self._Mg, self._G2)
         return self._G2
+
+    def paper_law(self, gains, sensed, xd, dxd, ddxd, F, T1, T2, u2, deN, minfo, sinfo) -> int:
+        """The paper's whole law (12)-(13), (17)-(18), (23)-(33) on the sensed state (16,)
+        (`controllers.control.control_laws`, the kernel of the harness' compiled loops): gains = packed
+        gains + [e2_sign, null_space_scale]; writes T1, T2, u2, deN, minfo, sinfo.  Returns a status code
+        (`controllers.status`)."""
+        return self._k.control_laws(self.mpk, self.spk, self.nodes, self.weights, gains, self.spec, sensed,
+                                    xd, dxd, ddxd, F, T1, T2, u2, deN, minfo, sinfo)
 
     def pinv(self, J2, dJ2):
         """J2^+ = J2^T (J2 J2^T)^-1 (6,2), eq. (7), and its exact time derivative (6,2); and
@@ -233,12 +242,15 @@ class Controller:
 
     name: short name (built-ins: the name used by ``--controller``); description: one line;
     actuations: the plant actuations it supports ("torque": it computes T2; "servo": it computes u2
-    or the servo reference); Params: a frozen dataclass of parameters with defaults (optional
-    method ``check(self)`` raising ParamsError) or None."""
+    or the servo reference); plants: the plant kinds it runs on ("mujoco", "analytic", "cosserat"; None:
+    any); Params: a frozen dataclass of parameters with defaults (optional method ``check(self)`` raising
+    ParamsError) or None.  The harness checks actuations and plants before a run and says in one line
+    what does not match."""
 
     name = "controller"
     description = ""
     actuations: tuple[str, ...] = ("torque", "servo")
+    plants: tuple[str, ...] | None = None
     Params: type | None = None
 
     def __init__(self) -> None:

@@ -7,7 +7,7 @@
     traj = run(scn, out="runs/mine")      # ... and writes run.rrd, figures, metrics.json, config.toml
 
 `load_scenario` validates everything, including the plant (scene MJCF, model compilation) and the
-controller (`[controller]`: class, actuation, params; harness.loop.controllers), before anything runs.
+controller (`[controller]`: class, actuation, params; harness.config.controller), before anything runs.
 `run` takes a path, a table, a `Scenario` or None (the paper scenario).
 """
 
@@ -28,22 +28,36 @@ from typing import Any
 
 from harness.config import load as _load
 from harness.config.errors import ConfigError
+from harness.config.runtime import options
 from harness.config.scenario import Scenario
 from harness.config.textio import jsonable
-
-DEBUG_ENV = "TELEOP_DEBUG"  # set to 1 to print tracebacks of output-writing failures
 
 
 def load_scenario(source: str | os.PathLike | Mapping | None = None, overrides: Iterable[str] = (), *,
                   labels: Iterable[str | None] | None = None) -> Scenario:
     """Read and validate a scenario (TOML path, parsed table or None = the paper scenario), apply the
-    dotted `key=value` overrides, and check that its plant can be built.  Raises `ConfigError`."""
-    from harness.loop.controllers import resolve_controller
-    from harness.plant import validate_plant
+    dotted `key=value` overrides, and check that its plant can be built.  Raises `ConfigError`.
+    The plant built for the check is kept for the next `run_scenario` of the returned scenario (built once
+    per run)."""
+    from harness.config.controller import resolve_controller
+    from harness.plant import build_plant
 
     scn = _load.load_scenario(source, overrides, labels=labels)
-    validate_plant(scn)
-    return resolve_controller(scn)
+    plant = build_plant(scn)
+    scn = resolve_controller(scn)
+    _BUILT[:] = [(scn, plant)]
+    return scn
+
+
+# (scenario, plant): the plant `load_scenario` built for its check, used once by `run_scenario` of that very
+# scenario object (the controller's parameters, which resolve_controller may fill in, do not enter a plant)
+_BUILT: list[tuple[Scenario, Any]] = []
+
+
+def _plant_built_for(scn: Scenario) -> Any:
+    if _BUILT and _BUILT[0][0] is scn:
+        return _BUILT.pop()[1]
+    return None
 
 
 @dataclass
@@ -151,7 +165,7 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
         try:
             return fn()
         except Exception as e:  # noqa: BLE001 - write whatever else exists, report below
-            if os.environ.get(DEBUG_ENV):
+            if options().debug:  # TELEOP_DEBUG=1
                 traceback.print_exc()
             failures.append(f"{what}: {' '.join(str(e).split())}" if isinstance(e, ConfigError)
                             else f"{what}: {type(e).__name__}: {e}")
@@ -159,22 +173,15 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
         return None
 
     if plant is None:
+        plant = _plant_built_for(scn)
+    if plant is None:
         plant = build_plant(scn)
     if out is not None:  # first, so the configuration is on disk whatever happens next
         clear_run_outputs(out)
         write_config(scn, out / "config.toml")
         written.append(out / "config.toml")
-    prefetch: list = []  # Rerun and matplotlib are imported on the other core while the loop runs
-
-    def start_prefetch():
-        from harness.output.prefetch import prefetch_output_imports
-
-        prefetch.append(prefetch_output_imports())
-        return prefetch[-1]  # the MuJoCo loop's physics thread may start when it ends (overlap_plan)
-
     with stop_on_signals(common.STOP if handle_signals else None) as received:
-        traj = loop.simulate(scn, plant=plant, progress=progress, on_chunk=on_chunk,
-                             on_running=start_prefetch if out is not None else None)
+        traj = loop.simulate(scn, plant=plant, progress=progress, on_chunk=on_chunk)
     interrupted = bool(received) or traj.status == "interrupted"
     traj.meta["environment"] = [dataclasses.asdict(o) for o in scn.environment.objects]  # drawn by outputs
 
@@ -194,8 +201,6 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
         doc = metrics if metrics is not None else {"status": traj.status, "message": traj.message,
                                                     "metrics_error": failures[-1] if failures else ""}
 
-        for th in prefetch:
-            th.join()  # no import lock may be held by another thread when the writers fork
         written += _write_outputs(traj, out, record_rate, attempt)
 
         def write_metrics() -> Path:
@@ -276,7 +281,7 @@ def _write_outputs(traj: Any, out: Path, record_rate: float | None, attempt: Cal
 
 def _split_figures(names: list[str]) -> tuple[list[str], list[str]]:
     """The figures this process draws and those a second process draws, about half the drawing each
-    (the measured costs: `benchmarks/bench_e2e.py`)."""
+    (the measured costs: `benchmarks/bench_core.py`)."""
     theirs = [n for n in names if n in FIGURES_IN_CHILD]
     return [n for n in names if n not in theirs], theirs
 
@@ -297,7 +302,7 @@ def run(scenario: Scenario | str | os.PathLike | Mapping | None = None, override
     if isinstance(scenario, Scenario):
         if overrides:
             raise TypeError("overrides apply to a scenario file or table, not to a Scenario object")
-        from harness.loop.controllers import resolve_controller
+        from harness.config.controller import resolve_controller
         from harness.plant import validate_plant
 
         validate_plant(scenario)

@@ -42,6 +42,7 @@ OPTIONS = {
     "controllers": [],
     "cache": ["--prune", "--clear"],
     "findings": ["--table", "--figures", "--no-write", "--list", "NAME"],
+    "stability-map": ["--duration", "--out"],
 }
 
 
@@ -611,3 +612,19 @@ def test_cache_reports_a_folder_it_cannot_remove(tmp_path, monkeypatch, capsys):
     assert cap.err.count("could not remove") == 3 and "Permission denied" in cap.err
     assert "removed 0 of 5 folder(s), 0.0 MiB freed" in cap.out
     assert paths["numba_old"].exists()
+
+
+def test_stability_map_command_writes_its_table_and_figure(tmp_path, monkeypatch, capsys):
+    """`teleop stability-map` runs the grid (cut here to one cell of one map, 0.05 s) and writes the table and
+    the figure; a bad --duration is one usage line."""
+    from harness.studies import stability_map as smap
+
+    monkeypatch.setattr(smap, "KNS", (10.0,))
+    monkeypatch.setattr(smap, "ETAS", (0.01,))
+    monkeypatch.setattr(smap, "MAPS", dict(list(smap.MAPS.items())[:1]))
+    out = tmp_path / "smap"
+    assert main(["stability-map", "--duration", "0.05", "--out", str(out)]) == 0
+    assert (out / "stability_map.png").stat().st_size > 0
+    assert "| 10" in (out / "stability_map.md").read_text() or "10" in (out / "stability_map.md").read_text()
+    assert main(["stability-map", "--duration", "0"]) == 2
+    assert "expected a number > 0" in capsys.readouterr().err

@@ -1,10 +1,11 @@
-"""The controller interface (controllers/interface.py, harness/loop/controllers.py, interface_loop.py):
+"""The controller interface (controllers/interface.py, harness/config/controller.py, interface_loop.py):
 the paper's law through the interface equals the compiled loop bit for bit; an independent numpy
 re-implementation of the paper's law (written here from the equations) matches it to 1e-9; every
 failure mode is one line; controller sweeps; CLI selection."""
 
 from __future__ import annotations
 
+import ast
 import csv
 import json
 import textwrap
@@ -22,7 +23,7 @@ from harness.api import load_scenario
 from harness.cli import main
 from harness.config.errors import ConfigError
 from harness.loop import simulate
-from harness.loop.controllers import make_controller
+from harness.loop.interface_adapter import make_controller
 from harness.loop.trajectory import ROW_FIELDS
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -286,7 +287,7 @@ def test_cli_selection_by_name_and_path_writes_resolved_params(tmp_path, capsys)
 
 
 def test_teleop_controllers_lists_builtins(capsys):
-    from harness.loop.controllers import BUILTINS
+    from controllers.baselines import BUILTINS
 
     assert main(["controllers"]) == 0
     out = capsys.readouterr().out.splitlines()
@@ -322,3 +323,46 @@ def test_controller_comparison_sweep_writes_one_row_per_case(tmp_path):
         assert len(list(csv.DictReader(fh))) == 6
     assert (tmp_path / "metric_vs_slave_mass.png").is_file()
     assert res is not None
+
+
+# --------------------------------------------------------------------------------- examples as documented
+def _documented_commands(path: Path) -> list[list[str]]:
+    """The `teleop ...` commands of an example's docstring (backslash continuations joined)."""
+    import shlex
+
+    text = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
+    text = text.replace("\\\n", " ")
+    return [shlex.split(line.strip())[1:] for line in text.splitlines() if line.strip().startswith("teleop ")]
+
+
+@pytest.mark.parametrize("example", sorted((ROOT / "examples" / "controllers").glob("*.py")),
+                         ids=lambda p: p.name)
+def test_every_example_command_works_as_written(example, tmp_path, monkeypatch, capsys):
+    """Each command an example's docstring gives succeeds as written (cut to 0.3 s; outputs in tmp),
+    from the checkout's root, where its paths are relative to."""
+    monkeypatch.chdir(ROOT)
+    commands = _documented_commands(example)
+    assert commands, f"{example.name} documents no teleop command"
+    for i, argv in enumerate(commands):
+        if "--duration" in argv:
+            argv[argv.index("--duration") + 1] = "0.3"
+        extra = ["--out", str(tmp_path / f"c{i}")] if argv[0] == "run" else []
+        assert main([*argv, *extra, "--no-progress"]) == 0, (example.name, argv, capsys.readouterr())
+
+
+def test_a_controller_declaring_its_plants_is_refused_elsewhere_in_one_line(tmp_path):
+    """A controller that declares `plants` is refused on another plant kind before anything runs, with one
+    line naming the field and what it needs."""
+    src = tmp_path / "only_analytic.py"
+    src.write_text(textwrap.dedent("""
+        from controllers.baselines import PaperNoNullSpace
+
+        class OnlyAnalytic(PaperNoNullSpace):
+            plants = ("analytic",)
+    """))
+    name = f"{src}:OnlyAnalytic"
+    assert load_scenario(None, [f'controller.name="{name}"', "plant.kind=analytic"]).controller.name == name
+    with pytest.raises(ConfigError) as e:
+        load_scenario(None, [f'controller.name="{name}"'])
+    assert "runs on plant.kind 'analytic' only, not 'mujoco'" in str(e.value)
+    assert "\n" not in str(e.value)

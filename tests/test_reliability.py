@@ -98,14 +98,16 @@ def test_singular_slave_jacobian_is_detected():
     with pytest.raises(FloatingPointError, match="singular"):
         slave_control(SlaveParams(), Gains(), SubtaskSpec(), q, np.zeros(6), np.array([0.0, 1.0]),
                       np.zeros(2), np.zeros(2))
-    a = sim.common_arrays(Scenario())
+    a = sim.compile_model(Scenario())._asdict()
     state = np.concatenate([[0.5, 1.1, 0.0, 0.0], q, np.zeros(6)])
     outs = [np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6), np.zeros(10), np.zeros(11)]
     xd = np.array([0.0, 1.0])
     status = K.control_laws(a["mpk_c"], a["spk_c"], a["nodes"], a["weights"], a["gains"], a["spec"], state,
                             xd, np.zeros(2), np.zeros(2), a["F"], *outs)
-    assert status == 3
-    assert sim.STATUS_TEXT[3] == "slave J2 J2^T singular"
+    from controllers.status import Status
+
+    assert status == Status.SLAVE_SINGULAR
+    assert Status(status).text == "slave J2 J2^T singular"
 
 
 def test_stop_event_interrupts_and_keeps_data():

@@ -95,7 +95,7 @@ def test_shipped_params_parse_like_the_interface():
     """The shipped controllers' Params (built-in and example) give the same instances through both
     parsers, and both refuse the same bad values."""
     from controllers.interface import ParamsError
-    from harness.loop.controllers import BUILTINS, load_class
+    from harness.config.controller import BUILTINS, load_class
 
     example = load_class(f"{ROOT / 'examples' / 'controllers' / 'jacobian_transpose.py'}:JacobianTransposePD")
     classes = [c for c in [*BUILTINS.values(), example] if getattr(c, "Params", None) is not None]

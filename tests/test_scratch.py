@@ -101,7 +101,7 @@ _NO_ALLOCATION_SCRIPT = textwrap.dedent("""
     import numpy as np
     from numba.core.runtime import rtsys
     from harness.config.scenario import Scenario
-    from harness.loop.common import common_arrays, initial_state, noise_table
+    from harness.loop.common import compile_model, initial_state, noise_table
     from harness.loop.fast import kernels
     from harness.loop.trajectory import ROW_WIDTH
     from controllers import master
@@ -109,15 +109,13 @@ _NO_ALLOCATION_SCRIPT = textwrap.dedent("""
     K = kernels(True)
     scn = Scenario(duration=0.2)
     n = scn.n_steps
-    a = common_arrays(scn)
+    model = compile_model(scn)
     rows = np.zeros((n, ROW_WIDTH))
-    mpk_p, spk_p = master.packed(scn.plant_master), scn.plant_slave.packed()
+    plant = (scn.control_dt, 1, False, master.packed(scn.plant_master), scn.plant_slave.packed())
 
     def run(k0, k1, state):
         noise, scale = noise_table(scn, n)  # fresh: its running power sums are updated in place
-        return K.analytic_chunk(state, k0, k1, scn.control_dt, 1, False, a["traj"], noise, scale, a["F"],
-                                a["F"], a["mpk_c"], a["spk_c"], mpk_p, spk_p, a["nodes"],
-                                a["weights"], a["gains"], a["spec"], rows)
+        return K.analytic_chunk(k0, k1, model, plant, (state, noise, scale, model.F, rows))
 
     run(0, 1, initial_state(scn))  # compile or load
     counts = []
@@ -152,11 +150,11 @@ _NO_ALLOCATION_MUJOCO_SCRIPT = textwrap.dedent("""
     from harness.config.scenario import Scenario
     from harness.loop.mujoco_loop import simulate_mujoco
 
-    simulate_mujoco(Scenario(duration=0.01), overlap=False)  # compile or load
+    simulate_mujoco(Scenario(duration=0.01))  # compile or load
     counts = []
     for duration in (0.01, 0.3):
         before = rtsys.get_allocation_stats()
-        tr = simulate_mujoco(Scenario(duration=duration), overlap=False)
+        tr = simulate_mujoco(Scenario(duration=duration))
         after = rtsys.get_allocation_stats()
         assert tr.status == "ok" and len(tr) == round(duration * 1000), (tr.status, len(tr))
         counts.append(after.alloc - before.alloc)

@@ -5,7 +5,7 @@
   the global min/max of every plotted series;
 - the 3-D geometry of run.rrd is logged at a display rate while the time series stay at the control
   rate and read back bit-identical to the Trajectory's arrays.
-No timings here: speed is measured in benchmarks/bench_e2e.py.
+No timings here: speed is measured in benchmarks/bench_core.py.
 """
 
 from __future__ import annotations
@@ -255,78 +255,8 @@ def test_envelope_with_a_subnormal_time_span():
 
 
 # ---------------------------------------------------------------------------------------------
-# on_running (the output imports start once the loop runs) and outputs written in parallel
+# outputs written in parallel
 # ---------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("overrides", [
-    ["plant.kind='analytic'", "duration=1.2"],                     # compiled analytic loop
-    ["duration=1.2"],                                                # compiled MuJoCo loop
-    ["plant.kind='analytic'", "duration=0.6", "controller.name='paper_interface'"],  # stepped loop
-    ["plant.kind='cosserat'", "duration=0.6"],                       # stepped loop, Cosserat rod
-], ids=["analytic", "mujoco", "stepped", "cosserat"])
-def test_on_running_is_called_once_when_the_loop_runs(overrides):
-    """Once, after the first chunk (the compiled MuJoCo loop: before it, once its kernel is loaded); except
-    in the Python-stepped loop on a plant that releases the GIL at every step (here the analytic
-    adapter), where a thread beside the loop would stall every step."""
-    from harness.api import load_scenario
-    from harness.loop import simulate
-
-    scn = load_scenario(None, [*overrides, "transient=0"])
-    seen: list[int] = []
-    chunks: list[int] = []
-    traj = simulate(scn, on_chunk=lambda part: chunks.append(len(part)),
-                    on_running=lambda: seen.append(len(chunks)))
-    assert traj.status == "ok"
-    assert len(chunks) >= 2  # the run has more than one chunk ...
-    if "controller.name='paper_interface'" in overrides:
-        assert seen == []  # ... the analytic adapter's steps release the GIL: no background work
-    elif overrides == ["duration=1.2"]:
-        assert seen == [0]  # ... the compiled MuJoCo loop: once, its kernel loaded, before any step
-    else:
-        assert seen == [1]  # ... and on_running came once, right after the first
-
-
-def test_imports_beside_the_compiled_loop_do_not_stall_it():
-    """The output imports run in a thread beside the compiled MuJoCo loop; the loop's thread waits for the
-    GIL only when a compiled call returns: after the first MUJOCO_CHUNK steps, calls last about
-    CHUNK_SECONDS (`mujoco_loop.next_chunk`, fed here a fixed 50 us per step so that the count does not
-    depend on this machine's speed), and while the imports run a waiting thread asks for the GIL after
-    `prefetch.SWITCH_INTERVAL`, restored when they end."""
-    import sys
-
-    from harness.api import load_scenario
-    from harness.loop import mujoco_loop, simulate
-    from harness.output import prefetch
-
-    scn = load_scenario(None, ["duration=20", "transient=0"])
-    calls = []
-    real = mujoco_loop.next_chunk
-
-    def counting(steps, seconds, on_chunk):
-        calls.append(steps)
-        return real(steps, 50e-6 * steps, on_chunk)
-
-    before = sys.getswitchinterval()
-    threads = []
-    intervals = []
-
-    def importing(names):  # in the thread, while the imports would run
-        intervals.append(sys.getswitchinterval())
-
-    mp = pytest.MonkeyPatch()
-    mp.setattr(mujoco_loop, "next_chunk", counting)
-    mp.setattr(prefetch, "_import_all", importing)
-    try:
-        traj = simulate(scn, on_running=lambda: threads.append(prefetch.prefetch_output_imports(())))
-        threads[0].join()
-    finally:
-        mp.undo()
-    size = int(mujoco_loop.CHUNK_SECONDS / 50e-6)
-    assert traj.status == "ok" and len(traj) == scn.n_steps
-    assert calls == [1000] + [size] * ((scn.n_steps - 1000) // size) + [(scn.n_steps - 1000) % size]
-    assert intervals == [min(before, prefetch.SWITCH_INTERVAL)]
-    assert sys.getswitchinterval() == before
-
-
 def test_outputs_written_in_parallel_equal_serial_writes(tmp_path):
     """run_scenario writes run.rrd and the figures in three processes; the PNGs are byte-identical to
     those `write_figures` draws alone in this process from the same trajectory."""

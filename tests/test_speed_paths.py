@@ -18,8 +18,8 @@ import pytest
 from controllers import slave as slave_model
 from harness.config.scenario import PlantConfig, Scenario
 from harness.loop.fast import K
-from harness.loop.mujoco_kernels import MJ_FUNCS
 from harness.loop.mujoco_loop import BACKBONE_POINTS, chain_body_ids, make_plant, simulate_mujoco
+from harness.loop.native import MJ_FUNCS
 
 
 def _python_geometry(scn, m, cmap, qpos_hist, q2):
@@ -312,13 +312,13 @@ def test_noise_free_record_rows_equal_recomputed_rows(kind):
     """Without noise the record row reuses the control laws' kinematics (record_row_info): the rows
     equal record_row recomputed from the true state, bit for bit."""
     from harness.loop import simulate
-    from harness.loop.common import common_arrays
+    from harness.loop.common import compile_model
     from harness.loop.trajectory import ROW_SLICES, ROW_WIDTH
 
     scn = Scenario(duration=0.2, snr_db=None, plant=PlantConfig(kind=kind, segments=4))
     tr = simulate(scn)
     assert tr.status == "ok"
-    a = common_arrays(scn)
+    a = compile_model(scn)._asdict()
     row = np.zeros(ROW_WIDTH)
     xd, dxd, ddxd = np.empty(2), np.empty(2), np.empty(2)
     for k in range(0, len(tr), 7):
@@ -331,15 +331,11 @@ def test_noise_free_record_rows_equal_recomputed_rows(kind):
             np.testing.assert_array_equal(got, row[sl], err_msg=f"{name} at step {k}")
 
 
-@pytest.mark.parametrize("overlap", [False, True], ids=["serial", "threaded"])
 @pytest.mark.parametrize("case", ["paper_delay", "contact"])
-def test_chunk_boundaries_do_not_change_the_run(monkeypatch, case, overlap, traj_arrays):
-    """The MuJoCo loop's compiled calls may split a run anywhere (their length follows the measured speed,
-    `mujoco_loop.next_chunk`): one call, calls of 1-97 steps in a seeded random order, and the default
-    give bit-identical trajectories, with a command delay (its ring buffer spans the calls) and with
-    contact and a delayed, filtered force sensor (scenarios/contact.toml); MuJoCo stepped by the loop's
-    thread or by the physics thread from the first step (the default switches between the two:
-    tests/test_overlap.py)."""
+def test_chunk_boundaries_do_not_change_the_run(monkeypatch, case, traj_arrays):
+    """The MuJoCo loop's compiled calls may split a run anywhere: one call, calls of 13 and of 97 steps
+    and the default give bit-identical trajectories, with a command delay (its ring buffer spans the calls)
+    and with contact and a delayed, filtered force sensor (scenarios/contact.toml)."""
     from harness.config.load import load_scenario
     from harness.loop import mujoco_loop
 
@@ -350,20 +346,10 @@ def test_chunk_boundaries_do_not_change_the_run(monkeypatch, case, overlap, traj
     else:
         scn = load_scenario(root / "scenarios" / "paper.toml", [*short, "plant.actuation_delay=0.003"])
     runs = {}
-    runs["default"] = traj_arrays(simulate_mujoco(scn, overlap=overlap))
-    monkeypatch.setattr(mujoco_loop, "MUJOCO_CHUNK", 10 ** 9)
-    runs["one call"] = traj_arrays(simulate_mujoco(scn, overlap=overlap))
-    rng = np.random.default_rng(7)
-    sizes = []
-
-    def random_chunk(steps, seconds, on_chunk):
-        sizes.append(int(rng.integers(1, 98)))
-        return sizes[-1]
-
-    monkeypatch.setattr(mujoco_loop, "MUJOCO_CHUNK", 13)
-    monkeypatch.setattr(mujoco_loop, "next_chunk", random_chunk)
-    runs["random"] = traj_arrays(simulate_mujoco(scn, overlap=overlap))
-    assert len(sizes) > 5
+    runs["default"] = traj_arrays(simulate_mujoco(scn))
+    for size in (10 ** 9, 13, 97):
+        monkeypatch.setattr(mujoco_loop, "MUJOCO_CHUNK", size)
+        runs[f"calls of {size}"] = traj_arrays(simulate_mujoco(scn))
     ref = runs.pop("default")
     assert len(ref["t"]) == scn.n_steps and "body_pos" in ref
     if case == "contact":
@@ -372,15 +358,3 @@ def test_chunk_boundaries_do_not_change_the_run(monkeypatch, case, overlap, traj
         assert arrays.keys() == ref.keys(), name
         for key, v in arrays.items():
             np.testing.assert_array_equal(v, ref[key], err_msg=f"{name}: {key}")
-
-
-def test_next_chunk_follows_the_measured_speed():
-    """Later calls last about CHUNK_SECONDS, never fewer than MUJOCO_CHUNK steps; with a live view
-    (on_chunk) or no measurement every call is MUJOCO_CHUNK steps."""
-    from harness.loop import mujoco_loop as ml
-
-    assert ml.next_chunk(1000, 0.05, False) == int(1000 * ml.CHUNK_SECONDS / 0.05)
-    assert ml.next_chunk(1000, 10.0, False) == ml.MUJOCO_CHUNK  # slow plant: not below the floor
-    assert ml.next_chunk(1000, 0.05, True) == ml.MUJOCO_CHUNK
-    assert ml.next_chunk(0, 0.05, False) == ml.MUJOCO_CHUNK
-    assert ml.next_chunk(1000, 0.0, False) == ml.MUJOCO_CHUNK

@@ -1,5 +1,5 @@
-"""The stepped loop's compiled glue (harness.loop.stepped_kernels) and the Cosserat plant's deferred
-recording (CosseratPlant.record / finish) give the numbers of the code they replace."""
+"""The stepped loop's paths agree (the paper's fast path and the interface), and the Cosserat plant's deferred
+recording (CosseratPlant.record / finish) gives the numbers of per-step geometry."""
 
 from __future__ import annotations
 
@@ -7,102 +7,9 @@ import numpy as np
 import pytest
 
 from harness.config.load import load_scenario
-from harness.loop.fast import kernels
-from harness.loop.kernels import R_E1, R_E2, RUNAWAY
+from harness.loop.common import compile_model
 from harness.loop.stepped_loop import simulate_stepped
-from harness.loop.trajectory import ROW_SLICES, ROW_WIDTH
 from harness.plant import build_plant
-
-
-def _check_numpy(state, exploding, Ftrue, Fctl, ignored):
-    """The loop's former numpy statements (reference for stepped_state_check)."""
-    total = float(state @ state)
-    if not np.isfinite(total) or total > exploding * exploding:
-        return 8
-    if min(state[4], state[5], state[6]) <= 0.0:
-        return 5
-    Fctl[:] = 0.0 if ignored else Ftrue
-    return 0
-
-
-def _after_numpy(st, T1, T2, u2, row, Ftrue, Fsens, cinfo, ref_mode, ext, ref, dt, sensed, cmd):
-    """The loop's former numpy statements (reference for stepped_after_control)."""
-    row[ROW_SLICES["F_true"]] = Ftrue
-    row[ROW_SLICES["F_sensed"]] = Fsens
-    row[ROW_SLICES["contact"]] = cinfo
-    if st == 0 and not np.isfinite(float(T1.sum() + T2.sum() + u2.sum())):
-        st = 1
-    if st == 0 and (abs(row[R_E1]) + abs(row[R_E1 + 1]) > RUNAWAY
-                    or abs(row[R_E2]) + abs(row[R_E2 + 1]) > RUNAWAY):
-        st = 4
-    if st != 0:
-        return st
-    if ref_mode == 1:
-        ref[6:12] += u2 * dt
-        ref[0:6] += ref[6:12] * dt
-    elif ref_mode == 2:
-        ref[:] = ext
-    cmd[0:2], cmd[2:8], cmd[8:20], cmd[20:26] = T1, T2, ref, sensed[4:10]
-    return 0
-
-
-@pytest.mark.parametrize("jit", [True, False])
-def test_state_check_kernel_equals_numpy(jit):
-    Kx = kernels(jit)
-    rng = np.random.default_rng(3)
-    cases = [rng.normal(size=16) for _ in range(20)]
-    for state in cases:
-        state[4:7] = np.abs(state[4:7]) + 0.1
-    cases[0][5] = -0.1  # section length <= 0
-    cases[1][4] = 0.0
-    cases[2][9] = np.nan
-    cases[3][0] = np.inf
-    cases[4][12] = 2e6  # exploding
-    for state in cases:
-        for ignored in (False, True):
-            Ftrue = rng.normal(size=4)
-            a, b = np.full(4, 7.0), np.full(4, 7.0)
-            sa = Kx.stepped_state_check(state, 1e6, Ftrue, a, ignored)
-            sb = _check_numpy(state, 1e6, Ftrue, b, ignored)
-            assert sa == sb
-            assert np.array_equal(a, b)
-    assert Kx.stepped_state_check(cases[0], 1e6, np.zeros(4), np.zeros(4), False) == 5
-    assert Kx.stepped_state_check(cases[2], 1e6, np.zeros(4), np.zeros(4), False) == 8
-    assert Kx.stepped_state_check(cases[4], 1e6, np.zeros(4), np.zeros(4), False) == 8
-
-
-@pytest.mark.parametrize("jit", [True, False])
-def test_after_control_kernel_equals_numpy(jit):
-    Kx = kernels(jit)
-    rng = np.random.default_rng(4)
-    seen = set()
-    cols = (ROW_SLICES["F_true"].start, ROW_SLICES["F_sensed"].start, ROW_SLICES["contact"].start)
-    for i in range(60):
-        T1, T2, u2 = rng.normal(size=2), rng.normal(size=6), rng.normal(size=6) * 10
-        if i % 7 == 1:
-            T2[3] = np.nan
-        row = rng.normal(size=ROW_WIDTH) * 0.3
-        if i % 5 == 2:
-            row[R_E2 + 1] = 1.5  # runaway
-        Ftrue, Fsens, cinfo = rng.normal(size=4), rng.normal(size=4), rng.normal(size=5)
-        ext, sensed = rng.normal(size=12), rng.normal(size=16)
-        ref0 = rng.normal(size=12)
-        st0 = 3 if i % 11 == 3 else 0
-        mode = i % 3
-        outs = []
-        for f in ("kernel", "numpy"):
-            r, ref, cmd = row.copy(), ref0.copy(), np.full(26, 9.0)
-            if f == "kernel":
-                s = Kx.stepped_after_control(st0, T1, T2, u2, r, Ftrue, Fsens, cinfo, *cols, mode, ext, ref,
-                                             1e-3, sensed, cmd)
-            else:
-                s = _after_numpy(st0, T1, T2, u2, r, Ftrue, Fsens, cinfo, mode, ext, ref, 1e-3, sensed, cmd)
-            outs.append((s, r, ref, cmd))
-        assert outs[0][0] == outs[1][0]
-        seen.add(outs[0][0])
-        for x, y in zip(outs[0][1:], outs[1][1:], strict=True):
-            assert np.array_equal(x, y)  # bit for bit, not just close
-    assert seen == {0, 1, 3, 4}  # every branch exercised
 
 
 class _PerStepGeometry:
@@ -189,25 +96,21 @@ def test_rod_command_kernels_equal_the_numpy_expressions():
 
 
 @pytest.mark.parametrize("extra", [["sensing.force.mode=ignored"], ["plant.actuation=servo", "snr_db=none"]])
-def test_the_three_controller_paths_of_the_stepped_loop_agree(extra):
-    """The paper controller's one-call step (stepped_paper_step), its fused_step (a subclass) and its
-    generic step() give the same rows bit for bit (constant interaction forces, actuation delay)."""
-    from harness.loop.stepped_loop import PaperController
+def test_paper_fast_path_and_interface_agree_in_the_stepped_loop(extra):
+    """The paper's law under "paper" (the stepped loop's one compiled call per step) and under
+    "paper_interface" (the same registered class stepped through the public interface) give the same rows
+    bit for bit on the Python-stepped MuJoCo plant (constant interaction forces, actuation delay)."""
     from harness.loop.stepped_plants import stepped_plant
 
-    class Fused(PaperController):
-        pass
-
-    class Plain(PaperController):
-        fused_step = None
-
-    scn = load_scenario(None, ["plant.kind=mujoco", "duration=0.3", "plant.actuation_delay=0.002",
-                               "interaction_forces=[[0.5, -1.0], [0.2, 0.4]]", *extra])
-    ctrls = (PaperController, Fused, Plain)
-    runs = [simulate_stepped(scn, stepped_plant(scn), controller=c()) for c in ctrls]
-    assert all(r.status == "ok" and len(r) == scn.n_steps for r in runs)
+    base = ["plant.kind=mujoco", "duration=0.3", "plant.actuation_delay=0.002",
+            "interaction_forces=[[0.5, -1.0], [0.2, 0.4]]", *extra]
+    runs = []
+    for name in ("paper", "paper_interface"):
+        scn = load_scenario(None, [*base, f"controller.name={name}"])
+        model = compile_model(scn)
+        runs.append(simulate_stepped(scn, stepped_plant(scn, model), model=model))
+    assert all(r.status == "ok" and len(r) == runs[0].t.shape[0] for r in runs)
     for f in ("q1", "q2", "T1", "T2", "u2", "F_true", "F_sensed", "e2"):
-        for r in runs[1:]:
-            assert np.array_equal(getattr(runs[0], f), getattr(r, f)), f
+        assert np.array_equal(getattr(runs[0], f), getattr(runs[1], f)), f
     if "sensing.force.mode=ignored" in extra:
         assert np.all(runs[0].F_sensed == 0.0) and np.any(runs[0].F_true != 0.0)

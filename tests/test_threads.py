@@ -2,7 +2,7 @@
 the in-process batch path) and `simulate` called from threads.  The compiled loops release the GIL, so
 what is shared between runs must be safe: the ahead-of-time modules load once, MuJoCo's process-wide warning
 callback hands each warning to the run whose thread raised it, and a sweep's results are the same as with
-worker processes and as single runs.  No timing assertions (benchmarks/bench_e2e.py measures the speed)."""
+worker processes and as single runs.  No timing assertions (benchmarks/bench_core.py measures the speed)."""
 
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "scenarios" / "paper.toml"
 SHORT = ["duration=0.3", "transient=0"]
 # euler, stiff servos, no material damping: MuJoCo warns (mjWARN_BADQACC) and the run stops there
-# (tests/test_reliability.py, tests/test_overlap.py)
+# (tests/test_reliability.py)
 EULER = ["plant.integrator='euler'", "plant.enforce_cc=true", "plant.bending_viscosity=[0, 0, 0]",
          "plant.extension_viscosity=[0, 0, 0]"]
 WARNS = [*SHORT, *EULER, "plant.servo_frequency=160"]
@@ -59,11 +59,11 @@ def test_warnings_stay_with_the_run_that_raised_them(traj_arrays):
     """Two runs at once, one raising a MuJoCo warning and one clean: each reports only its own warning text,
     as when run alone, and the process-wide callback is removed after them."""
     warn, clean = load_scenario(PAPER, WARNS), load_scenario(PAPER, SHORT)
-    ref_warn, ref_clean = simulate(warn, overlap=False), simulate(clean, overlap=False)
+    ref_warn, ref_clean = simulate(warn), simulate(clean)
     assert ref_warn.status == "diverged" and ref_warn.meta["mujoco_warning_text"]
     assert ref_clean.status == "ok" and ref_clean.meta["mujoco_warning_text"] == []
     for _ in range(5):
-        a, b = _together([lambda: simulate(warn, overlap=False), lambda: simulate(clean, overlap=False)])
+        a, b = _together([lambda: simulate(warn), lambda: simulate(clean)])
         for got, ref in ((a, ref_warn), (b, ref_clean)):
             assert (got.status, got.message) == (ref.status, ref.message)
             assert got.meta["mujoco_warning_text"] == ref.meta["mujoco_warning_text"]
@@ -93,7 +93,7 @@ gate = threading.Barrier(3)
 out = []
 def run():
     gate.wait()
-    out.append(simulate(Scenario(duration=0.05), overlap=False).status)
+    out.append(simulate(Scenario(duration=0.05)).status)
 ts = [threading.Thread(target=run) for _ in range(3)]
 [t.start() for t in ts]
 [t.join() for t in ts]
@@ -105,7 +105,7 @@ def test_threads_load_the_compiled_module_once():
     """Three threads of a fresh process start a run at the same moment: each uses the ahead-of-time module
     (none falls back to numba's JIT).  Loading one extension module from two threads at once failed inside
     importlib before `harness.loop.aot` serialised it."""
-    simulate(load_scenario(PAPER, ["duration=0.05", "transient=0"]), overlap=False)  # module built first
+    simulate(load_scenario(PAPER, ["duration=0.05", "transient=0"]))  # module built first
     res = subprocess.run([sys.executable, "-c", _LOAD_AT_ONCE], capture_output=True, text=True, cwd=ROOT,
                          timeout=600)
     assert res.returncode == 0, res.stderr[-2000:]

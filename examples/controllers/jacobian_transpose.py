@@ -1,10 +1,13 @@
 """A complete user controller: Jacobian-transpose task-space PD with gravity compensation.
 
-Run it:
+Run it on a torque plant: the analytic plant, or the MuJoCo plant with torque actuation and the
+constant-curvature chain (torque mode diverges on the free chain with every controller tried):
     teleop run --controller examples/controllers/jacobian_transpose.py:JacobianTransposePD \
-        --actuation torque --duration 5
+        --plant analytic --duration 5
     teleop check --controller examples/controllers/jacobian_transpose.py:JacobianTransposePD \
-        --actuation torque --duration 5 --bounds examples/controllers/jacobian_transpose_bounds.toml
+        --actuation torque --set plant.enforce_cc=true --duration 5 \
+        --bounds examples/controllers/jacobian_transpose_bounds.toml
+On the default plant (MuJoCo, servo) use examples/controllers/resolved_rate.py.
 
 Master: the paper's law (12)-(13) (the master stands for the operator's arm tracking x_d (40)).
 Slave (6 joints, 2 task coordinates): the tip is pulled toward the master tip by a task-space spring

@@ -34,7 +34,7 @@ from controllers.params import ParameterError
 from harness.cli.parser import EXIT_FAIL, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, build_parser
 from harness.cli.parser import one_line as _one_line
 from harness.config.errors import ConfigError
-from harness.config.runtime import fast_exit, overlap_setting, set_gc_thresholds
+from harness.config.runtime import RuntimeOptions, fast_exit, set_gc_thresholds, using_options
 from harness.config.textio import jsonable, prepare_out_dir
 
 # (module, attribute) of exception types that mean "invalid input" (exit 2).  Looked up in
@@ -295,7 +295,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def cmd_controllers(args: argparse.Namespace) -> int:  # noqa: ARG001
-    registry = _import("harness.loop.controllers")
+    registry = _import("harness.config.controller")
     items = registry.describe_builtins()
     width = max(len(n) for n, _, _ in items)
     for name, desc, acts in items:
@@ -397,6 +397,12 @@ def cmd_findings(args: argparse.Namespace) -> int:
     return EXIT_OK if held == len(results) else EXIT_FAIL
 
 
+def cmd_stability_map(args: argparse.Namespace) -> int:
+    out = prepare_out_dir(args.out)
+    smap = _import("harness.studies.stability_map")
+    return int(smap.main(out, args.duration))
+
+
 # ---------------------------------------------------------------------------------------------
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
@@ -408,8 +414,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help(sys.stderr)
         return EXIT_USAGE
     try:
-        overlap_setting()  # a bad TELEOP_OVERLAP is an input error before anything runs
-        return COMMANDS[args.command](args)
+        with using_options(RuntimeOptions.from_env()):  # the TELEOP_* switches, read once
+            return COMMANDS[args.command](args)
     except KeyboardInterrupt:
         _err("interrupted")
         return EXIT_INTERRUPTED
@@ -429,7 +435,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 COMMANDS = {"run": cmd_run, "check": cmd_check, "models": cmd_models, "sweep": cmd_sweep,
             "controllers": cmd_controllers, "fidelity": cmd_fidelity, "cache": cmd_cache,
-            "findings": cmd_findings}
+            "findings": cmd_findings, "stability-map": cmd_stability_map}
 
 
 if __name__ == "__main__":  # pragma: no cover
@@ -437,7 +443,7 @@ if __name__ == "__main__":  # pragma: no cover
 
 
 def prepare_process() -> None:
-    """What the `teleop` command sets up before `main()` (also used by benchmarks/bench_e2e.py, so that
+    """What the `teleop` command sets up before `main()` (also used by benchmarks/bench_core.py, so that
     it measures the command as users run it): the collector thresholds
     `harness.config.runtime.GC_THRESHOLDS`, and MuJoCo's OpenGL rendering off unless MUJOCO_GL says
     otherwise (the harness draws with Rerun and matplotlib; `import mujoco` then skips looking for

@@ -153,9 +153,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "rigid master.",
         epilog="exit status: 0 ok; 1 run failed (diverged, outputs not written) or bounds violated; "
                "2 invalid input; 130 interrupted (SIGINT/SIGTERM). "
-               "Set TELEOP_DEBUG=1 to print tracebacks of output-writing failures; TELEOP_OVERLAP=1 / 0 to "
-               "force the MuJoCo loop's physics thread on / off (default: tried when a core is free for it, "
-               "kept if faster). "
+               "Set TELEOP_DEBUG=1 to print tracebacks of output-writing failures. "
                "Run 'teleop COMMAND --help' for the options of each command.")
     parser.add_argument("--version", action=_VersionAction, help="print the package version and exit.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands")
@@ -291,6 +289,17 @@ def build_parser() -> argparse.ArgumentParser:
     what.add_argument("--clear", action="store_true",
                       help="remove every cache folder (the next run compiles again, 20-60 s). "
                            "Default: keep them.")
+
+    smap = sub.add_parser(
+        "stability-map", formatter_class=_Formatter, help="survival map over null-space gain x rod damping",
+        description="Run the paper scenario over a grid of the null-space gain k_n (eq. 27-28) and the "
+                    "bending viscosity eta_b, for the free chain and the CC chain, servo and torque "
+                    "(harness.studies.stability_map): the time each cell survives and its e2_rms. Writes "
+                    "stability_map.md and stability_map.png.")
+    smap.add_argument("--duration", metavar="S", type=_positive_float, default=3.0,
+                      help="simulated seconds per cell, > 0. Default: 3.")
+    smap.add_argument("--out", metavar="DIR", type=_path, default=Path("runs/stability_map"),
+                      help="output folder (created; must be writable). Default: runs/stability_map.")
 
     fid = sub.add_parser(
         "fidelity", formatter_class=_Formatter, help="plant-fidelity study over MuJoCo segment counts",

@@ -1,19 +1,61 @@
-"""Process-level settings shared by the `teleop` command and the sweep's pool workers: the garbage
-collector's thresholds, the fast end of a process, the TELEOP_OVERLAP switch and the progress bars.  Nothing
-here knows of plants or runs."""
+"""Process-level settings shared by the `teleop` command and the sweep's pool workers: the runtime options
+(`RuntimeOptions`, from the TELEOP_* environment variables), the garbage collector's thresholds, the fast
+end of a process and the progress bars.  Nothing here knows of plants or runs."""
 
 from __future__ import annotations
 
 import atexit
 import contextlib
+import dataclasses
 import functools
 import gc
 import os
 import re
 import signal
 import sys
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import NoReturn
+
+
+@dataclasses.dataclass(frozen=True)
+class RuntimeOptions:
+    """How this process runs the kernels and reports failures (not what it simulates).
+
+    cache_dir: root of the compiled-kernel cache ($TELEOP_CACHE_DIR, else $XDG_CACHE_HOME/octarm-teleop,
+    else ~/.cache/octarm-teleop); jit: compile the kernels with numba (False: TELEOP_NO_JIT=1, the
+    interpreted kernels, same maths, slow); aot: use the ahead-of-time loop modules (False: TELEOP_NO_AOT=1,
+    numba's JIT); debug: print tracebacks of output-writing failures (TELEOP_DEBUG=1)."""
+
+    cache_dir: Path
+    jit: bool = True
+    aot: bool = True
+    debug: bool = False
+
+    @classmethod
+    def from_env(cls, env: Mapping[str, str] = os.environ) -> RuntimeOptions:
+        root = env.get("TELEOP_CACHE_DIR") or os.path.join(
+            env.get("XDG_CACHE_HOME") or os.path.join(Path.home(), ".cache"), "octarm-teleop")
+        return cls(cache_dir=Path(root), jit=env.get("TELEOP_NO_JIT", "0") != "1",
+                   aot=env.get("TELEOP_NO_AOT", "0") != "1", debug=bool(env.get("TELEOP_DEBUG")))
+
+
+_OPTIONS: list[RuntimeOptions] = []  # set by `using_options` (the `teleop` command: read once at its start)
+
+
+def options() -> RuntimeOptions:
+    """The options in force: those `using_options` set, else read from the environment now."""
+    return _OPTIONS[-1] if _OPTIONS else RuntimeOptions.from_env()
+
+
+@contextlib.contextmanager
+def using_options(opts: RuntimeOptions) -> Iterator[RuntimeOptions]:
+    """Run the block with `opts` as the process' runtime options (`options()`)."""
+    _OPTIONS.append(opts)
+    try:
+        yield opts
+    finally:
+        _OPTIONS.remove(opts)
 
 # Python's garbage collector in a command's or worker's process: a run imports hundreds of thousands
 # of long-lived objects (numba, MuJoCo, Rerun, matplotlib) and each full collection traverses all of
@@ -45,24 +87,6 @@ def fast_exit(rc: int) -> NoReturn:
         atexit._run_exitfuncs()  # CPython's own exit step (the module has had it since Python 2)
     finally:
         end_process(rc)
-
-
-OVERLAP_ENV = "TELEOP_OVERLAP"
-
-
-def overlap_setting() -> bool | None:
-    """$TELEOP_OVERLAP: True ("1": the MuJoCo loop's physics thread on), False ("0": off) or None (unset or
-    empty: where a core is free and it is faster, `harness.loop.mujoco_loop.overlap_plan`).  Anything else
-    raises ConfigError naming the variable and its values (checked by `teleop` before any command runs)."""
-    from harness.config.errors import ConfigError
-
-    env = os.environ.get(OVERLAP_ENV, "").strip()
-    if env in ("0", "1"):
-        return env == "1"
-    if env:
-        raise ConfigError.field(OVERLAP_ENV, env, "1 (physics thread on), 0 (off), or unset (on when a core "
-                                "is free)")
-    return None
 
 
 def _is_terminal(stream) -> bool:
@@ -206,5 +230,6 @@ def progress_bar_class() -> type:
     return Bar
 
 
-__all__ = ["DIST_NAME", "GC_THRESHOLDS", "OVERLAP_ENV", "die_with_parent", "end_process", "fast_exit",
-           "overlap_setting", "parent_death_signal", "progress_bar_class", "provenance", "set_gc_thresholds"]
+__all__ = ["DIST_NAME", "GC_THRESHOLDS", "RuntimeOptions", "die_with_parent", "end_process", "fast_exit",
+           "options", "parent_death_signal", "progress_bar_class", "provenance", "set_gc_thresholds",
+           "using_options"]

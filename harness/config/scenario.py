@@ -160,9 +160,9 @@ ParamValue = doc(_LEAF | list[_LEAF | list[_LEAF | list[_LEAF]]], "",
 
 @dataclass(frozen=True)
 class ControllerConfig:
-    """Which controller runs (controllers/interface.py).  The class and its params are checked by the
-    loop layer when the scenario is loaded through harness.api; the resolved config.toml spells out
-    every parameter."""
+    """Which controller runs (controllers/interface.py).  The class and its params are checked by
+    harness/config/controller.py when the scenario is loaded through harness.api; the resolved
+    config.toml spells out every parameter."""
 
     name: doc(str, '"paper" (the paper\'s law, compiled), another built-in ("teleop controllers") or '
               '"path/to/file.py:ClassName" / "package.module:ClassName"', pattern=CONTROLLER_RE,

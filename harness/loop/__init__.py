@@ -1,14 +1,16 @@
-"""The closed loop: the paper's controllers (on the nominal analytic models) driving a plant.
+"""The closed loop: a controller (on the nominal analytic models) driving a plant.
 
-`simulate(scn, plant=None)` is the one entry point: it takes a scenario and a plant
-(`harness.plant.build_plant(scn)` when not given) and returns the in-memory `Trajectory`.  The
-paper's controller on the analytic and MuJoCo plants runs in the compiled loops
-`harness.loop.analytic_loop` / `harness.loop.mujoco_loop`; everything else (a Python controller on any
-plant, any controller on a plant stepped from Python such as the Cosserat rod) runs in the one
-Python-level loop `harness.loop.stepped_loop` (plants: `harness.loop.stepped_plants`); what they
-share (initial state, noise, status codes, stop flag) is `harness.loop.common`; the compiled
-kernels are `harness.loop.kernels` / `harness.loop.mujoco_kernels`, compiled by `harness.loop.fast`.
-The loop knows nothing of files, recordings or sweeps.
+`simulate(scn, plant=None)` is the one entry point: it compiles the scenario once into a `RunModel`
+(`harness.loop.common.compile_model`), takes a plant (`harness.plant.build_plant(scn)` when not given) and
+returns the in-memory `Trajectory`.  The paper's law (registered as "paper") on the analytic and MuJoCo
+plants runs in the compiled loops `harness.loop.analytic_loop` / `harness.loop.mujoco_loop`; every other
+controller (`controllers.interface.Controller`) on any plant, and any controller on a plant stepped from
+Python such as the Cosserat rod, runs in the one Python-level loop `harness.loop.stepped_loop` (plants:
+`harness.loop.stepped_plants`).  What they share (the run model, noise, the chunk driver, the stop flag) is
+`harness.loop.common`; the per-step glue (runaway and section-length checks, servo reference) and the
+compiled kernels are `harness.loop.kernels` / `harness.loop.mujoco_kernels`, compiled by
+`harness.loop.fast`.  Status codes: `controllers.status`.  The loop knows nothing of files, recordings or
+sweeps.
 """
 
 from __future__ import annotations
@@ -28,44 +30,35 @@ def releases_gil(scn) -> bool:
     return jit_wanted()
 
 
-def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None, on_running=None,
-             overlap: bool | None = None):
+def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None):
     """Run one scenario on `plant` (default: the plant `scn.plant` describes); returns the Trajectory.
     on_chunk: optional callable receiving each finished chunk of control steps as a `Trajectory`
-    (e.g. a live viewer, `harness.output.viewer.LiveView`).  on_running: optional callable called
-    once, without arguments, when the loop's start-up (numba loading its kernels, model set-up) is over:
-    after the first chunk of steps, or, in the compiled MuJoCo loop, as soon as its kernel is loaded.
-    Background work started then (the output imports, `harness.output.prefetch`) does not compete with
-    the start-up for the GIL; on_running may return that work's thread, and on 2 CPUs the MuJoCo loop's
-    physics thread (overlap) starts when it ends.  Not called by the Python-stepped loop on plants that
-    release the GIL at every step (`simulate_stepped`): there such work would stall every step.
-    overlap: the compiled MuJoCo loop steps MuJoCo in a second thread (same numbers, less time, more CPU;
-    `harness.loop.mujoco_loop.simulate_mujoco`); None = when and while a core is free for it.  Ignored by
-    the other loops.
+    (e.g. a live viewer, `harness.output.viewer.LiveView`).
 
     A run that diverges or is interrupted (`harness.loop.common.STOP`) returns everything up to that
     point, with `status` and `message` saying what happened and when."""
+    from harness.loop.common import compile_model
+
+    model = compile_model(scn)  # once per run: every loop, adapter and controller context reads it
     if plant is None:
         from harness.plant import build_plant
 
         plant = build_plant(scn)
-    python_ctrl = scn.controller.name != "paper"  # a controllers.interface.Controller (loop/controllers.py)
+    from harness.loop.interface_adapter import is_compiled
+
+    python_ctrl = not is_compiled(scn)  # a controllers.interface.Controller, stepped from Python
     if python_ctrl or hasattr(plant, "advance"):  # the one Python-level loop, on a SteppedPlant
         from harness.loop.stepped_loop import simulate_stepped
 
         if not hasattr(plant, "advance"):  # the MuJoCo / analytic plant: its Python-stepped adapter
             from harness.loop.stepped_plants import stepped_plant
 
-            plant = stepped_plant(scn, plant)
-        return simulate_stepped(scn, plant, progress=progress,
-                                controller="interface" if python_ctrl else None, on_chunk=on_chunk,
-                                on_running=on_running)
+            plant = stepped_plant(scn, model, plant)
+        return simulate_stepped(scn, plant, progress=progress, on_chunk=on_chunk, model=model)
     if plant.kind == "analytic":
         from harness.loop.analytic_loop import simulate_analytic
 
-        return simulate_analytic(scn, progress=progress, plant=plant, on_chunk=on_chunk,
-                                 on_running=on_running)
+        return simulate_analytic(scn, progress=progress, plant=plant, on_chunk=on_chunk, model=model)
     from harness.loop.mujoco_loop import simulate_mujoco
 
-    return simulate_mujoco(scn, progress=progress, plant=plant, on_chunk=on_chunk, on_running=on_running,
-                           overlap=overlap)
+    return simulate_mujoco(scn, progress=progress, plant=plant, on_chunk=on_chunk, model=model)

@@ -14,9 +14,9 @@ from harness.config.scenario import Scenario
 from harness.loop.aot import A
 from harness.loop.common import (
     CHUNK,
-    STOP,
-    common_arrays,
-    initial_state,
+    ChunkRun,
+    RunModel,
+    compile_model,
     noise_table,
     progress_bar,
     run_meta,
@@ -27,59 +27,47 @@ from harness.plant.analytic import AnalyticPlant
 
 
 def simulate_analytic(scn: Scenario, progress: bool = False,
-                      plant: AnalyticPlant | None = None, on_chunk=None, on_running=None) -> Trajectory:
+                      plant: AnalyticPlant | None = None, on_chunk=None,
+                      model: RunModel | None = None) -> Trajectory:
     """Closed loop on the analytic plant (plant params may differ from the controller's).
     plant: the plant's parameters (default: the scenario's plant side); on_chunk: optional callable
-    receiving each finished chunk of steps as a `Trajectory` (e.g. a live viewer); on_running: called
-    once after the first chunk (`harness.loop.simulate`)."""
+    receiving each finished chunk of steps as a `Trajectory` (e.g. a live viewer); model: the scenario's
+    `RunModel` (default: compiled here)."""
     if plant is None:
         plant = AnalyticPlant(scn.plant_master, scn.plant_slave)
     n = scn.n_steps
-    state = initial_state(scn)
+    a = model if model is not None else compile_model(scn)
+    state = a.s0.copy()
     noise, scale = noise_table(scn, n)
-    a = common_arrays(scn)
     rows = np.zeros((n, ROW_WIDTH))
-    # constant interaction forces: the plant feels a["F"]; the laws get them unless ignored
-    Fc = np.zeros(4) if scn.sensing.force.mode == "ignored" else a["F"]
-    rows[:, ROW_SLICES["F_true"]] = a["F"]
+    # constant interaction forces: the plant feels a.F; the laws get them unless ignored
+    Fc = np.zeros(4) if scn.sensing.force.mode == "ignored" else a.F
+    rows[:, ROW_SLICES["F_true"]] = a.F
     rows[:, ROW_SLICES["F_sensed"]] = Fc
     mpk_p = master_model.packed(plant.master)
     spk_p = plant.slave.packed()
     nsub = max(1, scn.substeps)
+    plant_args = (scn.control_dt, nsub, scn.continuous_control, mpk_p, spk_p)
     bar = progress_bar(progress, n, "analytic plant")
-    status, done, k = 0, 0, 0
+
+    def part(k: int, done: int) -> None:
+        piece = Trajectory.from_rows(rows[k:done])
+        piece.meta.update(run_meta(scn, 0.0))
+        on_chunk(piece)
+
+    run = ChunkRun(n, CHUNK, bar, part if on_chunk is not None else None)
     t0 = time.perf_counter()
-    interrupted = False
     error = ""
     try:
-        while k < n:
-            k1 = min(n, k + CHUNK)
-            status, m = A.analytic_chunk(state, k, k1, scn.control_dt, nsub, scn.continuous_control,
-                                         a["traj"], noise, scale, Fc, a["F"], a["mpk_c"], a["spk_c"], mpk_p,
-                                         spk_p, a["nodes"], a["weights"], a["gains"], a["spec"], rows[k:k1])
-            done = k + m
-            if bar is not None:
-                bar.update(m)
-            if on_chunk is not None and m:
-                part = Trajectory.from_rows(rows[k:done])
-                part.meta.update(run_meta(scn, 0.0))
-                on_chunk(part)
-            if on_running is not None:
-                on_running, start = None, on_running
-                start()
-            if status != 0:
-                break
-            k = k1
-            if STOP.is_set():
-                interrupted = True
-                break
+        run.run(lambda k, k1: A.analytic_chunk(k, k1, a, plant_args, (state, noise, scale, Fc, rows[k:k1])))
     except KeyboardInterrupt:
-        interrupted = True
+        run.interrupted = True
     except Exception as exc:  # keep what was computed; report the cause
         error = f"{type(exc).__name__}: {exc}"
     finally:
         if bar is not None:
             bar.close()
+    status, done, interrupted = run.status, run.done, run.interrupted
     traj = Trajectory.from_rows(rows[:done])
     traj.meta.update(run_meta(scn, time.perf_counter() - t0))
     set_outcome(traj, status, interrupted, error)

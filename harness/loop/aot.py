@@ -1,7 +1,7 @@
 """Ahead-of-time compiled loop entry kernels: a run that never loads numba.
 
 Why.  Loading numba costs every process about 1.2-1.5 s before its first step on the reference
-machine (`benchmarks/bench_e2e.py`): importing numba and llvmlite (~0.4 s), then, at the first call
+machine (`benchmarks/bench_core.py`): importing numba and llvmlite (~0.4 s), then, at the first call
 of any kernel, even one loaded from numba's on-disk cache, initialising its CPU target: some 250
 implementation modules, one of which imports SciPy's linear algebra (~0.6-0.9 s).  For the 20-s paper
 run that is as long as the loop itself, and a sweep pays it again in every worker.
@@ -11,8 +11,8 @@ What.  The loop's entry kernels, called once per chunk of steps (`ENTRIES`), are
 module (milliseconds) and calls it like the jitted kernel, without importing numba.  The module is
 compiled from the very function the JIT compiles (`harness.loop.fast`, callees compiled by numba and
 linked in), for the exact argument types of the call, so the numbers are the same (tested
-bit-identical).  Its Python wrapper releases the GIL like `njit(nogil=True)`, so the output imports
-of `harness.output.prefetch` still run beside the loop.
+bit-identical).  Its Python wrapper releases the GIL like `njit(nogil=True)`, so a sweep's threads
+still run side by side.
 
 Where.  One module per entry and argument types:
 `<cache root>/aot-<digest>-<recipe>/octarm_<entry>_<types>.so` (`harness.loop.fast.cache_root`; the
@@ -44,12 +44,13 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.config.runtime import options
 from harness.loop import fast
 
 log = logging.getLogger(__name__)
 
 # Kernels called once per chunk of steps (not per step: finding the module costs ~50 us per call).
-ENTRIES = ("mujoco_chunk", "analytic_chunk", "backbone_world", "kinematics_replay", "physics_server")
+ENTRIES = ("mujoco_chunk", "analytic_chunk", "backbone_world", "kinematics_replay")
 
 
 class Unsupported(TypeError):
@@ -224,8 +225,8 @@ class Entry:
         return fn(*args)
 
     def _resolve(self, key: str, args: tuple):
-        jit = os.environ.get("TELEOP_NO_JIT", "0") != "1"
-        if not jit or os.environ.get("TELEOP_NO_AOT", "0") == "1":
+        opts = options()
+        if not opts.jit or not opts.aot:
             return getattr(fast.K, self.name)
         modname = module_name(self.name, key)
         try:

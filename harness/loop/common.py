@@ -1,4 +1,4 @@
-"""What every closed loop shares: the stop flag and status codes, the initial state, the desired
+"""What every closed loop shares: the stop flag, the initial state, the desired
 trajectory, the seeded noise table, the controller-side packed arrays and the run metadata.
 
 Used by the plant-specific loops (`harness.loop.analytic_loop`, `harness.loop.mujoco_loop`); it
@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import threading
 from functools import partial
+from typing import NamedTuple
 
 import numpy as np
 
 from controllers import master as master_model
 from controllers import slave as slave_model
 from controllers.slave import gauss_legendre01
+from controllers.status import Status
 from controllers.subtasks import pack_subtask
 from harness.config.runtime import progress_bar_class
 from harness.config.scenario import Scenario
@@ -26,26 +28,15 @@ from harness.plant.initial import initial_state as _initial_state
 STOP = threading.Event()  # set from a signal handler to stop a run cleanly
 CHUNK = 250  # control steps per compiled call between progress/interrupt checks
 
-STATUS_TEXT = {
-    1: "non-finite state or command",
-    2: "master Jacobian J1 singular",
-    3: "slave J2 J2^T singular",
-    4: "runaway tracking error (|e| > 1 m)",
-    5: "slave section length <= 0",
-    6: "non-finite or exploding MuJoCo state (|x| > 1e6)",
-    7: "MuJoCo warning",
-    8: "non-finite or exploding plant state (|x| > 1e6)",
-}
-
-
 def set_outcome(traj: Trajectory, status: int, interrupted: bool, error: str = "", detail: str = "") -> None:
     """Set traj.status/message from a loop's end: an exception text (`error`), a kernel status code
-    (STATUS_TEXT, plus `detail`), an interrupt, or nothing (status stays "ok")."""
+    (`controllers.status.Status`, plus `detail`), an interrupt, or nothing (status stays "ok")."""
     t_end = float(traj.t[-1]) if len(traj) else 0.0
     if error:
         traj.status, cause = "error", error
     elif status != 0:
-        traj.status, cause = "diverged", STATUS_TEXT.get(status, "unknown") + detail
+        known = status in Status._value2member_map_
+        traj.status, cause = "diverged", (Status(status).text if known else "unknown") + detail
     elif interrupted:
         traj.status, cause = "interrupted", "interrupted"
     else:
@@ -93,6 +84,35 @@ def noise_table(scn: Scenario, n: int) -> tuple[np.ndarray, float]:
     return normals, float(10.0 ** (-scn.snr_db / 20.0))
 
 
+class ChunkRun:
+    """Drives a compiled loop over a run's control steps in calls of `size` steps (`run`), keeping where it is
+    (status, done, interrupted) up to date, so that a caller that catches an exception still knows how many
+    steps were recorded."""
+
+    def __init__(self, n: int, size: int, bar=None, on_part=None):
+        self.n, self.size, self.bar, self.on_part = n, size, bar, on_part
+        self.status, self.done, self.interrupted = 0, 0, False
+
+    def run(self, call) -> None:
+        """call(k, k1) -> (status, steps done) runs steps k..k1-1.  After each call: the progress bar,
+        on_part(k, done) when steps were done; stops at a non-zero status or when STOP is set."""
+        k = 0
+        while k < self.n:
+            k1 = min(self.n, k + self.size)
+            self.status, m = call(k, k1)
+            self.done = k + m
+            if self.bar is not None:
+                self.bar.update(m)
+            if self.on_part is not None and m:
+                self.on_part(k, self.done)
+            if self.status != 0:
+                return
+            k = k1
+            if STOP.is_set():
+                self.interrupted = True
+                return
+
+
 def progress_bar(enabled: bool, total: int, desc: str):
     if not enabled:
         return None
@@ -103,15 +123,36 @@ def progress_bar(enabled: bool, total: int, desc: str):
     return bar(total=total, desc=desc, unit="step", unit_scale=True, leave=False)
 
 
-def common_arrays(scn: Scenario):
-    """Packed controller-side arrays shared by both plants."""
+class RunModel(NamedTuple):
+    """A scenario compiled once per run (frozen, like Pinocchio's / MuJoCo's model): the controller-side
+    packed parameters, the quadrature, the constant forces, the desired trajectory and the initial state.
+    The loops, the plants' adapters and the controller context read it; per-run buffers (noise table,
+    record rows, command ring) are made by each run.
+
+    mpk_c: master params (`controllers.master.packed`), spk_c: slave params (`SlaveParams.packed`),
+    nodes, weights: Gauss-Legendre on [0, 1] (slave.n_quad,), gains: packed gains + [e2_sign,
+    null_space_scale], spec: packed sub-task (`controllers.subtasks.pack_subtask`), F (4,) N: constant
+    tip forces [F1, F2], traj (5,): desired-trajectory parameters, s0 (16,): [q1, dq1, q2, dq2] at t = 0."""
+
+    mpk_c: np.ndarray
+    spk_c: np.ndarray
+    nodes: np.ndarray
+    weights: np.ndarray
+    gains: np.ndarray
+    spec: np.ndarray
+    F: np.ndarray
+    traj: np.ndarray
+    s0: np.ndarray
+
+
+def compile_model(scn: Scenario) -> RunModel:
+    """The `RunModel` of `scn` (raises SimulationError when the start is impossible)."""
     nodes, weights = gauss_legendre01(scn.slave.n_quad)
     F = np.array([*scn.interaction_forces[0], *scn.interaction_forces[1]], dtype=float)
-    return dict(
+    return RunModel(
         mpk_c=master_model.packed(scn.master), spk_c=scn.slave.packed(), nodes=nodes, weights=weights,
         gains=np.concatenate([scn.gains.packed(), [float(scn.faults.e2_sign), scn.faults.null_space_scale]]),
-        spec=pack_subtask(scn.subtask, scn.slave), F=F,
-        traj=trajectory_params(scn))
+        spec=pack_subtask(scn.subtask, scn.slave), F=F, traj=trajectory_params(scn), s0=initial_state(scn))
 
 
 def run_meta(scn: Scenario, wall: float) -> dict:

@@ -25,39 +25,34 @@ from __future__ import annotations
 
 import hashlib
 import inspect
-import os
 import threading
 import types
 from functools import cache
 from pathlib import Path
 
 from controllers import cc, control, master, moments, slave, subtasks, tip
+from harness.config.runtime import options
 
 MODULES = [cc, tip, moments, slave, master, subtasks, control]
 
 
 def _extra_modules():
     """Kernel modules of harness/ (plant maps, analytic plant, loops), compiled the same way."""
-    import importlib
+    from harness.loop import force_kernels, kernels, native, stepped_kernels
+    from harness.plant import analytic
 
-    names = ("harness.plant.chain_map", "harness.plant.analytic", "harness.loop.kernels",
-             "harness.loop.force_kernels", "harness.loop.native", "harness.loop.mujoco_kernels",
-             "harness.loop.stepped_kernels")
-    mods = []
-    for name in names:
-        try:
-            mods.append(importlib.import_module(name))
-        except ImportError:  # pragma: no cover - e.g. mujoco missing: its kernels are unavailable
-            pass
-    return mods
+    try:
+        from harness.loop import mujoco_kernels
+        from harness.plant import chain_map
+    except ImportError:  # pragma: no cover - mujoco missing: its kernels are unavailable
+        return [analytic, kernels, force_kernels, native, stepped_kernels]
+    return [chain_map, analytic, kernels, force_kernels, native, mujoco_kernels, stepped_kernels]
 
 
 def cache_root() -> Path:
     """Root folder of the compiled kernels: $TELEOP_CACHE_DIR, else $XDG_CACHE_HOME/octarm-teleop, else
     ~/.cache/octarm-teleop."""
-    root = os.environ.get("TELEOP_CACHE_DIR") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME") or os.path.join(Path.home(), ".cache"), "octarm-teleop")
-    return Path(root)
+    return options().cache_dir
 
 
 @cache
@@ -81,7 +76,7 @@ def source_digest() -> str:
 
 def jit_wanted() -> bool:
     """Whether the kernels are compiled: False when TELEOP_NO_JIT=1 (the interpreted kernels)."""
-    return os.environ.get("TELEOP_NO_JIT", "0") != "1"
+    return options().jit
 
 
 _BUILDING = threading.Lock()

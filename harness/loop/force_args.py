@@ -56,8 +56,7 @@ class ForceArgs:
         self.cpts = np.zeros((n if contact is not None else 0, N_POINTS, 6))
 
     def args(self, k0: int, k1: int) -> tuple:
-        """The `fargs` of steps k0..k1 (the loop reads the sensors from `self.sensordata`: d.sensordata, or
-        the copy a physics thread keeps, `harness.loop.native.physics_server`)."""
+        """The `fargs` of steps k0..k1 (the loop reads the sensors from `self.sensordata`, d.sensordata)."""
         return (self.sensordata, self.cadr, self.Fconst, self.mode, self.noise, self.std, self.alpha,
                 self.delay, self.buf, self.filt, self.op_on, self.op, self.targets, self.hand, self.target,
                 self.mpk_p, self.cpts[k0:k1] if self.cpts.shape[0] else self.cpts)

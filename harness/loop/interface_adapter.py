@@ -18,10 +18,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from controllers.interface import ControllerDiverged, Observation
+from controllers.interface import (
+    ControllerContext,
+    ControllerDiverged,
+    NominalModels,
+    Observation,
+    ParamsError,
+)
+from controllers.status import Status
+from harness.config.controller import is_compiled, load_class, parse_params, plant_actuation
+from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
-from harness.loop.common import STATUS_TEXT, common_arrays
-from harness.loop.controllers import make_controller
+from harness.loop.common import RunModel, compile_model
+from harness.loop.fast import K
 
 SHAPES = (("T1", 2), ("T2", 6), ("u2", 6), ("deN", 6))
 REF_SHAPES = (("q2_ref", 6), ("dq2_ref", 6))
@@ -60,20 +69,21 @@ def check_action(act, name: str, k: int, t: float, servo: bool) -> str:
 
 class InterfaceController:
     """The scenario's `controllers.interface.Controller` (built-in or user class) as the loop's
-    controller: ``reset(scn, state0)``, ``step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN) -> int``."""
+    controller: ``reset(model)``, ``step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN) -> int``."""
 
-    def __init__(self, scn: Scenario) -> None:
+    def __init__(self, scn: Scenario, model: RunModel) -> None:
         self.name = scn.controller.name
-        self.ctrl, self.ctx = make_controller(scn)
+        self.ctrl, self.ctx = make_controller(scn, model)
         self.servo = self.ctx.actuation == "servo"
         self.obs = Observation()
+        self.F = self.obs.F  # (4,) N, the sensed tip forces: the loop writes them here before each step
         self.use_ref = False
         self.ref = np.zeros(12)  # [q2_ref, dq2_ref] of the last action with use_ref
         self.diverged = ""
         self.k = 0
 
-    def reset(self, scn: Scenario, state0: np.ndarray) -> None:
-        self.obs.F[:] = common_arrays(scn)["F"]
+    def reset(self, model: RunModel) -> None:
+        self.obs.F[:] = model.F
         self.k = 0
         try:
             self.ctrl.reset(self.ctx)
@@ -93,7 +103,7 @@ class InterfaceController:
         try:
             act = self.ctrl.step(obs)
         except ControllerDiverged as e:
-            code = e.code if e.code in STATUS_TEXT and e.code != 0 else -1
+            code = e.code if e.code in Status._value2member_map_ and e.code != 0 else -1
             self.diverged = f"controller {name!r} stopped: {_line(e)} at step {k} (t = {t:.3f} s)"
             act = getattr(self.ctrl, "action", None)
             if act is None:
@@ -116,3 +126,26 @@ class InterfaceController:
             self.ref[0:6] = act.q2_ref
             self.ref[6:12] = act.dq2_ref
         return code
+
+
+def make_controller(scn: Scenario, model: RunModel | None = None):
+    """(instance, context) for a run: the class instantiated and the context its `reset` receives.
+    model: the scenario's `RunModel` (default: compiled here)."""
+    cfg = scn.controller
+    cls = load_class(cfg.name)
+    try:
+        params = parse_params(cls, cfg.params)
+    except ParamsError as e:
+        raise ConfigError(str(e), path=f"controller.params.{e.key}") from None
+    ctrl = cls()
+    a = model if model is not None else compile_model(scn)
+    ctx = ControllerContext(
+        dt=scn.control_dt, n_steps=scn.n_steps, actuation=plant_actuation(scn), plant=scn.plant.kind,
+        master=scn.master, slave=scn.slave, gains=scn.gains, subtask=scn.subtask,
+        F=a.F.reshape(2, 2).copy(), seed=scn.seed, params=params,
+        models=NominalModels(scn.master, scn.slave, scn.subtask, kernels=K), q0=a.s0.copy(),
+        faults=(scn.faults.e2_sign, scn.faults.null_space_scale))
+    return ctrl, ctx
+
+
+__all__ = ["ControllerFailure", "InterfaceController", "is_compiled", "make_controller"]

@@ -4,11 +4,8 @@ Everything that happens once per control step and is not MuJoCo's `mj_step` live
 that the Python side of the loop is one kernel call plus `mj_step`:
   sensing noise -> master law -> slave law -> record row (and, for the analytic plant, RK4).
 
-Status codes returned by the kernels (STATUS_TEXT in harness.loop.common):
-0 ok, 1 non-finite state or command, 2 master Jacobian singular, 3 slave J2 J2^T singular,
-4 runaway error (|e1| or |e2| above the limit), 5 slave section length <= 0, 6 non-finite or
-exploding MuJoCo state, 7 a MuJoCo warning (counted by MuJoCo in mjData.warning; checked after
-every mj_step, so the run stops at the step that raised it).
+Status codes returned by the kernels: `controllers.status` (ST_* here; a MuJoCo warning is counted by
+MuJoCo in mjData.warning and checked after every mj_step, so the run stops at the step that raised it).
 """
 
 from __future__ import annotations
@@ -16,7 +13,6 @@ from __future__ import annotations
 import numpy as np
 
 from controllers.control import (
-    DET_MIN,
     MASTER_INFO,
     MI_DE1,
     MI_E1,
@@ -27,11 +23,16 @@ from controllers.control import (
     SI_X2,
     SI_YA,
     SLAVE_INFO,
-    master_control_kernel,
-    slave_control_kernel,
+    control_laws,
 )
 from controllers.master import master_kernel
 from controllers.scratch import scratch, scratch_zeros
+from controllers.status import (
+    ST_NONFINITE,
+    ST_OK,
+    ST_RUNAWAY,
+    ST_SECTION_LENGTH,
+)
 from controllers.subtasks import limits_kernel
 from controllers.tip import tip_kinematics
 from harness.plant.analytic import plant_accel
@@ -41,6 +42,25 @@ R_T, R_Q1, R_DQ1, R_Q2, R_DQ2, R_XD, R_X1, R_X2 = 0, 1, 3, 5, 11, 17, 19, 21
 R_E1, R_E2, R_DE1, R_DE2, R_BETA, R_YA, R_DEN, R_T1, R_T2, R_U2 = 23, 25, 27, 29, 31, 32, 33, 39, 41, 47
 ROW_W = 53
 RUNAWAY = 1.0  # m: |e1| or |e2| beyond this is a runaway (the workspace is ~1 m)
+
+
+# --- the per-step glue every loop body shares (the compiled loops and the Python-stepped loop) ---------
+def runaway(row):
+    """True when the record row's |e1| or |e2| (1-norm, m) exceeds RUNAWAY."""
+    return (abs(row[R_E1]) + abs(row[R_E1 + 1]) > RUNAWAY) or (abs(row[R_E2]) + abs(row[R_E2 + 1]) > RUNAWAY)
+
+
+def section_collapsed(state):
+    """True when a section length q2[0:3] = state[4:7] (m) is <= 0."""
+    return state[4] <= 0.0 or state[5] <= 0.0 or state[6] <= 0.0
+
+
+def servo_reference_step(ref, u2, dt):
+    """The servo reference ref (12,) = [q2_ref, dq2_ref] after one control step dt (s) with the slave
+    input u2 (6,) (eq. 18): semi-implicit Euler, dq2_ref += u2 dt, then q2_ref += dq2_ref dt."""
+    for a in range(6):
+        ref[6 + a] += u2[a] * dt
+        ref[a] += ref[6 + a] * dt
 
 
 def add_noise(state, noise_row, scale, out):
@@ -71,23 +91,6 @@ def add_noise_channel(state, noise, k, scale, out):
         noise[0, 16 + i] += state[i] * state[i]
         std = np.sqrt(noise[0, 16 + i] / (k + 1)) * scale
         out[i] = state[i] + std * noise[k, i]
-
-
-def control_laws(mpk, spk, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F, T1, T2, u2, deN,
-                 minfo, sinfo):
-    """Both controllers on a sensed state (16,) = [q1, dq1, q2, dq2].  Returns a status code."""
-    q1 = sensed[0:2]
-    dq1 = sensed[2:4]
-    q2 = sensed[4:10]
-    dq2 = sensed[10:16]
-    det1 = master_control_kernel(mpk, gains, q1, dq1, xd, dxd, ddxd, F[0:2], T1, minfo)
-    if det1 == 0.0:
-        return 2
-    det2 = slave_control_kernel(spk, nodes, weights, gains, spec, q2, dq2, minfo[0:2], minfo[8:10],
-                                minfo[6:8], F[2:4], T2, u2, deN, sinfo)
-    if det2 <= DET_MIN:
-        return 3
-    return 0
 
 
 def record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row):
@@ -209,15 +212,67 @@ def desired(traj, t, xd, dxd, ddxd):
     ddxd[1] = -traj[3] * w * w * c
 
 
-def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale, F, Fp,
-                   mpk_c, spk_c, mpk_p, spk_p, nodes, weights, gains, spec, rows):
-    """Run control steps k0..k1-1 of the closed loop on the analytic plant, in place on state (16,).
+def plant_substeps(state, t, h, nsub, continuous, model, F, mpk_p, spk_p, T1, T2, u2, deN, minfo, sinfo, xd,
+                   dxd, ddxd, k1s, k2s, k3s, k4s, tmp):
+    """nsub RK4 steps of h (s) of the analytic plant (`harness.plant.analytic.plant_accel`: its packed
+    params mpk_p, spk_p, the forces model.F it feels (1)) from time t, in place on state (16,).  The
+    commands T1 (2,), T2 (6,) are held over the steps (zero-order hold) unless `continuous`: then both
+    laws (model's nominal params, F (4,) the forces they get) are evaluated on every RK4 stage's state (no
+    noise), writing T1, T2, u2, deN, minfo, sinfo, xd, dxd, ddxd.  k1s..k4s, tmp (16,): work.
+    Returns ST_OK, ST_NONFINITE or a law's status."""
+    mpk_c, spk_c, nodes, weights, gains, spec, Fp, traj, _s0 = model
+    for j in range(nsub):
+        ts = t + j * h
+        # RK4 stage 1
+        if continuous:
+            desired(traj, ts, xd, dxd, ddxd)
+            st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, state, xd, dxd, ddxd, F,
+                              T1, T2, u2, deN, minfo, sinfo)
+            if st != 0:
+                return st
+        if not plant_accel(mpk_p, spk_p, nodes, weights, state, T1, T2, Fp, k1s):
+            return ST_NONFINITE
+        for i in range(16):
+            tmp[i] = state[i] + 0.5 * h * k1s[i]
+        if continuous:
+            desired(traj, ts + 0.5 * h, xd, dxd, ddxd)
+            control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
+                         T1, T2, u2, deN, minfo, sinfo)
+        if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k2s):
+            return ST_NONFINITE
+        for i in range(16):
+            tmp[i] = state[i] + 0.5 * h * k2s[i]
+        if continuous:
+            control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
+                         T1, T2, u2, deN, minfo, sinfo)
+        if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k3s):
+            return ST_NONFINITE
+        for i in range(16):
+            tmp[i] = state[i] + h * k3s[i]
+        if continuous:
+            desired(traj, ts + h, xd, dxd, ddxd)
+            control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
+                         T1, T2, u2, deN, minfo, sinfo)
+        if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k4s):
+            return ST_NONFINITE
+        for i in range(16):
+            state[i] += h / 6.0 * (k1s[i] + 2.0 * k2s[i] + 2.0 * k3s[i] + k4s[i])
+    return ST_OK
 
-    Controller uses the nominal packed params (mpk_c, spk_c), the plant its own (mpk_p, spk_p).
+
+def analytic_chunk(k0, k1, model, plant, data):
+    """Run control steps k0..k1-1 of the closed loop on the analytic plant, in place on the state.
+
+    model: the run's `harness.loop.common.RunModel` (the controller's nominal packed params mpk_c, spk_c,
+    quadrature, gains, sub-task, Fp (4,) the interaction forces the plant feels (1), desired trajectory);
+    plant: (dt control period (s), nsub, continuous, mpk_p, spk_p: the plant's own packed params);
+    data: (state (16,), noise, noise_scale, F (4,) = [F1, F2] the laws get (13), (17), rows of this chunk).
     Zero-order hold of the commands over the control step (nsub RK4 steps of dt/nsub) unless
     `continuous`, where both laws are evaluated in every RK4 stage on the true state (no noise).
-    F (4,) = [F1, F2] the laws get (13), (17); Fp (4,) the interaction forces the plant feels (1).
     Returns (status, number of completed steps)."""
+    mpk_c, spk_c, nodes, weights, gains, spec, Fp, traj, _s0 = model
+    dt, nsub, continuous, mpk_p, spk_p = plant
+    state, noise, noise_scale, F, rows = data
     # the control step's arrays: made here, not by a shared helper (a scratch array lives in the frame that
     # makes it: a helper would hand back arrays over its finished frame)
     T1 = scratch_zeros(2)
@@ -242,53 +297,20 @@ def analytic_chunk(state, k0, k1, dt, nsub, continuous, traj, noise, noise_scale
                           xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, rows[k - k0])
         if st != 0:
             return st, k - k0 + 1
-        for j in range(nsub):
-            ts = t + j * h
-            # RK4 stage 1
-            if continuous:
-                desired(traj, ts, xd, dxd, ddxd)
-                st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, state, xd, dxd, ddxd, F,
-                                  T1, T2, u2, deN, minfo, sinfo)
-                if st != 0:
-                    return st, k - k0 + 1
-            if not plant_accel(mpk_p, spk_p, nodes, weights, state, T1, T2, Fp, k1s):
-                return 1, k - k0 + 1
-            for i in range(16):
-                tmp[i] = state[i] + 0.5 * h * k1s[i]
-            if continuous:
-                desired(traj, ts + 0.5 * h, xd, dxd, ddxd)
-                control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
-                             T1, T2, u2, deN, minfo, sinfo)
-            if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k2s):
-                return 1, k - k0 + 1
-            for i in range(16):
-                tmp[i] = state[i] + 0.5 * h * k2s[i]
-            if continuous:
-                control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
-                             T1, T2, u2, deN, minfo, sinfo)
-            if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k3s):
-                return 1, k - k0 + 1
-            for i in range(16):
-                tmp[i] = state[i] + h * k3s[i]
-            if continuous:
-                desired(traj, ts + h, xd, dxd, ddxd)
-                control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
-                             T1, T2, u2, deN, minfo, sinfo)
-            if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k4s):
-                return 1, k - k0 + 1
-            for i in range(16):
-                state[i] += h / 6.0 * (k1s[i] + 2.0 * k2s[i] + 2.0 * k3s[i] + k4s[i])
+        st = plant_substeps(state, t, h, nsub, continuous, model, F, mpk_p, spk_p, T1, T2, u2, deN, minfo,
+                            sinfo, xd, dxd, ddxd, k1s, k2s, k3s, k4s, tmp)
+        if st != ST_OK:
+            return st, k - k0 + 1
         for i in range(16):
             if not np.isfinite(state[i]):
-                return 1, k - k0 + 1
-        for i in range(3):
-            if state[4 + i] <= 0.0:
-                return 5, k - k0 + 1
-        r = rows[k - k0]
-        if (abs(r[R_E1]) + abs(r[R_E1 + 1]) > RUNAWAY) or (abs(r[R_E2]) + abs(r[R_E2 + 1]) > RUNAWAY):
-            return 4, k - k0 + 1
-    return 0, k1 - k0
+                return ST_NONFINITE, k - k0 + 1
+        if section_collapsed(state):
+            return ST_SECTION_LENGTH, k - k0 + 1
+        if runaway(rows[k - k0]):
+            return ST_RUNAWAY, k - k0 + 1
+    return ST_OK, k1 - k0
 
 
-KERNELS = ("add_noise", "add_noise_channel", "sense_state", "control_laws", "record_row", "record_row_info",
-           "control_step", "desired", "analytic_chunk")
+KERNELS = ("runaway", "section_collapsed", "servo_reference_step", "plant_substeps", "add_noise",
+           "add_noise_channel", "sense_state", "record_row", "record_row_info", "control_step", "desired",
+           "analytic_chunk")

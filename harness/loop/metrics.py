@@ -83,14 +83,3 @@ def compute_metrics(traj: Trajectory, scn: Scenario) -> dict:
         "sim_time_reached": t_end, "wall_time": wall,
         "realtime_factor": (t_end / wall) if wall and wall > 0 and not math.isnan(wall) else math.nan,
     }
-
-
-def to_json_safe(metrics: dict) -> dict:
-    """NaN/inf -> None so json.dump writes valid JSON."""
-    out = {}
-    for k, v in metrics.items():
-        if isinstance(v, float) and not math.isfinite(v):
-            out[k] = None
-        else:
-            out[k] = v
-    return out

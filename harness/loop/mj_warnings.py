@@ -4,8 +4,7 @@ MuJoCo has one process-wide warning callback (`mujoco.set_mju_user_warning`).  A
 callback would collect the warnings of every other run stepping at the same time (a sweep's thread
 executor, `harness.studies.executor`), and the first run to finish would switch the capture off for the
 others.  Here one dispatcher is installed while any run captures, and it hands each warning to the run
-whose thread raised it (MuJoCo calls the callback in the thread that steps).  The physics thread of a
-threaded run (`harness.loop.mujoco_loop`, overlap) is added to its run with `WarningSink.follow`.
+whose thread raised it (MuJoCo calls the callback in the thread that steps).
 
 The warning *counts* never needed this: they live in each run's own `MjData` (`d.warning`).
 """
@@ -30,31 +29,21 @@ def _dispatch(msg) -> None:
 
 
 class WarningSink:
-    """The warning text MuJoCo raises in this thread (and the threads `follow` adds) until `close`.
+    """The warning text MuJoCo raises in this thread until `close`.
     `text`: list of messages, in order.  Use as a context manager, or call `close` in a `finally`."""
 
     def __init__(self) -> None:
         self.text: list[str] = []
-        self._threads: list[int] = []
-        self.follow(threading.current_thread())
-
-    def follow(self, thread: threading.Thread) -> None:
-        """Also capture the warnings raised in `thread` (started, not yet stepping MuJoCo)."""
-        ident = thread.ident
-        if ident is None:
-            raise ValueError(f"thread {thread.name!r} is not started")
+        self._ident = threading.get_ident()
         with _lock:
             if not _sinks:
                 mujoco.set_mju_user_warning(_dispatch)
-            _sinks[ident] = self.text
-            self._threads.append(ident)
+            _sinks[self._ident] = self.text
 
     def close(self) -> None:
         with _lock:
-            for ident in self._threads:
-                if _sinks.get(ident) is self.text:
-                    del _sinks[ident]
-            self._threads.clear()
+            if _sinks.get(self._ident) is self.text:
+                del _sinks[self._ident]
             if not _sinks:
                 mujoco.set_mju_user_warning(None)
 

@@ -12,6 +12,7 @@ from controllers.cc import backbone_points
 from controllers.control import MASTER_INFO, SLAVE_INFO
 from controllers.master import master_kernel
 from controllers.scratch import scratch, scratch_zeros
+from controllers.status import ST_MUJOCO_STATE, ST_MUJOCO_WARNING, ST_OK, ST_RUNAWAY, ST_SECTION_LENGTH
 from harness.loop.force_kernels import (
     CONTACT_INFO,
     operator_advance,
@@ -20,20 +21,8 @@ from harness.loop.force_kernels import (
     read_contact,
     sense_forces,
 )
-from harness.loop.kernels import R_E1, R_E2, ROW_W, RUNAWAY, control_step
-from harness.loop.native import (  # noqa: F401 - MJ_FUNCS: re-exported for the loop's callers
-    MJ_FUNCS,
-    MJ_KINEMATICS_FN,
-    MJ_STEP_FN,
-    SYNC_GO,
-    SYNC_S1,
-    SYNC_S2,
-    copy_geometry,
-    mj_call,
-    sync_load,
-    sync_store,
-    sync_wait,
-)
+from harness.loop.kernels import ROW_W, control_step, runaway, section_collapsed, servo_reference_step
+from harness.loop.native import MJ_KINEMATICS_FN, MJ_STEP_FN, copy_geometry, mj_call
 from harness.plant.chain_map import (
     chain_elastic_correction,
     chain_force_from_T2,
@@ -45,7 +34,7 @@ from harness.plant.chain_map import (
 
 # =============================================================================================
 # MuJoCo plant: the whole control loop compiled, calling MuJoCo's C functions by address
-# (`harness.loop.native`: the addresses, the calls, and the physics thread's synchronisation)
+# (`harness.loop.native`: the addresses and the calls)
 # =============================================================================================
 def sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state):
     """True (noise-free) state (16,) [q1, dq1, q2, dq2] from MuJoCo joints; qc, vc (n_chain,) work."""
@@ -58,18 +47,33 @@ def sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, stat
     chain_sense(qc, vc, R, L0, state[4:10], state[10:16])
 
 
+def mujoco_state_status(state):
+    """Status of the sensed true state (16,) of the MuJoCo plant: ST_MUJOCO_STATE if an entry is not finite
+    or above 1e6 in magnitude, ST_SECTION_LENGTH if a section length is <= 0, else ST_OK."""
+    for i in range(16):
+        if not np.isfinite(state[i]) or abs(state[i]) > 1e6:
+            return ST_MUJOCO_STATE
+    if section_collapsed(state):
+        return ST_SECTION_LENGTH
+    return ST_OK
+
+
 def mujoco_commands(servo, feedforward, dt, q2s, T2, u2, ref, C, R, L0, kv_over_kp, cmd):
-    """Command vector cmd = [master torque (2), chain ctrl (n), chain feedforward force (n)].
+    """Command vector cmd = [master torque (2), chain ctrl (n), chain feedforward force (n)] after the servo
+    reference ref (12,) = [q_ref, dq_ref] took the step dt with u2 (servo actuation; `chain_commands`)."""
+    if servo:
+        servo_reference_step(ref, u2, dt)
+    chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, cmd)
+
+
+def chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, cmd):
+    """The chain's part of cmd = [master torque (2), chain ctrl (n), chain feedforward force (n)].
 
     Torque actuation: chain ctrl = virtual-work map of T2 at the sensed q2s (motors).
-    Servo actuation: integrate the reference q2 with u2 (semi-implicit Euler, ref = [q_ref, dq_ref]),
-    ctrl = joints(q_ref) + (kv/kp) A(q_ref) dq_ref (position servo with velocity feed-forward folded
-    into the target), feed-forward = virtual-work map of T2 at q_ref (if enabled)."""
+    Servo actuation: ctrl = joints(q_ref) + (kv/kp) A(q_ref) dq_ref (position servo with velocity
+    feed-forward folded into the target), feed-forward = virtual-work map of T2 at q_ref (if enabled)."""
     n = C.shape[0]
     if servo:
-        for a in range(6):
-            ref[6 + a] += u2[a] * dt
-            ref[a] += ref[6 + a] * dt
         chain_joints_from_q2(ref[0:6], C, L0, cmd[2:2 + n])
         chain_joints_rate_add(ref[0:6], ref[6:12], C, kv_over_kp, cmd[2:2 + n])
         if feedforward:
@@ -101,35 +105,38 @@ def master_tip_state(mpk, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, 
         vm[i] = J1[i, 0] * dq1[0] + J1[i, 1] * dq1[1]
 
 
-def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc, m_qadr, m_dadr, m_act,
-                 c_qadr, c_dadr, c_act, R, C, L0, eargs,
-                 servo, feedforward, kv_over_kp, traj, noise, noise_scale, F, mpk_c, spk_c, nodes,
-                 weights, gains, spec, ref, cmdbuf, delay, rows, qpos_hist, cmd_log, geo_in, geo_out, wnum,
-                 fargs, sync):
-    """Control steps k0..k1-1 on the MuJoCo plant (model/data pointers mptr, dptr; mjfn = MJ_FUNCS;
-    qpos, qvel, ctrl, qfrc are numpy views of the same MjData).  Per step: sense -> noise -> both laws
-    -> record -> commands (delayed by `delay` control steps through the ring buffer cmdbuf (delay+1, 2+2n)) ->
-    `substeps` x (elastic correction + mj_step).  eargs: ChainMap.elastic_args (constant tuple).
+def mujoco_chunk(k0, k1, model, plant, data, fargs):
+    """Control steps k0..k1-1 on the MuJoCo plant.
+
+    model: the run's `harness.loop.common.RunModel` (mpk_c, spk_c, nodes, weights, gains, spec, F, traj,
+    s0);
+    plant: the MuJoCo plant's constants (mptr, dptr: mjModel*, mjData* addresses; mjfn = MJ_FUNCS; substeps;
+    dt: control period (s); m_qadr, m_dadr, m_act: master joint qpos/dof addresses and actuators; c_qadr,
+    c_dadr, c_act: the chain's; R, C, L0, eargs (ChainMap.elastic_args): the chain map; servo, feedforward,
+    kv_over_kp (n,): the actuation);
+    data: the run's buffers (qpos, qvel, ctrl, qfrc: numpy views of the MjData; noise, noise_scale;
+    ref (12,); cmdbuf; delay; rows, qpos_hist, cmd_log: this chunk's rows; geo_in, geo_out; wnum).
+    Per step: sense -> noise -> both laws -> record -> commands (delayed by `delay` control steps through
+    the ring buffer cmdbuf (delay+1, 2+2n)) -> `substeps` x (elastic correction + mj_step).
     cmd_log (rows, nu + nv): if it has rows ((k1 - k0) * substeps), row (k - k0) * substeps + s receives
     [ctrl, qfrc] exactly as applied before that mj_step (for a raw-MuJoCo replay); 0 rows = off.
     Recording geometry: qpos_hist (k1 - k0, nq) receives qpos at the start of each step (0 rows = off),
     or, if geo_out = (body_pos, body_quat, master_pos, tip) has rows, `copy_geometry` fills them from the
     kinematics MuJoCo computed inside the first mj_step of the step (the start state: valid for the
     single-stage integrators, not RK4), geo_in = (xpos, xquat, site_xpos, xanchor, bodies, gids).
-    wnum: MuJoCo's warning counters, checked after every mj_step: a view of mjData.warning.number, or, with
-    the physics thread, the copy it takes after each mj_step2 (`physics_server`'s wsnap).
+    wnum: MuJoCo's warning counters (a view of mjData.warning.number), checked after every mj_step.
     fargs = (sensordata, cadr (ContactMap.adr or empty), Fconst (4,) constant tip forces (F2 is applied by
     the caller through xfrc_applied, F1 here through qfrc_applied = J1^T F1), fmode, fnoise, fstd, falpha,
     fdelay, fbuf, ffilt (`sense_forces`), op_on, op, targets, hand (4,), target (2,) (operator, see
     `harness.loop.force_kernels`), mpk_p (plant master, packed), cpts (k1 - k0, np, 6) contact points or
     0 rows): the laws get the sensed F (`sense_forces`) instead of F (kept in the signature).
-    sync: int64 (0,) = this thread steps MuJoCo (mj_step); (SYNC_SIZE,) = the thread of `physics_server`
-    (same MjData, same sync) steps it in MuJoCo's two phases, mj_step2 when asked (sync[SYNC_GO]) and then at
-    once mj_step1 of the new state, which runs while this thread computes the next control step (mj_step1
-    reads neither ctrl nor qfrc_applied; mj_step1 + mj_step2 = mj_step's numbers).  This thread writes
-    sync[SYNC_GO] only.
     Returns (status, completed steps); status 6 = non-finite or exploding MuJoCo state, 7 = a MuJoCo
     warning was raised during the last completed step (whose row is recorded)."""
+    mpk_c, spk_c, nodes, weights, gains, spec, F, traj, _s0 = model
+    (mptr, dptr, mjfn, substeps, dt, m_qadr, m_dadr, m_act, c_qadr, c_dadr, c_act, R, C, L0, eargs, servo,
+     feedforward, kv_over_kp) = plant
+    (qpos, qvel, ctrl, qfrc, noise, noise_scale, ref, cmdbuf, delay, rows, qpos_hist, cmd_log, geo_in,
+     geo_out, wnum) = data
     (sensordata, cadr, Fconst, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, op_on, op, targets, hand,
      target, mpk_p, cpts) = fargs
     F2c = scratch_zeros(2)
@@ -169,16 +176,11 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
     live = geo_out[0].shape[0] > 0
     nu = ctrl.shape[0]
     nv = qfrc.shape[0]
-    par = sync.shape[0] > 0
-    gen = sync_load(sync, SYNC_GO) if par else 0  # physics steps done in the run
     for k in range(k0, k1):
         sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state)
-        for i in range(16):
-            if not np.isfinite(state[i]) or abs(state[i]) > 1e6:
-                return 6, k - k0
-        for i in range(3):
-            if state[4 + i] <= 0.0:
-                return 5, k - k0
+        st = mujoco_state_status(state)
+        if st != ST_OK:
+            return st, k - k0
         t = k * dt
         r = rows[k - k0]
         read_contact(sensordata, cadr, F2c, r[R_CI:R_CI + CONTACT_INFO], cpts[k - k0] if cpts.shape[0] > 0
@@ -199,13 +201,10 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
         if hist:
             for i in range(qpos.shape[0]):
                 qpos_hist[k - k0, i] = qpos[i]
-        if st == 0 and ((abs(r[R_E1]) + abs(r[R_E1 + 1]) > RUNAWAY)
-                        or (abs(r[R_E2]) + abs(r[R_E2 + 1]) > RUNAWAY)):
-            st = 4
+        if st == 0 and runaway(r):
+            st = ST_RUNAWAY
         if st != 0:  # the last recorded step is not stepped: its geometry row from its kinematics
-            if par:  # the physics thread's mj_step1 of this state copies it: wait for it to be done
-                sync_wait(sync, SYNC_S1, gen, mjfn)
-            elif live:
+            if live:
                 mj_call(mjfn[MJ_KINEMATICS_FN], mptr, dptr)
                 copy_geometry(geo_in, k - k0, geo_out)
             return st, k - k0 + 1
@@ -242,18 +241,13 @@ def mujoco_chunk(mptr, dptr, mjfn, k0, k1, substeps, dt, qpos, qvel, ctrl, qfrc,
                     lr[i] = ctrl[i]
                 for i in range(nv):
                     lr[nu + i] = qfrc[i]
-            if par:  # (the physics thread copies the geometry rows, from its mj_step1)
-                gen += 1
-                sync_store(sync, SYNC_GO, gen)
-                sync_wait(sync, SYNC_S2, gen, mjfn)
-            else:
-                mj_call(mjfn[MJ_STEP_FN], mptr, dptr)
-                if live and s == 0:
-                    copy_geometry(geo_in, k - k0, geo_out)
+            mj_call(mjfn[MJ_STEP_FN], mptr, dptr)
+            if live and s == 0:
+                copy_geometry(geo_in, k - k0, geo_out)
             for w in range(wnum.shape[0]):
                 if wnum[w] != 0:  # any MuJoCo warning stops the run: it must never pass silently
-                    return 7, k - k0 + 1
-    return 0, k1 - k0
+                    return ST_MUJOCO_WARNING, k - k0 + 1
+    return ST_OK, k1 - k0
 
 
 def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):
@@ -271,7 +265,8 @@ def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):
 
 # the kernels that allocate on the heap (run-time sizes), compiled with numba's runtime (harness.loop.fast)
 HEAP_KERNELS = ("mujoco_chunk", "backbone_world")
-KERNELS = ("sense_mujoco", "mujoco_commands", "master_tip_state", "mujoco_chunk", "replay_commands")
+KERNELS = ("sense_mujoco", "mujoco_state_status", "mujoco_commands", "chain_commands", "master_tip_state",
+           "mujoco_chunk", "replay_commands")
 
 
 # =============================================================================================

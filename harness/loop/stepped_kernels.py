@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import math
 
-from harness.loop.kernels import R_E1, R_E2, RUNAWAY, control_step
+from controllers.status import ST_NONFINITE, ST_PLANT_STATE, ST_RUNAWAY, ST_SECTION_LENGTH
+from harness.loop.kernels import control_step, runaway, section_collapsed, servo_reference_step
 
 
 def stepped_state_check(state, exploding, Ftrue, Fctl, ignored):
@@ -31,9 +32,9 @@ def stepped_state_check(state, exploding, Ftrue, Fctl, ignored):
     for i in range(state.shape[0]):
         total += state[i] * state[i]
     if not math.isfinite(total) or total > exploding * exploding:
-        return 8
-    if min(state[4], state[5], state[6]) <= 0.0:
-        return 5
+        return ST_PLANT_STATE
+    if section_collapsed(state):
+        return ST_SECTION_LENGTH
     for i in range(Fctl.shape[0]):
         Fctl[i] = 0.0 if ignored else Ftrue[i]
     return 0
@@ -63,17 +64,13 @@ def stepped_after_control(st, T1, T2, u2, row, Ftrue, Fsens, cinfo, i_F, i_Fs, i
         for i in range(u2.shape[0]):
             s3 += u2[i]
         if not math.isfinite(s1 + s2 + s3):
-            st = 1
-    if st == 0 and (abs(row[R_E1]) + abs(row[R_E1 + 1]) > RUNAWAY
-                    or abs(row[R_E2]) + abs(row[R_E2 + 1]) > RUNAWAY):
-        st = 4
+            st = ST_NONFINITE
+    if st == 0 and runaway(row):
+        st = ST_RUNAWAY
     if st != 0:
         return st
     if ref_mode == 1:
-        for i in range(6):
-            ref[6 + i] += u2[i] * dt
-        for i in range(6):
-            ref[i] += ref[6 + i] * dt
+        servo_reference_step(ref, u2, dt)
     elif ref_mode == 2:
         for i in range(12):
             ref[i] = ext_ref[i]

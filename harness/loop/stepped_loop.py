@@ -2,10 +2,11 @@
 `harness.plant.stepped.SteppedPlant`).
 
 Plants: the Cosserat rod (`harness.plant.cosserat_plant`) and the Python-stepped adapters of the MuJoCo
-and analytic plants (`harness.loop.stepped_plants`).  Controllers: the paper's (`PaperController`,
-the compiled laws, default) or a `controllers.interface.Controller` through
-`harness.loop.interface_adapter.InterfaceController` (``controller="interface"``).  The paper's
-controller on the MuJoCo / analytic plants runs in the compiled loops instead (`harness.loop.simulate`).
+and analytic plants (`harness.loop.stepped_plants`).  Controllers: any `controllers.interface.Controller`
+(through `harness.loop.interface_adapter.InterfaceController`); the paper's law under its registered
+name "paper" takes its compiled fast path (one compiled call per step,
+`harness.loop.stepped_kernels.stepped_paper_step`).  The paper's law on the MuJoCo / analytic plants
+runs in the compiled loops instead (`harness.loop.simulate`).
 The loop over control steps is Python, and each step is a few compiled calls.  Per control step k
 (t = k control_dt):
 
@@ -13,9 +14,8 @@ The loop over control steps is Python, and each step is a few compiled calls.  P
     x_d(t), eq. (40)                            K.desired
     sensed = state + AWGN                       K.add_noise, the seeded table of noise_table (as the
                                                 other loops: same seed -> same noise)
-    status = controller.step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN)
-                                                default PaperController: the compiled laws (12)-(13),
-                                                (17)-(33) (K.control_laws, as in the compiled loops)
+    action = controller.step(observation)       T1, T2, u2, deN (and a servo reference); "paper": the
+                                                compiled laws (12)-(13), (17)-(33) (as the compiled loops)
     record row of the true state                K.record_row (ROW layout of harness.loop.trajectory)
     servo reference                             dq2_ref += u2 dt, q2_ref += dq2_ref dt (semi-implicit
                                                 Euler, as harness.loop.mujoco_kernels.mujoco_commands),
@@ -24,7 +24,7 @@ The loop over control steps is Python, and each step is a few compiled calls.  P
                                                 the sensed q2 of the commanding step (MuJoCo torque map)
     status = plant.advance(control_dt)
 
-Statuses are those of `harness.loop.common.STATUS_TEXT` (1 non-finite command, 2/3 singular, 4
+Statuses are those of `controllers.status.Status` (1 non-finite command, 2/3 singular, 4
 runaway, 5 section length <= 0, 8 non-finite or exploding plant state, ...); the run stops at the
 first non-zero one, keeps every recorded row and says why (`set_outcome`).  `harness.loop.common.STOP`
 interrupts between steps.  Per-step buffers are preallocated; the glue around the plant and the
@@ -32,21 +32,11 @@ controller (state checks, sensed force, record columns, command checks, servo re
 two compiled calls (`harness.loop.stepped_kernels`); a plant with `record(k)` / `finish(traj, done)` (the
 Cosserat rod, the MuJoCo adapter) keeps its own recording, otherwise the plant geometry is copied into
 (n, ...) arrays (`plant.geometry()` returns the same arrays every call).
-
-Controller interface (`Controller`): `reset(scn, state0)` once, then per step
-`step(t, sensed (16,), xd, dxd, ddxd (2,), out_T1 (2,), out_T2 (6,), out_u2 (6,), out_deN (6,)) -> int`
-filling the master torques T1 (N m), the slave generalized forces T2 ([N, N m^2], eq. 18; servo
-plants use it as feed-forward), the slave input u2 (eq. 18, the servo reference's acceleration) and
-the null-space velocity error deN (eq. 23, recorded; zeros if the controller has none); returns 0 or
-a status code.  A controller may also offer `fused_step(t, k, state, traj, noise, scale, xd, dxd,
-ddxd, sensed, T1, T2, u2, deN, row)` doing x_d, noise, its laws and the record row in one call
-(PaperController: the compiled `control_step`); the loop then uses it instead.
 """
 
 from __future__ import annotations
 
 import time
-from typing import Protocol
 
 import numpy as np
 
@@ -55,82 +45,27 @@ from harness.config.scenario import Scenario
 from harness.loop.common import (
     CHUNK,
     STOP,
-    common_arrays,
-    initial_state,
+    RunModel,
+    compile_model,
     noise_table,
     progress_bar,
     run_meta,
     set_outcome,
 )
 from harness.loop.fast import K
-from harness.loop.interface_adapter import ControllerFailure, InterfaceController
+from harness.loop.interface_adapter import ControllerFailure, InterfaceController, is_compiled
 from harness.loop.trajectory import ROW_SLICES, ROW_WIDTH, Trajectory
 from harness.plant.stepped import SteppedPlant
 
 EXPLODING = 1e6  # |state| above this is a diverged plant (status 8)
 
 
-class Controller(Protocol):
-    """A controller the stepped loop can run (see the module docstring for shapes and units)."""
-
-    name: str
-
-    def reset(self, scn: Scenario, state0: np.ndarray) -> None: ...
-
-    def step(self, t: float, sensed: np.ndarray, xd: np.ndarray, dxd: np.ndarray, ddxd: np.ndarray,
-             T1: np.ndarray, T2: np.ndarray, u2: np.ndarray, deN: np.ndarray) -> int: ...
-
-
-class PaperController:
-    """The paper's controllers on the nominal analytic models: master feedback linearization
-    (12)-(13), slave (17)-(18) with null-space tracking (23)-(28) and sub-task (29)-(33); one
-    compiled call (`harness.loop.kernels.control_laws`) per step, the kernel the compiled loops use."""
-
-    name = "paper"
-
-    def __init__(self) -> None:
-        self._args: tuple = ()
-        self.minfo = np.empty(MASTER_INFO)
-        self.sinfo = np.empty(SLAVE_INFO)
-
-    def reset(self, scn: Scenario, state0: np.ndarray) -> None:
-        a = common_arrays(scn)
-        self._args = (a["mpk_c"], a["spk_c"], a["nodes"], a["weights"], a["gains"], a["spec"])
-        self.F = a["F"]
-        self._control_step = K.control_step  # looked up once, not per step
-
-    def step(self, t, sensed, xd, dxd, ddxd, T1, T2, u2, deN) -> int:
-        mpk, spk, nodes, weights, gains, spec = self._args
-        return K.control_laws(mpk, spk, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, self.F,
-                              T1, T2, u2, deN, self.minfo, self.sinfo)
-
-    def loop_args(self) -> tuple:
-        """(mpk_c, spk_c, nodes, weights, gains, spec, F, minfo, sinfo): the arrays of the compiled step,
-        for the stepped loop's one-call step (`harness.loop.stepped_kernels.stepped_paper_step`)."""
-        return (*self._args, self.F, self.minfo, self.sinfo)
-
-    def fused_step(self, t, k, state, traj, noise, scale, xd, dxd, ddxd, sensed, T1, T2, u2, deN, row) -> int:
-        """The loop's fast path: x_d, noise, both laws and the record row in one compiled call
-        (`harness.loop.kernels.control_step`, the compiled loops' own step; same numbers as `step`
-        plus the loop's separate calls)."""
-        mpk, spk, nodes, weights, gains, spec = self._args
-        return self._control_step(t, state, traj, noise, k, scale, mpk, spk, nodes, weights, gains, spec,
-                              self.F, xd, dxd, ddxd, sensed, T1, T2, u2, deN, self.minfo, self.sinfo, row)
-
-
 def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
-                     controller: Controller | None = None, on_chunk=None, on_running=None) -> Trajectory:
+                     on_chunk=None, model: RunModel | None = None) -> Trajectory:
     """Run the scenario on a stepped plant; returns the Trajectory (possibly cut short).
-    controller: a loop `Controller` (default `PaperController`), or `"interface"` for the scenario's
-    `controllers.interface.Controller` (`harness.loop.interface_adapter.InterfaceController`).
+    The controller is the scenario's (`scn.controller`); model: the scenario's `RunModel` (default: compiled
+    here).
     on_chunk: optional callable receiving every CHUNK steps as a `Trajectory` (time series only).
-    on_running: called once after the first CHUNK steps (`harness.loop.simulate`), only if the plant
-    says `overlap_imports = True` (`harness.plant.stepped.SteppedPlant`): this loop runs Python at every
-    step, and a plant that releases the GIL at every step (MuJoCo's `mj_step` binding, the compiled
-    analytic step) would then wait for the import thread at every step.  Measured on the 5-s paper run:
-    the loop 1.5 -> 3.3 s (analytic, `paper_interface`) and 2.9 -> 4.5 s (MuJoCo, `dls_ik`) beside the
-    1.2-s imports, which cost less after the loop; the Cosserat plant, whose steps hold the GIL, waits
-    0.2 s for them.
 
     traj.x2_plant: the plant's own slave tip (n, 2); traj.master_pos: (n, 3, 3) if the plant's
     geometry has "master"; every other geometry array goes to traj.meta["geometry"][name] (n, ...).
@@ -138,29 +73,26 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
     geometry instead.
     Timings: meta "build_time" (controller and plant reset), "wall_time" (the loop)."""
     tb = time.perf_counter()
-    if not getattr(plant, "overlap_imports", False):
-        on_running = None
     n = scn.n_steps
     dt = scn.control_dt
-    s0 = initial_state(scn)
-    if controller == "interface":
-        controller = InterfaceController(scn)
-    ctrl = controller if controller is not None else PaperController()
-    cname = getattr(ctrl, "name", type(ctrl).__name__)
+    model = model if model is not None else compile_model(scn)
+    s0 = model.s0
+    fast = is_compiled(scn)  # the paper's law: its compiled one-call step
+    ctrl = None if fast else InterfaceController(scn, model)
+    cname = scn.controller.name
     error, failed = "", False
     plant.reset(s0)
     if hasattr(plant, "stop"):  # a plant with long inner loops (the rod) checks the stop flag itself
         plant.stop = STOP
-    try:
-        ctrl.reset(scn, s0)
-    except ControllerFailure as exc:
-        error, failed, n = str(exc), True, 0
-    fused = getattr(ctrl, "fused_step", None)  # optional one-call fast path (the paper controller)
-    own_ref = hasattr(ctrl, "use_ref")  # the controller may give the servo reference directly
+    if ctrl is not None:
+        try:
+            ctrl.reset(model)
+        except ControllerFailure as exc:
+            error, failed, n = str(exc), True, 0
     build_time = time.perf_counter() - tb
     noise, scale = noise_table(scn, scn.n_steps)
-    a = common_arrays(scn)
-    traj_p, mpk, gains, spec = a["traj"], a["mpk_c"], a["gains"], a["spec"]
+    a = model
+    traj_p, mpk, gains, spec = a.traj, a.mpk_c, a.gains, a.spec
     rows = np.zeros((n, ROW_WIDTH))
     own_geo = hasattr(plant, "finish")
     tips = np.zeros((0 if own_geo else n, 2))
@@ -170,11 +102,11 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
     # the true tip forces each step, else the constant ones; the paper controller (its `F`) gets them in
     # `exact` sensing mode, zeros in `ignored` ("sensed" needs the MuJoCo plant: config check)
     plant_forces = getattr(plant, "forces", None)
-    Ftrue, cinfo = a["F"].copy(), np.zeros(5)
-    Fctl = getattr(ctrl, "F", None)
+    Ftrue, cinfo = a.F.copy(), np.zeros(5)
     ignored = scn.sensing.force.mode == "ignored"
-    # without a controller F, F_sensed records F_true: the check kernel copies it into a scratch
-    Fsens, ignored = (Fctl, ignored) if Fctl is not None else (np.zeros(4), False)
+    # every controller reads the sensed F (F_true, or zeros when ignored), written by the check kernel each
+    # step: the paper's law from its own array, an interface controller in its observation (obs.F)
+    Fsens = model.F.copy() if fast else ctrl.F
     iF, iFs, iC = ROW_SLICES["F_true"].start, ROW_SLICES["F_sensed"].start, ROW_SLICES["contact"].start
     xd, dxd, ddxd = np.zeros(2), np.zeros(2), np.zeros(2)
     T1, T2, u2, deN = np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6)
@@ -191,11 +123,9 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
     no_ref = np.zeros(0)
     ref_mode = 1 if servo else 0
     slots = delay + 1
-    # the paper's controller (its own class, not a subclass that may override `fused_step`): check, laws and
-    # the glue of `after` in one compiled call
-    one = K.stepped_paper_step if type(ctrl) is PaperController and not failed else None
-    if one is not None:
-        mpk_c, spk_c, nodes, weights, gains_c, spec_c, F_c, minfo, sinfo = ctrl.loop_args()
+    # the paper's law: check, laws and the glue of `after` in one compiled call
+    one = K.stepped_paper_step if fast else None
+    minfo, sinfo = np.empty(MASTER_INFO), np.empty(SLAVE_INFO)
     bar = progress_bar(progress, n, f"{plant.kind} plant ({plant.actuation}), controller {cname}")
     status, done = 0, 0
     interrupted = False
@@ -211,9 +141,9 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
                 plant_forces(Ftrue, cinfo)
             row = rows[k]
             if one is not None:  # the paper's controller: check, laws, row, glue in one compiled call
-                s0, st = one(state, EXPLODING, Ftrue, ignored, t, traj_p, noise, k, scale, mpk_c, spk_c,
-                             nodes, weights, gains_c, spec_c, F_c, xd, dxd, ddxd, sensed, T1, T2, u2, deN,
-                             minfo, sinfo, row, cinfo, iF, iFs, iC, ref_mode, ref, dt, cmdbuf[k % slots])
+                s0, st = one(state, EXPLODING, Ftrue, ignored, t, traj_p, noise, k, scale, a.mpk_c, a.spk_c,
+                             a.nodes, a.weights, a.gains, a.spec, Fsens, xd, dxd, ddxd, sensed, T1, T2, u2,
+                             deN, minfo, sinfo, row, cinfo, iF, iFs, iC, ref_mode, ref, dt, cmdbuf[k % slots])
                 if s0:
                     status = s0
                     break
@@ -222,15 +152,12 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
                 if st:
                     status = st
                     break
-                if fused is not None:
-                    st = fused(t, k, state, traj_p, noise, scale, xd, dxd, ddxd, sensed, T1, T2, u2, deN, row)
-                else:
-                    K.desired(traj_p, t, xd, dxd, ddxd)
-                    K.sense_state(state, noise, k, scale, sensed)
-                    st = int(ctrl.step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN))
-                    K.record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row)
+                K.desired(traj_p, t, xd, dxd, ddxd)
+                K.sense_state(state, noise, k, scale, sensed)
+                st = int(ctrl.step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN))
+                K.record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row)
                 ext = no_ref
-                if servo and own_ref and ctrl.use_ref:
+                if servo and ctrl.use_ref:
                     ext, ref_mode = ctrl.ref, 2
                 elif servo:
                     ref_mode = 1
@@ -259,9 +186,6 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
                     part = Trajectory.from_rows(rows[k + 1 - CHUNK:k + 1])
                     part.meta.update(run_meta(scn, 0.0))
                     on_chunk(part)
-                if on_running is not None:
-                    on_running, start = None, on_running
-                    start()
                 if STOP.is_set():
                     interrupted = True
                     break
@@ -288,7 +212,7 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
         traj.meta["geometry"] = {name: v[:done].copy() for name, v in geo.items()}
         traj.meta.update(getattr(plant, "meta", lambda: {})())
     if status == -1:  # a controller gave up (ControllerDiverged without a status code)
-        traj.status, traj.message = "diverged", getattr(ctrl, "diverged", "controller gave up")
+        traj.status, traj.message = "diverged", ctrl.diverged or "controller gave up"
     elif failed:
         traj.status, traj.message = "error", error
         traj.meta["failed_controller"] = cname

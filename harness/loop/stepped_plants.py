@@ -10,8 +10,8 @@ paper's law through the interface gives the compiled loop's numbers bit for bit:
   into qfrc_applied and `mujoco.mj_step` (the Python binding of the same C function), MuJoCo warnings
   (status 7).  The servo reference and the actuation delay are the loop's (as in the compiled loop:
   the commands of step k - delay, each mapped with its own step's q2).
-* `AnalyticStepped`: RK4 of `harness.plant.analytic.plant_accel` with the commands held over the control
-  step (as `analytic_chunk` without continuous control).
+* `AnalyticStepped`: the RK4 of `analytic_chunk` (`harness.loop.kernels.plant_substeps`) with the commands
+  held over the control step.
 
 Both record their own geometry (`record(k)`, `finish(traj, done)`) instead of per-step
 `slave_tip()` / `geometry()`.
@@ -23,8 +23,10 @@ import mujoco
 import numpy as np
 
 from controllers import master as master_model
+from controllers.control import MASTER_INFO, SLAVE_INFO
+from controllers.status import Status
 from harness.config.scenario import Scenario
-from harness.loop.common import common_arrays, initial_state
+from harness.loop.common import RunModel
 from harness.loop.fast import K
 from harness.loop.mujoco_loop import _Geometry, _plant_geometry, make_plant, warning_counts
 
@@ -34,8 +36,8 @@ class MujocoStepped:
 
     kind = "mujoco"
 
-    def __init__(self, scn: Scenario, plant=None) -> None:
-        self.m, self.d, self.cmap = make_plant(scn, plant)
+    def __init__(self, scn: Scenario, model: RunModel, plant=None) -> None:
+        self.m, self.d, self.cmap = make_plant(scn, plant, model.s0)
         c = self.cmap
         self.n = c.n_chain
         self.actuation = scn.plant.actuation
@@ -46,6 +48,7 @@ class MujocoStepped:
         self.kv_over_kp = (np.divide(c.servo_kv, c.servo_kp, out=np.zeros(self.n), where=c.servo_kp > 0)
                            if self.servo else np.zeros(self.n))
         self.cmd = np.zeros(2 + 2 * self.n)  # [master torque, chain ctrl (n), chain feed-forward (n)]
+        self.ref = np.zeros(12)  # [q2_ref, dq2_ref] of the command being mapped
         self.qc, self.vc, self.corr = np.empty(self.n), np.empty(self.n), np.empty(self.n)
         self.geo = _Geometry(self.m, self.d, c, scn.n_steps, live=False)
         self.warned: dict[str, int] = {}
@@ -57,26 +60,15 @@ class MujocoStepped:
         d, c = self.d, self.cmap
         K.sense_mujoco(d.qpos, d.qvel, c.master_qpos_adr, c.master_dof_adr, c.chain_qpos_adr, c.chain_dof_adr,
                        c.R, c.L0, self.qc, self.vc, state)
-        if not np.all(np.isfinite(state)) or np.any(np.abs(state) > 1e6):
-            return 6
-        if np.any(state[4:7] <= 0.0):
-            return 5
-        return 0
+        return Status(K.mujoco_state_status(state))
 
     def command(self, T1, T2, q2_ref, dq2_ref, q2_sensed) -> None:
-        c, n, cmd = self.cmap, self.n, self.cmd
+        c, cmd, ref = self.cmap, self.cmd, self.ref
         cmd[0] = T1[0]
         cmd[1] = T1[1]
-        if self.servo:
-            K.chain_joints_from_q2(q2_ref, c.C, c.L0, cmd[2:2 + n])
-            K.chain_joints_rate_add(q2_ref, dq2_ref, c.C, self.kv_over_kp, cmd[2:2 + n])
-            if self.ff:
-                K.chain_force_from_T2(q2_ref, T2, c.R, cmd[2 + n:2 + 2 * n])
-            else:
-                cmd[2 + n:] = 0.0
-        else:
-            K.chain_force_from_T2(q2_sensed, T2, c.R, cmd[2:2 + n])
-            cmd[2 + n:] = 0.0
+        ref[0:6] = q2_ref
+        ref[6:12] = dq2_ref
+        K.chain_commands(self.servo, self.ff, q2_sensed, T2, ref, c.C, c.R, c.L0, self.kv_over_kp, cmd)
 
     def advance(self, dt: float) -> int:
         d, c, n, use = self.d, self.cmap, self.n, self.cmd
@@ -90,7 +82,7 @@ class MujocoStepped:
             mujoco.mj_step(self.m, d)
             if wnum.any():
                 self.warned = warning_counts(d.warning.number)
-                return 7
+                return Status.MUJOCO_WARNING
         return 0
 
     def slave_tip(self) -> np.ndarray:
@@ -117,21 +109,21 @@ class AnalyticStepped:
     kind = "analytic"
     actuation = "torque"
 
-    def __init__(self, scn: Scenario, plant=None) -> None:
+    def __init__(self, scn: Scenario, model: RunModel, plant=None) -> None:
         from harness.plant.analytic import AnalyticPlant
 
         if plant is None:
             plant = AnalyticPlant(scn.plant_master, scn.plant_slave)
-        a = common_arrays(scn)
+        self.model = model
         self.mpk = master_model.packed(plant.master)
         self.spk = plant.slave.packed()
-        self.nodes, self.weights, self.F = a["nodes"], a["weights"], a["F"]
         self.nsub = max(1, scn.substeps)
         self.physics_dt = scn.control_dt / self.nsub
-        self.state = initial_state(scn)
+        self.state = model.s0.copy()
         self.T1, self.T2 = np.zeros(2), np.zeros(6)
-        self.ks = [np.empty(16) for _ in range(4)]
-        self.tmp = np.empty(16)
+        # the law's buffers of `plant_substeps` (unused: the commands are held) and its RK4 work arrays
+        self.work = (np.zeros(4), np.zeros(6), np.zeros(6), np.zeros(MASTER_INFO), np.zeros(SLAVE_INFO),
+                     np.zeros(2), np.zeros(2), np.zeros(2), *(np.empty(16) for _ in range(5)))
 
     def reset(self, state0: np.ndarray) -> None:
         self.state[:] = state0
@@ -145,25 +137,17 @@ class AnalyticStepped:
         self.T2[:] = T2
 
     def advance(self, dt: float) -> int:
-        s, tmp = self.state, self.tmp
+        s = self.state
         nsub = max(1, round(dt / self.physics_dt))
-        h = dt / nsub
-        k1, k2, k3, k4 = self.ks
-        args = (self.mpk, self.spk, self.nodes, self.weights)
-        for _ in range(nsub):
-            for src, scale, out in ((s, 0.0, k1), (k1, 0.5, k2), (k2, 0.5, k3), (k3, 1.0, k4)):
-                if scale == 0.0:
-                    tmp[:] = s
-                else:
-                    np.multiply(src, scale * h, out=tmp)
-                    tmp += s
-                if not K.plant_accel(*args, tmp, self.T1, self.T2, self.F, out):
-                    return 1
-            s += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        F, u2, deN, minfo, sinfo, xd, dxd, ddxd, *ks = self.work
+        st = K.plant_substeps(s, 0.0, dt / nsub, nsub, False, self.model, F, self.mpk, self.spk, self.T1,
+                              self.T2, u2, deN, minfo, sinfo, xd, dxd, ddxd, *ks)
+        if st != Status.OK:
+            return Status(st)
         if not np.all(np.isfinite(s)):
-            return 1
+            return Status.NONFINITE
         if np.any(s[4:7] <= 0.0):
-            return 5
+            return Status.SECTION_LENGTH
         return 0
 
     def slave_tip(self) -> np.ndarray:
@@ -179,13 +163,13 @@ class AnalyticStepped:
         pass
 
 
-def stepped_plant(scn: Scenario, plant=None):
+def stepped_plant(scn: Scenario, model: RunModel, plant=None):
     """The scenario's plant as a `SteppedPlant`: `plant` itself if it is one (the Cosserat rod), else the
     Python-stepped adapter of the analytic or MuJoCo plant."""
     if plant is not None and hasattr(plant, "advance"):
         return plant
     if scn.plant.kind == "analytic":
-        return AnalyticStepped(scn, plant)
+        return AnalyticStepped(scn, model, plant)
     if scn.plant.kind == "mujoco":
-        return MujocoStepped(scn, plant)
+        return MujocoStepped(scn, model, plant)
     raise NotImplementedError(f"plant.kind = {scn.plant.kind!r} has no Python-stepped adapter yet")

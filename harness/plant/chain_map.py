@@ -353,10 +353,6 @@ class ChainMap:
         chain_q2_from_joints(np.asarray(qpos_chain, dtype=float), self.R, self.L0, out)
         return out
 
-    def dq2_from_joints(self, qpos_chain, qvel_chain) -> np.ndarray:
-        """Sensed dq2/dt (6,) from chain joint positions and velocities (n_chain,)."""
-        return self.sense_joints(qpos_chain, qvel_chain)[1]
-
     def sense_joints(self, qpos_chain, qvel_chain) -> tuple[np.ndarray, np.ndarray]:
         """Sensed (q2, dq2) (6,) each from chain joint positions and velocities (n_chain,)."""
         q2, dq2 = np.empty(6), np.empty(6)

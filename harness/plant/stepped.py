@@ -12,7 +12,7 @@ Per control step of length control_dt, the loop calls, in this order:
     ... noise, controller, record ...
     plant.record(k)  or  slave_tip(), geometry()   # the recording's plant geometry at time t
     plant.command(T1, T2, q2_ref, dq2_ref, q2_sensed)   # held until the next call
-    status = plant.advance(control_dt)       # 0, or a code of harness.loop.common.STATUS_TEXT
+    status = plant.advance(control_dt)       # 0, or a controllers.status.Status code
     ... at the end: plant.finish(traj, done) if the plant has `record` / `finish`
 
 Units: q1 (rad), dq1 (rad/s), q2 = [d1, d2, d3 (m), k1, k2, k3 (1/m)] and its rates; T1 (N m) master
@@ -40,9 +40,6 @@ class SteppedPlant(Protocol):
     kind: str  # plant kind, as in Scenario.plant.kind (e.g. "cosserat")
     actuation: str  # "servo" (tracks q2_ref, T2 feed-forward) | "torque" (applies T2)
     physics_dt: float  # s, the plant's own step; control_dt is a multiple of it
-    # Optional (not part of the check): `overlap_imports = True` if `advance` holds the GIL while it steps,
-    # so that other Python threads (the output imports of `harness.output.prefetch`) may run beside the
-    # loop without stalling it at every step (`harness.loop.stepped_loop.simulate_stepped`).
 
     def reset(self, state0: np.ndarray) -> None:
         """Both arms at rest at state0 (16,) = [q1, dq1, q2, dq2] (time 0, commands cleared)."""

@@ -15,11 +15,11 @@ from typing import Any
 
 import numpy as np
 
+from harness.config.controller import resolve_controller
 from harness.config.errors import ConfigError
 from harness.config.load import load_scenario, scenario_to_dict
 from harness.config.scenario import Scenario
 from harness.config.textio import jsonable, toml_literal
-from harness.loop.controllers import resolve_controller
 from harness.studies.study import Case, Factor, Study, canon, check_case_count, is_real
 
 log = logging.getLogger(__name__)

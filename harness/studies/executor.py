@@ -84,7 +84,7 @@ def run_case(case: dict) -> dict:
         scn = case["scenario"]
         # a sweep keeps every core busy with cases: no second thread per case (it would spin-wait for a core)
         limit = case.get("time_limit")
-        traj = simulate(scn, progress=False, overlap=False,
+        traj = simulate(scn, progress=False,
                         on_chunk=_deadline_check(t0, limit) if limit else None)
         metrics = compute_metrics(traj, scn)
         out.update(status=traj.status, message=traj.message,

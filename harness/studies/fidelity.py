@@ -329,8 +329,8 @@ def cc_study(Ns=(4, 8, 16, 32), n_samples: int = 4, seed: int = 0, settle_steps:
 
     from harness.config.scenario import Scenario
     from harness.loop.fast import K
-    from harness.loop.mujoco_kernels import MJ_FUNCS
     from harness.loop.mujoco_loop import simulate_mujoco
+    from harness.loop.native import MJ_FUNCS
 
     master = MasterParams() if master is None else master
     slave = SlaveParams() if slave is None else slave

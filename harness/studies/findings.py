@@ -244,8 +244,8 @@ def _num(v: Any) -> float | None:
 
 def finding_scenarios(f: Finding) -> list:
     """The validated scenario of each run of a finding (raises ConfigError naming the field)."""
+    from harness.config.controller import resolve_controller
     from harness.config.load import load_scenario
-    from harness.loop.controllers import resolve_controller
     from harness.plant import validate_plant
 
     out = []

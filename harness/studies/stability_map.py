@@ -97,7 +97,7 @@ ETAS = (0.0, 0.001, 0.01, 0.1, 1.0)
 
 
 def main(out="runs/stability_map", duration: float = 3.0) -> int:
-    """``python -m harness.studies.stability_map [OUT]``: the stability maps (MAPS over KNS x ETAS),
+    """``teleop stability-map [--out OUT] [--duration S]``: the stability maps (MAPS over KNS x ETAS),
     stability_map.md and stability_map.png in OUT."""
     import sys
 
@@ -112,12 +112,6 @@ def main(out="runs/stability_map", duration: float = 3.0) -> int:
     plot_stability_map(maps, duration, out / "stability_map.png")
     print("\n\n".join(text))
     return 0
-
-
-if __name__ == "__main__":
-    import sys
-
-    raise SystemExit(main(*sys.argv[1:2]))
 
 
 __all__ = ["MAPS", "main", "plot_stability_map", "stability_map", "stability_markdown"]

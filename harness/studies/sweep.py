@@ -53,7 +53,6 @@ from harness.config.load import scenario_to_dict
 from harness.config.runtime import progress_bar_class
 from harness.config.scenario import Scenario
 from harness.config.textio import OutputError, describe_os_error, prepare_out_dir, write_atomic
-from harness.output.prefetch import prefetch_output_imports
 from harness.studies.cases import expand_cases, load_base
 from harness.studies.executor import (
     Runner,
@@ -143,7 +142,6 @@ def _study_document(study: Study, base: Scenario) -> dict:
     return {"study": st, "sampling": sampling, "factor": factors, "scenario": scenario_to_dict(base)}
 
 
-SUMMARY_IMPORTS = ("matplotlib.figure", "matplotlib.backends.backend_agg")  # harness.studies.summary._plots
 
 
 def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | None = None,
@@ -243,15 +241,11 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
             if on_row is not None:
                 on_row(row)
 
-        # matplotlib (for the summary plots) is imported while the workers run the cases, not after
-        prefetch = prefetch_output_imports(SUMMARY_IMPORTS) if todo else None
         try:
             lap("setup")
             run_cases(runner, case_fn, todo, study.metrics, False, on_result, time_limit=case_timeout)
             bar.close()
             lap("cases")
-            if prefetch is not None:
-                prefetch.join()  # the summary's imports; before any later fork (no import lock held)
             lap("summary")
             if study.record and result.complete:
                 try:

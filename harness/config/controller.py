@@ -1,16 +1,12 @@
-"""Controller selection: the registry of built-ins, the importer for user classes, parameter
-validation and the per-run controller context.  The interface itself is `controllers.interface`.
+"""The scenario's controller as a class: the registry of built-ins (`controllers.baselines.BUILTINS`), the
+loader of user classes and the checks a controller's declarations ask for, before anything runs.
 
-`scn.controller.name`:
-* "paper" (default): the paper's law, fused into the compiled loops (harness.loop.kernels) -- the
-  fast path, no Python per step;
-* another built-in (`BUILTINS`), or "path/to/file.py:ClassName" / "package.module:ClassName": the
-  class runs through the Python-level loop (harness.loop.stepped_loop) on the same plants, noise,
-  metrics and recordings.
-
-`resolve_controller(scn)` loads and checks the class (ConfigError, exit 2, before anything is written):
-it must be a class with callable `reset` and `step`, support the plant's actuation, accept the
-scenario's params; it returns the scenario with every parameter spelled out (for config.toml).
+`controller.name`: a built-in name, "path/to/file.py:ClassName" or "package.module:ClassName".  The one
+place in the harness that imports a module by name (user code, on the user's request).
+`resolve_controller(scn)` loads and checks the class (ConfigError, one line, exit 2, before anything is
+written): a class with callable `reset` and `step`, supporting the plant's actuation (`actuations`)
+and plant kind (`plants`, when it declares them), accepting the scenario's params; it returns the scenario
+with every parameter spelled out (for config.toml).
 """
 
 from __future__ import annotations
@@ -24,65 +20,17 @@ from pathlib import Path
 
 import numpy as np
 
-from controllers.baselines import DampedLeastSquaresIK, PaperNoNullSpace
-from controllers.control import MASTER_INFO, SLAVE_INFO
-from controllers.interface import (
-    Action,
-    Controller,
-    ControllerContext,
-    ControllerDiverged,
-    NominalModels,
-    Observation,
-    ParamsError,
-)
+from controllers.baselines import BUILTINS, FAST_PATH
+from controllers.interface import Controller, ParamsError
 from harness.config.errors import ConfigError
 from harness.config.scenario import ControllerConfig, Scenario
-from harness.loop.common import STATUS_TEXT, common_arrays, initial_state
-from harness.loop.fast import K
-
-COMPILED = "paper"  # the name that selects the compiled fast path
-
-
-class PaperController(Controller):
-    """The paper's law (12)-(13), (17)-(18) with the null-space terms (23)-(33) through the interface:
-    each step calls the same compiled kernel as the fused loop (`harness.loop.kernels.control_laws`)
-    on the observation, so a run gives the compiled loop's numbers bit for bit (tested)."""
-
-    name = "paper_interface"
-    description = "the paper's law (12)-(33) through the Python interface (compiled kernels per step)"
-    actuations = ("torque", "servo")
-
-    def reset(self, ctx: ControllerContext) -> None:
-        super().reset(ctx)
-        m = ctx.models
-        self.gains = np.concatenate([ctx.gains.packed(), [float(ctx.faults[0]), float(ctx.faults[1])]])
-        self.args = (m.mpk, m.spk, m.nodes, m.weights, self.gains, m.spec)
-        self.minfo, self.sinfo = np.empty(MASTER_INFO), np.empty(SLAVE_INFO)
-
-    def step(self, obs: Observation) -> Action:
-        a = self.action
-        st = K.control_laws(*self.args, obs.sensed, obs.x_d, obs.dx_d, obs.ddx_d, obs.F, a.T1, a.T2, a.u2,
-                            a.deN, self.minfo, self.sinfo)
-        if st != 0:
-            raise ControllerDiverged(STATUS_TEXT[st], code=st)
-        return a
-
-
-# name -> class; "paper" is listed with the class that gives the same law through the interface
-BUILTINS: dict[str, type] = {
-    "paper": PaperController,
-    "paper_interface": PaperController,
-    "paper_no_null": PaperNoNullSpace,
-    "dls_ik": DampedLeastSquaresIK,
-}
-DESCRIPTIONS = {
-    "paper": "the paper's law (12)-(13), (17)-(18) with null-space terms (23)-(33); compiled fast path",
-}
 
 
 def describe_builtins() -> list[tuple[str, str, tuple[str, ...]]]:
     """(name, one-line description, supported actuations) of every built-in."""
-    return [(n, DESCRIPTIONS.get(n, c.description), tuple(c.actuations)) for n, c in BUILTINS.items()]
+    return [(n, c.description + ("; compiled fast path" if n == FAST_PATH else
+                                  " (through the Python interface)" if c is BUILTINS[FAST_PATH] else ""),
+             tuple(c.actuations)) for n, c in BUILTINS.items()]
 
 
 def plant_actuation(scn: Scenario) -> str:
@@ -161,6 +109,10 @@ def resolve_controller(scn: Scenario) -> Scenario:
     cfg = scn.controller
     cls = load_class(cfg.name)
     act = plant_actuation(scn)
+    plants = getattr(cls, "plants", None)  # declared by the class (controllers.interface.Controller)
+    if plants is not None and scn.plant.kind not in plants:
+        raise _bad(cfg.name, f"runs on plant.kind {', '.join(map(repr, plants))} only, not "
+                             f"{scn.plant.kind!r}")
     supported = tuple(getattr(cls, "actuations", ("torque", "servo")))
     if act not in supported:
         plant = "the analytic plant (torque-driven)" if scn.plant.kind == "analytic" else \
@@ -177,34 +129,15 @@ def resolve_controller(scn: Scenario) -> Scenario:
                           path="controller.params") from None
     full = ({f.name: _as_toml(getattr(p, f.name)) for f in dataclasses.fields(p)}
             if dataclasses.is_dataclass(p) else dict(cfg.params))
-    if cfg.name == COMPILED or full == cfg.params:
+    if cfg.name == FAST_PATH or full == cfg.params:
         return scn
     return dataclasses.replace(scn, controller=ControllerConfig(cfg.name, full))
 
 
 def is_compiled(scn: Scenario) -> bool:
-    """True when the compiled fast path runs (the paper's law, `controller.name = "paper"`)."""
-    return scn.controller.name == COMPILED
+    """True when the paper's law runs in the compiled fast path (`controller.name = "paper"`)."""
+    return scn.controller.name == FAST_PATH
 
 
-def make_controller(scn: Scenario):
-    """(instance, context) for a run: the class instantiated and the context its `reset` receives."""
-    cfg = scn.controller
-    cls = load_class(cfg.name)
-    try:
-        params = parse_params(cls, cfg.params)
-    except ParamsError as e:
-        raise ConfigError(str(e), path=f"controller.params.{e.key}") from None
-    ctrl = cls()
-    a = common_arrays(scn)
-    ctx = ControllerContext(
-        dt=scn.control_dt, n_steps=scn.n_steps, actuation=plant_actuation(scn), plant=scn.plant.kind,
-        master=scn.master, slave=scn.slave, gains=scn.gains, subtask=scn.subtask,
-        F=a["F"].reshape(2, 2).copy(), seed=scn.seed, params=params,
-        models=NominalModels(scn.master, scn.slave, scn.subtask, kernels=K), q0=initial_state(scn),
-        faults=(scn.faults.e2_sign, scn.faults.null_space_scale))
-    return ctrl, ctx
-
-
-__all__ = ["BUILTINS", "PaperController", "describe_builtins", "is_compiled", "load_class", "make_controller",
-           "plant_actuation", "resolve_controller"]
+__all__ = ["describe_builtins", "is_compiled", "load_class", "parse_params", "plant_actuation",
+           "resolve_controller"]
