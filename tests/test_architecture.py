@@ -214,10 +214,7 @@ def test_warm_modules_keep_the_layer_rules():
 # uses is dead code (the test below).  Entries are independent references or entry points of modules
 # whose consolidation is under way elsewhere (the slave and master models, the Cosserat rod, outputs).
 TEST_ONLY = {
-    "coriolis_matrix", "damping_force", "forward_dynamics", "jacobian_dot", "mass_and_nle",
-    "tip_derivatives",
-    "elbow_points", "in_range", "_one_minus_cos_over", "tip_velocity", "timeline_name", "to_file",
-    "slave_control", "null_space_quantities", "null_space_reference", "elastic_energy",
+    "tip_derivatives", "tip_velocity", "timeline_name", "to_file", "slave_control", "elastic_energy",
 }
 
 
