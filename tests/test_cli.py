@@ -627,4 +627,4 @@ def test_stability_map_command_writes_its_table_and_figure(tmp_path, monkeypatch
     assert (out / "stability_map.png").stat().st_size > 0
     assert "| 10" in (out / "stability_map.md").read_text() or "10" in (out / "stability_map.md").read_text()
     assert main(["stability-map", "--duration", "0"]) == 2
-    assert "expected a number > 0" in capsys.readouterr().err
+    assert "expected a positive number" in capsys.readouterr().err
