@@ -128,24 +128,35 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--reps", type=int, default=10, help="repetitions of each pair (default 10)")
     ap.add_argument("--cases", type=int, default=64, help="cases of the sweep study (default 64)")
+    ap.add_argument("--no-write", action="store_true", help="print only (default: replace the results file)")
     args = ap.parse_args()
-    print(f"# bench_core: {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {os.cpu_count()} CPUs, "
-          f"load average {os.getloadavg()[0]:.2f}, --reps {args.reps} --cases {args.cases}")
+    lines: list[str] = []
+
+    def say(text: str) -> None:
+        print(text, flush=True)
+        lines.append(text)
+
+    say(f"# bench_core: {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {os.cpu_count()} CPUs, "
+        f"load average {os.getloadavg()[0]:.2f}, --reps {args.reps} --cases {args.cases}")
     loops, raws, binding, loops_b = loop_and_raw(args.reps)
     raw_med = float(np.median(raws))
-    print(f"raw mj_step, paper run (20 s): {raw_med:.3f} s median; compiled loop {np.median(loops):.3f} s; "
-          f"Python-stepped loop {np.median(binding):.3f} s")
-    print(f"loop / raw          {spread([a / b for a, b in zip(loops, raws, strict=True)])}   goal <= 1.25")
+    say(f"raw mj_step, paper run (20 s): {raw_med:.3f} s median; compiled loop {np.median(loops):.3f} s; "
+        f"Python-stepped loop {np.median(binding):.3f} s")
+    say(f"loop / raw          {spread([a / b for a, b in zip(loops, raws, strict=True)])}   goal <= 1.25")
     pays = spread([a / b for a, b in zip(binding, loops_b, strict=True)])
-    print(f"binding / loop      {pays}   (> 1: the compiled loop pays)")
+    say(f"binding / loop      {pays}   (> 1: the compiled loop pays)")
     with tempfile.TemporaryDirectory(prefix="bench_core-") as tmp:
         runs, one, two = run_and_sweeps(args.reps, args.cases, Path(tmp))
     bound = 1.5 * raw_med + 1.5
-    print(f"teleop run: {np.median(runs):.2f} s median [{min(runs):.2f}, {max(runs):.2f}]; "
-          f"bound 1.5 x raw + 1.5 s = {bound:.2f} s")
-    print(f"run / bound         {spread([r / bound for r in runs])}   goal <= 1")
-    print(f"sweep of {args.cases}: 1 worker {np.median(one):.1f} s, 2 workers {np.median(two):.1f} s")
-    print(f"sweep 1 / 2         {spread([a / b for a, b in zip(one, two, strict=True)])}   goal >= 1.7")
+    say(f"teleop run: {np.median(runs):.2f} s median [{min(runs):.2f}, {max(runs):.2f}]; "
+        f"bound 1.5 x raw + 1.5 s = {bound:.2f} s")
+    say(f"run / bound         {spread([r / bound for r in runs])}   goal <= 1")
+    say(f"sweep of {args.cases}: 1 worker {np.median(one):.1f} s, 2 workers {np.median(two):.1f} s")
+    say(f"sweep 1 / 2         {spread([a / b for a, b in zip(one, two, strict=True)])}   goal >= 1.7")
+    if not args.no_write:
+        from results import write_result
+
+        write_result(__file__, lines[0] + "\n\n```text\n" + "\n".join(lines[1:]) + "\n```\n")
     return 0
 
 

@@ -8,7 +8,7 @@
 Each configuration runs the same small mass-mismatch study (plant slave masses scaled 0.8..1.2)
 into a fresh temporary folder through `harness.studies.sweep.run_sweep` in this process, so the wall time
 includes starting the worker processes, their first cases, results.jsonl and the summary (csv and plot).
-It does not include the imports of a fresh `teleop sweep` process: `benchmarks/bench_e2e.py` measures
+It does not include the imports of a fresh `teleop sweep` process: `benchmarks/bench_core.py` measures
 those.  One case is run in this process first, and the summary plot's modules are imported, so that
 every configuration starts from the same warm process (the numba cache and the loop's modules loaded,
 inherited by forked workers).  The configurations run in turn, --reps times, the order reversed every

@@ -5,7 +5,7 @@ loop that keeps cases in flight and hands each result to the parent as it finish
 Threads (`--executor threads`, the in-process batch path): the compiled loops release the GIL while they
 step (`harness.loop.releases_gil`), so the cases of one process run on every core without worker
 processes, with the same results.  Processes stay the default: a crashing case then takes only its
-worker (benchmarks/bench_e2e.py measures both).
+worker (benchmarks/bench_core.py measures both).
 """
 
 
