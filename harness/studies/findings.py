@@ -281,7 +281,7 @@ def _run(f: Finding, scenarios: list, res: FindingResult, keep_trajectories: boo
     for r, scn in zip(f.runs, scenarios, strict=True):
         traj, metrics = None, {}
         if r.simulate:
-            traj = simulate(scn, progress=False, overlap=False)
+            traj = simulate(scn, progress=False)
             metrics = compute_metrics(traj, scn)
         for k, v in metrics.items():
             res.values[f"{r.name}.{k}"] = v
@@ -307,18 +307,19 @@ def _run(f: Finding, scenarios: list, res: FindingResult, keep_trajectories: boo
 def _bounds_checks(run: str, bounds: Bounds, metrics: Mapping, bad: Mapping[str, Violation]) -> list[Check]:
     from dataclasses import fields
 
-    from harness.config.bounds import FLAG_BOUNDS, NUMERIC_BOUNDS
+    from harness.config.bounds import FLAGS, limit_of
 
     out = []
     for fl in fields(bounds):
         key, limit = fl.name, getattr(bounds, fl.name)
-        if key in NUMERIC_BOUNDS and limit is not None:
-            metric, rel, unit, _ = NUMERIC_BOUNDS[key]
+        if key in FLAGS:
+            if limit:
+                metric = FLAGS[key]
+                want = "ok" if metric == "status" else 0
+                out.append(Check(f"{run}.{metric}", "eq", want, metrics.get(metric), key not in bad))
+        elif key.endswith(("_max", "_min")) and limit is not None:
+            metric, rel, unit = limit_of(key)
             out.append(Check(f"{run}.{metric}", rel, limit, metrics.get(metric), key not in bad, unit))
-        elif key in FLAG_BOUNDS and limit:
-            metric = "status" if key == "status_ok" else "mujoco_warnings"
-            want = "ok" if key == "status_ok" else 0
-            out.append(Check(f"{run}.{metric}", "eq", want, metrics.get(metric), key not in bad))
     return out
 
 
@@ -351,10 +352,13 @@ def fmt(v: Any) -> str:
 
 def _unit(quantity: str) -> str:
     """' <unit>' of a run metric (from the bounds table) or a derived measurement, else ''."""
-    from harness.config.bounds import NUMERIC_BOUNDS
+    from dataclasses import fields
+
+    from harness.config.bounds import Bounds, limit_of
 
     key = quantity.rsplit(".", 1)[-1]
-    units = {metric: unit for metric, _, unit, _ in NUMERIC_BOUNDS.values() if unit}
+    limits = (limit_of(f.name) for f in fields(Bounds) if f.name.endswith(("_max", "_min")))
+    units = {m: u for m, _, u in limits if u}
     unit = units.get(key) or MEASURE_UNITS.get(key, "")
     return f" {unit}" if unit else ""
 

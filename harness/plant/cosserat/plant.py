@@ -142,9 +142,6 @@ class CosseratPlant:
     """Rod slave + analytic rigid master, stepped from Python (`SteppedPlant`)."""
 
     kind = "cosserat"
-    # the rod's compiled steps hold the GIL: the output imports run beside the loop, which waits ~0.2 s
-    # for them on the 3-s paper run instead of 1.2 s after it (harness.loop.stepped_loop.simulate_stepped)
-    overlap_imports = True
 
     def __init__(self, scn: Scenario) -> None:
         c = scn.plant.cosserat
