@@ -47,10 +47,30 @@ the rod's material damping (``plant.bending_viscosity`` eta_b -> hinge eta_b / h
 ``plant.extension_viscosity`` eta_a -> slide eta_a / h, h the segment length) is MuJoCo joint damping
 (``chain_params.joint_damping``, integrated implicitly; exact at rest length on the manifold).
 
-Actuation: ``servo`` = a position actuator per chain joint (force kp (ctrl - q) - kv qdot, ctrl = the
-joint target, e.g. ``joints_from_q2``), kp = M_jj (2 pi f)^2, kv = 2 zeta (2 pi f) M_jj with M_jj the
-diagonal of the joint-space inertia (armature included) at the straight rest configuration; add
-kv qdot_ref through qfrc_applied for velocity tracking.  ``torque`` = a motor per chain joint (gear 1).
+Actuation, every kind defined per unit length of the section (a distributed actuator, so the chain has
+a continuum limit as N grows):
+
+* ``servo``: a position actuator per chain joint (force kp (ctrl - q) - kv qdot, ctrl = the joint
+  target, e.g. ``joints_from_q2``) with section-level gains distributed like the rod's springs
+  (``chain_params.servo_gains``): each CC coordinate u = [e_i, Theta_i] of a section, moved alone, is a
+  servo of natural frequency f = ``servo_frequency`` and damping ratio zeta against its section-level
+  inertia diag(C^T M C) at the straight rest configuration; hinges kp = N K_Theta_i, slides the
+  ``slide_pattern`` of K_e (the N servos of a section in series give K_u).  Velocity tracking: fold
+  (kv / kp) qdot_ref into the target.
+* ``torque``: a motor per chain joint (gear 1) driven with the virtual-work map ``chain_force_from_T2``
+  (every hinge of a section the same torque, every interior slide the same force: distributed).
+* ``muscle``: per section two one-sided groups of extensor muscles at lateral offsets s = +r and -r
+  (``plant.muscle_radius``) in the arm's plane, an antagonistic pair.  Each is a MuJoCo fixed tendon
+  ``octarm_s{i}_muscle_{pos,neg}_tendon`` of length sum(slides of the section) - s sum(hinges of the
+  section), the chain form of the CC fibre length d_i (1 - s k_i) = d_i - s Theta_i (half-rod
+  coefficients: ``chain_params.muscle_tendon_coefs``), driven by a ``general`` actuator
+  ``octarm_s{i}_muscle_{pos,neg}``: dyntype filterexact (act' = (ctrl - act) / tau,
+  ``plant.muscle_time_constant``), gain 1, no bias, ctrllimited to [0, F_max] (``plant.muscle_max_force``):
+  a force act >= 0 that lengthens its fibre, applied by MuJoCo through the tendon (virtual work: every
+  segment of the section feels the same fibre force).  Extensors, because the OctArm's McKibben
+  muscles are extensors (they lengthen under pressure) and the sections here live in [L0,
+  max_extension L0], which needs a net extending force against the extension stiffness; a contractile
+  (pulling) group could only hold d <= L0.  Commands: ``chain_map.muscle_commands``.
 Master: two motors.  Armature: ``armature_fraction`` times the section inertia scale on every chain
 joint, plus one segment mass on the tip slide (see ``chain_params.joint_armature``), a modelled mismatch of
 relative size ~ fraction / (6 N) in M2.
@@ -86,11 +106,14 @@ from harness.config.scenario import ACTUATIONS, PlantConfig, Scenario
 from harness.config.textio import atomic_path
 from harness.plant.chain_map import ChainMap, _ro, chain_layout
 from harness.plant.chain_params import (
+    MUSCLE_SIDES,
     TIP_MASS_FRACTION,
     joint_armature,
     joint_damping,
     joint_stiffness,
+    muscle_tendon_coefs,
     segment_inertias,
+    servo_gains,
 )
 from harness.plant.environment import ContactMap, add_environment, clearance, contact_map
 from harness.plant.initial import InitialStateError, initial_state
@@ -237,8 +260,36 @@ def _add_octarm(spec: mujoco.MjSpec, slave: SlaveParams, plant: PlantConfig, N: 
     return joint_names, stiff, arm, tip_mass
 
 
+def _add_muscles(spec: mujoco.MjSpec, joint_names: list[str], plant: PlantConfig, layout: dict,
+                 N: int) -> list[str]:
+    """Two one-sided muscle groups per section on fixed tendons (see the module docstring, Actuation)."""
+    slide, hinge = muscle_tendon_coefs(N, layout)
+    names = []
+    for i in range(3):
+        r = float(plant.muscle_radius[i])
+        for side, tag in zip(MUSCLE_SIDES, ("pos", "neg"), strict=True):
+            t = spec.add_tendon(name=f"octarm_s{i}_muscle_{tag}_tendon")
+            for c, jn in enumerate(joint_names):
+                cf = slide[i, c] - side * r * hinge[i, c]
+                if cf != 0.0:
+                    t.wrap_joint(jn, float(cf))
+            a = spec.add_actuator(name=f"octarm_s{i}_muscle_{tag}", target=t.name,
+                                  trntype=mujoco.mjtTrn.mjTRN_TENDON)
+            a.dyntype = mujoco.mjtDyn.mjDYN_FILTEREXACT
+            a.dynprm[0] = float(plant.muscle_time_constant[i])
+            a.gaintype = mujoco.mjtGain.mjGAIN_FIXED
+            a.gainprm[0] = 1.0
+            a.biastype = mujoco.mjtBias.mjBIAS_NONE
+            a.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+            a.ctrlrange = [0.0, float(plant.muscle_max_force[i])]
+            names.append(a.name)
+    return names
+
+
 def _add_actuators(spec: mujoco.MjSpec, joint_names: list[str], actuation: str) -> list[str]:
     names = []
+    if actuation == "muscle":
+        return names
     for jn in joint_names:
         if actuation == "servo":
             a = spec.add_actuator(name=f"{jn}_servo", target=jn, trntype=mujoco.mjtTrn.mjTRN_JOINT)
@@ -300,6 +351,10 @@ def _validate_plant(plant: PlantConfig) -> int:
         v = getattr(plant, f)
         if not (np.isfinite(v) and v > 0):
             raise PlantModelError(f"plant.{f} = {v!r}: must be finite and > 0")
+    for f in ("muscle_time_constant", "muscle_max_force", "muscle_radius"):
+        v = np.asarray(getattr(plant, f), dtype=float)
+        if v.shape != (3,) or not np.all(np.isfinite(v) & (v > 0)):
+            raise PlantModelError(f"plant.{f} = {getattr(plant, f)!r}: must be 3 finite numbers > 0")
     if not (np.isfinite(plant.armature_fraction) and plant.armature_fraction >= 0):
         raise PlantModelError(f"plant.armature_fraction = {plant.armature_fraction!r}: must be >= 0")
     return N
@@ -319,6 +374,7 @@ def _build(master: MasterParams, slave: SlaveParams, plant: PlantConfig, scene=N
     layout = chain_layout(N)
     joint_names, stiff, arm, tip_mass = _add_octarm(spec, slave, plant, N, layout, scene)
     act_names = _add_actuators(spec, joint_names, plant.actuation)
+    muscle_names = _add_muscles(spec, joint_names, plant, layout, N) if plant.actuation == "muscle" else []
     if plant.enforce_cc:
         _add_cc_equalities(spec, N)
     if environment is not None and environment.objects:
@@ -336,13 +392,12 @@ def _build(master: MasterParams, slave: SlaveParams, plant: PlantConfig, scene=N
         M = np.zeros((m.nv, m.nv))
         mujoco.mj_fullM(m, d, M)
         dof = np.array([m.jnt_dofadr[m.joint(n).id] for n in joint_names])
-        w = 2.0 * np.pi * plant.servo_frequency
-        Mjj = np.diag(M)[dof]
-        kp = Mjj * w * w
-        kv = 2.0 * plant.servo_damping_ratio * w * Mjj
+        C = layout["C"]
+        mass_u = np.einsum("ra,rs,sa->a", C, M[np.ix_(dof, dof)], C)  # diag(C^T M C)
+        kp, kv = servo_gains(mass_u, N, layout, plant.servo_frequency, plant.servo_damping_ratio)
         for a_name, p, v in zip(act_names, kp, kv, strict=True):
             spec.actuator(a_name).set_to_position(kp=float(p), kv=float(v))
-    return spec, N, layout, joint_names, act_names, stiff, arm, tip_mass, kp, kv
+    return spec, N, layout, joint_names, act_names + muscle_names, stiff, arm, tip_mass, kp, kv
 
 
 def build_spec(master: MasterParams, slave: SlaveParams, plant: PlantConfig, *,
@@ -384,7 +439,10 @@ def build_model(master: MasterParams, slave: SlaveParams, plant: PlantConfig, *,
                                 np.int64),
         chain_qpos_adr=_ro(m.jnt_qposadr[chain_j], np.int64),
         chain_dof_adr=_ro(m.jnt_dofadr[chain_j], np.int64),
-        chain_actuator_ids=_ro([m.actuator(n).id for n in act_names], np.int64),
+        chain_actuator_ids=_ro([m.actuator(n).id for n in act_names if "_muscle_" not in n], np.int64),
+        muscle_actuator_ids=_ro([m.actuator(n).id for n in act_names if "_muscle_" in n], np.int64),
+        muscle_radius=_ro(plant.muscle_radius),
+        muscle_max_force=_ro(plant.muscle_max_force),
         master_site_id=int(m.site("master_tip_site").id),
         tip_site_id=int(m.site("octarm_tip_site").id),
         master_base_pos=_ro(m.body("master_base").pos),
@@ -421,6 +479,11 @@ class MujocoPlant:
     def build(cls, scn: Scenario) -> MujocoPlant:
         """Build from the scenario's plant side (raises PlantModelError on bad MJCF or options, and
         when an environment object intersects the arm at the initial state)."""
+        if scn.plant.actuation == "muscle":
+            # the plant side is complete (build_model, ChainMap.muscle_actuator_ids, chain_map.muscle_commands);
+            # the control loop does not write the muscle commands yet
+            raise PlantModelError("plant.actuation = 'muscle': not run by the simulation loop yet (build the "
+                                  "plant with harness.plant.mujoco_model.build_model)")
         m, cmap = build_model(scn.plant_master, scn.plant_slave, scn.plant, environment=scn.environment)
         if not scn.environment.objects:
             return cls(m, cmap)
