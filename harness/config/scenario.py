@@ -139,9 +139,10 @@ class PlantConfig:
                               "ms)", gt=0.0, le=10.0) = (0.05, 0.05, 0.05)
     muscle_max_force: vec(3, "N, force limit F_max of one muscle group per section (assumption: supply "
                           "pressure x bore area of the group)", gt=0.0, le=1e5) = (400.0, 300.0, 200.0)
-    muscle_radius: vec(3, "m, lateral offset r of the two groups from the backbone per section "
-                       "(assumption: the muscles sit at the rim of a 6 / 5 / 4 cm wide arm)", gt=0.0,
-                       le=0.5) = (0.03, 0.025, 0.02)
+    muscle_radius: vec(3, "m, lateral offset r of the two groups from the backbone per section; "
+                       "default: the radius at which two fibres carrying the section's extension stiffness "
+                       "give its bending stiffness, r = sqrt(Kb / (Ke L0)) for the default [slave] "
+                       "(0.163, 0.120, 0.091 m), rounded", gt=0.0, le=0.5) = (0.16, 0.12, 0.09)
     armature_fraction: num("segment-joint armature as a fraction of the section inertia", **NONNEG) = 0.01
     scene_xml: doc(doc(str, "", expect="the path of an existing MJCF scene file") | None,
                    "alternative scene MJCF file (must include master + octarm base); relative paths "
