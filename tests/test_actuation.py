@@ -14,8 +14,8 @@ import math
 import mujoco
 import numpy as np
 import pytest
-
 from actuation_statics import Q2_HOLD, Hold, hold_T2
+
 from controllers.params import MasterParams, SlaveParams
 from harness.config.errors import ConfigError
 from harness.config.load import load_scenario

@@ -117,10 +117,11 @@ class PlantConfig:
     slave: doc(Slave | None, '"none" = same as [slave]; or a [plant.slave] table whose missing keys take '
                "the nominal [slave] value") = None
     actuation: doc(Literal[ACTUATIONS], '"servo" | "torque" | "muscle" (mujoco only).  "servo": position '
-                   "servos, defined per unit length, track the integrated command q2_ref: they hide the slave's "
-                   "inertia and the controller's dynamics model (the stiff inner loop does the work).  "
-                   '"torque": the controller\'s T2 acts on the body as ideal, instantaneous generalized forces: '
-                   'hides actuator dynamics and limits.  "muscle": two one-sided extensor groups per section '
+                   "servos, defined per unit length, track the integrated command q2_ref: they hide the "
+                   "slave's inertia and the controller's dynamics model (the stiff inner loop does the "
+                   'work).  "torque": the controller\'s T2 acts on the body as ideal, instantaneous '
+                   'generalized forces: hides actuator dynamics and limits.  "muscle": two one-sided '
+                   "extensor groups per section "
                    "(force >= 0, lengthening the fibres at +-muscle_radius) with first-order force dynamics "
                    "(muscle_time_constant) and limits (muscle_max_force): hides none of these; it cannot "
                    "realize every T2 (commands outside [0, F_max] are clipped) and lags by tau") = "servo"

@@ -414,10 +414,11 @@ class ChainMap:
         return out
 
     def muscle_commands(self, q2, T2) -> tuple[np.ndarray, int]:
-        """Muscle group commands (6,) for T2 at q2 and the number of saturated groups (``muscle_commands``)."""
+        """Muscle group commands (6,) for T2 at q2 and the number of saturated groups
+        (``muscle_commands``)."""
         out = np.empty(6)
-        n_sat = muscle_commands(np.asarray(q2, dtype=float), np.asarray(T2, dtype=float), self.muscle_radius,
-                                self.muscle_max_force, out)
+        n_sat = muscle_commands(np.asarray(q2, dtype=float), np.asarray(T2, dtype=float),
+                                self.muscle_radius, self.muscle_max_force, out)
         return out, int(n_sat)
 
     def elastic_correction(self, qpos_chain) -> np.ndarray:
@@ -461,5 +462,5 @@ class ChainMap:
 
 # kernels compiled by harness.loop.fast (numba) together with controllers/
 KERNELS = ("chain_joints_from_q2", "chain_joints_jacobian", "chain_joints_rate_add", "chain_q2_from_joints",
-           "chain_sense", "chain_force_from_T2", "muscle_commands", "chain_extension", "chain_elastic_correction",
-           "chain_elastic_energy")
+           "chain_sense", "chain_force_from_T2", "muscle_commands", "chain_extension",
+           "chain_elastic_correction", "chain_elastic_energy")

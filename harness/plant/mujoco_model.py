@@ -480,8 +480,8 @@ class MujocoPlant:
         """Build from the scenario's plant side (raises PlantModelError on bad MJCF or options, and
         when an environment object intersects the arm at the initial state)."""
         if scn.plant.actuation == "muscle":
-            # the plant side is complete (build_model, ChainMap.muscle_actuator_ids, chain_map.muscle_commands);
-            # the control loop does not write the muscle commands yet
+            # the plant side is complete (build_model, ChainMap.muscle_actuator_ids,
+            # chain_map.muscle_commands); the control loop does not write the muscle commands yet
             raise PlantModelError("plant.actuation = 'muscle': not run by the simulation loop yet (build the "
                                   "plant with harness.plant.mujoco_model.build_model)")
         m, cmap = build_model(scn.plant_master, scn.plant_slave, scn.plant, environment=scn.environment)
