@@ -221,3 +221,29 @@ def test_hold_converges_in_N(actuation):
     mode_lim = modes[-1] + (modes[-1] - modes[-2]) / (2 ** p_m - 1)
     assert np.linalg.norm(tips[-1] - tip_lim) < TIP_TOL
     assert abs(modes[-1] - mode_lim) < MODE_TOL * abs(mode_lim)
+
+
+def test_muscle_hold_by_stepping_mujoco():
+    """mj_step with the elastic correction at every step (as the loop does): from zero muscle force the
+    groups' forces rise as 1 - exp(-t / tau), and the arm settles onto the static hold found by Newton."""
+    h = Hold(4, "muscle")
+    h.solve()
+    tip_eq = h.tip()
+    m, cm = h.m, h.cm
+    d = mujoco.MjData(m)
+    cm.set_q2(d, Q2_HOLD)
+    d.ctrl[:] = h.ctrl
+    adr = m.actuator_actadr[cm.muscle_actuator_ids]
+    tau = np.repeat(PlantConfig().muscle_time_constant, 2)
+    dist = {}
+    for k in range(1, int(round(6.0 / m.opt.timestep)) + 1):
+        d.qfrc_applied[cm.chain_dof_adr] = cm.elastic_correction(cm.chain_qpos(d))
+        mujoco.mj_step(m, d)
+        if k == 50:
+            np.testing.assert_allclose(d.act[adr] / h.ctrl[cm.muscle_actuator_ids],
+                                       1 - np.exp(-50 * m.opt.timestep / tau), rtol=1e-9)
+        if k in (1000, 3000, 6000):
+            mujoco.mj_kinematics(m, d)
+            dist[k] = np.linalg.norm(cm.octarm_tip(m, d) - tip_eq)
+    assert dist[6000] < dist[3000] < dist[1000]
+    assert dist[6000] < 2e-3
