@@ -106,6 +106,37 @@ class Hold:
         return np.linalg.eigvals(A)
 
     def first_mode(self) -> float:
-        """Natural frequency |lambda| / (2 pi) (Hz) of the slowest mode."""
+        """|lambda| / (2 pi) (Hz) of the slowest mode: the natural frequency of the first bending mode
+        (a lightly damped pair under torque and muscle actuation; an overdamped real eigenvalue under the
+        critically damped servos, where this is its decay rate over 2 pi)."""
         lam = self.modes()
         return float(np.abs(lam).min() / (2 * np.pi))
+
+
+def step_map_modes(h: Hold, eps: float = 1e-6) -> np.ndarray:
+    """Continuous-time eigenvalues log(mu) / dt of the one-physics-step map of the chain at the hold (mu
+    its eigenvalues), linearized by centred finite differences through mj_step with the elastic
+    correction recomputed before the step, as the loop applies it (mjd_transitionFD would hold
+    qfrc_applied, and with it the correction, fixed)."""
+    m, cm = h.m, h.cm
+    d = mujoco.MjData(m)
+    n = h.q_eq.size
+    act0 = h.d.act.copy()
+
+    def step(x):
+        mujoco.mj_resetData(m, d)
+        d.qpos[h.qadr] = x[:n]
+        d.qvel[h.dof] = x[n:]
+        d.ctrl[:] = h.ctrl
+        d.act[:] = act0
+        d.qfrc_applied[h.dof] = cm.elastic_correction(x[:n]) + h.force
+        mujoco.mj_step(m, d)
+        return np.concatenate([d.qpos[h.qadr], d.qvel[h.dof]])
+
+    x0 = np.concatenate([h.q_eq, np.zeros(n)])
+    A = np.empty((2 * n, 2 * n))
+    for c in range(2 * n):
+        dx = np.zeros(2 * n)
+        dx[c] = eps
+        A[:, c] = (step(x0 + dx) - step(x0 - dx)) / (2 * eps)
+    return np.log(np.linalg.eigvals(A).astype(complex)) / m.opt.timestep

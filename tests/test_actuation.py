@@ -14,7 +14,7 @@ import math
 import mujoco
 import numpy as np
 import pytest
-from actuation_statics import Q2_HOLD, Hold, hold_T2
+from actuation_statics import Q2_HOLD, Hold, hold_T2, step_map_modes
 
 from controllers.params import MasterParams, SlaveParams
 from harness.config.errors import ConfigError
@@ -168,6 +168,19 @@ def test_hold_shape_is_within_the_muscle_range():
     n = muscle_commands(Q2_HOLD, hold_T2(SLAVE, Q2_HOLD), np.array(PlantConfig().muscle_radius),
                         np.array(PlantConfig().muscle_max_force), out)
     assert n == 0, out
+
+
+@pytest.mark.parametrize("actuation", ["servo", "torque", "muscle"])
+def test_modes_agree_with_the_mj_step_map(actuation):
+    """The slowest eigenvalue of the continuous linearization (the convergence test's first mode) and of
+    MuJoCo's one-step map (log(mu) / dt) agree to the first-order integrator's O(|lambda| dt)."""
+    h = Hold(4, actuation)
+    h.solve()
+    lc, ld = h.modes(), step_map_modes(h)
+    a, b = lc[np.argmin(np.abs(lc))], ld[np.argmin(np.abs(ld))]
+    dt = h.m.opt.timestep
+    assert abs(b - a) <= 2 * abs(a) * (abs(a) * dt)
+    assert np.max(lc.real) < 0 and np.max(ld.real) < 0  # the hold is stable
 
 
 # ------------------------------------------------------------------------------------------------
