@@ -260,3 +260,15 @@ def test_muscle_hold_by_stepping_mujoco():
             dist[k] = np.linalg.norm(cm.octarm_tip(m, d) - tip_eq)
     assert dist[6000] < dist[3000] < dist[1000]
     assert dist[6000] < 2e-3
+
+
+def test_muscle_plant_exports_and_reloads(tmp_path):
+    from harness.plant.mujoco_model import export_mjcf
+
+    path = export_mjcf(MasterParams(), SLAVE, PlantConfig(segments=3, actuation="muscle"), tmp_path / "m.xml")
+    m = mujoco.MjModel.from_xml_path(str(path))
+    assert m.ntendon == 6 and m.na == 6
+    ids = [m.actuator(f"octarm_s{i}_muscle_{t}").id for i in range(3) for t in ("pos", "neg")]
+    np.testing.assert_allclose(m.actuator_ctrlrange[ids, 0], 0.0)
+    np.testing.assert_allclose(m.actuator_ctrlrange[ids, 1], np.repeat(PlantConfig().muscle_max_force, 2))
+    assert np.all(m.actuator_dyntype[ids] == mujoco.mjtDyn.mjDYN_FILTEREXACT)

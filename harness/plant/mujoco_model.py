@@ -288,8 +288,6 @@ def _add_muscles(spec: mujoco.MjSpec, joint_names: list[str], plant: PlantConfig
 
 def _add_actuators(spec: mujoco.MjSpec, joint_names: list[str], actuation: str) -> list[str]:
     names = []
-    if actuation == "muscle":
-        return names
     for jn in joint_names:
         if actuation == "servo":
             a = spec.add_actuator(name=f"{jn}_servo", target=jn, trntype=mujoco.mjtTrn.mjTRN_JOINT)
@@ -373,8 +371,9 @@ def _build(master: MasterParams, slave: SlaveParams, plant: PlantConfig, scene=N
     _set_master(spec, master, scene)
     layout = chain_layout(N)
     joint_names, stiff, arm, tip_mass = _add_octarm(spec, slave, plant, N, layout, scene)
-    act_names = _add_actuators(spec, joint_names, plant.actuation)
-    muscle_names = _add_muscles(spec, joint_names, plant, layout, N) if plant.actuation == "muscle" else []
+    muscle = plant.actuation == "muscle"
+    act_names = (_add_muscles(spec, joint_names, plant, layout, N) if muscle
+                 else _add_actuators(spec, joint_names, plant.actuation))
     if plant.enforce_cc:
         _add_cc_equalities(spec, N)
     if environment is not None and environment.objects:
@@ -397,7 +396,7 @@ def _build(master: MasterParams, slave: SlaveParams, plant: PlantConfig, scene=N
         kp, kv = servo_gains(mass_u, N, layout, plant.servo_frequency, plant.servo_damping_ratio)
         for a_name, p, v in zip(act_names, kp, kv, strict=True):
             spec.actuator(a_name).set_to_position(kp=float(p), kv=float(v))
-    return spec, N, layout, joint_names, act_names + muscle_names, stiff, arm, tip_mass, kp, kv
+    return spec, N, layout, joint_names, act_names, stiff, arm, tip_mass, kp, kv
 
 
 def build_spec(master: MasterParams, slave: SlaveParams, plant: PlantConfig, *,
@@ -421,6 +420,8 @@ def build_model(master: MasterParams, slave: SlaveParams, plant: PlantConfig, *,
     spec, N, layout, joint_names, act_names, stiff, arm, tip_mass, kp, kv = _build(master, slave, plant,
                                                                                    scene_xml, environment)
     m = _compile(spec, "the plant model")
+    act_ids = [m.actuator(n).id for n in act_names]
+    muscle = plant.actuation == "muscle"
     Ke = np.asarray(slave.extension_stiffness)
     shape_w = np.where(layout["is_hinge"] == 0, stiff, 0.0)
 
@@ -439,8 +440,8 @@ def build_model(master: MasterParams, slave: SlaveParams, plant: PlantConfig, *,
                                 np.int64),
         chain_qpos_adr=_ro(m.jnt_qposadr[chain_j], np.int64),
         chain_dof_adr=_ro(m.jnt_dofadr[chain_j], np.int64),
-        chain_actuator_ids=_ro([m.actuator(n).id for n in act_names if "_muscle_" not in n], np.int64),
-        muscle_actuator_ids=_ro([m.actuator(n).id for n in act_names if "_muscle_" in n], np.int64),
+        chain_actuator_ids=_ro([] if muscle else act_ids, np.int64),
+        muscle_actuator_ids=_ro(act_ids if muscle else [], np.int64),
         muscle_radius=_ro(plant.muscle_radius),
         muscle_max_force=_ro(plant.muscle_max_force),
         master_site_id=int(m.site("master_tip_site").id),
