@@ -186,7 +186,7 @@ def test_a_bad_overlap_switch_is_an_input_error(monkeypatch, tmp_path, capsys):
 
 
 def _warning_scenario() -> Scenario:
-    plant = PlantConfig(integrator="euler", servo_frequency=160.0, enforce_cc=True,
+    plant = PlantConfig(integrator="euler", servo_frequency=40.0, enforce_cc=True,
                         bending_viscosity=(0.0,) * 3, extension_viscosity=(0.0,) * 3)
     return Scenario(duration=0.3, plant=plant)
 
