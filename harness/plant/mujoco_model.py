@@ -47,30 +47,21 @@ the rod's material damping (``plant.bending_viscosity`` eta_b -> hinge eta_b / h
 ``plant.extension_viscosity`` eta_a -> slide eta_a / h, h the segment length) is MuJoCo joint damping
 (``chain_params.joint_damping``, integrated implicitly; exact at rest length on the manifold).
 
-Actuation, every kind defined per unit length of the section (a distributed actuator, so the chain has
-a continuum limit as N grows):
-
-* ``servo``: a position actuator per chain joint (force kp (ctrl - q) - kv qdot, ctrl = the joint
-  target, e.g. ``joints_from_q2``) with section-level gains distributed like the rod's springs
-  (``chain_params.servo_gains``): each CC coordinate u = [e_i, Theta_i] of a section, moved alone, is a
-  servo of natural frequency f = ``servo_frequency`` and damping ratio zeta against its section-level
-  inertia diag(C^T M C) at the straight rest configuration; hinges kp = N K_Theta_i, slides the
-  ``slide_pattern`` of K_e (the N servos of a section in series give K_u).  Velocity tracking: fold
-  (kv / kp) qdot_ref into the target.
-* ``torque``: a motor per chain joint (gear 1) driven with the virtual-work map ``chain_force_from_T2``
-  (every hinge of a section the same torque, every interior slide the same force: distributed).
-* ``muscle``: per section two one-sided groups of extensor muscles at lateral offsets s = +r and -r
-  (``plant.muscle_radius``) in the arm's plane, an antagonistic pair.  Each is a MuJoCo fixed tendon
-  ``octarm_s{i}_muscle_{pos,neg}_tendon`` of length sum(slides of the section) - s sum(hinges of the
-  section), the chain form of the CC fibre length d_i (1 - s k_i) = d_i - s Theta_i (half-rod
-  coefficients: ``chain_params.muscle_tendon_coefs``), driven by a ``general`` actuator
-  ``octarm_s{i}_muscle_{pos,neg}``: dyntype filterexact (act' = (ctrl - act) / tau,
-  ``plant.muscle_time_constant``), gain 1, no bias, ctrllimited to [0, F_max] (``plant.muscle_max_force``):
-  a force act >= 0 that lengthens its fibre, applied by MuJoCo through the tendon (virtual work: every
-  segment of the section feels the same fibre force).  Extensors, because the OctArm's McKibben
-  muscles are extensors (they lengthen under pressure) and the sections here live in [L0,
-  max_extension L0], which needs a net extending force against the extension stiffness; a contractile
-  (pulling) group could only hold d <= L0.  Commands: ``chain_map.muscle_commands``.
+Actuation, each defined per unit length of the section (so the chain has a continuum limit in N):
+``servo``: a position actuator per chain joint (force kp (ctrl - q) - kv qdot, ctrl = the joint target,
+e.g. ``joints_from_q2``; fold (kv / kp) qdot_ref into it for velocity tracking), gains from
+``chain_params.servo_gains``: each section's CC coordinate (e_i, Theta_i), moved alone, is a servo of
+``servo_frequency`` and ``servo_damping_ratio`` against its inertia diag(C^T M C) at the straight rest
+configuration, spread over the joints like the springs.  ``torque``: a motor per chain joint (gear 1),
+driven by the virtual-work map ``chain_force_from_T2``.  ``muscle``: per section two one-sided groups of
+extensor muscles at lateral offsets s = +r, -r (``plant.muscle_radius``), each a fixed tendon
+``octarm_s{i}_muscle_{pos,neg}_tendon`` of length sum(section slides) - s sum(section hinges), the
+chain's CC fibre length d_i - s Theta_i (``chain_params.muscle_tendon_coefs``), driven by a ``general``
+actuator ``octarm_s{i}_muscle_{pos,neg}``: filterexact dynamics (tau = ``plant.muscle_time_constant``),
+gain 1, no bias, ctrlrange [0, F_max] (``plant.muscle_max_force``): a force >= 0 lengthening its fibre.
+Extensors: the OctArm's McKibben muscles lengthen under pressure, and sections in [L0, max_extension
+L0] need a net extending force (pulling-only groups could hold only d <= L0).  Commands:
+``chain_map.muscle_commands``.
 Master: two motors.  Armature: ``armature_fraction`` times the section inertia scale on every chain
 joint, plus one segment mass on the tip slide (see ``chain_params.joint_armature``), a modelled mismatch of
 relative size ~ fraction / (6 N) in M2.
@@ -350,9 +341,8 @@ def _validate_plant(plant: PlantConfig) -> int:
         if not (np.isfinite(v) and v > 0):
             raise PlantModelError(f"plant.{f} = {v!r}: must be finite and > 0")
     for f in ("muscle_time_constant", "muscle_max_force", "muscle_radius"):
-        v = np.asarray(getattr(plant, f), dtype=float)
-        if v.shape != (3,) or not np.all(np.isfinite(v) & (v > 0)):
-            raise PlantModelError(f"plant.{f} = {getattr(plant, f)!r}: must be 3 finite numbers > 0")
+        if np.shape(v := getattr(plant, f)) != (3,) or not np.all(np.isfinite(v) & (np.asarray(v) > 0)):
+            raise PlantModelError(f"plant.{f} = {v!r}: must be 3 finite numbers > 0")
     if not (np.isfinite(plant.armature_fraction) and plant.armature_fraction >= 0):
         raise PlantModelError(f"plant.armature_fraction = {plant.armature_fraction!r}: must be >= 0")
     return N
@@ -480,9 +470,7 @@ class MujocoPlant:
     def build(cls, scn: Scenario) -> MujocoPlant:
         """Build from the scenario's plant side (raises PlantModelError on bad MJCF or options, and
         when an environment object intersects the arm at the initial state)."""
-        if scn.plant.actuation == "muscle":
-            # the plant side is complete (build_model, ChainMap.muscle_actuator_ids,
-            # chain_map.muscle_commands); the control loop does not write the muscle commands yet
+        if scn.plant.actuation == "muscle":  # the loop does not write chain_map.muscle_commands yet
             raise PlantModelError("plant.actuation = 'muscle': not run by the simulation loop yet (build the "
                                   "plant with harness.plant.mujoco_model.build_model)")
         m, cmap = build_model(scn.plant_master, scn.plant_slave, scn.plant, environment=scn.environment)
