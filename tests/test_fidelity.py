@@ -118,9 +118,10 @@ def test_observed_orders():
 def test_constant_curvature_enforced_vs_free_chain():
     """cc_study: held under gravity, the constrained chain stays on the CC manifold (soft equalities:
     well under a millimetre at the tip, under a milliradian per hinge); the free chain bends away
-    from it (gravity loads the segments of a section unequally) by an order of magnitude more, and,
-    without material damping, its closed loop under the paper's gains diverges (README, stability map)
-    while the constrained one runs."""
+    from it (gravity loads the segments of a section unequally) several times more.  Even
+    without material damping both closed loops run under the paper's gains: the servos' damping,
+    distributed over the segments like the rod's (kv / kp = 2 zeta / w on every joint), damps the free
+    chain's non-CC modes."""
     undamped = PlantConfig(bending_viscosity=(0.0,) * 3, extension_viscosity=(0.0,) * 3)
     rows = fid.cc_study(Ns=(4, 8), n_samples=2, seed=0, settle_steps=1000, loop_duration=0.4, plant=undamped)
     by = {(r["N"], r["enforce_cc"]): r for r in rows}
@@ -128,9 +129,11 @@ def test_constant_curvature_enforced_vs_free_chain():
     for N in (4, 8):
         on, off = by[(N, True)], by[(N, False)]
         assert 0 < on["tip_dev_mm"] < 0.5 and 0 < on["hinge_dev_mrad"] < 1.0, on
-        assert off["tip_dev_mm"] > 10 * on["tip_dev_mm"] and off["hinge_dev_mrad"] > 10 * on["hinge_dev_mrad"]
+        # servo gains per unit length hold the free chain's non-CC shapes stiffer than per-joint gains
+        # did: measured tip ratio 26 (N = 4) and 8.9 (N = 8), hinge ratios larger
+        assert off["tip_dev_mm"] > 5 * on["tip_dev_mm"] and off["hinge_dev_mrad"] > 10 * on["hinge_dev_mrad"]
         assert off["tip_dev_mm"] > 1.0, off  # millimetres: a real, measurable mismatch
-        assert on["closed_loop"] == "ok" and off["closed_loop"].startswith("diverged at t = "), (on, off)
+        assert on["closed_loop"] == "ok" and off["closed_loop"] == "ok", (on, off)
         assert on["us_per_step"] > 0 and off["us_per_step"] > 0
     md = fid.cc_markdown(rows, 2, 1000, 0.4)
     assert md.count("\n| 4 |") == 2 and "| 8 | no |" in md

@@ -203,19 +203,34 @@ def test_inertials_and_springs_follow_params():
         assert i[0] > 0 and i[0] + i[1] >= i[2] * (1 - 1e-12)
 
 
-def test_servo_gains_from_joint_inertia():
-    plant = PlantConfig(segments=3, actuation="servo", servo_frequency=15.0, servo_damping_ratio=0.8)
-    m, cm = pm.build_model(MASTER, SLAVE, plant)
-    d = mujoco.MjData(m)
-    mujoco.mj_forward(m, d)
-    M = np.zeros((m.nv, m.nv))
-    mujoco.mj_fullM(m, d, M)
-    w = 2 * np.pi * 15.0
-    Mjj = np.diag(M)[cm.chain_dof_adr]
-    ids = np.asarray(cm.chain_actuator_ids)
-    np.testing.assert_allclose(m.actuator_gainprm[ids, 0], Mjj * w * w, rtol=1e-12)
-    np.testing.assert_allclose(m.actuator_biasprm[ids, 1], -Mjj * w * w, rtol=1e-12)
-    np.testing.assert_allclose(m.actuator_biasprm[ids, 2], -2 * 0.8 * w * Mjj, rtol=1e-12)
+def test_servo_gains_per_unit_length_of_the_section():
+    """Each section's bend Theta_i, moved alone at the straight rest configuration (hinges Theta_i / N),
+    is a servo of natural frequency f and damping ratio zeta against its inertia c^T M c (MuJoCo's M);
+    the interior slides get N times the section-level extension gain (rods of length L0 / N)."""
+    f, zeta = 15.0, 0.8
+    for N in (3, 6):
+        plant = PlantConfig(segments=N, actuation="servo", servo_frequency=f, servo_damping_ratio=zeta)
+        m, cm = pm.build_model(MASTER, SLAVE, plant)
+        d = mujoco.MjData(m)
+        mujoco.mj_forward(m, d)
+        M = np.zeros((m.nv, m.nv))
+        mujoco.mj_fullM(m, d, M)
+        dof = np.asarray(cm.chain_dof_adr)
+        Mc = M[np.ix_(dof, dof)]
+        w = 2 * np.pi * f
+        ids = np.asarray(cm.chain_actuator_ids)
+        kp = m.actuator_gainprm[ids, 0]
+        np.testing.assert_allclose(m.actuator_biasprm[ids, 1], -kp, rtol=1e-12)
+        kv = -m.actuator_biasprm[ids, 2]
+        C = np.asarray(cm.C)
+        for i in range(3):
+            c = C[:, 3 + i]
+            mu = c @ Mc @ c
+            assert (c * kp) @ c == pytest.approx(mu * w * w, rel=1e-12)
+            assert (c * kv) @ c == pytest.approx(2 * zeta * w * mu, rel=1e-12)
+            ce = C[:, i]
+            interior = (cm.section == i) & (cm.is_hinge == 0) & (cm.segment >= 1) & (cm.segment < N)
+            np.testing.assert_allclose(kp[interior], N * (ce @ Mc @ ce) * w * w, rtol=1e-12)
 
 
 def test_master_params_are_written():

@@ -32,13 +32,11 @@ def _rerun_verify(path: Path) -> subprocess.CompletedProcess:
 
 
 def test_diverging_mujoco_run_keeps_everything(tmp_path):
-    """The free chain WITHOUT material damping under the paper's gains diverges (README, stability map):
-    the CLI stops, says when and why, exits 1, and still writes a valid recording, metrics and figures
-    of what was computed."""
+    """A sign error in the coordination feedback (18) (`faults.e2_sign = -1`) diverges on the default
+    plant (finding faults_are_caught): the CLI stops, says when and why, exits 1, and still writes a
+    valid recording, metrics and figures of what was computed."""
     out = tmp_path / "div"
-    res = subprocess.run([*TELEOP, "run", "--set", "plant.enforce_cc=false", "--set",
-                          "plant.bending_viscosity=[0,0,0]", "--set", "plant.extension_viscosity=[0,0,0]",
-                          "--duration", "2",
+    res = subprocess.run([*TELEOP, "run", "--set", "faults.e2_sign=-1", "--duration", "2",
                           "--no-progress", "--out", str(out)], capture_output=True, text=True, cwd=ROOT,
                          timeout=600)
     assert res.returncode == 1, res.stderr
@@ -53,7 +51,8 @@ def test_diverging_mujoco_run_keeps_everything(tmp_path):
 
 
 def test_mujoco_warning_stops_the_run_at_the_step_that_raised_it():
-    """An explicit integrator with stiff servos (euler, 160 Hz: h kv / M > 2) makes MuJoCo raise
+    """An explicit integrator with stiff servos (euler, 40 Hz: h kv / M > 2 on the light distal joints,
+    whose servo gains are set per unit length of the section) makes MuJoCo raise
     mjWARN_BADQACC within a few ms.  The compiled loop checks MuJoCo's warning counters after every
     mj_step: the run stops at that step (not at the end of a 1000-step chunk), the message names the
     warning and MuJoCo's own text, and the rows up to it are finite."""
@@ -62,7 +61,7 @@ def test_mujoco_warning_stops_the_run_at_the_step_that_raised_it():
     # the CC chain without material damping (with it, euler's explicit damping blows the state up
     # before MuJoCo's acceleration check fires: a divergence, but not this test's warning)
     scn = Scenario(duration=2.0,
-                   plant=PlantConfig(integrator="euler", servo_frequency=160.0, enforce_cc=True,
+                   plant=PlantConfig(integrator="euler", servo_frequency=40.0, enforce_cc=True,
                                      bending_viscosity=(0.0,) * 3, extension_viscosity=(0.0,) * 3))
     tr = simulate_mujoco(scn)
     assert tr.status == "diverged", tr.message
@@ -72,7 +71,7 @@ def test_mujoco_warning_stops_the_run_at_the_step_that_raised_it():
     assert 1 <= len(tr) < 50  # stopped at the warning, well inside the first compiled chunk
     assert np.all(np.isfinite(tr.q2[:-1])) and np.all(np.isfinite(tr.e2[:-1]))
     # the same model with the implicit integrator (the default) runs through: the warning was real
-    ok = simulate_mujoco(Scenario(duration=0.2, plant=PlantConfig(servo_frequency=160.0)))
+    ok = simulate_mujoco(Scenario(duration=0.2, plant=PlantConfig(servo_frequency=40.0)))
     assert ok.status == "ok" and ok.meta["mujoco_warnings"] == 0
 
 

@@ -89,8 +89,12 @@ def _add_scenario_options(p: argparse.ArgumentParser, *, sim: bool = True) -> No
                             "Shortcut for --set plant.kind=... "
                             "Default: from the scenario (paper: mujoco).")
     p.add_argument("--actuation", choices=ACTUATIONS, default=None,
-                   help="MuJoCo slave actuation: 'servo' (segment-joint position servos) or 'torque' "
-                        "(generalized forces mapped to joint torques). "
+                   help="MuJoCo slave actuation, each defined per unit length of a section: 'servo' "
+                        "(position servos tracking the integrated command; hides the slave's inertia and the "
+                        "controller's dynamics model), 'torque' (the controller's T2 as ideal generalized "
+                        "forces; hides actuator dynamics and limits) or 'muscle' (two one-sided extensor "
+                        "groups per section, force lag tau and limit F_max: pushes only, clips commands "
+                        "outside [0, F_max], lags by tau; plant.muscle_* fields). "
                         "Shortcut for --set plant.actuation=... "
                         "Default: from the scenario (paper: servo).")
     p.add_argument("--segments", metavar="N", default=None,

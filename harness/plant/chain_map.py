@@ -129,6 +129,43 @@ def chain_force_from_T2(q2, T2, R, out):
         out[c] = acc
 
 
+def muscle_commands(q2, T2, radius, max_force, out):
+    """Force commands of the antagonistic muscle groups that realize T2 on the CC model; returns how many
+    of the 6 commands lie outside [0, F_max] (MuJoCo clips those: saturated groups).
+
+    q2 (6,) = [d (m), k (1/m)], normally the sensed q2; T2 (6,) = [F_d1..3 (N), M_k1..3 (N m^2)], the
+    generalized forces of the controller (paper (17)); radius (3,) = r_i (m), the lateral offsets of
+    the groups; max_force (3,) = F_max,i (N); out (6,) = [p+_1, p-_1, p+_2, p-_2, p+_3, p-_3] (N), the
+    group at s = +r then the one at s = -r of each section (the order of ChainMap.muscle_actuator_ids).
+
+    A group at offset s pushes along a fibre of length l_s = d (1 - s k) (extensor: force p >= 0
+    lengthens it), so its generalized force on (d_i, k_i) is p (dl_s/dd, dl_s/dk) = p (1 - s k, -s d).
+    The pair realizes [F_d, M_k] when A p = T with A = [[1 - r k, 1 + r k], [-r d, r d]], det A = 2 r d:
+      p+ = F_d / 2 - (1 + r k) M_k / (2 r d),    p- = F_d / 2 + (1 - r k) M_k / (2 r d).
+    The commands are written unclipped: the muscle actuators are ctrllimited to [0, F_max], so MuJoCo
+    clips them (a group cannot pull, nor push past F_max), and each section's actuator state follows
+    the clipped command with the time constant tau.  What the loop must do at each control step, with
+    the same sensed q2 and T2 as the torque mode's ``chain_force_from_T2``:
+      n_sat = muscle_commands(q2s, T2, radius, max_force, out);  ctrl[muscle_actuator_ids] = out
+    (held over the control period; n_sat, summed over the run, counts saturated group-steps).
+    """
+    n_sat = 0
+    for i in range(3):
+        d = q2[i]
+        k = q2[3 + i]
+        r = radius[i]
+        m = T2[3 + i] / (2.0 * r * d)
+        pp = 0.5 * T2[i] - (1.0 + r * k) * m
+        pm = 0.5 * T2[i] + (1.0 - r * k) * m
+        out[2 * i] = pp
+        out[2 * i + 1] = pm
+        if pp < 0.0 or pp > max_force[i]:
+            n_sat += 1
+        if pm < 0.0 or pm > max_force[i]:
+            n_sat += 1
+    return n_sat
+
+
 def chain_extension(qpos_chain, R, section, is_hinge, e, sq):
     """Section extensions e (3,) = R[:3] qpos_chain (m) and, per section, the sum of its squared hinge
     angles sq (3,) (rad^2): what the chain's elastic energy and its gradient are built from."""
@@ -285,7 +322,10 @@ class ChainMap:
     n_segments: N, segments per section; n_chain = 6 N + 1 chain joints.
     master_qpos_adr, master_dof_adr (2,): shoulder, elbow.  master_actuator_ids (2,).
     chain_qpos_adr, chain_dof_adr (n_chain,): chain joints in MuJoCo order (per segment slide, hinge;
-        tip slide last).  chain_actuator_ids (n_chain,): the servo/motor of each chain joint.
+        tip slide last).  chain_actuator_ids (n_chain,): the servo/motor of each chain joint (empty for
+        muscle actuation).
+    muscle_actuator_ids (6,): the muscle groups [s1 +r, s1 -r, s2 +r, ...] (``muscle_commands`` order;
+        empty unless muscle actuation); muscle_radius, muscle_max_force (3,): r (m), F_max (N).
     master_site_id, tip_site_id: ``master_tip_site``, ``octarm_tip_site``.
     master_base_pos, octarm_base_pos (3,): world positions of the bases (task space origin).
     C (n_chain, 6), R (6, n_chain), L0 (3,): joints = C [d - L0, k d];  [d - L0, k d] = R joints.
@@ -305,6 +345,9 @@ class ChainMap:
     chain_qpos_adr: np.ndarray
     chain_dof_adr: np.ndarray
     chain_actuator_ids: np.ndarray
+    muscle_actuator_ids: np.ndarray
+    muscle_radius: np.ndarray
+    muscle_max_force: np.ndarray
     master_site_id: int
     tip_site_id: int
     master_base_pos: np.ndarray
@@ -366,6 +409,14 @@ class ChainMap:
         chain_force_from_T2(np.asarray(q2, dtype=float), np.asarray(T2, dtype=float), self.R, out)
         return out
 
+    def muscle_commands(self, q2, T2) -> tuple[np.ndarray, int]:
+        """Muscle group commands (6,) for T2 at q2 and the number of saturated groups
+        (``muscle_commands``)."""
+        out = np.empty(6)
+        n_sat = muscle_commands(np.asarray(q2, dtype=float), np.asarray(T2, dtype=float),
+                                self.muscle_radius, self.muscle_max_force, out)
+        return out, int(n_sat)
+
     def elastic_correction(self, qpos_chain) -> np.ndarray:
         """Force (n_chain,) to add to MuJoCo's springs (see ``chain_elastic_correction``)."""
         out = np.empty(self.n_chain)
@@ -407,5 +458,5 @@ class ChainMap:
 
 # kernels compiled by harness.loop.fast (numba) together with controllers/
 KERNELS = ("chain_joints_from_q2", "chain_joints_jacobian", "chain_joints_rate_add", "chain_q2_from_joints",
-           "chain_sense", "chain_force_from_T2", "chain_extension", "chain_elastic_correction",
-           "chain_elastic_energy")
+           "chain_sense", "chain_force_from_T2", "muscle_commands", "chain_extension",
+           "chain_elastic_correction", "chain_elastic_energy")

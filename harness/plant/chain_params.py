@@ -144,3 +144,61 @@ def joint_armature(slave: SlaveParams, N: int, layout: dict, fraction: float) ->
         a[c] = fraction * (m[i] * L0[i] ** 2 / 3.0 if layout["is_hinge"][c] else m[i])
     a[-1] += TIP_SLIDE_ARMATURE * m[2] / N
     return a
+
+
+def servo_gains(mass_u: np.ndarray, N: int, layout: dict, frequency: float,
+                damping_ratio: float) -> tuple[np.ndarray, np.ndarray]:
+    """Position-servo gains per chain joint (kp in N m/rad or N/m, kv in N m s/rad or N s/m), defined
+    per unit length of the section so that the N servos of a section in series are N-independent.
+
+    mass_u (6,): the section-level inertias of the CC coordinates u = [e_1..3 (kg), Theta_1..3
+    (kg m^2)], the diagonal of C^T M C with M the chain's joint-space inertia at the straight rest
+    configuration (armature included).  Section-level servo stiffness K_u = mass_u w^2 and damping
+    D_u = 2 zeta w mass_u (w = 2 pi frequency): one CC coordinate moved alone (the others held) is a
+    servo of natural frequency ``frequency`` and damping ratio ``damping_ratio``.  Distributed like the
+    rod's own springs (`joint_stiffness`): every hinge of section i gets N K_Theta_i (N hinges in
+    series give K_Theta_i for the section bend), the slides `slide_pattern` of K_e (N K_e_i inside a
+    section, 2N K_e for the base and tip half rods, the two half rods in series at a boundary).  kv /
+    kp = 2 zeta / w on every joint, so the fast local (non-CC) modes are overdamped and stable under
+    implicit damping whatever their stiffness.
+    """
+    w = 2.0 * np.pi * float(frequency)
+    mu = np.asarray(mass_u, dtype=float)
+    kp_u, kv_u = mu * w * w, 2.0 * float(damping_ratio) * w * mu
+    kp = hinge_values(N * kp_u[3:], layout) + slide_pattern(kp_u[:3], N, layout)
+    kv = hinge_values(N * kv_u[3:], layout) + slide_pattern(kv_u[:3], N, layout)
+    return kp, kv
+
+
+MUSCLE_SIDES = (1.0, -1.0)  # lateral offset signs of a section's two groups: s = +r (body +x), s = -r
+
+
+def muscle_tendon_coefs(N: int, layout: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Fixed-tendon coefficients of the muscle fibres of each section: (slide_coef, hinge_sign), each
+    (3, n_chain).  The fibre of section i at lateral offset s (m, along the body x axis, in the arm's
+    plane) has length  l = sum_c slide_coef[i, c] q_c - s * sum_c hinge_sign[i, c] q_c  (+ a constant),
+    the chain form of the CC fibre length l_s = d_i (1 - s k_i) = d_i - s Theta_i: a positive hinge
+    angle bends the section toward +x and shortens the fibres on that side.
+
+    Slides: 1 for the slides inside a section (j >= 1), 1 for the base half rod (slide (0, 0), all of it
+    in section 0) and the tip half rod (the tip slide, in section 2); a boundary slide (i, 0), i >= 1,
+    is the rod between the midpoints of the last segment of section i-1 and the first of section i:
+    half of it lies in each section, so it counts 1/2 in both fibres.  On the CC manifold the fibre
+    length is then d_i - s Theta_i + (e_{i+1} - e_i) / (4N) [i < 2] + (e_{i-1} - e_i) / (4N) [i > 0]
+    (e = d - L0): exact when neighbouring sections extend equally, O(1/N) otherwise (a discretization
+    error that vanishes as N grows).  Hinges: 1 on the hinges of section i (Theta_i = their sum).
+    """
+    C = layout["C"]
+    n = C.shape[0]
+    slide = np.zeros((3, n))
+    hinge = np.zeros((3, n))
+    for c in range(n):
+        i, j = int(layout["section"][c]), int(layout["segment"][c])
+        if layout["is_hinge"][c]:
+            hinge[i, c] = 1.0
+        elif j == 0 and i >= 1:
+            slide[i - 1, c] = 0.5
+            slide[i, c] = 0.5
+        else:
+            slide[i, c] = 1.0
+    return slide, hinge

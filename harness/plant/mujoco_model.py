@@ -47,10 +47,21 @@ the rod's material damping (``plant.bending_viscosity`` eta_b -> hinge eta_b / h
 ``plant.extension_viscosity`` eta_a -> slide eta_a / h, h the segment length) is MuJoCo joint damping
 (``chain_params.joint_damping``, integrated implicitly; exact at rest length on the manifold).
 
-Actuation: ``servo`` = a position actuator per chain joint (force kp (ctrl - q) - kv qdot, ctrl = the
-joint target, e.g. ``joints_from_q2``), kp = M_jj (2 pi f)^2, kv = 2 zeta (2 pi f) M_jj with M_jj the
-diagonal of the joint-space inertia (armature included) at the straight rest configuration; add
-kv qdot_ref through qfrc_applied for velocity tracking.  ``torque`` = a motor per chain joint (gear 1).
+Actuation, each defined per unit length of the section (so the chain has a continuum limit in N):
+``servo``: a position actuator per chain joint (force kp (ctrl - q) - kv qdot, ctrl = the joint target,
+e.g. ``joints_from_q2``; fold (kv / kp) qdot_ref into it for velocity tracking), gains from
+``chain_params.servo_gains``: each section's CC coordinate (e_i, Theta_i), moved alone, is a servo of
+``servo_frequency`` and ``servo_damping_ratio`` against its inertia diag(C^T M C) at the straight rest
+configuration, spread over the joints like the springs.  ``torque``: a motor per chain joint (gear 1),
+driven by the virtual-work map ``chain_force_from_T2``.  ``muscle``: per section two one-sided groups of
+extensor muscles at lateral offsets s = +r, -r (``plant.muscle_radius``), each a fixed tendon
+``octarm_s{i}_muscle_{pos,neg}_tendon`` of length sum(section slides) - s sum(section hinges), the
+chain's CC fibre length d_i - s Theta_i (``chain_params.muscle_tendon_coefs``), driven by a ``general``
+actuator ``octarm_s{i}_muscle_{pos,neg}``: filterexact dynamics (tau = ``plant.muscle_time_constant``),
+gain 1, no bias, ctrlrange [0, F_max] (``plant.muscle_max_force``): a force >= 0 lengthening its fibre.
+Extensors: the OctArm's McKibben muscles lengthen under pressure, and sections in [L0, max_extension
+L0] need a net extending force (pulling-only groups could hold only d <= L0).  Commands:
+``chain_map.muscle_commands``.
 Master: two motors.  Armature: ``armature_fraction`` times the section inertia scale on every chain
 joint, plus one segment mass on the tip slide (see ``chain_params.joint_armature``), a modelled mismatch of
 relative size ~ fraction / (6 N) in M2.
@@ -86,11 +97,14 @@ from harness.config.scenario import ACTUATIONS, PlantConfig, Scenario
 from harness.config.textio import atomic_path
 from harness.plant.chain_map import ChainMap, _ro, chain_layout
 from harness.plant.chain_params import (
+    MUSCLE_SIDES,
     TIP_MASS_FRACTION,
     joint_armature,
     joint_damping,
     joint_stiffness,
+    muscle_tendon_coefs,
     segment_inertias,
+    servo_gains,
 )
 from harness.plant.environment import ContactMap, add_environment, clearance, contact_map
 from harness.plant.initial import InitialStateError, initial_state
@@ -237,6 +251,32 @@ def _add_octarm(spec: mujoco.MjSpec, slave: SlaveParams, plant: PlantConfig, N: 
     return joint_names, stiff, arm, tip_mass
 
 
+def _add_muscles(spec: mujoco.MjSpec, joint_names: list[str], plant: PlantConfig, layout: dict,
+                 N: int) -> list[str]:
+    """Two one-sided muscle groups per section on fixed tendons (see the module docstring, Actuation)."""
+    slide, hinge = muscle_tendon_coefs(N, layout)
+    names = []
+    for i in range(3):
+        r = float(plant.muscle_radius[i])
+        for side, tag in zip(MUSCLE_SIDES, ("pos", "neg"), strict=True):
+            t = spec.add_tendon(name=f"octarm_s{i}_muscle_{tag}_tendon")
+            for c, jn in enumerate(joint_names):
+                cf = slide[i, c] - side * r * hinge[i, c]
+                if cf != 0.0:
+                    t.wrap_joint(jn, float(cf))
+            a = spec.add_actuator(name=f"octarm_s{i}_muscle_{tag}", target=t.name,
+                                  trntype=mujoco.mjtTrn.mjTRN_TENDON)
+            a.dyntype = mujoco.mjtDyn.mjDYN_FILTEREXACT
+            a.dynprm[0] = float(plant.muscle_time_constant[i])
+            a.gaintype = mujoco.mjtGain.mjGAIN_FIXED
+            a.gainprm[0] = 1.0
+            a.biastype = mujoco.mjtBias.mjBIAS_NONE
+            a.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+            a.ctrlrange = [0.0, float(plant.muscle_max_force[i])]
+            names.append(a.name)
+    return names
+
+
 def _add_actuators(spec: mujoco.MjSpec, joint_names: list[str], actuation: str) -> list[str]:
     names = []
     for jn in joint_names:
@@ -300,6 +340,9 @@ def _validate_plant(plant: PlantConfig) -> int:
         v = getattr(plant, f)
         if not (np.isfinite(v) and v > 0):
             raise PlantModelError(f"plant.{f} = {v!r}: must be finite and > 0")
+    for f in ("muscle_time_constant", "muscle_max_force", "muscle_radius"):
+        if np.shape(v := getattr(plant, f)) != (3,) or not np.all(np.isfinite(v) & (np.asarray(v) > 0)):
+            raise PlantModelError(f"plant.{f} = {v!r}: must be 3 finite numbers > 0")
     if not (np.isfinite(plant.armature_fraction) and plant.armature_fraction >= 0):
         raise PlantModelError(f"plant.armature_fraction = {plant.armature_fraction!r}: must be >= 0")
     return N
@@ -318,7 +361,9 @@ def _build(master: MasterParams, slave: SlaveParams, plant: PlantConfig, scene=N
     _set_master(spec, master, scene)
     layout = chain_layout(N)
     joint_names, stiff, arm, tip_mass = _add_octarm(spec, slave, plant, N, layout, scene)
-    act_names = _add_actuators(spec, joint_names, plant.actuation)
+    muscle = plant.actuation == "muscle"
+    act_names = (_add_muscles(spec, joint_names, plant, layout, N) if muscle
+                 else _add_actuators(spec, joint_names, plant.actuation))
     if plant.enforce_cc:
         _add_cc_equalities(spec, N)
     if environment is not None and environment.objects:
@@ -336,10 +381,9 @@ def _build(master: MasterParams, slave: SlaveParams, plant: PlantConfig, scene=N
         M = np.zeros((m.nv, m.nv))
         mujoco.mj_fullM(m, d, M)
         dof = np.array([m.jnt_dofadr[m.joint(n).id] for n in joint_names])
-        w = 2.0 * np.pi * plant.servo_frequency
-        Mjj = np.diag(M)[dof]
-        kp = Mjj * w * w
-        kv = 2.0 * plant.servo_damping_ratio * w * Mjj
+        C = layout["C"]
+        mass_u = np.einsum("ra,rs,sa->a", C, M[np.ix_(dof, dof)], C)  # diag(C^T M C)
+        kp, kv = servo_gains(mass_u, N, layout, plant.servo_frequency, plant.servo_damping_ratio)
         for a_name, p, v in zip(act_names, kp, kv, strict=True):
             spec.actuator(a_name).set_to_position(kp=float(p), kv=float(v))
     return spec, N, layout, joint_names, act_names, stiff, arm, tip_mass, kp, kv
@@ -366,6 +410,8 @@ def build_model(master: MasterParams, slave: SlaveParams, plant: PlantConfig, *,
     spec, N, layout, joint_names, act_names, stiff, arm, tip_mass, kp, kv = _build(master, slave, plant,
                                                                                    scene_xml, environment)
     m = _compile(spec, "the plant model")
+    act_ids = [m.actuator(n).id for n in act_names]
+    muscle = plant.actuation == "muscle"
     Ke = np.asarray(slave.extension_stiffness)
     shape_w = np.where(layout["is_hinge"] == 0, stiff, 0.0)
 
@@ -384,7 +430,10 @@ def build_model(master: MasterParams, slave: SlaveParams, plant: PlantConfig, *,
                                 np.int64),
         chain_qpos_adr=_ro(m.jnt_qposadr[chain_j], np.int64),
         chain_dof_adr=_ro(m.jnt_dofadr[chain_j], np.int64),
-        chain_actuator_ids=_ro([m.actuator(n).id for n in act_names], np.int64),
+        chain_actuator_ids=_ro([] if muscle else act_ids, np.int64),
+        muscle_actuator_ids=_ro(act_ids if muscle else [], np.int64),
+        muscle_radius=_ro(plant.muscle_radius),
+        muscle_max_force=_ro(plant.muscle_max_force),
         master_site_id=int(m.site("master_tip_site").id),
         tip_site_id=int(m.site("octarm_tip_site").id),
         master_base_pos=_ro(m.body("master_base").pos),
@@ -421,6 +470,9 @@ class MujocoPlant:
     def build(cls, scn: Scenario) -> MujocoPlant:
         """Build from the scenario's plant side (raises PlantModelError on bad MJCF or options, and
         when an environment object intersects the arm at the initial state)."""
+        if scn.plant.actuation == "muscle":  # the loop does not write chain_map.muscle_commands yet
+            raise PlantModelError("plant.actuation = 'muscle': not run by the simulation loop yet (build the "
+                                  "plant with harness.plant.mujoco_model.build_model)")
         m, cmap = build_model(scn.plant_master, scn.plant_slave, scn.plant, environment=scn.environment)
         if not scn.environment.objects:
             return cls(m, cmap)
