@@ -44,7 +44,7 @@ def _same(a, b):
 
 
 # --------------------------------------------------------------------------------- bit for bit
-@pytest.mark.parametrize("actuation", ["servo", "torque"])
+@pytest.mark.parametrize("actuation", ["servo", "torque", "muscle"])
 @pytest.mark.parametrize("snr", ["40", "none"])
 def test_paper_through_interface_is_bit_for_bit(actuation, snr):
     over = [f'plant.actuation="{actuation}"', f"snr_db={snr}"]
@@ -52,6 +52,8 @@ def test_paper_through_interface_is_bit_for_bit(actuation, snr):
     py = simulate(_scn(*over, 'controller.name="paper_interface"'))
     assert compiled.status == "ok" and len(compiled) == 300
     _same(compiled, py)
+    if actuation == "muscle":  # the muscle groups' commands, as both loops count them
+        assert compiled.meta["muscle_saturated_steps"] == py.meta["muscle_saturated_steps"]
 
 
 def test_paper_through_interface_bit_for_bit_with_delay_and_feedforward_off():

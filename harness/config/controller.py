@@ -34,8 +34,9 @@ def describe_builtins() -> list[tuple[str, str, tuple[str, ...]]]:
 
 
 def plant_actuation(scn: Scenario) -> str:
-    """What the plant needs from the slave command: "torque" (T2) or "servo" (u2 / reference)."""
-    return "torque" if scn.plant.kind == "analytic" else scn.plant.actuation
+    """What the plant needs from the slave command: "torque" (T2: the analytic plant, motors, muscles) or
+    "servo" (u2 / reference)."""
+    return "servo" if scn.plant.kind != "analytic" and scn.plant.actuation == "servo" else "torque"
 
 
 def _bad(name: str, why: str) -> ConfigError:

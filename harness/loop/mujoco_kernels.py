@@ -29,6 +29,7 @@ from harness.plant.chain_map import (
     chain_joints_from_q2,
     chain_joints_rate_add,
     chain_sense,
+    muscle_commands,
 )
 
 
@@ -58,21 +59,31 @@ def mujoco_state_status(state):
     return ST_OK
 
 
-def mujoco_commands(servo, feedforward, dt, q2s, T2, u2, ref, C, R, L0, kv_over_kp, cmd):
+def mujoco_commands(servo, feedforward, dt, q2s, T2, u2, ref, C, R, L0, kv_over_kp, muscle, cmd):
     """Command vector cmd = [master torque (2), chain ctrl (n), chain feedforward force (n)] after the servo
-    reference ref (12,) = [q_ref, dq_ref] took the step dt with u2 (servo actuation; `chain_commands`)."""
+    reference ref (12,) = [q_ref, dq_ref] took the step dt with u2 (servo actuation; `chain_commands`).
+    Returns `chain_commands`' count of saturated muscle groups."""
     if servo:
         servo_reference_step(ref, u2, dt)
-    chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, cmd)
+    return chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, muscle, cmd)
 
 
-def chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, cmd):
-    """The chain's part of cmd = [master torque (2), chain ctrl (n), chain feedforward force (n)].
+def chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, muscle, cmd):
+    """The chain's part of cmd = [master torque (2), chain ctrl (n), chain feedforward force (n)]; returns
+    the number of muscle groups whose command lies outside [0, F_max] (0 for the other actuations).
 
     Torque actuation: chain ctrl = virtual-work map of T2 at the sensed q2s (motors).
     Servo actuation: ctrl = joints(q_ref) + (kv/kp) A(q_ref) dq_ref (position servo with velocity
-    feed-forward folded into the target), feed-forward = virtual-work map of T2 at q_ref (if enabled)."""
+    feed-forward folded into the target), feed-forward = virtual-work map of T2 at q_ref (if enabled).
+    Muscle actuation (muscle = (radius (3,), max_force (3,)), empty arrays otherwise): the first 6 entries
+    of the chain ctrl are the force commands of the muscle groups realizing T2 at q2s
+    (`chain_map.muscle_commands`, clipped to [0, F_max] by MuJoCo's ctrlrange); no feed-forward."""
     n = C.shape[0]
+    radius, max_force = muscle
+    if radius.shape[0] > 0:
+        for c in range(n):
+            cmd[2 + n + c] = 0.0
+        return muscle_commands(q2s, T2, radius, max_force, cmd[2:8])
     if servo:
         chain_joints_from_q2(ref[0:6], C, L0, cmd[2:2 + n])
         chain_joints_rate_add(ref[0:6], ref[6:12], C, kv_over_kp, cmd[2:2 + n])
@@ -85,6 +96,7 @@ def chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, cmd):
         chain_force_from_T2(q2s, T2, R, cmd[2:2 + n])
         for c in range(n):
             cmd[2 + n + c] = 0.0
+    return 0
 
 
 # record-row columns after the control step's (harness.loop.trajectory.ROW_FIELDS)
@@ -113,9 +125,11 @@ def mujoco_chunk(k0, k1, model, plant, data, fargs):
     plant: the MuJoCo plant's constants (mptr, dptr: mjModel*, mjData* addresses; mjfn = MJ_FUNCS; substeps;
     dt: control period (s); m_qadr, m_dadr, m_act: master joint qpos/dof addresses and actuators; c_qadr,
     c_dadr, c_act: the chain's; R, C, L0, eargs (ChainMap.elastic_args): the chain map; servo, feedforward,
-    kv_over_kp (n,): the actuation);
+    kv_over_kp (n,), muscle ((radius, max_force) or two empty arrays): the actuation; c_act: the muscle
+    actuators under muscle actuation);
     data: the run's buffers (qpos, qvel, ctrl, qfrc: numpy views of the MjData; noise, noise_scale;
-    ref (12,); cmdbuf; delay; rows, qpos_hist, cmd_log: this chunk's rows; geo_in, geo_out; wnum).
+    ref (12,); cmdbuf; delay; rows, qpos_hist, cmd_log: this chunk's rows; geo_in, geo_out; wnum; nsat (1,):
+    the run's count of saturated muscle group-steps, added to).
     Per step: sense -> noise -> both laws -> record -> commands (delayed by `delay` control steps through
     the ring buffer cmdbuf (delay+1, 2+2n)) -> `substeps` x (elastic correction + mj_step).
     cmd_log (rows, nu + nv): if it has rows ((k1 - k0) * substeps), row (k - k0) * substeps + s receives
@@ -134,9 +148,9 @@ def mujoco_chunk(k0, k1, model, plant, data, fargs):
     warning was raised during the last completed step (whose row is recorded)."""
     mpk_c, spk_c, nodes, weights, gains, spec, F, traj, _s0 = model
     (mptr, dptr, mjfn, substeps, dt, m_qadr, m_dadr, m_act, c_qadr, c_dadr, c_act, R, C, L0, eargs, servo,
-     feedforward, kv_over_kp) = plant
+     feedforward, kv_over_kp, muscle) = plant
     (qpos, qvel, ctrl, qfrc, noise, noise_scale, ref, cmdbuf, delay, rows, qpos_hist, cmd_log, geo_in,
-     geo_out, wnum) = data
+     geo_out, wnum, nsat) = data
     (sensordata, cadr, Fconst, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, op_on, op, targets, hand,
      target, mpk_p, cpts) = fargs
     F2c = scratch_zeros(2)
@@ -212,11 +226,12 @@ def mujoco_chunk(k0, k1, model, plant, data, fargs):
         cmd = cmdbuf[slot]
         cmd[0] = T1[0]
         cmd[1] = T1[1]
-        mujoco_commands(servo, feedforward, dt, sensed[4:10], T2, u2, ref, C, R, L0, kv_over_kp, cmd)
+        nsat[0] += mujoco_commands(servo, feedforward, dt, sensed[4:10], T2, u2, ref, C, R, L0, kv_over_kp,
+                                   muscle, cmd)
         use = cmdbuf[(k - delay) % nb] if k >= delay else cmdbuf[0]
         for i in range(2):
             ctrl[m_act[i]] = use[i]
-        for c in range(n):
+        for c in range(c_act.shape[0]):
             ctrl[c_act[c]] = use[2 + c]
         for s in range(substeps):
             if apply1:  # operator's grip (+ constant F1) on the master handle, J1^T F1

@@ -66,6 +66,20 @@ def warning_counts(numbers: np.ndarray) -> dict[str, int]:
     return out
 
 
+def muscle_args(cmap: ChainMap) -> tuple[np.ndarray, np.ndarray]:
+    """(radius (3,), max_force (3,)) of the muscle groups under muscle actuation, else two empty arrays
+    (`harness.loop.mujoco_kernels.chain_commands`)."""
+    if cmap.muscle_actuator_ids.shape[0]:
+        return np.asarray(cmap.muscle_radius, float), np.asarray(cmap.muscle_max_force, float)
+    return np.zeros(0), np.zeros(0)
+
+
+def chain_ctrl_ids(cmap: ChainMap) -> np.ndarray:
+    """The chain's actuators, in the order of the chain part of the command vector: the muscle groups
+    under muscle actuation, else one servo or motor per chain joint."""
+    return cmap.muscle_actuator_ids if cmap.muscle_actuator_ids.shape[0] else cmap.chain_actuator_ids
+
+
 def make_plant(scn: Scenario, plant: MujocoPlant | None = None, s0: np.ndarray | None = None
                ) -> tuple[mujoco.MjModel, mujoco.MjData, ChainMap]:
     """Compiled plant model, data at the scenario's initial state s0 (16,) (default: computed here), and its
@@ -124,15 +138,17 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     warned: dict[str, int] = {}
     wnum = d.warning.number  # view of MuJoCo's warning counters
 
+    muscle = muscle_args(cmap)
+    nsat = np.zeros(1, dtype=np.int64)  # saturated muscle group-steps of the run
     plant_args = (m._address, d._address, MJ_FUNCS, sub, scn.control_dt, cmap.master_qpos_adr,
                   cmap.master_dof_adr, cmap.master_actuator_ids, cmap.chain_qpos_adr, cmap.chain_dof_adr,
-                  cmap.chain_actuator_ids, cmap.R, cmap.C, cmap.L0, cmap.elastic_args, servo,
-                  scn.plant.servo_feedforward, kv_over_kp)
+                  chain_ctrl_ids(cmap), cmap.R, cmap.C, cmap.L0, cmap.elastic_args, servo,
+                  scn.plant.servo_feedforward, kv_over_kp, muscle)
 
     def chunk(k: int, k1: int):
         data = (d.qpos, d.qvel, d.ctrl, d.qfrc_applied, noise, scale, ref, cmdbuf, delay, rows[k:k1],
                 geo.qpos_hist[k:k1], cmd_log[k * sub:k1 * sub] if log else cmd_log, geo.inputs,
-                geo.outputs(k, k1), wnum)
+                geo.outputs(k, k1), wnum, nsat)
         status, mdone = A.mujoco_chunk(k, k1, a, plant_args, data, force.args(k, k1))
         if wnum.any():
             warned.update(warning_counts(wnum))
@@ -167,6 +183,8 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     traj.meta["build_time"] = build_time
     traj.meta["kernel_load_time"] = load_time
     traj.meta["mujoco_warnings"] = int(sum(warned.values()))
+    if scn.plant.actuation == "muscle":
+        traj.meta["muscle_saturated_steps"] = int(nsat[0])
     traj.meta["mujoco_warning_counts"] = warned
     captured = sink.text
     traj.meta["mujoco_warning_text"] = captured[:20]

@@ -28,7 +28,14 @@ from controllers.status import Status
 from harness.config.scenario import Scenario
 from harness.loop.common import RunModel
 from harness.loop.fast import K
-from harness.loop.mujoco_loop import _Geometry, _plant_geometry, make_plant, warning_counts
+from harness.loop.mujoco_loop import (
+    _Geometry,
+    _plant_geometry,
+    chain_ctrl_ids,
+    make_plant,
+    muscle_args,
+    warning_counts,
+)
 
 
 class MujocoStepped:
@@ -48,6 +55,8 @@ class MujocoStepped:
         self.kv_over_kp = (np.divide(c.servo_kv, c.servo_kp, out=np.zeros(self.n), where=c.servo_kp > 0)
                            if self.servo else np.zeros(self.n))
         self.cmd = np.zeros(2 + 2 * self.n)  # [master torque, chain ctrl (n), chain feed-forward (n)]
+        self.muscle, self.ctrl_ids = muscle_args(c), chain_ctrl_ids(c)
+        self.saturated = 0  # muscle group-steps outside [0, F_max]
         self.ref = np.zeros(12)  # [q2_ref, dq2_ref] of the command being mapped
         self.qc, self.vc, self.corr = np.empty(self.n), np.empty(self.n), np.empty(self.n)
         self.geo = _Geometry(self.m, self.d, c, scn.n_steps, live=False)
@@ -68,12 +77,13 @@ class MujocoStepped:
         cmd[1] = T1[1]
         ref[0:6] = q2_ref
         ref[6:12] = dq2_ref
-        K.chain_commands(self.servo, self.ff, q2_sensed, T2, ref, c.C, c.R, c.L0, self.kv_over_kp, cmd)
+        self.saturated += K.chain_commands(self.servo, self.ff, q2_sensed, T2, ref, c.C, c.R, c.L0,
+                                           self.kv_over_kp, self.muscle, cmd)
 
     def advance(self, dt: float) -> int:
         d, c, n, use = self.d, self.cmap, self.n, self.cmd
         d.ctrl[c.master_actuator_ids] = use[0:2]
-        d.ctrl[c.chain_actuator_ids] = use[2:2 + n]
+        d.ctrl[self.ctrl_ids] = use[2:2 + self.ctrl_ids.shape[0]]
         wnum = d.warning.number
         for _ in range(self.sub):
             self.qc[:] = d.qpos[c.chain_qpos_adr]
@@ -100,6 +110,8 @@ class MujocoStepped:
         traj.meta.update(_plant_geometry(self.m, self.cmap, self.geo, done, traj))
         traj.meta["mujoco_warnings"] = int(sum(self.warned.values()))
         traj.meta["mujoco_warning_counts"] = self.warned
+        if self.actuation == "muscle":
+            traj.meta["muscle_saturated_steps"] = int(self.saturated)
 
 
 class AnalyticStepped:

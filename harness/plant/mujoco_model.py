@@ -470,9 +470,6 @@ class MujocoPlant:
     def build(cls, scn: Scenario) -> MujocoPlant:
         """Build from the scenario's plant side (raises PlantModelError on bad MJCF or options, and
         when an environment object intersects the arm at the initial state)."""
-        if scn.plant.actuation == "muscle":  # the loop does not write chain_map.muscle_commands yet
-            raise PlantModelError("plant.actuation = 'muscle': not run by the simulation loop yet (build the "
-                                  "plant with harness.plant.mujoco_model.build_model)")
         m, cmap = build_model(scn.plant_master, scn.plant_slave, scn.plant, environment=scn.environment)
         if not scn.environment.objects:
             return cls(m, cmap)
