@@ -101,6 +101,7 @@ CASES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_aot_run_bit_identical_to_jit(name, monkeypatch, traj_arrays):
     """Every array of the Trajectory (states, errors, commands, plant geometry) is bit-identical with
@@ -126,6 +127,7 @@ def test_aot_path_resolves_extension_modules(monkeypatch):
     assert fns and all(type(fn).__name__ == "builtin_function_or_method" for fn in fns), fns
 
 
+@pytest.mark.slow
 def test_run_does_not_import_numba():
     """A MuJoCo run with the modules built imports neither numba nor SciPy (their ~1.2-1.5 s start-up
     is what the modules save)."""
@@ -222,6 +224,7 @@ def test_build_failure_falls_back_to_jit(tmp_path, monkeypatch, caplog, traj_arr
     aot.forget()
 
 
+@pytest.mark.slow
 def test_concurrent_builds_compile_once(tmp_path):
     """Two processes needing the same missing module (two sweep workers) build it once, under the lock,
     and both run it (the smallest entry, backbone_world, in an empty cache)."""

@@ -51,6 +51,7 @@ def series(draw):
     return t, y, draw(st.integers(1, 200))
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(series())
 def test_envelope_keeps_every_column_extremum(case):
@@ -97,6 +98,7 @@ def _lexsort_envelope_indices(t, y, n_columns):
     return np.unique(np.concatenate([starts, ends, by_lo[starts], by_hi[ends], np.flatnonzero(~finite)]))
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(series(), st.booleans())
 def test_envelope_indices_equal_the_sorting_reference(case, ties):
@@ -257,6 +259,7 @@ def test_envelope_with_a_subnormal_time_span():
 # ---------------------------------------------------------------------------------------------
 # outputs written in parallel
 # ---------------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_outputs_written_in_parallel_equal_serial_writes(tmp_path):
     """run_scenario writes run.rrd and the figures in three processes; the PNGs are byte-identical to
     those `write_figures` draws alone in this process from the same trajectory."""

@@ -156,6 +156,7 @@ def _random_states(rng, n=25):
     return q, rng.normal(size=(n, 6))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("slice_inertia", [(0.0, 0.0, 0.0), (2e-3, 1e-3, 5e-4)])
 def test_fused_mass_nle_equals_reference(slice_inertia):
     """mass_nle_kernel (moments of the quadrature, Lagrange-form Coriolis) = dynamics_kernel M2 and

@@ -178,6 +178,7 @@ def _rows(out: Path) -> dict[str, dict]:
     return {r["case_id"]: r for r in map(json.loads, (out / RESULTS).read_text().splitlines())}
 
 
+@pytest.mark.slow
 def test_thread_sweep_equals_process_sweep_and_single_runs(tmp_path):
     """12 MuJoCo cases (some warn and stop) through 2 threads and through 2 worker processes: the same
     statuses, messages and metrics, bit for bit, and the same as `run_case` alone on each case; the worst
@@ -204,6 +205,7 @@ def test_thread_sweep_equals_process_sweep_and_single_runs(tmp_path):
     assert all(p.stat().st_size > 0 for p in threads.recordings)
 
 
+@pytest.mark.slow
 def test_an_interrupted_thread_sweep_stops_its_cases_and_resumes(tmp_path):
     """Ctrl-C (here: KeyboardInterrupt from on_row) during a thread sweep: the running cases stop at their
     next chunk, no case thread is left, the stop flag is cleared, only finished cases are rows, and the same
