@@ -24,7 +24,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGE = ROOT / "docs" / "matrix.md"
@@ -157,7 +156,6 @@ def render(res: dict[tuple[str, str, str], tuple[str, str]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-@pytest.mark.slow
 def test_matrix():
     res = outcomes()
     page = render(res)
