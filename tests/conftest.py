@@ -122,3 +122,25 @@ def trajectory_arrays(tr: Trajectory) -> dict[str, np.ndarray]:
 def traj_arrays():
     """trajectory_arrays(tr) -> {field name: array} of every array field of a Trajectory."""
     return trajectory_arrays
+
+
+# ---------------------------------------------------------------------------------------------
+# tiers: plain `pytest` runs the fast tier (pyproject addopts: -m 'not slow'); `pytest -m slow` the slow
+# one; `pytest -m "slow or not slow"` both.  The summary gives each tier's time (setup + call +
+# teardown of its tests, summed), so one run of both tiers (.ci/run) reports both.
+# ---------------------------------------------------------------------------------------------
+_TIER_TIME: dict[str, list[float]] = {}
+
+
+def pytest_runtest_logreport(report):
+    tier = "slow" if "slow" in report.keywords else "fast"
+    entry = _TIER_TIME.setdefault(tier, [0, 0.0])
+    entry[1] += report.duration
+    if report.when == "call":
+        entry[0] += 1
+
+
+def pytest_terminal_summary(terminalreporter):
+    if _TIER_TIME:
+        parts = [f"{tier} tier: {n} tests, {t:.0f} s" for tier, (n, t) in sorted(_TIER_TIME.items())]
+        terminalreporter.write_line("tiers (test time, summed): " + "; ".join(parts))

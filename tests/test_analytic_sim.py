@@ -34,6 +34,7 @@ def exact_run():
     return scn, tr
 
 
+@pytest.mark.slow
 def test_master_error_follows_closed_form_of_eq_15(exact_run):
     scn, tr = exact_run
     g = scn.gains

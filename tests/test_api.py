@@ -28,6 +28,7 @@ def test_readme_example_runs_a_mismatched_plant(tmp_path):
     assert traj.meta["metrics"]["e2_rms"] != nominal.meta["metrics"]["e2_rms"]
 
 
+@pytest.mark.slow
 def test_run_with_out_writes_what_teleop_run_writes(tmp_path):
     from harness import run
 

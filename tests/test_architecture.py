@@ -131,6 +131,7 @@ def _part(module: str) -> str:
     return parts[1] if len(parts) > 1 else "__init__"
 
 
+@pytest.mark.slow
 def test_graph_sees_the_imports():
     """The checker itself: it finds known edges (else the tests below would pass vacuously)."""
     g = _graph()
@@ -139,11 +140,13 @@ def test_graph_sees_the_imports():
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 
+@pytest.mark.slow
 def test_no_import_cycles_in_harness():
     cycles = _cycles(_graph())
     assert not cycles, f"import cycles in harness/: {cycles}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("part", sorted(ALLOWED))
 def test_layers(part):
     bad = []
@@ -176,6 +179,7 @@ DYNAMIC_ALLOWED = {
 }
 
 
+@pytest.mark.slow
 def test_no_module_imports_by_a_computed_name():
     """A module named by a string literal counts as an import (layer rules above); a name computed at run
     time is only allowed where DYNAMIC_ALLOWED says why."""
@@ -193,6 +197,7 @@ def test_no_module_imports_by_a_computed_name():
     assert not bad, f"imports by a computed name: {bad}"
 
 
+@pytest.mark.slow
 def test_the_dynamic_import_checker_sees_them():
     call = ast.parse("importlib.import_module(name)").body[0].value
     assert _dynamic_import(call) is call
@@ -249,6 +254,7 @@ def _names_used(paths) -> set[str]:
     return used
 
 
+@pytest.mark.slow
 def test_no_production_function_is_used_only_by_tests():
     """Every function, class and method of controllers/ and harness/ is used by production code (the
     packages themselves, benchmarks, examples); module hooks (__getattr__) aside."""

@@ -161,6 +161,7 @@ def _fuzz_values():
                         | st.dictionaries(keys, inner, max_size=4), max_leaves=12)
 
 
+@pytest.mark.slow
 def test_fuzz_bounds_loader():
     """Random tables: load_bounds either returns Bounds or raises a one-line ConfigError."""
     from hypothesis import given, settings

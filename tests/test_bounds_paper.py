@@ -28,6 +28,7 @@ def run(actuation: str, *overrides: str) -> dict:
     return compute_metrics(simulate(scn), scn)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("actuation", ["servo", "torque"])
 def test_paper_scenario_meets_shipped_bounds(actuation):
     metrics = run(actuation)
@@ -44,6 +45,7 @@ def test_bounds_catch_a_sign_error(actuation):
     assert "status_ok" in bounds
 
 
+@pytest.mark.slow
 def test_bounds_catch_a_dropped_null_space_term():
     """Servo mode stays stable without phi_N and e2 is unaffected (phi_N lives in the null space), so
     only the null-space and range bounds can see it."""
@@ -53,6 +55,7 @@ def test_bounds_catch_a_dropped_null_space_term():
     assert "e2_rms_max" not in violations
 
 
+@pytest.mark.slow
 def test_torque_bounds_catch_a_dropped_null_space_term():
     """In torque mode (CC chain with the default material damping) the arm without phi_N runs through
     the 20 s, but its null-space velocity error grows 4x (measured deN_rms 0.30 against 0.061-0.072

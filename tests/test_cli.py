@@ -491,6 +491,7 @@ def test_fidelity_delegates(monkeypatch, tmp_path, capsys):
 
 
 # --------------------------------------------------------------------------------------------- processes
+@pytest.mark.slow
 def test_console_entry_point_error_is_one_line(tmp_path):
     res = subprocess.run([sys.executable, "-m", "harness.cli", "run", "--segments", "0",
                           "--out", str(tmp_path / "o")], capture_output=True, text=True, cwd=ROOT, timeout=60)
@@ -519,6 +520,7 @@ def test_version_is_printed_and_exits_zero(capsys):
     assert capsys.readouterr().out == f"teleop {version('octarm-teleop')}\n"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", [None, "egl"])
 def test_prepare_process_turns_mujoco_gl_off_unless_set(preset):
     """`teleop` (entry -> prepare_process) sets MUJOCO_GL=disable only when the user has not set it, so

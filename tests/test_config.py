@@ -408,6 +408,7 @@ def test_plant_model_set_equal_to_nominal_stays_set(tmp_path):
     masses=st.none() | st.lists(st.floats(1e-3, 10), min_size=3, max_size=3),
     amp=st.floats(0, 0.05),
 )
+@pytest.mark.slow
 def test_round_trip_property(tmp_path, gains, snr, seed, segments, masses, amp):
     src = {
         "gains": dict(zip(["k1", "k2", "k3", "k4", "ky", "ks", "kn"], gains, strict=True)),
@@ -443,12 +444,14 @@ def _check_loader(src) -> None:
     assert isinstance(scn, Scenario)
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(_tables)
 def test_fuzz_random_tables(src):
     _check_loader(src)
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(st.data())
 def test_fuzz_mutated_valid_scenario(data):
@@ -468,6 +471,7 @@ def test_fuzz_mutated_valid_scenario(data):
 @settings(max_examples=100, deadline=None)
 @given(st.lists(st.text(max_size=30) | st.from_regex(r"[a-z_.]{1,20}=[\[\]0-9a-z.,\"' -]{0,20}",
                                                      fullmatch=True), max_size=4))
+@pytest.mark.slow
 def test_fuzz_overrides(overrides):
     try:
         scn = load_scenario(None, overrides)

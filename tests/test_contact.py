@@ -124,6 +124,7 @@ def test_contact_sensor_matches_mj_contact_force():
 
 
 # ------------------------------------------------------------------------ steady error, F2 ignored
+@pytest.mark.slow
 def test_steady_coordination_error_with_ignored_tip_force():
     """Constant tip force F on the slave, F2 = 0 in the law (17): the closed loop (17)-(21) settles at
     k4 e2 + J2 M2^-1 J2^T F = 0, i.e. e2 = -(J2 M2^-1 J2^T) F / k4 at the final configuration
@@ -231,6 +232,7 @@ def test_contact_divergence_is_reported_with_partial_outputs():
     assert metrics["status"] == "diverged" and metrics["contact_force_peak"] > 10.0
 
 
+@pytest.mark.slow
 def test_contact_outputs_forces_figure_and_recording(exact_run, tmp_path):
     """forces.png is written for runs with interaction; the recording holds the force series (true and
     to-the-law F2 read back equal the trajectory's) and the contact arrows."""

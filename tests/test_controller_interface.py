@@ -272,6 +272,7 @@ def test_controller_diverged_is_status_diverged(tmp_path):
 
 
 # --------------------------------------------------------------------------------- selection, CLI
+@pytest.mark.slow
 def test_cli_selection_by_name_and_path_writes_resolved_params(tmp_path, capsys):
     out = tmp_path / "dls"
     assert main(["run", "--controller", "dls_ik", "--set", "controller.params.gain=15", "--duration", "0.1",
@@ -298,6 +299,7 @@ def test_teleop_controllers_lists_builtins(capsys):
     assert "paper_no_null" in BUILTINS and "dls_ik" in BUILTINS
 
 
+@pytest.mark.slow
 def test_baselines_track_on_mujoco_servo():
     """Both built-in baselines follow the master on the paper scenario (1 s, servo plant): the
     coordination error stays at the millimetre level of the paper's law."""
@@ -308,6 +310,7 @@ def test_baselines_track_on_mujoco_servo():
 
 
 # --------------------------------------------------------------------------------- sweeps
+@pytest.mark.slow
 def test_controller_comparison_sweep_writes_one_row_per_case(tmp_path):
     from harness.studies.sweep import run_sweep
 
@@ -339,6 +342,7 @@ def _documented_commands(path: Path) -> list[list[str]]:
 
 @pytest.mark.parametrize("example", sorted((ROOT / "examples" / "controllers").glob("*.py")),
                          ids=lambda p: p.name)
+@pytest.mark.slow
 def test_every_example_command_works_as_written(example, tmp_path, monkeypatch, capsys):
     """Each command an example's docstring gives succeeds as written (cut to 0.3 s; outputs in tmp),
     from the checkout's root, where its paths are relative to."""

@@ -76,6 +76,7 @@ def test_cached_fit_follows_every_step_and_reset():
     np.testing.assert_allclose(plant.sense()[0], q2b, atol=1e-12)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("law", ["analytic", "linear"])
 def test_end_couple_gives_circular_arc(law):
     p = SlaveParams(gravity=(0.0, 0.0), bending_stiffness=(3.0, 3.0, 3.0))
@@ -107,6 +108,7 @@ def test_axial_force_extends_by_F_over_EA():
     np.testing.assert_allclose(q[3:], 0.0, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_servo_reaches_command():
     start = Q2 + np.array([0.02, -0.02, 0.02, -0.5, 0.5, -0.5])
     plant = CosseratSlave(P0, material_damping=(0.3, 3.0))

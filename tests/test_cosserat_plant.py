@@ -136,6 +136,7 @@ def test_bad_cosserat_settings_are_one_line_errors_before_running(overrides, tex
     assert text in msg and "\n" not in msg
 
 
+@pytest.mark.slow
 def test_cli_bad_setting_exit_2_one_line(tmp_path):
     r = subprocess.run([sys.executable, "-m", "harness.cli", "run", "--plant", "cosserat", "--set",
                         "plant.cosserat.dt=0.002", "--out", str(tmp_path / "x")],
@@ -146,6 +147,7 @@ def test_cli_bad_setting_exit_2_one_line(tmp_path):
     assert not (tmp_path / "x").exists()
 
 
+@pytest.mark.slow
 def test_cli_writes_outputs_with_the_rod_in_the_recording(tmp_path):
     out = tmp_path / "run"
     r = subprocess.run([sys.executable, "-m", "harness.cli", "run", "--plant", "cosserat",

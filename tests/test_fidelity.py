@@ -100,6 +100,7 @@ def test_site_jacobian_times_A_matches_J2():
     assert np.all(orders >= ORDER), (errs, orders)
 
 
+@pytest.mark.slow
 def test_writers_and_plot(default_table, tmp_path):
     md = default_table.write_markdown(tmp_path / "f.md").read_text()
     assert md.startswith("| N |") and "| 32 |" in md
@@ -115,6 +116,7 @@ def test_observed_orders():
     np.testing.assert_allclose(fid.observed_orders((4, 8, 16), (1.0, 0.25, 0.0625)), [2.0, 2.0])
 
 
+@pytest.mark.slow
 def test_constant_curvature_enforced_vs_free_chain():
     """cc_study: held under gravity, the constrained chain stays on the CC manifold (soft equalities:
     well under a millimetre at the tip, under a milliradian per hinge); the free chain bends away

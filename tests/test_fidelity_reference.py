@@ -80,6 +80,7 @@ def test_fit_decay_recovers_a_damped_sinusoid():
     assert fe == pytest.approx(f, rel=2e-4) and ze == pytest.approx(z, rel=1e-3)
 
 
+@pytest.mark.slow
 def test_small_motion_of_the_damped_chain_matches_the_rod():
     """Released 1 N tip deflection of the straight arm, default material damping on both: the free
     chain (N = 8) matches the Cosserat rod's first mode within 3 % in frequency and 10 % in damping

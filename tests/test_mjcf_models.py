@@ -150,6 +150,7 @@ def test_cold_start_without_islands_solves_the_same_physics(actuation):
 
 # --- generated models --------------------------------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("n,actuation,cc", CASES)
 def test_model_compiles_steps_is_named_and_deterministic(n, actuation, cc):
     """Invariants of every generated model: compiles, every element named (snake_case), steps 1 s

@@ -107,6 +107,7 @@ def test_kill_9_of_a_writer_leaves_no_file_under_its_final_name(tmp_path):
     assert _temps(tmp_path), "the partial file should be under its temporary name"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("delay", [2.0, 4.0])
 def test_kill_9_of_a_run_leaves_only_complete_files(tmp_path, delay):
     out = tmp_path / "o"
@@ -125,6 +126,7 @@ def test_kill_9_of_a_run_leaves_only_complete_files(tmp_path, delay):
 
 
 # --- full disk, stalls, interrupts ------------------------------------------------------------------
+@pytest.mark.slow
 def test_full_disk_is_reported_not_hung(tmp_path):
     """A 1 MB file-size limit: the ~1.6 MB recording cannot be written, the small files can."""
     warm = _teleop(["run", *ANALYTIC, "--duration", "0.2", "--out", tmp_path / "warm"])  # numba cache
@@ -149,6 +151,7 @@ def test_full_disk_is_reported_not_hung(tmp_path):
     print(f"full-disk run reported in {took:.1f} s")
 
 
+@pytest.mark.slow
 def test_stalled_writer_is_killed_and_reported(tmp_path):
     t0 = time.monotonic()
     with pytest.raises(OutputError, match="no progress for 1 s"):
@@ -380,6 +383,7 @@ def test_max_cases_option_and_table(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_unreachable_scheduler_is_found_before_any_file(tmp_path, capsys):
     out = tmp_path / "o"
     t0 = time.monotonic()
@@ -392,6 +396,7 @@ def test_unreachable_scheduler_is_found_before_any_file(tmp_path, capsys):
     print(f"unreachable scheduler reported in {took:.1f} s")
 
 
+@pytest.mark.slow
 def test_pool_workers_end_when_the_main_process_is_killed(tmp_path):
     (tmp_path / "slowcase.py").write_text(textwrap.dedent("""
         import os, time

@@ -24,6 +24,7 @@ def _check_pngs(paths, outdir):
         assert np.ptp(img[..., :3]) > 0.5, f"{p.name} is blank"  # something was drawn
 
 
+@pytest.mark.slow
 def test_full_run_figures(tmp_path, synthetic_trajectory):
     outdir = tmp_path / "figs"
     with warnings.catch_warnings():
@@ -32,18 +33,21 @@ def test_full_run_figures(tmp_path, synthetic_trajectory):
     _check_pngs(paths, outdir)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("n", [37, 2, 1])
 def test_early_stopped_and_tiny_runs(tmp_path, synthetic_trajectory, n):
     traj = synthetic_trajectory(n, status="diverged", message="NaN in qacc", nan_tail=min(4, n - 1))
     _check_pngs(write_figures(traj, tmp_path), tmp_path)
 
 
+@pytest.mark.slow
 def test_analytic_plant_without_meta(tmp_path, synthetic_trajectory):
     traj = synthetic_trajectory(300, plant=False, with_master_pos=False)
     traj.meta = {}  # no geometry, bases or ranges: defaults must still draw
     _check_pngs(write_figures(traj, tmp_path, lengths=(0.6, 0.6)), tmp_path)
 
 
+@pytest.mark.slow
 def test_broken_backbone_fn_falls_back(tmp_path, synthetic_trajectory):
     traj = synthetic_trajectory(100)
 
@@ -56,11 +60,13 @@ def test_broken_backbone_fn_falls_back(tmp_path, synthetic_trajectory):
     _check_pngs(paths, tmp_path)
 
 
+@pytest.mark.slow
 def test_empty_run(tmp_path, synthetic_trajectory):
     traj = synthetic_trajectory(0, status="error", message="failed before the first step")
     _check_pngs(write_figures(traj, tmp_path), tmp_path)
 
 
+@pytest.mark.slow
 def test_figures_differ_with_data(tmp_path, synthetic_trajectory):
     """The e2 figure shows the plant-tip curves only when x2_plant exists."""
     a = write_figures(synthetic_trajectory(200), tmp_path / "a")[1]
@@ -148,6 +154,7 @@ def _check_layout(fig, name):
                 assert not bi.overlaps(bj), f"{name}: {ti.get_text()!r} overlaps {tj.get_text()!r}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("run", ["synthetic", "synthetic_diverged", "contact"])
 def test_no_text_is_clipped_or_overlapping(tmp_path, monkeypatch, request, synthetic_trajectory, run):
     traj = {"synthetic": lambda: synthetic_trajectory(1200),

@@ -105,6 +105,7 @@ def test_blocks_bound_every_chunk(tmp_path, synthetic_trajectory):
         assert sum(c.num_rows for c in chunks) == n
 
 
+@pytest.mark.slow
 def test_rerun_verify_and_compare(tmp_path, synthetic_trajectory):
     traj = synthetic_trajectory(1200)
     a = write_recording(traj, tmp_path / "a.rrd", recording_id="same-run")

@@ -31,6 +31,7 @@ def _rerun_verify(path: Path) -> subprocess.CompletedProcess:
     return subprocess.run([str(exe), "rrd", "verify", str(path)], capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_diverging_mujoco_run_keeps_everything(tmp_path):
     """A sign error in the coordination feedback (18) (`faults.e2_sign = -1`) diverges on the default
     plant (finding faults_are_caught): the CLI stops, says when and why, exits 1, and still writes a
@@ -134,6 +135,7 @@ def test_stop_event_interrupts_and_keeps_data():
     assert np.all(np.isfinite(tr.e2))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_signal_leaves_valid_files(tmp_path, sig):
     out = tmp_path / "sig"
@@ -174,6 +176,7 @@ def _metrics_of(out: Path) -> dict:
     return m
 
 
+@pytest.mark.slow
 def test_same_seed_bit_identical_across_processes(tmp_path):
     """Two separate processes, same config and seed -> identical metrics (every digit); another
     seed -> different."""

@@ -129,6 +129,7 @@ _NO_ALLOCATION_SCRIPT = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_the_compiled_control_step_allocates_nothing_per_step():
     """The analytic loop (both laws with the null-space terms, noise, record rows, RK4 of the analytic plant:
     every per-step kernel of the MuJoCo loop but MuJoCo's step and the chain maps) makes the same number of
@@ -162,6 +163,7 @@ _NO_ALLOCATION_MUJOCO_SCRIPT = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_the_mujoco_loop_allocates_nothing_per_step():
     """The MuJoCo loop's compiled kernel (`mujoco_chunk`, which keeps numba's runtime for its chain-sized
     arrays) makes the same number of heap allocations in a 10-step run as in a 300-step one, each one

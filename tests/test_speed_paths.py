@@ -23,7 +23,7 @@ from harness.loop.native import MJ_FUNCS
 
 
 def _python_geometry(scn, m, cmap, qpos_hist, q2):
-    """The former per-step Python replay (reference)."""
+    """Reference: a plain Python loop over `mujoco.mj_kinematics` and `slave.backbone`, step by step."""
     n = qpos_hist.shape[0]
     d = mujoco.MjData(m)
     bodies = chain_body_ids(m, cmap)
@@ -71,7 +71,7 @@ def _qpos_history(scn, cmd_log, n):
                                                   (4, "euler")])
 def test_compiled_geometry_matches_python_replay(segments, integrator):
     """Geometry copied inside the loop (single-stage integrators) or replayed by the compiled
-    mj_kinematics loop (RK4) = the former Python mj_kinematics replay, bit for bit."""
+    mj_kinematics loop (RK4) = a plain Python mj_kinematics replay, bit for bit."""
     # the explicit integrators with torque actuation: they cannot integrate the servos' gains (docs/plants.md)
     act = "servo" if integrator == "implicitfast" else "torque"
     plant = PlantConfig(segments=segments, integrator=integrator, enforce_cc=True, actuation=act)
@@ -158,6 +158,7 @@ def _random_states(rng, n=25):
     return q, rng.normal(size=(n, 6))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("slice_inertia", [(0.0, 0.0, 0.0), (2e-3, 1e-3, 5e-4)])
 def test_fused_mass_nle_equals_reference(slice_inertia):
     """mass_nle_kernel (moments of the quadrature, Lagrange-form Coriolis), compiled and interpreted, = the

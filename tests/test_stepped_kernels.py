@@ -1,5 +1,7 @@
 """The stepped loop's paths agree (the paper's fast path and the interface), and the Cosserat plant's deferred
-recording (CosseratPlant.record / finish) gives the numbers of per-step geometry."""
+recording (CosseratPlant.record / finish) gives the numbers of per-step geometry, and the rod's command
+kernels do what they stand for: the servo's rest strains lay the rod on the commanded arcs, the active
+loads do the generalized forces' virtual work."""
 
 from __future__ import annotations
 
@@ -54,45 +56,69 @@ def test_cosserat_plant_built_for_a_shorter_run_records_a_longer_one():
         assert np.array_equal(a.meta["geometry"][k], b.meta["geometry"][k])
 
 
-def test_rod_command_kernels_equal_the_numpy_expressions():
-    """cosserat.kernels.rest_strains / active_loads (the servo rest strains and the active loads of
-    harness.plant.cosserat, Actuation) give the numbers of the numpy expressions they replaced, bit for
-    bit."""
-    from harness.plant.cosserat import kernels as kr
-
-    rng = np.random.default_rng(5)
-    n = 7
+def _rod_layout(n=7):
     L0 = np.array([0.3, 0.25, 0.2])
     sec = np.repeat(np.arange(3), n)
-    l0 = (L0 / n)[sec]
+    return n, L0, sec, (L0 / n)[sec]
+
+
+def _random_q2(rng, L0, i):
+    q2 = np.concatenate([L0 * rng.uniform(0.8, 1.4, 3), rng.normal(size=3) * (3.0 if i % 4 else 1e-9)])
+    if i == 0:
+        q2[3:] = 0.0  # straight sections: the sinc limit
+    return q2
+
+
+def test_rest_strains_lay_the_rod_on_the_commanded_arcs():
+    """cosserat_rod.rest_strains (the servo's rest shape): a rod at rest with these strains is the
+    commanded constant-curvature arcs cut into n elements per section.  Reference: the nodes of the arcs
+    at j/n of each section (conftest.cc_shape, written independently): each element's rest length
+    l0 (1 + sigma_z) is the chord between its nodes, and the rest curvature at each hinge times its
+    Voronoi length l0 is the angle between the neighbouring chords (at the base: between the base
+    direction and the first chord, over half an element)."""
+    from conftest import cc_shape
+
+    from harness.plant.cosserat import kernels as kr
+
+    n, L0, sec, l0 = _rod_layout()
     ne = 3 * n
+    rng = np.random.default_rng(5)
     for i in range(40):
-        q2 = np.concatenate([L0 * rng.uniform(0.8, 1.4, 3), rng.normal(size=3) * (3.0 if i % 4 else 1e-9)])
-        if i == 0:
-            q2[3:] = 0.0  # straight sections: sinc limit
-        T2 = rng.normal(size=6)
-        # reference: the former numpy code of CosseratSlave._set_rest / _set_active
-        d, k = q2[:3], q2[3:]
-        x = 0.5 * k * (d / n)
-        sinc = np.where(np.abs(x) < 1e-8, 1.0 - x * x / 6.0, np.sin(x) / np.where(x == 0, 1.0, x))
-        sig_ref = np.zeros((3, ne))
-        sig_ref[2] = (d / L0 * sinc - 1.0)[sec]
-        kap = (k * d / L0)[sec]
-        kap_ref = np.zeros((3, ne - 1))
-        kap_ref[1] = (l0[:-1] * kap[:-1] + l0[1:] * kap[1:]) / (l0[:-1] + l0[1:])
-        mu = T2[3:] / d
-        n_ref = (T2[:3] - k * mu)[sec]
-        m_ref = np.zeros((3, ne - 1))
-        mue = mu[sec]
-        m_ref[1] = (l0[:-1] * mue[:-1] + l0[1:] * mue[1:]) / (l0[:-1] + l0[1:])
+        q2 = _random_q2(rng, L0, i)
         sig, kp, kb = np.full((3, ne), 9.0), np.full((3, ne - 1), 9.0), np.full(3, 9.0)
         kr.rest_strains(q2, n, L0, sec, l0, sig, kp, kb)
+        chords = np.diff(cc_shape(q2, per_section=n), axis=0)  # (ne, 2) [x, z]
+        np.testing.assert_allclose(l0 * (1.0 + sig[2]), np.hypot(*chords.T), rtol=1e-12, atol=1e-15)
+        assert not sig[:2].any() and not kp[[0, 2]].any() and not kb[[0, 2]].any()
+        a, b = chords[:-1], chords[1:]
+        turn = np.arctan2(a[:, 1] * b[:, 0] - a[:, 0] * b[:, 1], (a * b).sum(1))
+        np.testing.assert_allclose(kp[1] * 0.5 * (l0[:-1] + l0[1:]), turn, rtol=1e-9, atol=1e-13)
+        first = np.arctan2(chords[0, 0], chords[0, 1])  # from the base direction (+z)
+        np.testing.assert_allclose(kb[1] * 0.5 * l0[0], first, rtol=1e-9, atol=1e-13)
+
+
+def test_active_loads_do_the_virtual_work_of_the_generalized_forces():
+    """cosserat_rod.active_loads: the internal axial force n and bending moment m it sets do, per unit rest
+    length of section i, the virtual work of the generalized forces, (T_d dd + T_k dk) / L0, for every
+    virtual change dq2 of the arc (axial strain d / L0 - 1, curvature k d / L0 per rest length)."""
+    from harness.plant.cosserat import kernels as kr
+
+    n, L0, sec, l0 = _rod_layout()
+    ne = 3 * n
+    rng = np.random.default_rng(6)
+    inner = np.flatnonzero(sec[:-1] == sec[1:])  # hinges inside a section
+    for i in range(40):
+        q2, T2, dq = _random_q2(rng, L0, i), rng.normal(size=6), rng.normal(size=6)
         an, am, amb = np.full(ne, 9.0), np.full((3, ne - 1), 9.0), np.full(3, 9.0)
         kr.active_loads(T2, q2, sec, l0, an, am, amb)
-        assert np.array_equal(sig, sig_ref) and np.array_equal(kp, kap_ref)
-        assert np.array_equal(kb, [0.0, kap[0], 0.0])
-        assert np.array_equal(an, n_ref) and np.array_equal(am, m_ref)
-        assert np.array_equal(amb, [0.0, mu[0], 0.0])
+        d, k, dd, dk = q2[:3], q2[3:], dq[:3], dq[3:]
+        want = (T2[:3] * dd + T2[3:] * dk) / L0
+        m_sec = np.full(3, np.nan)
+        m_sec[sec[inner]] = am[1, inner]
+        np.testing.assert_allclose(amb[1], m_sec[0], rtol=1e-15)
+        assert not am[[0, 2]].any() and not amb[[0, 2]].any()
+        work = an * (dd / L0)[sec] + (m_sec * (k * dd + d * dk) / L0)[sec]
+        np.testing.assert_allclose(work, want[sec], rtol=1e-10, atol=1e-12 * np.abs(want).max())
 
 
 @pytest.mark.parametrize("extra", [["sensing.force.mode=ignored"], ["plant.actuation=servo", "snr_db=none"]])

@@ -151,6 +151,7 @@ def test_random_sampling_is_seeded():
     assert [c.params for c in expand_cases(load_study(doc))] != [c.params for c in a]
 
 
+@pytest.mark.slow
 def test_case_ids_stable_across_processes():
     doc = study(GRID2)
     ids = [c.case_id for c in expand_cases(load_study(doc))]
@@ -233,6 +234,7 @@ def test_shipped_studies_expand(name):
 
 
 # --- running, resuming, failures -------------------------------------------------------------------
+@pytest.mark.slow
 def test_resume_after_crash_runs_nothing_twice(tmp_path, calls):
     out, doc, k = tmp_path / "out", study(GRID2), 3
 
@@ -257,6 +259,7 @@ def test_resume_after_crash_runs_nothing_twice(tmp_path, calls):
     assert res.ran == 0 and len(calls()) == n_calls + 9 - k
 
 
+@pytest.mark.slow
 def test_failing_and_diverged_cases_are_rows(tmp_path):
     doc = study([MASS, {"param": "seed", "values": [0, 1, 2]}])
     res = run_sweep(doc, out=tmp_path, workers=2, progress=False, case_fn=stub_case)
@@ -273,6 +276,7 @@ def test_failing_and_diverged_cases_are_rows(tmp_path):
     assert ok["metrics"]["e2_max"] == pytest.approx(2e-3 * sum(NOMINAL.masses))
 
 
+@pytest.mark.slow
 def test_dead_worker_is_isolated(tmp_path, calls):
     doc = study([{"param": "seed", "values": [0, 3, 4, 5, 6]}])
     res = run_sweep(doc, out=tmp_path, workers=2, progress=False, case_fn=stub_case)
@@ -355,6 +359,7 @@ def test_run_case_never_raises(monkeypatch):
     assert row["metrics"] == {"e2_rms": None, "e2_max": 1.5, "beta_min": None}
 
 
+@pytest.mark.slow
 def test_torn_last_line_is_ignored(tmp_path, calls):
     doc = study([MASS])
     run_sweep(doc, out=tmp_path, workers=2, progress=False, case_fn=stub_case)
@@ -370,6 +375,7 @@ def test_torn_last_line_is_ignored(tmp_path, calls):
     assert sorted(r["case_id"] for r in rows) == sorted(c.case_id for c in res.cases)
 
 
+@pytest.mark.slow
 def test_sigterm_stops_workers_and_keeps_rows(tmp_path):
     out, pids = tmp_path / "out", tmp_path / "pids.txt"
     doc = study([{"param": "seed", "values": list(range(4, 24))}])
@@ -401,6 +407,7 @@ def test_sigterm_stops_workers_and_keeps_rows(tmp_path):
     assert res.complete and res.skipped == len(rows) and len(table_lines(out)) == 20
 
 
+@pytest.mark.slow
 def test_dask_matches_process_pool(tmp_path, calls):
     from distributed import LocalCluster
 
@@ -420,6 +427,7 @@ def test_dask_matches_process_pool(tmp_path, calls):
 
 
 # --- outputs ---------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_summary_plots_recordings_and_provenance(tmp_path):
     doc = study(GRID2, record={"worst": 2, "by": "e2_rms"})
     res = run_sweep(doc, out=tmp_path, workers=2, progress=False, case_fn=stub_case)
@@ -537,6 +545,7 @@ print(json.dumps({k: v["metrics"] for k, v in sorted(res.rows.items())}))
 """
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("threads, warm", [("none", 1), ("thread", 0), ("after", 1)])
 def test_workers_are_forked_warm_only_from_a_single_threaded_process(tmp_path, threads, warm):
     """A sweep started from a process without other threads forks its workers after importing the loop
@@ -558,6 +567,7 @@ def test_workers_are_forked_warm_only_from_a_single_threaded_process(tmp_path, t
     assert rows == expected
 
 
+@pytest.mark.slow
 def test_phase_timings_add_up(tmp_path, capsys, monkeypatch):
     """SweepResult.timings splits the call's wall time into set-up, cases, recordings and summary: each
     phase is measured, none is negative, they fit in the call, and the cases phase holds the cases (9
