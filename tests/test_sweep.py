@@ -590,3 +590,10 @@ def test_phase_timings_add_up(tmp_path, capsys, monkeypatch):
     err = capsys.readouterr().err
     pattern = r"ran 9 \(processes\) in \d+\.\d s \(\d+ cases/min; set-up \d+\.\d s, summary \d+\.\d s\)"
     assert re.search(pattern, err), err
+
+
+def test_unhashable_distribution_name_is_one_line():
+    """A distribution given as a non-string (``scale = {random = []}``, found by the study-file fuzz test)
+    is a one-line ConfigError naming the factor, not a TypeError."""
+    with pytest.raises(ConfigError, match=r"\[\[factor\]\] 'a': scale: random = \[\]; expected one of"):
+        load_study({"study": {"name": "x"}, "factor": [{"name": "a", "param": "seed", "scale": {"random": []}}]})

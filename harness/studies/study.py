@@ -185,7 +185,7 @@ def canon(v) -> str:
 
 def _parse_dist(spec: dict, where: str) -> dict:
     kind = spec.get("random")
-    if kind not in DISTRIBUTIONS:
+    if not isinstance(kind, str) or kind not in DISTRIBUTIONS:  # (an unhashable value: one line too)
         hint = did_you_mean(suggest(kind, DISTRIBUTIONS)) if isinstance(kind, str) else ""
         raise ConfigError(f"{where}: random = {kind!r}; {hint}expected one of {sorted(DISTRIBUTIONS)}")
     keys = DISTRIBUTIONS[kind]
