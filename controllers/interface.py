@@ -243,14 +243,17 @@ class Controller:
     name: short name (built-ins: the name used by ``--controller``); description: one line;
     actuations: the plant actuations it supports ("torque": it computes T2; "servo": it computes u2
     or the servo reference); plants: the plant kinds it runs on ("mujoco", "analytic", "cosserat"; None:
-    any); Params: a frozen dataclass of parameters with defaults (optional method ``check(self)`` raising
-    ParamsError) or None.  The harness checks actuations and plants before a run and says in one line
-    what does not match."""
+    any); requires: plant settings it needs, {plant kind: {dotted scenario key: value}} (e.g.
+    ``{"mujoco": {"plant.enforce_cc": True}}``: on the MuJoCo plant only the constant-curvature chain);
+    Params: a frozen dataclass of parameters with defaults (optional method ``check(self)`` raising
+    ParamsError) or None.  The harness checks actuations, plants and requirements before a run and says
+    in one line what does not match."""
 
     name = "controller"
     description = ""
     actuations: tuple[str, ...] = ("torque", "servo")
     plants: tuple[str, ...] | None = None
+    requires: dict[str, dict[str, object]] = {}  # noqa: RUF012 - read only
     Params: type | None = None
 
     def __init__(self) -> None:

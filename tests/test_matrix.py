@@ -33,14 +33,7 @@ DURATION = 0.2  # s of simulated time per cell
 # Cells that fail today because of a bug outside the tests, each with the bug in one line.  The test
 # demands that these cells still fail (strict: remove the entry once the bug is fixed) and that every
 # other cell passes; the table marks them.
-KNOWN_BUGS: dict[tuple[str, str, str], str] = {
-    ("mujoco free chain", "torque", "examples/controllers/jacobian_transpose.py:JacobianTransposePD"):
-        "the example declares only actuations = ('torque',); the free chain under torque needs "
-        "plant.enforce_cc = true (its README says so) but no declared requirement refuses it up front",
-    ("cosserat", "torque", "examples/controllers/jacobian_transpose.py:JacobianTransposePD"):
-        "the example commands T2 of about 40 kN on the rod within 10 ms and the rod's compiled step "
-        "raises ZeroDivisionError (reported as status 'error', not as a diverged plant state)",
-}
+KNOWN_BUGS: dict[tuple[str, str, str], str] = {}
 
 
 def plants() -> list[tuple[str, list[str]]]:

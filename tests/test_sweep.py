@@ -596,4 +596,5 @@ def test_unhashable_distribution_name_is_one_line():
     """A distribution given as a non-string (``scale = {random = []}``, found by the study-file fuzz test)
     is a one-line ConfigError naming the factor, not a TypeError."""
     with pytest.raises(ConfigError, match=r"\[\[factor\]\] 'a': scale: random = \[\]; expected one of"):
-        load_study({"study": {"name": "x"}, "factor": [{"name": "a", "param": "seed", "scale": {"random": []}}]})
+        load_study({"study": {"name": "x"},
+                    "factor": [{"name": "a", "param": "seed", "scale": {"random": []}}]})

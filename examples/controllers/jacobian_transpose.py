@@ -28,7 +28,8 @@ configuration through the null-space projector I - J2^T J2^+T (which leaves the 
 without it the self-motion drifts to the curvature limits within 5 s on some noise seeds.
 T2 is what a torque plant needs (MuJoCo
 `plant.actuation = "torque"`, the analytic plant); it does not provide a servo reference, so it
-declares `actuations = ("torque",)` and is rejected on a servo plant before the run.
+declares `actuations = ("torque",)`, `plants = ("mujoco", "analytic")` and, on MuJoCo, the
+constant-curvature chain (`requires`); anything else is refused before the run.
 
 Parameters ([controller.params] or --set controller.params.KEY=VALUE):
     kp (N/m), kd (N s/m), joint_damping c (1/s), posture kq (1/s^2).
@@ -48,6 +49,8 @@ class JacobianTransposePD(Controller):
     name = "jacobian_transpose"
     description = "Jacobian-transpose task-space PD with gravity/elastic compensation (torque plants)"
     actuations = ("torque",)
+    plants = ("mujoco", "analytic")  # on the rod its stiff gains blow up within 10 ms
+    requires = {"mujoco": {"plant.enforce_cc": True}}  # the free chain diverges under torque (docs)
 
     @dataclass(frozen=True)
     class Params:

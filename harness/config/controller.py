@@ -24,6 +24,7 @@ from controllers.baselines import BUILTINS, FAST_PATH
 from controllers.interface import Controller, ParamsError
 from harness.config.errors import ConfigError
 from harness.config.scenario import ControllerConfig, Scenario
+from harness.config.textio import toml_literal
 
 
 def describe_builtins() -> list[tuple[str, str, tuple[str, ...]]]:
@@ -41,6 +42,14 @@ def plant_actuation(scn: Scenario) -> str:
 
 def _bad(name: str, why: str) -> ConfigError:
     return ConfigError(f"controller.name = {name!r}: {why}", path="controller.name", value=name)
+
+
+def _setting(scn: Scenario, key: str):
+    """The value of a dotted scenario key (None where the path does not exist)."""
+    obj = scn
+    for part in key.split("."):
+        obj = getattr(obj, part, None)
+    return obj
 
 
 def load_class(name: str) -> type:
@@ -121,6 +130,11 @@ def resolve_controller(scn: Scenario) -> Scenario:
         need = "T2 (section forces/moments)" if act == "torque" else "u2 or a servo reference"
         raise _bad(cfg.name, f"supports actuation {', '.join(map(repr, supported))} only, but {plant} "
                              f"needs {need}")
+    for key, want in (getattr(cls, "requires", None) or {}).get(scn.plant.kind, {}).items():
+        have = _setting(scn, key)
+        if have != want:
+            raise _bad(cfg.name, f"needs {key} = {toml_literal(want)} on plant.kind {scn.plant.kind!r} "
+                                 f"(it is {toml_literal(have)})")
     try:
         p = parse_params(cls, cfg.params)
     except ParamsError as e:
