@@ -598,3 +598,37 @@ def test_unhashable_distribution_name_is_one_line():
     with pytest.raises(ConfigError, match=r"\[\[factor\]\] 'a': scale: random = \[\]; expected one of"):
         load_study({"study": {"name": "x"},
                     "factor": [{"name": "a", "param": "seed", "scale": {"random": []}}]})
+
+
+def _mass_study(tmp_path, actuation):
+    path = tmp_path / f"mass_{actuation}.toml"
+    path.write_text(f"""
+[study]
+name = "mass_{actuation}"
+set = ["duration=0.6", "transient=0.2", "plant.actuation='{actuation}'"]
+metrics = ["e2_rms"]
+
+[[factor]]
+name = "slave_mass"
+param = "plant.slave.masses"
+scale = [0.5, 2.0]
+""")
+    return path
+
+
+@pytest.mark.parametrize("actuation", ["servo", "muscle"])
+def test_a_servo_plant_warns_when_a_study_varies_what_it_hides(tmp_path, capsys, caplog, actuation):
+    """A study varying the slave's mass on a servo plant says so in one line before it runs and again in
+    its summary with the measured spread of e2; on a plant that feels the mass (muscles) it says nothing."""
+    from harness.studies.sweep import main_sweep
+
+    rc = main_sweep(_mass_study(tmp_path, actuation), out=tmp_path / "o", workers=1, progress=False,
+                    executor="threads")
+    assert rc == 0
+    before = [r.getMessage() for r in caplog.records if "hide them" in r.getMessage()]  # logged at the start
+    after = [ln for ln in capsys.readouterr().err.splitlines() if "hide them" in ln]  # in the summary
+    if actuation == "servo":
+        assert len(before) == 1 and "'slave_mass'" in before[0] and len(after) == 1
+        assert re.search(r"measured: slave_mass: e2_rms \S+ at 0\.5 -> \S+ at 2", after[0]), after
+    else:
+        assert before == after == []

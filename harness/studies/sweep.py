@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import os
 import signal
 import sys
@@ -111,6 +112,7 @@ class SweepResult:
     # "cases" (first submit to last result), "recordings" (the worst cases re-run), "summary" (summary.csv,
     # plots, the wait for their imports)
     timings: dict[str, float] = dataclasses.field(default_factory=dict)
+    hidden: list[str] = dataclasses.field(default_factory=list)  # factors a servo plant hides
 
     @property
     def complete(self) -> bool:
@@ -142,6 +144,37 @@ def _study_document(study: Study, base: Scenario) -> dict:
     return {"study": st, "sampling": sampling, "factor": factors, "scenario": scenario_to_dict(base)}
 
 
+
+
+# slave dynamics parameters whose effect a servo-actuated plant hides: its stiff position servos track the
+# integrated command, so the slave's inertia and damping hardly enter (docs/plants.md, actuations)
+HIDDEN_BY_SERVO = ("plant.slave.masses", "plant.slave.slice_inertia", "plant.slave.extension_damping",
+                   "plant.slave.bending_damping", "plant.extension_viscosity", "plant.bending_viscosity")
+
+
+def hidden_factors(study: Study, cases: Sequence[Case]) -> list[str]:
+    """The study's factors that vary slave dynamics on a servo-actuated MuJoCo or Cosserat plant."""
+    servo = any(c.scenario.plant.kind in ("mujoco", "cosserat") and c.scenario.plant.actuation == "servo"
+                for c in cases)
+    return [f.name for f in study.factors if servo and ".".join(f.path) in HIDDEN_BY_SERVO]
+
+
+def hidden_warning(names: Sequence[str]) -> str:
+    return (f"warning: factor(s) {', '.join(map(repr, names))} vary the slave's dynamics on a servo-actuated "
+            "plant, whose position servos hide them; use plant.actuation = \"torque\" or \"muscle\" to "
+            "see their effect")
+
+
+def sensitivity(result: SweepResult, name: str, metric: str = "e2_rms") -> str:
+    """The measured spread of `metric` over the levels of factor `name` (finite rows only)."""
+    pts = sorted((float(r["params"][name]), float(r["metrics"][metric])) for r in result.rows.values()
+                 if r.get("params", {}).get(name) is not None and isinstance(r.get("metrics", {}).get(metric),
+                                                                            (int, float))
+                 and math.isfinite(r["metrics"][metric]))
+    if len(pts) < 2:
+        return f"{name}: fewer than 2 finite {metric} values"
+    (x0, y0), (x1, y1) = pts[0], pts[-1]
+    return f"{name}: {metric} {y0:.4g} at {x0:g} -> {y1:.4g} at {x1:g}"
 
 
 def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | None = None,
@@ -190,6 +223,9 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
     check_case_count(study)
     base = load_base(study)
     cases = expand_cases(study, base)
+    hidden = hidden_factors(study, cases)
+    if hidden:
+        log.warning(hidden_warning(hidden))
     runner = Runner(workers, scheduler, pick_executor(executor, scheduler, cases))
     if scheduler:
         runner.connect()  # a bad or unreachable scheduler is input: found before anything is written
@@ -211,7 +247,7 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
         todo = [c for c in cases if c.case_id not in known]
         result = SweepResult(study, out, cases, {c.case_id: known[c.case_id] for c in cases
                                                  if c.case_id in known}, skipped=len(cases) - len(todo),
-                             executor=runner.kind)
+                             executor=runner.kind, hidden=hidden)
         extra = len(set(known) - {c.case_id for c in cases})
         log.info("study %s: %d cases, %d already done, %d to run on %d %s%s", study.name, len(cases),
                  result.skipped, len(todo), runner.workers, runner.kind,
@@ -348,6 +384,9 @@ def main_sweep(study_path: str | os.PathLike, out: str | os.PathLike | None = No
           f"{res.skipped} already done -> {res.out}", file=sys.stderr)
     for p in res.recordings:
         print(f"recording: {p}", file=sys.stderr)
+    if res.hidden:
+        print(f"{hidden_warning(res.hidden)} (measured: "
+              f"{'; '.join(sensitivity(res, n) for n in res.hidden)})", file=sys.stderr)
     for f in res.failures:
         print(f"error: {f}", file=sys.stderr)
     if not res.complete:
