@@ -75,19 +75,25 @@ class RunResult:
 @contextlib.contextmanager
 def stop_on_signals(stop: threading.Event | None) -> Iterator[list[int]]:
     """While active, SIGINT/SIGTERM set `stop` (the simulation then returns status "interrupted");
-    a second signal raises KeyboardInterrupt.  Yields the list of received signal numbers."""
+    a second signal, or the first while a Python controller's code runs, raises `HarnessInterrupt` (a
+    KeyboardInterrupt the controller adapter tells apart from one a controller raises).  Yields the list
+    of received signal numbers."""
     received: list[int] = []
     if stop is None or threading.current_thread() is not threading.main_thread():
         yield received
         return
 
     def handler(signum, frame):  # noqa: ARG001
+        from harness.config.controller import USER_CODE, HarnessInterrupt
+
         if stop.is_set():
-            raise KeyboardInterrupt
+            raise HarnessInterrupt
         received.append(signum)
         stop.set()
         print(f"\n{signal.Signals(signum).name}: stopping the run, outputs will be written "
               "(repeat to abort immediately)", file=sys.stderr)
+        if USER_CODE[0]:  # a controller's code is running (it may block): stop it now
+            raise HarnessInterrupt
 
     stop.clear()
     previous = {}

@@ -211,7 +211,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     out = prepare_out_dir(args.out) if args.out is not None else None
     traj, metrics, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress,
                                                                record_rate=args.record_rate)
-    if interrupted:
+    if interrupted or traj.status == "error":  # an error is no measurement, whatever the bounds allow
         return _run_exit_code(traj, failures, interrupted, wrote=out is not None)
     if metrics is None:
         _err(f"no metrics could be computed, bounds not checked ({failures[0] if failures else 'unknown'})")
@@ -375,7 +375,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as e:
         if isinstance(e, _user_error_types()):
             _err(e)
-            return EXIT_USAGE
+            return getattr(e, "exit_code", EXIT_USAGE)  # a controller's own code failing: 1
         raise
 
 

@@ -99,10 +99,13 @@ class ControllerConfig:
     name: a built-in ("paper" = the paper's law (12)-(33), compiled; `teleop controllers` lists the
     others), or a user class "path/to/file.py:ClassName" / "package.module:ClassName".
     params: the controller's own parameters (TOML values), validated by its class (`Params`) when the
-    scenario is loaded through harness.api; the resolved config.toml spells out every one of them."""
+    scenario is loaded through harness.api; the resolved config.toml spells out every one of them.
+    step_timeout: s, the longest a Python controller's call may run (None: no limit); construction,
+    reset and the first step may take at least 120 s (they may compile the nominal models)."""
 
     name: str = "paper"
     params: dict = field(default_factory=dict)
+    step_timeout: float | None = 10.0
 
 
 @dataclass(frozen=True)

@@ -56,7 +56,7 @@ from harness.config.scenario import (
     TrajectoryConfig,
 )
 
-CONTROLLER_RE = re.compile(r"^(?:[A-Za-z_][A-Za-z0-9_]*|[^\s:]+:[A-Za-z_][A-Za-z0-9_]*)$")
+CONTROLLER_RE = re.compile(r"^(?:[A-Za-z_][A-Za-z0-9_]*|[^\x00-\x1f:][^\x00-\x1f]*:[A-Za-z_][A-Za-z0-9_]*)$")
 CONTROLLER_DESC = ("a built-in controller name (see 'teleop controllers'), 'path/to/file.py:ClassName' or "
                    "'package.module:ClassName'")
 
@@ -81,7 +81,7 @@ def _controller(path: str, v: Any) -> ControllerConfig:
         v = {"name": v}
     if not isinstance(v, Mapping):
         raise ConfigError.field(path, v, f"must be a table [controller] or a name (got {type_name(v)})")
-    check_keys(v, path, ("name", "params"))
+    check_keys(v, path, ("name", "params", "step_timeout"))
     name = v.get("name", ControllerConfig.name)
     if not isinstance(name, str) or not CONTROLLER_RE.match(name.strip()):
         raise ConfigError.field(f"{path}.name", name, f"must be {CONTROLLER_DESC}")
@@ -95,7 +95,14 @@ def _controller(path: str, v: Any) -> ControllerConfig:
         if not isinstance(k, str) or not KEY_RE.match(k):
             raise ConfigError.field(f"{path}.params", k, "keys must be names like 'gain'")
         out[k] = _param_value(f"{path}.params.{k}", x)
-    return ControllerConfig(name=name.strip(), params=out)
+    timeout = v.get("step_timeout", ControllerConfig.step_timeout)
+    if is_none_word(timeout):
+        timeout = None
+    elif isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not 0 < timeout <= 86400:
+        raise ConfigError.field(f"{path}.step_timeout", timeout,
+                                'must be a number of seconds in (0, 86400] or "none" (no limit)')
+    return ControllerConfig(name=name.strip(), params=out,
+                            step_timeout=None if timeout is None else float(timeout))
 
 
 # ---------------------------------------------------------------------------------------------
