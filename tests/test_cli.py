@@ -456,11 +456,13 @@ def test_sweep_delegates(monkeypatch, tmp_path):
     assert main(["sweep", str(study), "--out", str(tmp_path / "s"), "--workers", "3",
                  "--scheduler", "tcp://h:8786", "--no-progress"]) == 0
     assert calls == [((study, tmp_path / "s", 3, "tcp://h:8786", False),
-                      {"max_cases": None, "executor": "processes"})]
+                      {"max_cases": None, "executor": "processes", "allow_code": False})]
     assert main(["sweep", str(study)]) == 0
-    assert calls[-1] == ((study, None, None, None, True), {"max_cases": None, "executor": "processes"})
+    assert calls[-1] == ((study, None, None, None, True), {"max_cases": None, "executor": "processes",
+                                                           "allow_code": False})
     assert main(["sweep", str(study), "--executor", "threads", "--max-cases", "5"]) == 0
-    assert calls[-1] == ((study, None, None, None, True), {"max_cases": 5, "executor": "threads"})
+    assert calls[-1] == ((study, None, None, None, True), {"max_cases": 5, "executor": "threads",
+                                                           "allow_code": False})
 
 
 def test_sweep_errors(monkeypatch, tmp_path, capsys):

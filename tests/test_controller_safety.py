@@ -279,3 +279,134 @@ def test_a_controller_path_with_a_space_works(tmp_path, capsys):
     (folder / "ctrl.py").write_text(CONTROLLERS)
     rc, err = _run(capsys, f"{folder / 'ctrl.py'}:Plain", tmp_path / "o")
     assert rc == 0, err
+
+
+# ------------------------------------------------------------------- 7: files run no code unless allowed
+MARKER = textwrap.dedent('''
+    from pathlib import Path
+
+    Path(__file__).with_name("IMPORTED").write_text("code ran")
+    from controllers.baselines import BUILTINS
+
+    Ctl = BUILTINS["dls_ik"]
+''')
+
+
+@pytest.fixture()
+def planted(tmp_path):
+    """A scenario file naming a controller file next to it (relative path) that leaves a marker when
+    imported; the commands run from another folder."""
+    d = tmp_path / "from_elsewhere"
+    d.mkdir()
+    (d / "ctl.py").write_text(MARKER)
+    (d / "scn.toml").write_text('duration = 0.05\ntransient = 0.0\n[controller]\nname = "ctl.py:Ctl"\n')
+    cwd = tmp_path / "cwd"
+    cwd.mkdir()
+    return d, cwd
+
+
+@pytest.mark.parametrize("command", ["run", "check"])
+def test_a_scenario_file_naming_code_is_refused_without_allow_code(planted, capsys, monkeypatch, command):
+    d, cwd = planted
+    monkeypatch.chdir(cwd)
+    extra = ["--bounds", str(ROOT / "bounds" / "paper_mujoco.toml")] if command == "check" else ["--out", "o"]
+    rc = main([command, str(d / "scn.toml"), "--no-progress", *extra])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "--allow-code" in err[0] and "is Python code" in err[0], err
+    assert not (d / "IMPORTED").exists() and not (cwd / "o").exists()
+
+
+def test_allow_code_runs_it_with_the_path_relative_to_the_file(planted, capsys, monkeypatch):
+    d, cwd = planted
+    monkeypatch.chdir(cwd)
+    assert main(["run", str(d / "scn.toml"), "--allow-code", "--no-progress", "--out", "o"]) == 0
+    assert (d / "IMPORTED").exists()
+    import tomllib
+
+    cfg = tomllib.loads((cwd / "o" / "config.toml").read_text())
+    assert cfg["controller"]["name"] == f"{d / 'ctl.py'}:Ctl"
+
+
+def test_a_module_reference_in_a_file_is_refused_too(tmp_path):
+    f = tmp_path / "m.toml"
+    f.write_text('[controller]\nname = "os:getcwd"\n')
+    with pytest.raises(ConfigError, match="is Python code.*--allow-code"):
+        load_scenario(f)
+
+
+def test_the_command_line_and_the_api_say_so(planted, capsys, monkeypatch):
+    d, cwd = planted
+    monkeypatch.chdir(cwd)
+    assert main(["run", "--controller", str(d / "ctl.py") + ":Ctl", "--no-progress", "--out", "o",
+                 *[a for s in SHORT for a in ("--set", s)]]) == 0
+    with pytest.raises(ConfigError, match="--allow-code"):
+        load_scenario(d / "scn.toml")
+    assert load_scenario(d / "scn.toml", allow_code=True).controller.name == f"{d / 'ctl.py'}:Ctl"
+    import harness
+
+    assert harness.run(d / "scn.toml", allow_code=True).status == "ok"
+
+
+def test_a_replayed_config_toml_naming_code_needs_allow_code(ctl, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert _run(capsys, "ctl.py:Plain", tmp_path / "o")[0] == 0
+    rc = main(["run", str(tmp_path / "o" / "config.toml"), "--no-progress", "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "--allow-code" in err[0]
+    monkeypatch.chdir(ROOT)  # the recorded path is absolute: the replay works from anywhere
+    assert main(["run", str(tmp_path / "o" / "config.toml"), "--allow-code", "--no-progress",
+                 "--out", str(tmp_path / "r")]) == 0
+
+
+def test_teleop_models_never_imports_a_controller(planted, capsys, monkeypatch):
+    d, cwd = planted
+    monkeypatch.chdir(cwd)
+    assert main(["models", str(d / "scn.toml"), "--out", "m.xml"]) == 0
+    assert (cwd / "m.xml").is_file() and not (d / "IMPORTED").exists()
+
+
+def _study(folder: Path, values: list[str]) -> Path:
+    (folder / "ctl.py").write_text(CONTROLLERS)
+    p = folder / "study.toml"
+    p.write_text(textwrap.dedent(f'''
+        [study]
+        name = "ctl"
+        set = ["duration=0.05", "transient=0.0"]
+        metrics = ["e2_rms"]
+        [[factor]]
+        param = "controller"
+        values = {json.dumps(values)}
+        [[factor]]
+        param = "seed"
+        values = [0, 1]
+    '''))
+    return p
+
+
+def test_a_study_naming_code_is_refused_without_allow_code(tmp_path, capsys, monkeypatch):
+    d = tmp_path / "s"
+    d.mkdir()
+    study = _study(d, ["dls_ik", "ctl.py:Plain"])
+    monkeypatch.chdir(tmp_path)
+    rc = main(["sweep", str(study), "--out", str(tmp_path / "o"), "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "--allow-code" in err[0] and not (tmp_path / "o").exists()
+
+
+def test_a_failing_controller_in_a_sweep_is_an_error_row_and_the_others_run(tmp_path, capsys, monkeypatch):
+    """Controller paths resolve against the study file (run from another folder); the controller that
+    raises SystemExit gives error rows, the others ok rows; the sweep completes (exit 0) at once."""
+    d = tmp_path / "s"
+    d.mkdir()
+    study = _study(d, ["dls_ik", "ctl.py:StepExit0", "ctl.py:Plain"])
+    monkeypatch.chdir(tmp_path)
+    rc = main(["sweep", str(study), "--out", str(tmp_path / "o"), "--no-progress", "--allow-code",
+               "--workers", "1"])
+    assert rc == 0, capsys.readouterr().err
+    rows = [json.loads(line) for line in (tmp_path / "o" / "results.jsonl").read_text().splitlines()]
+    by = {(r["params"]["controller"], r["params"]["seed"]): r for r in rows}
+    assert len(rows) == 6
+    for seed in (0, 1):
+        assert by[("ctl.py:StepExit0", seed)]["status"] == "error"
+        assert "raised SystemExit(0) at step 5" in by[("ctl.py:StepExit0", seed)]["message"]
+        assert by[("dls_ik", seed)]["status"] == "ok" and by[("ctl.py:Plain", seed)]["status"] == "ok"

@@ -80,8 +80,10 @@ _SHORTCUTS = (  # (attribute, option, dotted key)
 )
 
 
-def load_from_args(args: argparse.Namespace, extra: Sequence[tuple[str, str]] = ()):
-    """Scenario from the positional file, the shortcut options, `extra` (key=value, label) and --set."""
+def load_from_args(args: argparse.Namespace, extra: Sequence[tuple[str, str]] = (), controller: bool = True):
+    """Scenario from the positional file, the shortcut options, `extra` (key=value, label) and --set.
+    The command line is the user's say-so for a Python controller; a file naming one needs --allow-code.
+    controller=False: the controller is not loaded (no user code is imported)."""
     from harness.api import load_scenario
 
     overrides: list[str] = []
@@ -100,7 +102,8 @@ def load_from_args(args: argparse.Namespace, extra: Sequence[tuple[str, str]] = 
     for text in args.overrides:
         overrides.append(text)
         labels.append(f"--set {text if len(text) <= 80 else text[:77] + '...'}")
-    return load_scenario(args.scenario, overrides, labels=labels)
+    return load_scenario(args.scenario, overrides, labels=labels, controller=controller,
+                         allow_code=bool(getattr(args, "allow_code", False)) or None)
 
 
 def _import(name: str):
@@ -234,7 +237,7 @@ def cmd_models(args: argparse.Namespace) -> int:
     if args.enforce_cc is not None:
         flag = "true" if args.enforce_cc else "false"
         extra.append((f"plant.enforce_cc={flag}", "--enforce-cc" if args.enforce_cc else "--no-enforce-cc"))
-    scn = load_from_args(args, extra)
+    scn = load_from_args(args, extra, controller=False)  # a model export never imports a controller
     p = scn.plant
     path = args.out if args.out is not None else Path(
         "mjcf") / f"octarm_{p.actuation}_n{p.segments}{'_cc' if p.enforce_cc else ''}.xml"
@@ -258,7 +261,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         return _view_case(study, args.out, args.view)
     sweep = _import("harness.studies.sweep")  # validates the study, then creates and checks the output folder
     rc = sweep.main_sweep(study, args.out, args.workers, args.scheduler, not args.no_progress,
-                          max_cases=args.max_cases, executor=args.executor)
+                          max_cases=args.max_cases, executor=args.executor, allow_code=args.allow_code)
     return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
 
 
