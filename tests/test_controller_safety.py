@@ -410,3 +410,50 @@ def test_a_failing_controller_in_a_sweep_is_an_error_row_and_the_others_run(tmp_
         assert by[("ctl.py:StepExit0", seed)]["status"] == "error"
         assert "raised SystemExit(0) at step 5" in by[("ctl.py:StepExit0", seed)]["message"]
         assert by[("dls_ik", seed)]["status"] == "ok" and by[("ctl.py:Plain", seed)]["status"] == "ok"
+
+
+# ------------------------------------------------------------------- 8: hints for known failures
+def _diverged(*over):
+    from types import SimpleNamespace
+
+    return load_scenario(None, ['plant.actuation="torque"', *over]), SimpleNamespace(status="diverged")
+
+
+def test_the_torque_hint_names_only_settings_that_differ_from_the_run():
+    from harness.cli import failure_hint
+
+    hint = failure_hint(*_diverged())
+    assert hint.startswith("hint: ") and "\n" not in hint and "k_n = 100 past the sampled-data limit" in hint
+    assert all(s in hint for s in ("plant.enforce_cc=true", "plant.bending_viscosity=[1.0,1.0,1.0]",
+                                   "gains.kn=60"))
+    hint = failure_hint(*_diverged("gains.kn=60", "plant.bending_viscosity=[2.0,2.0,2.0]"))
+    assert "plant.enforce_cc=true" in hint and "gains.kn=60" not in hint and "bending_viscosity" not in hint
+    assert failure_hint(*_diverged("plant.enforce_cc=true")) is None
+    assert failure_hint(*_diverged('plant.actuation="servo"')) is None
+    scn, tr = _diverged()
+    tr.status = "ok"
+    assert failure_hint(scn, tr) is None
+
+
+def _hint_options(hint: str) -> list[str]:
+    return [part.split()[0] for part in hint.split("--set ")[1:]]
+
+
+def test_torque_on_the_free_chain_prints_one_hint(capsys):
+    rc = main(["check", "--actuation", "torque", "--duration", "2", "--set", "transient=0.5", "--no-progress",
+               "--bounds", str(ROOT / "bounds" / "paper_mujoco.toml")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 1
+    hints = [line for line in err if line.startswith("hint: ")]
+    assert len(hints) == 1 and len(_hint_options(hints[0])) == 3
+
+
+def test_every_setting_the_torque_hint_suggests_runs():
+    """Each printed suggestion runs the paper scenario in torque actuation for 5 s (status ok)."""
+    from harness.cli import failure_hint
+
+    options = _hint_options(failure_hint(*_diverged()))
+    assert len(options) == 3
+    for opt in options:
+        tr = simulate(load_scenario("paper", ['plant.actuation="torque"', "duration=5", "transient=1", opt]))
+        assert tr.status == "ok" and len(tr) == 5000, (opt, tr.message)

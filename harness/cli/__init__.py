@@ -167,6 +167,36 @@ def _simulate_and_write(scn, out: Path | None, progress: bool, live=None, record
     return res.traj, res.metrics, res.failures, res.interrupted
 
 
+# Settings that run the paper scenario in torque actuation on the MuJoCo plant (each checked for 5 s by
+# tests/test_controller_safety.py::test_every_setting_the_torque_hint_suggests_runs): (applies to this
+# scenario, option, what it is)
+_TORQUE_FIXES = (
+    (lambda s: not s.plant.enforce_cc, "--set plant.enforce_cc=true", "the CC chain"),
+    (lambda s: max(s.plant.bending_viscosity) < 1.0, "--set plant.bending_viscosity=[1.0,1.0,1.0]",
+     "10x the default bending damping"),
+    (lambda s: s.gains.kn > 60.0, "--set gains.kn=60", "a lower null-space gain"),
+)
+
+
+def failure_hint(scn, traj) -> str | None:
+    """One line saying what to change when a run failed for a known reason, else None.  Known: torque
+    actuation on the MuJoCo free chain diverges with the paper's gains (README, stability map)."""
+    p = scn.plant
+    if traj.status != "diverged" or p.kind != "mujoco" or p.actuation != "torque" or p.enforce_cc:
+        return None
+    fixes = [f"{opt} ({what})" for applies, opt, what in _TORQUE_FIXES if applies(scn)]
+    runs = "; settings that run the paper scenario: " + ", ".join(fixes) if fixes else ""
+    return (f"hint: torque actuation on the free chain diverges: the stability map ('teleop stability-map') "
+            f"puts k_n = {scn.gains.kn:g} past the sampled-data limit of a non-CC mode at the section "
+            f"junction{runs}")
+
+
+def _print_hint(scn, traj) -> None:
+    hint = failure_hint(scn, traj)
+    if hint:
+        print(hint, file=sys.stderr)
+
+
 def _run_exit_code(traj, failures: list[str], interrupted: bool, wrote: bool = True) -> int:
     if interrupted:
         t_end = float(traj.t[-1]) if len(traj) else 0.0
@@ -194,6 +224,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     traj, _, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress, live=live,
                                                          record_rate=args.record_rate)
     rc = _run_exit_code(traj, failures, interrupted)
+    _print_hint(scn, traj)
     if live is not None:
         if live.failed:
             _warn(f"live view: {live.failed}")
@@ -214,6 +245,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     out = prepare_out_dir(args.out) if args.out is not None else None
     traj, metrics, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress,
                                                                record_rate=args.record_rate)
+    _print_hint(scn, traj)
     if interrupted or traj.status == "error":  # an error is no measurement, whatever the bounds allow
         return _run_exit_code(traj, failures, interrupted, wrote=out is not None)
     if metrics is None:
