@@ -457,3 +457,20 @@ def test_every_setting_the_torque_hint_suggests_runs():
     for opt in options:
         tr = simulate(load_scenario("paper", ['plant.actuation="torque"', "duration=5", "transient=1", opt]))
         assert tr.status == "ok" and len(tr) == 5000, (opt, tr.message)
+
+
+# ------------------------------------------------------------------- 9: the guide's skeleton runs as written
+def test_the_guide_skeleton_runs_as_written(tmp_path, monkeypatch, capsys):
+    import re
+    import shlex
+
+    text = (ROOT / "docs" / "guide" / "controllers.md").read_text(encoding="utf-8")
+    (code,) = re.findall(r"```python\n(.*?)```", text, re.S)
+    (tmp_path / "my_controller.py").write_text(code)
+    commands = [shlex.split(line)[1:] for block in re.findall(r"```sh\n(.*?)```", text, re.S)
+                for line in block.splitlines() if line.startswith("teleop ")]
+    assert len(commands) == 2
+    monkeypatch.chdir(tmp_path)
+    for i, argv in enumerate(commands):
+        assert main([*argv, "--out", f"o{i}", "--no-progress"]) == 0, capsys.readouterr().err
+        assert json.loads((tmp_path / f"o{i}" / "metrics.json").read_text())["status"] == "ok"
