@@ -228,9 +228,8 @@ class InterfaceController:
             raise ControllerFailure(f"controller {name!r} raised {describe_exception(e)} "
                                     f"at step {k} (t = {t:.3f} s)") from None
         finally:
-            USER_CODE[0] = False
-            if armed:
-                signal.setitimer(signal.ITIMER_REAL, 0.0)
+            USER_CODE[0] = False  # the timer stays armed: past the step its alarm does nothing (one system
+            #                       call per step; `close` disarms it)
         if limit is not None and not armed and time.perf_counter() - t0 > limit:  # worker threads: no alarm
             raise self._fail(_Timeout(), f"at step {k} (t = {t:.3f} s)", limit)
         bad = check_action(act, name, k, t, self.servo)
