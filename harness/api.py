@@ -88,9 +88,9 @@ def stop_on_signals(stop: threading.Event | None) -> Iterator[list[int]]:
         yield received
         return
 
-    def handler(signum, frame):  # noqa: ARG001
-        from harness.config.controller import USER_CODE, HarnessInterrupt
+    from harness.config.controller import USER_CODE, HarnessInterrupt
 
+    def handler(signum, frame):  # noqa: ARG001
         if stop.is_set():
             raise HarnessInterrupt
         received.append(signum)

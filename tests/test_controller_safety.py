@@ -371,7 +371,7 @@ def _study(folder: Path, values: list[str]) -> Path:
     p.write_text(textwrap.dedent(f'''
         [study]
         name = "ctl"
-        set = ["duration=0.05", "transient=0.0"]
+        set = ["duration=0.05", "transient=0.0", "controller.step_timeout=0.3"]
         metrics = ["e2_rms"]
         [[factor]]
         param = "controller"
@@ -394,19 +394,22 @@ def test_a_study_naming_code_is_refused_without_allow_code(tmp_path, capsys, mon
 
 
 def test_a_failing_controller_in_a_sweep_is_an_error_row_and_the_others_run(tmp_path, capsys, monkeypatch):
-    """Controller paths resolve against the study file (run from another folder); the controller that
-    raises SystemExit gives error rows, the others ok rows; the sweep completes (exit 0) at once."""
+    """Controller paths resolve against the study file (run from another folder); the controllers that
+    raise SystemExit or block give error rows, the others ok rows; the sweep completes (exit 0)."""
     d = tmp_path / "s"
     d.mkdir()
-    study = _study(d, ["dls_ik", "ctl.py:StepExit0", "ctl.py:Plain"])
+    study = _study(d, ["dls_ik", "ctl.py:StepExit0", "ctl.py:Plain", "ctl.py:Blocks"])
     monkeypatch.chdir(tmp_path)
     rc = main(["sweep", str(study), "--out", str(tmp_path / "o"), "--no-progress", "--allow-code",
                "--workers", "1"])
     assert rc == 0, capsys.readouterr().err
     rows = [json.loads(line) for line in (tmp_path / "o" / "results.jsonl").read_text().splitlines()]
     by = {(r["params"]["controller"], r["params"]["seed"]): r for r in rows}
-    assert len(rows) == 6
+    assert len(rows) == 8
     for seed in (0, 1):
+        blocked = by[("ctl.py:Blocks", seed)]
+        assert blocked["status"] == "error"
+        assert "ran longer than controller.step_timeout = 0.3 s at step 3" in blocked["message"]
         assert by[("ctl.py:StepExit0", seed)]["status"] == "error"
         assert "raised SystemExit(0) at step 5" in by[("ctl.py:StepExit0", seed)]["message"]
         assert by[("dls_ik", seed)]["status"] == "ok" and by[("ctl.py:Plain", seed)]["status"] == "ok"
