@@ -259,8 +259,8 @@ def test_one_ctrl_c_interrupts_a_blocking_controller(ctl, tmp_path):
                             cwd=tmp_path, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
     deadline = time.monotonic() + 240
-    while not (out / "config.toml").exists() and time.monotonic() < deadline:  # written before simulating
-        time.sleep(0.2)
+    while proc.poll() is None and not (out / "config.toml").exists() and time.monotonic() < deadline:
+        time.sleep(0.2)  # config.toml is written before simulating
     time.sleep(3.0)  # in step 3's sleep
     proc.send_signal(signal.SIGINT)
     try:
