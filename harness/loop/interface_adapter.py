@@ -167,7 +167,7 @@ class InterfaceController:
         try:
             if armed:
                 signal.setitimer(signal.ITIMER_REAL, limit)
-            return fn(*args)
+            out = fn(*args)
         except HarnessInterrupt:
             raise
         except BaseException as e:  # noqa: BLE001 - the controller's code: one line, never the process
@@ -179,8 +179,9 @@ class InterfaceController:
             if armed:
                 signal.setitimer(signal.ITIMER_REAL, 0.0)
             self.close()
-            if limit is not None and not armed and time.perf_counter() - t0 > limit:
-                raise self._fail(_Timeout(), f"in {phase}", limit)
+        if limit is not None and not armed and time.perf_counter() - t0 > limit:  # worker threads: no alarm
+            raise self._fail(_Timeout(), f"in {phase}", limit)
+        return out
 
     # -- the loop's protocol ------------------------------------------------------------------------
     def reset(self, model: RunModel) -> None:
