@@ -264,19 +264,23 @@ class Controller:
     def parse_params(cls, raw: dict | None) -> Any:
         """Validated `Params` instance from a TOML table (missing keys: defaults).  Raises ParamsError."""
         raw = dict(raw or {})
-        if cls.Params is None:
+        params = getattr(cls, "Params", None)  # a plain class (not derived from Controller) may have none
+        if params is None:
             if raw:
                 key = sorted(raw)[0]
-                raise ParamsError(key, raw[key], f"unknown key; controller {cls.name!r} takes no parameters")
+                label = getattr(cls, "name", cls.__name__)
+                raise ParamsError(key, raw[key], f"unknown key; controller {label!r} takes no parameters")
             return None
-        names = [f.name for f in dataclasses.fields(cls.Params)]
-        defaults = cls.Params()
+        if not dataclasses.is_dataclass(params):
+            raise TypeError(f"controller {cls.__name__}: Params must be a dataclass with defaults")
+        names = [f.name for f in dataclasses.fields(params)]
+        defaults = params()
         kwargs = {}
         for key, value in raw.items():
             if key not in names:
                 raise ParamsError(key, value, f"unknown key; allowed: {', '.join(names)}")
             kwargs[key] = _check_value(key, getattr(defaults, key), value)
-        p = cls.Params(**kwargs)
+        p = params(**kwargs)
         check = getattr(p, "check", None)
         if callable(check):
             check()

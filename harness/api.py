@@ -34,16 +34,21 @@ from harness.config.textio import jsonable
 
 
 def load_scenario(source: str | os.PathLike | Mapping | None = None, overrides: Iterable[str] = (), *,
-                  labels: Iterable[str | None] | None = None) -> Scenario:
+                  labels: Iterable[str | None] | None = None, allow_code: bool | None = None,
+                  controller: bool = True) -> Scenario:
     """Read and validate a scenario (TOML path, parsed table or None = the paper scenario), apply the
     dotted `key=value` overrides, and check that its plant can be built.  Raises `ConfigError`.
     The plant built for the check is kept for the next `run_scenario` of the returned scenario (built once
-    per run)."""
+    per run).  allow_code=True: a scenario FILE may name a Python controller ('file.py:Class'; refused
+    otherwise, `harness.config.load`); the overrides are the caller's.  controller=False: the controller is
+    not loaded (no code is imported; `teleop models`)."""
     from harness.config.controller import resolve_controller
     from harness.plant import build_plant
 
-    scn = _load.load_scenario(source, overrides, labels=labels)
+    scn = _load.load_scenario(source, overrides, labels=labels, allow_code=allow_code if controller else True)
     plant = build_plant(scn)
+    if not controller:
+        return scn
     scn = resolve_controller(scn)
     _BUILT[:] = [(scn, plant)]
     return scn
@@ -76,19 +81,25 @@ class RunResult:
 @contextlib.contextmanager
 def stop_on_signals(stop: threading.Event | None) -> Iterator[list[int]]:
     """While active, SIGINT/SIGTERM set `stop` (the simulation then returns status "interrupted");
-    a second signal raises KeyboardInterrupt.  Yields the list of received signal numbers."""
+    a second signal, or the first while a Python controller's code runs, raises `HarnessInterrupt` (a
+    KeyboardInterrupt the controller adapter tells apart from one a controller raises).  Yields the list
+    of received signal numbers."""
     received: list[int] = []
     if stop is None or threading.current_thread() is not threading.main_thread():
         yield received
         return
 
+    from harness.config.controller import USER_CODE, HarnessInterrupt
+
     def handler(signum, frame):  # noqa: ARG001
         if stop.is_set():
-            raise KeyboardInterrupt
+            raise HarnessInterrupt
         received.append(signum)
         stop.set()
         print(f"\n{signal.Signals(signum).name}: stopping the run, outputs will be written "
               "(repeat to abort immediately)", file=sys.stderr)
+        if USER_CODE[0]:  # a controller's code is running (it may block): stop it now
+            raise HarnessInterrupt
 
     stop.clear()
     previous = {}
@@ -291,12 +302,13 @@ FIGURES_IN_CHILD = ("fig2_e1.png", "fig3_e2.png", "fig4_beta.png", "forces.png")
 
 
 def run(scenario: Scenario | str | os.PathLike | Mapping | None = None, overrides: Iterable[str] = (), *,
-        out: str | os.PathLike | None = None, progress: bool = False):
+        out: str | os.PathLike | None = None, progress: bool = False, allow_code: bool | None = None):
     """Run a scenario and return its `Trajectory` (metrics in `traj.meta["metrics"]`).
 
     scenario: a `Scenario`, a TOML path, a parsed table, or None (the paper scenario on MuJoCo);
     overrides: dotted `key=value` strings (not with a `Scenario`).  out: folder for run.rrd, figures,
-    metrics.json and config.toml (None = write nothing).  Raises `ConfigError` for bad input and
+    metrics.json and config.toml (None = write nothing).  allow_code=True: a scenario file may name a
+    Python controller (`load_scenario`).  Raises `ConfigError` for bad input and
     `RuntimeError` if an output could not be written (the trajectory is then in the exception's
     `traj` attribute)."""
     if isinstance(scenario, Scenario):
@@ -308,7 +320,7 @@ def run(scenario: Scenario | str | os.PathLike | Mapping | None = None, override
         validate_plant(scenario)
         scn = resolve_controller(scenario)
     else:
-        scn = load_scenario(scenario, overrides)
+        scn = load_scenario(scenario, overrides, allow_code=allow_code)
     out_dir = None
     if out is not None:
         from harness.config.textio import prepare_out_dir
@@ -323,7 +335,8 @@ def run(scenario: Scenario | str | os.PathLike | Mapping | None = None, override
 
 
 def run_sweep(study, out=None, **kwargs):
-    """Run a mismatch study (see `harness.studies.sweep.run_sweep`)."""
+    """Run a mismatch study (see `harness.studies.sweep.run_sweep`; allow_code=True lets a study file
+    name Python controllers)."""
     from harness.studies.sweep import run_sweep as _run_sweep
 
     return _run_sweep(study, out, **kwargs)

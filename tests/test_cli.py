@@ -458,12 +458,13 @@ def test_sweep_delegates(monkeypatch, tmp_path):
                  "--scheduler", "tcp://h:8786", "--no-progress"]) == 0
     none = {"overrides": [], "case_timeout": None}
     assert calls == [((study, tmp_path / "s", 3, "tcp://h:8786", False),
-                      {"max_cases": None, "executor": "processes", **none})]
+                      {"max_cases": None, "executor": "processes", **none, "allow_code": False})]
     assert main(["sweep", str(study)]) == 0
     assert calls[-1] == ((study, None, None, None, True),
-                         {"max_cases": None, "executor": "processes", **none})
+                         {"max_cases": None, "executor": "processes", **none, "allow_code": False})
     assert main(["sweep", str(study), "--executor", "threads", "--max-cases", "5"]) == 0
-    assert calls[-1] == ((study, None, None, None, True), {"max_cases": 5, "executor": "threads", **none})
+    assert calls[-1] == ((study, None, None, None, True),
+                         {"max_cases": 5, "executor": "threads", **none, "allow_code": False})
     assert main(["sweep", str(study), "--set", "duration=2", "--set", "seed=3", "--case-timeout", "1.5"]) == 0
     assert calls[-1][1]["overrides"] == ["duration=2", "seed=3"] and calls[-1][1]["case_timeout"] == 1.5
 

@@ -278,14 +278,16 @@ def test_cli_selection_by_name_and_path_writes_resolved_params(tmp_path, capsys)
     assert main(["run", "--controller", "dls_ik", "--set", "controller.params.gain=15", "--duration", "0.1",
                  "--out", str(out), "--no-progress"]) == 0
     cfg = tomllib.loads((out / "config.toml").read_text())
-    assert cfg["controller"] == {"name": "dls_ik", "params": {"gain": 15.0, "damping": 0.01}}
+    assert cfg["controller"] == {"name": "dls_ik", "params": {"gain": 15.0, "damping": 0.01},
+                                 "step_timeout": 10.0}
     assert load_scenario(out / "config.toml").controller.params == {"gain": 15.0, "damping": 0.01}
     out2 = tmp_path / "jt"
     assert main(["run", "--controller", EXAMPLE, "--actuation", "torque", "--set", "plant.enforce_cc=true",
                  "--duration", "0.1", "--out", str(out2), "--no-progress"]) == 0
     cfg = tomllib.loads((out2 / "config.toml").read_text())
-    assert cfg["controller"]["name"] == EXAMPLE and set(cfg["controller"]["params"]) == {
-        "kp", "kd", "joint_damping", "posture"}
+    path, _, cls = EXAMPLE.rpartition(":")  # config.toml replays from anywhere: the absolute path
+    assert cfg["controller"]["name"] == f"{Path(path).resolve()}:{cls}"
+    assert set(cfg["controller"]["params"]) == {"kp", "kd", "joint_damping", "posture"}
     assert "status ok" in capsys.readouterr().out
 
 

@@ -81,8 +81,10 @@ _SHORTCUTS = (  # (attribute, option, dotted key)
 )
 
 
-def load_from_args(args: argparse.Namespace, extra: Sequence[tuple[str, str]] = ()):
-    """Scenario from the positional file, the shortcut options, `extra` (key=value, label) and --set."""
+def load_from_args(args: argparse.Namespace, extra: Sequence[tuple[str, str]] = (), controller: bool = True):
+    """Scenario from the positional file, the shortcut options, `extra` (key=value, label) and --set.
+    The command line is the user's say-so for a Python controller; a file naming one needs --allow-code.
+    controller=False: the controller is not loaded (no user code is imported)."""
     from harness.api import load_scenario
 
     overrides: list[str] = []
@@ -101,7 +103,8 @@ def load_from_args(args: argparse.Namespace, extra: Sequence[tuple[str, str]] = 
     for text in args.overrides:
         overrides.append(text)
         labels.append(f"--set {text if len(text) <= 80 else text[:77] + '...'}")
-    return load_scenario(args.scenario, overrides, labels=labels)
+    return load_scenario(args.scenario, overrides, labels=labels, controller=controller,
+                         allow_code=bool(getattr(args, "allow_code", False)) or None)
 
 
 def _import(name: str):
@@ -169,6 +172,36 @@ def _simulate_and_write(scn, out: Path | None, progress: bool, live=None, record
     return res.traj, res.metrics, res.failures, res.interrupted
 
 
+# Settings that run the paper scenario in torque actuation on the MuJoCo plant (each checked for 5 s by
+# tests/test_controller_safety.py::test_every_setting_the_torque_hint_suggests_runs): (applies to this
+# scenario, option, what it is)
+_TORQUE_FIXES = (
+    (lambda s: not s.plant.enforce_cc, "--set plant.enforce_cc=true", "the CC chain"),
+    (lambda s: max(s.plant.bending_viscosity) < 1.0, "--set plant.bending_viscosity=[1.0,1.0,1.0]",
+     "10x the default bending damping"),
+    (lambda s: s.gains.kn > 60.0, "--set gains.kn=60", "a lower null-space gain"),
+)
+
+
+def failure_hint(scn, traj) -> str | None:
+    """One line saying what to change when a run failed for a known reason, else None.  Known: torque
+    actuation on the MuJoCo free chain diverges with the paper's gains (README, stability map)."""
+    p = scn.plant
+    if traj.status != "diverged" or p.kind != "mujoco" or p.actuation != "torque" or p.enforce_cc:
+        return None
+    fixes = [f"{opt} ({what})" for applies, opt, what in _TORQUE_FIXES if applies(scn)]
+    runs = "; settings that run the paper scenario: " + ", ".join(fixes) if fixes else ""
+    return (f"hint: torque actuation on the free chain diverges: the stability map ('teleop stability-map') "
+            f"puts k_n = {scn.gains.kn:g} past the sampled-data limit of a non-CC mode at the section "
+            f"junction{runs}")
+
+
+def _print_hint(scn, traj) -> None:
+    hint = failure_hint(scn, traj)
+    if hint:
+        print(hint, file=sys.stderr)
+
+
 def _run_exit_code(traj, failures: list[str], interrupted: bool, wrote: bool = True) -> int:
     if interrupted:
         t_end = float(traj.t[-1]) if len(traj) else 0.0
@@ -217,6 +250,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         traj, _, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress,
                                                              live=live, record_rate=args.record_rate)
         rc = _run_exit_code(traj, failures, interrupted)
+        _print_hint(scn, traj)
         if live is not None:
             if live.failed:
                 _warn(f"live view: {live.failed}")
@@ -239,7 +273,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     out = prepare_out_dir(args.out) if args.out is not None else None
     traj, metrics, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress,
                                                                record_rate=args.record_rate)
-    if interrupted:
+    _print_hint(scn, traj)
+    if interrupted or traj.status == "error":  # an error is no measurement, whatever the bounds allow
         return _run_exit_code(traj, failures, interrupted, wrote=out is not None)
     if metrics is None:
         _err(f"no metrics could be computed, bounds not checked ({failures[0] if failures else 'unknown'})")
@@ -262,7 +297,7 @@ def cmd_models(args: argparse.Namespace) -> int:
     if args.enforce_cc is not None:
         flag = "true" if args.enforce_cc else "false"
         extra.append((f"plant.enforce_cc={flag}", "--enforce-cc" if args.enforce_cc else "--no-enforce-cc"))
-    scn = load_from_args(args, extra)
+    scn = load_from_args(args, extra, controller=False)  # a model export never imports a controller
     p = scn.plant
     path = args.out if args.out is not None else Path(
         "mjcf") / f"octarm_{p.actuation}_n{p.segments}{'_cc' if p.enforce_cc else ''}.xml"
@@ -290,7 +325,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     sweep = _import("harness.studies.sweep")  # validates the study, then creates and checks the output folder
     rc = sweep.main_sweep(study, args.out, args.workers, args.scheduler, not args.no_progress,
                           max_cases=args.max_cases, executor=args.executor, overrides=args.overrides,
-                          case_timeout=args.case_timeout)
+                          case_timeout=args.case_timeout, allow_code=args.allow_code)
     return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
 
 
@@ -429,7 +464,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as e:
         if isinstance(e, _user_error_types()):
             _err(e)
-            return EXIT_USAGE
+            return getattr(e, "exit_code", EXIT_USAGE)  # a controller's own code failing: 1
         raise
 
 

@@ -113,6 +113,11 @@ def _add_scenario_options(p: argparse.ArgumentParser, *, sim: bool = True) -> No
                             "'package.module:ClassName' (controllers/interface.py). Shortcut for --set "
                             "controller.name=...; its parameters: --set controller.params.KEY=VALUE. "
                             "Default: from the scenario (paper: paper).")
+        p.add_argument("--allow-code", action="store_true",
+                       help="let the scenario file (or a replayed config.toml) name a Python controller "
+                            "('file.py:Class', 'package.module:Class') and run it; only for files you trust. "
+                            "A controller given with --controller needs no such option. Default: such a file "
+                            "is refused.")
         p.add_argument("--seed", metavar="N", default=None,
                        help="noise seed, integer >= 0. Default: from the scenario (paper: 0).")
         p.add_argument("--snr", metavar="DB|none", default=None,
@@ -266,6 +271,10 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--no-progress", action="store_true",
                        help="do not show the progress bar (default: shown on stderr when it is a "
                             "terminal).")
+    sweep.add_argument("--allow-code", action="store_true",
+                       help="let the study (its scenario, set or controller factor) name Python controllers "
+                            "('file.py:Class', 'package.module:Class', paths relative to the study file) and "
+                            "run them; only for studies you trust. Default: such a study is refused.")
     sweep.add_argument("--view", metavar="CASE_ID", default=None,
                        help="do not run: open the recording of case CASE_ID of this sweep "
                             "(<out>/recordings/CASE_ID.rrd, written for the worst cases, see record) in a "

@@ -7,6 +7,13 @@ place in the harness that imports a module by name (user code, on the user's req
 written): a class with callable `reset` and `step`, supporting the plant's actuation (`actuations`)
 and plant kind (`plants`, when it declares them), accepting the scenario's params; it returns the scenario
 with every parameter spelled out (for config.toml).
+
+Controller code is the user's: whatever it raises (`SystemExit` and `KeyboardInterrupt` included) while
+it is imported, constructed, checks its `Params`, resets or steps is one line naming the controller and
+the phase (`ControllerCodeError` before a run, exit 1; `harness.loop.interface_adapter.ControllerFailure`
+during one, status "error").  A Ctrl-C of the user is the harness' own `HarnessInterrupt`: it always
+interrupts.  While the main thread runs controller code `USER_CODE[0]` is True, so that the harness'
+signal handlers interrupt it at once (`harness.api.stop_on_signals`).
 """
 
 from __future__ import annotations
@@ -23,8 +30,30 @@ import numpy as np
 from controllers.baselines import BUILTINS, FAST_PATH
 from controllers.interface import Controller, ParamsError
 from harness.config.errors import ConfigError
-from harness.config.scenario import ControllerConfig, Scenario
+from harness.config.scenario import Scenario
 from harness.config.textio import toml_literal
+
+
+class HarnessInterrupt(KeyboardInterrupt):
+    """A Ctrl-C / SIGTERM received by the harness (its signal handlers raise this one); a plain
+    KeyboardInterrupt raised by a controller is the controller's failure, not the user's interrupt."""
+
+
+class ControllerCodeError(ConfigError):
+    """A controller's own code failed before the run (import, Params check): one line, exit 1."""
+
+    exit_code = 1
+
+
+USER_CODE = [False]  # the main thread is running controller code (set by the loop's adapter)
+
+
+def describe_exception(e: BaseException) -> str:
+    """'SystemExit(0)', 'KeyboardInterrupt', 'RuntimeError: boom' (one line)."""
+    if isinstance(e, SystemExit):
+        return f"SystemExit({e.code!r})"
+    text = " ".join(str(e).split())
+    return f"{type(e).__name__}: {text}" if text else type(e).__name__
 
 
 def describe_builtins() -> list[tuple[str, str, tuple[str, ...]]]:
@@ -80,28 +109,42 @@ def load_class(name: str) -> type:
                     raise
         else:
             mod = importlib.import_module(where)
-    except ConfigError:
+    except (ConfigError, HarnessInterrupt):
         raise
+    except (SystemExit, KeyboardInterrupt) as e:  # user code tried to end the process: an error
+        raise ControllerCodeError(f"controller.name = {name!r}: importing {where} raised "
+                                  f"{describe_exception(e)}", path="controller.name", value=name) from None
     except Exception as e:  # noqa: BLE001 - any import failure is one line
-        raise _bad(name, f"cannot import {where}: {type(e).__name__}: {' '.join(str(e).split())}") from None
+        raise _bad(name, f"cannot import {where}: {describe_exception(e)}") from None
     cls = getattr(mod, attr, None)
     if cls is None:
         raise _bad(name, f"{where} has no attribute {attr!r}")
     if not isinstance(cls, type):
         raise _bad(name, f"{attr} is not a class (a controller is a class with reset(ctx) and step(obs))")
     missing = [m for m in ("reset", "step") if not callable(getattr(cls, m, None))]
+    if issubclass(cls, Controller) and cls.step is Controller.step:
+        missing.append("step")  # the base class' step only raises NotImplementedError
     if missing:
         raise _bad(name, f"class {attr} lacks the controller interface: no method {' or '.join(missing)} "
                          "(see controllers/interface.py)")
     return cls
 
 
-def parse_params(cls: type, raw: dict):
-    """Validated params of `cls` (its `parse_params` classmethod, or the base class' rules)."""
+def parse_params(cls: type, raw: dict, name: str | None = None):
+    """Validated params of `cls` (its `parse_params` classmethod, or the base class' rules; a class
+    without `Params` takes no parameters).  Raises ParamsError / TypeError / ValueError for bad values,
+    ControllerCodeError (one line) for anything else the controller's code raises."""
     fn = getattr(cls, "parse_params", None)
-    if fn is None:
-        return Controller.parse_params.__func__(cls, raw)
-    return fn(raw)
+    try:
+        if fn is None:
+            return Controller.parse_params.__func__(cls, raw)
+        return fn(raw)
+    except (ParamsError, TypeError, ValueError, HarnessInterrupt):
+        raise
+    except BaseException as e:  # noqa: BLE001 - the controller's code: one line
+        label = name or getattr(cls, "__name__", "?")
+        raise ControllerCodeError(f"controller {label!r} raised {describe_exception(e)} in its Params check",
+                                  path="controller.params") from None
 
 
 def _as_toml(v):
@@ -136,7 +179,9 @@ def resolve_controller(scn: Scenario) -> Scenario:
             raise _bad(cfg.name, f"needs {key} = {toml_literal(want)} on plant.kind {scn.plant.kind!r} "
                                  f"(it is {toml_literal(have)})")
     try:
-        p = parse_params(cls, cfg.params)
+        p = parse_params(cls, cfg.params, cfg.name)
+    except ControllerCodeError:
+        raise
     except ParamsError as e:
         raise ConfigError(str(e), path=f"controller.params.{e.key}") from None
     except (TypeError, ValueError) as e:
@@ -146,7 +191,7 @@ def resolve_controller(scn: Scenario) -> Scenario:
             if dataclasses.is_dataclass(p) else dict(cfg.params))
     if cfg.name == FAST_PATH or full == cfg.params:
         return scn
-    return dataclasses.replace(scn, controller=ControllerConfig(cfg.name, full))
+    return dataclasses.replace(scn, controller=dataclasses.replace(cfg, params=full))
 
 
 def is_compiled(scn: Scenario) -> bool:
@@ -154,5 +199,5 @@ def is_compiled(scn: Scenario) -> bool:
     return scn.controller.name == FAST_PATH
 
 
-__all__ = ["describe_builtins", "is_compiled", "load_class", "parse_params", "plant_actuation",
-           "resolve_controller"]
+__all__ = ["USER_CODE", "ControllerCodeError", "HarnessInterrupt", "describe_builtins", "describe_exception",
+           "is_compiled", "load_class", "parse_params", "plant_actuation", "resolve_controller"]

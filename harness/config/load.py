@@ -26,6 +26,12 @@ a new object is added as a whole table (``environment.objects.box2={kind="box"}`
 
 Every error raises `harness.config.errors.ConfigError` with one line naming the dotted field, its value
 and the allowed range or type.
+
+Files run no code unless the user says so: a scenario file (or a replayed config.toml) whose
+``controller.name`` is Python code (``file.py:Class``, ``package.module:Class``) is refused unless
+``allow_code`` (``--allow-code``); a controller given by an override (``--controller``, ``--set``) or in
+a table passed by the caller is the caller's say-so.  A relative ``file.py`` path in a file resolves
+against that file's folder; config.toml records it as an absolute path.
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ import copy
 import dataclasses
 import functools
 import math
+import os
 import re
 import tomllib
 from collections.abc import Iterable, Mapping
@@ -317,15 +324,56 @@ def _plain_copy(obj: Any, depth: int = 0) -> Any:
     return copy.copy(obj)
 
 
+def is_code_reference(name: str) -> bool:
+    """True for a controller named as Python code ('file.py:Class', 'package.module:Class')."""
+    return ":" in name
+
+
+def _file_reference(name: str) -> tuple[str, str] | None:
+    """(path, class) of a 'path/to/file.py:Class' reference, None for anything else."""
+    where, sep, attr = name.rpartition(":")
+    if sep and (where.endswith(".py") or "/" in where or "\\" in where):
+        return where, attr
+    return None
+
+
+def _rebase_controller(raw: dict, base: Path | None) -> None:
+    """A relative controller file path in `raw` made relative to `base` (the folder of the file that
+    names it); anything else is left for the schema to check."""
+    node = raw.get("controller")
+    table = node if isinstance(node, dict) else None
+    name = table.get("name") if table is not None else node
+    ref = _file_reference(name.strip()) if isinstance(name, str) and base is not None else None
+    if ref is None or Path(ref[0]).is_absolute():
+        return
+    new = f"{base / ref[0]}:{ref[1]}"
+    if table is not None:
+        table["name"] = new
+    else:
+        raw["controller"] = new
+
+
 def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterable[str] = (), *,
-                  labels: Iterable[str | None] | None = None) -> Scenario:
+                  labels: Iterable[str | None] | None = None, allow_code: bool | None = None,
+                  code_dir: str | Path | None = None) -> Scenario:
     """Read (TOML file path or already-parsed table; None = all defaults), apply dotted `key=value`
     overrides in order, validate everything and return the frozen `Scenario`.  Raises `ConfigError`.
 
     labels: optional description of each override for error messages (e.g. "--segments 100");
     by default an error caused by an override says "(from override 'key=value')".
+    allow_code: None = a controller named as Python code is refused when the scenario FILE names it (the
+    overrides and a table are the caller's); True = allowed; False = refused whatever names it (a study
+    file's overrides).  code_dir: the folder relative controller file paths of a table source and of the
+    overrides resolve against (a study file's folder; default: the current folder); a scenario file's own
+    resolve against its folder.
     """
     raw, label, default_name = _read_source(source)
+    origin = "table" if isinstance(source, Mapping) else None
+    if label is not None:  # a file
+        origin = "file" if "controller" in raw else None
+        _rebase_controller(raw, Path(label).resolve().parent)
+    elif code_dir is not None:
+        _rebase_controller(raw, Path(code_dir))
     if isinstance(overrides, str):
         overrides = [overrides]
     overrides = list(overrides or ())
@@ -339,14 +387,26 @@ def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterabl
         except ConfigError as e:
             raise (e.with_context(lab) if lab else e) from None
         applied.append((key, where))
+        if key in ("controller", "controller.name"):
+            origin = "override"
+            if code_dir is not None:
+                _rebase_controller(raw, Path(code_dir))
     try:
-        return _scenario_from_dict(raw, default_name)
+        scn = _scenario_from_dict(raw, default_name)
     except ConfigError as e:
         path = e.path or ""
         for key, where in reversed(applied):
             if path == key or path.startswith(key + ".") or (path and key.startswith(path + ".")):
                 raise e.with_context(f"(from {where})") from None
         raise (e.with_context(label) if label else e) from None
+    name = scn.controller.name
+    if is_code_reference(name) and not allow_code and (allow_code is False or origin == "file"):
+        what = f"scenario file {label}" if origin == "file" else "the study"
+        raise ConfigError(f"controller.name = {name!r} in {what} is Python code; files run no code unless "
+                          "you allow it: add --allow-code (API: allow_code=True) if you trust it, or give "
+                          "the controller on the command line (--controller)", path="controller.name",
+                          value=name)
+    return scn
 
 
 def _prepare(raw: Mapping, default_name: str | None) -> tuple[dict, dict[int, str]]:
@@ -446,7 +506,12 @@ def _toml_lines(table: Mapping[str, Any], name: str = "") -> list[str]:
 
 
 def dumps_scenario(scn: Scenario) -> str:
-    """The fully resolved scenario as TOML text (see `dump_scenario`)."""
+    """The fully resolved scenario as TOML text (see `dump_scenario`); a relative controller file path
+    (relative to the current folder) is written absolute, so that the file replays from anywhere."""
+    ref = _file_reference(scn.controller.name)
+    if ref is not None and not Path(ref[0]).is_absolute():
+        scn = dataclasses.replace(scn, controller=dataclasses.replace(
+            scn.controller, name=f"{os.path.abspath(ref[0])}:{ref[1]}"))
     header = [
         "# Fully resolved scenario written by harness.config.load.dump_scenario.",
         '# Every value is explicit; "none" = unset (no noise / automatic / same as the nominal model).',
@@ -464,6 +529,6 @@ def dump_scenario(scn: Scenario, path: str | Path) -> Path:
 
 
 __all__ = [
-    "REACH_MARGIN", "dump_scenario", "dumps_scenario", "load_scenario", "parse_override",
+    "REACH_MARGIN", "dump_scenario", "dumps_scenario", "is_code_reference", "load_scenario", "parse_override",
     "scenario_to_dict", "schema_paths", "trajectory_radius_range",
 ]

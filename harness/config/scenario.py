@@ -29,7 +29,7 @@ NAME_RE = r"^[A-Za-z0-9_][A-Za-z0-9_.+=,@-]{0,99}$"
 NAME_EXPECT = ("a string of 1-100 letters, digits or _ . + = , @ - (usable as a folder name; no spaces or "
                "slashes, not starting with '.' or '-')")
 KEY_RE = r"^[A-Za-z_][A-Za-z0-9_-]*$"
-CONTROLLER_RE = r"^(?:[A-Za-z_][A-Za-z0-9_]*|[^\s:]+:[A-Za-z_][A-Za-z0-9_]*)$"
+CONTROLLER_RE = r"^(?:[A-Za-z_][A-Za-z0-9_]*|[^\x00-\x1f:][^\x00-\x1f]*:[A-Za-z_][A-Za-z0-9_]*)$"
 CONTROLLER_EXPECT = ("a built-in controller name (see 'teleop controllers'), 'path/to/file.py:ClassName' or "
                      "'package.module:ClassName'")
 POS, NONNEG = {"gt": 0.0}, {"ge": 0.0}
@@ -188,6 +188,10 @@ class ControllerConfig:
     params: doc(dict[doc(str, "", pattern=KEY_RE), ParamValue],
                 "the controller's own parameters (booleans, numbers, strings, arrays)") = \
         field(default_factory=dict)
+    step_timeout: doc(num("", gt=0.0, le=86400.0) | None,
+                      's, the longest a Python controller\'s call may run ("none": no limit); construction, '
+                      "reset and the first step may take at least 120 s (they may compile the nominal "
+                      "models)") = 10.0
 
 
 @dataclass(frozen=True)

@@ -7,14 +7,23 @@ paper eq. (40), the scenario's interaction forces F (4,) N), calls the controlle
 buffers.  With ``use_ref`` (servo plants) the controller's q2_ref / dq2_ref replace the loop's
 integrated reference (`use_ref`, `ref` (12,)).
 
-Failures are one line naming the controller, the step and the time:
-* the controller raises, returns None, a wrong shape, NaN or inf -> `ControllerFailure` (the loop stops
+Failures are one line naming the controller, the phase (construction, reset, step) and for a step its
+index and time:
+* the controller raises anything (`SystemExit` and `KeyboardInterrupt` included: a controller cannot
+  end the process), returns None, a wrong shape, a dtype that is not real (complex, strings, objects),
+  NaN or inf, or a call runs longer than `controller.step_timeout` -> `ControllerFailure` (the loop stops
   with status "error", rows up to the previous step kept, meta "failed_controller");
+* a Ctrl-C / SIGTERM of the user interrupts a controller call at once (`HarnessInterrupt`, status
+  "interrupted"): the harness' handlers raise it while the main thread runs controller code;
 * `ControllerDiverged` -> its status code (or -1 with `diverged` holding the message); the row of that
   step is recorded with the controller's last action, as in the compiled loops.
 """
 
 from __future__ import annotations
+
+import signal
+import threading
+import time
 
 import numpy as np
 
@@ -26,26 +35,50 @@ from controllers.interface import (
     ParamsError,
 )
 from controllers.status import Status
-from harness.config.controller import is_compiled, load_class, parse_params, plant_actuation
+from harness.config.controller import (
+    USER_CODE,
+    HarnessInterrupt,
+    describe_exception,
+    is_compiled,
+    load_class,
+    parse_params,
+    plant_actuation,
+)
 from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
-from harness.loop.common import RunModel, compile_model
+from harness.loop.common import STOP, RunModel, compile_model
 from harness.loop.fast import K
 
 SHAPES = (("T1", 2), ("T2", 6), ("u2", 6), ("deN", 6))
 REF_SHAPES = (("q2_ref", 6), ("dq2_ref", 6))
+FIRST_CALL_TIMEOUT = 120.0  # s, at least this long for construction, reset and step 0 (they may compile
+#                             the nominal models' kernels on first use)
+_TIMER = hasattr(signal, "setitimer")
 
 
 class ControllerFailure(RuntimeError):
     """A controller raised or returned an unusable action (message: one line naming the controller)."""
 
 
+class _Timeout(BaseException):
+    """Raised by the alarm handler inside a controller call that ran past its limit."""
+
+
 def _line(e: BaseException) -> str:
     return " ".join(str(e).split())
 
 
+def _on_alarm(signum, frame):  # noqa: ARG001
+    if USER_CODE[0]:
+        raise _Timeout
+
+
+def _on_sigint(signum, frame):  # noqa: ARG001 - Python's default Ctrl-C, marked as the user's
+    raise HarnessInterrupt
+
+
 def check_action(act, name: str, k: int, t: float, servo: bool) -> str:
-    """'' if the action is usable, else what is wrong (one line)."""
+    """'' if the action is usable, else what is wrong (one line naming the field)."""
     where = f"at step {k} (t = {t:.3f} s)"
     if act is None:
         return f"controller {name!r} returned None instead of an Action {where}"
@@ -60,6 +93,9 @@ def check_action(act, name: str, k: int, t: float, servo: bool) -> str:
                     f"array of shape ({n},)) {where}")
         if v.shape != (n,):
             return f"controller {name!r} returned {field} of shape {v.shape} (expected ({n},)) {where}"
+        if v.dtype.kind not in "fiu":  # complex (its imaginary part would be dropped), bool, str, object
+            return (f"controller {name!r} returned {field} of dtype {v.dtype} (expected real floating-point "
+                    f"numbers) {where}")
         if not np.all(np.isfinite(v)):
             bad = "NaN" if np.any(np.isnan(v)) else "inf"
             text = np.array2string(v, precision=4)
@@ -69,11 +105,21 @@ def check_action(act, name: str, k: int, t: float, servo: bool) -> str:
 
 class InterfaceController:
     """The scenario's `controllers.interface.Controller` (built-in or user class) as the loop's
-    controller: ``reset(model)``, ``step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN) -> int``."""
+    controller: ``reset(model)``, ``step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN) -> int``,
+    ``close()`` (the loop calls it at the end: restores the signal handlers a controller call needs).
+    A failure to construct the controller is raised by `reset` (the run then ends with status "error")."""
 
     def __init__(self, scn: Scenario, model: RunModel) -> None:
         self.name = scn.controller.name
-        self.ctrl, self.ctx = make_controller(scn, model)
+        self.limit = scn.controller.step_timeout  # s per step, None = no limit
+        self.main = threading.current_thread() is threading.main_thread()
+        self._saved: dict | None = None  # signal handlers replaced for the controller's calls
+        self.failure = ""
+        self.ctrl, self.ctx = make_controller(scn, model, construct=False)
+        try:
+            self.ctrl = self._once("construction", self.ctrl)
+        except ControllerFailure as e:
+            self.ctrl, self.failure = None, str(e)
         self.servo = self.ctx.actuation == "servo"
         self.obs = Observation()
         self.F = self.obs.F  # (4,) N, the sensed tip forces: the loop writes them here before each step
@@ -82,14 +128,68 @@ class InterfaceController:
         self.diverged = ""
         self.k = 0
 
+    # -- guarding the controller's calls ------------------------------------------------------------
+    def _install(self) -> None:
+        """On the main thread: the alarm handler of the time limit, and Ctrl-C marked as the user's when
+        Python's default handler is in place (the CLI's own handler marks it already)."""
+        if self._saved is not None or not self.main:
+            return
+        self._saved = {}
+        if self.limit is not None and _TIMER:
+            self._saved[signal.SIGALRM] = signal.signal(signal.SIGALRM, _on_alarm)
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            self._saved[signal.SIGINT] = signal.signal(signal.SIGINT, _on_sigint)
+
+    def close(self) -> None:
+        """Disarm the timer and restore the signal handlers (idempotent)."""
+        if self._saved is None:
+            return
+        if signal.SIGALRM in self._saved:
+            signal.setitimer(signal.ITIMER_REAL, 0.0)
+        for sig, old in self._saved.items():
+            signal.signal(sig, old)
+        self._saved = None
+
+    def _fail(self, e: BaseException, phase: str, limit: float | None) -> ControllerFailure:
+        if isinstance(e, _Timeout):
+            return ControllerFailure(f"controller {self.name!r} ran longer than controller.step_timeout = "
+                                     f"{limit:g} s {phase} (stopped; raise or turn off the limit with "
+                                     "controller.step_timeout = \"none\")")
+        return ControllerFailure(f"controller {self.name!r} raised {describe_exception(e)} {phase}")
+
+    def _once(self, phase: str, fn, *args):
+        """Call controller code once (construction, reset) under the first-call time limit."""
+        limit = None if self.limit is None else max(self.limit, FIRST_CALL_TIMEOUT)
+        self._install()
+        armed = self.main and limit is not None and _TIMER
+        USER_CODE[0] = self.main
+        t0 = time.perf_counter()
+        try:
+            if armed:
+                signal.setitimer(signal.ITIMER_REAL, limit)
+            out = fn(*args)
+        except HarnessInterrupt:
+            raise
+        except BaseException as e:  # noqa: BLE001 - the controller's code: one line, never the process
+            if isinstance(e, KeyboardInterrupt) and STOP.is_set():
+                raise HarnessInterrupt from None  # the user's Ctrl-C reached the controller's code
+            raise self._fail(e, f"in {phase}", limit) from None
+        finally:
+            USER_CODE[0] = False
+            if armed:
+                signal.setitimer(signal.ITIMER_REAL, 0.0)
+            self.close()
+        if limit is not None and not armed and time.perf_counter() - t0 > limit:  # worker threads: no alarm
+            raise self._fail(_Timeout(), f"in {phase}", limit)
+        return out
+
+    # -- the loop's protocol ------------------------------------------------------------------------
     def reset(self, model: RunModel) -> None:
         self.obs.F[:] = model.F
         self.k = 0
-        try:
-            self.ctrl.reset(self.ctx)
-        except Exception as e:  # noqa: BLE001 - the controller's fault: one line
-            raise ControllerFailure(f"controller {self.name!r} raised {type(e).__name__} in reset: "
-                                    f"{_line(e)}") from None
+        if self.ctrl is None:
+            raise ControllerFailure(self.failure)
+        self._once("reset", self.ctrl.reset, self.ctx)
 
     def step(self, t, sensed, xd, dxd, ddxd, T1, T2, u2, deN) -> int:
         obs, name, k = self.obs, self.name, self.k
@@ -100,7 +200,18 @@ class InterfaceController:
         obs.ddx_d[:] = ddxd
         obs.t, obs.k = t, k
         code = 0
+        limit = self.limit
+        if limit is not None and k == 0:
+            limit = max(limit, FIRST_CALL_TIMEOUT)
+        if self._saved is None:
+            self._install()
+        main = self.main
+        armed = main and limit is not None and _TIMER
+        USER_CODE[0] = main
+        t0 = time.perf_counter()
         try:
+            if armed:
+                signal.setitimer(signal.ITIMER_REAL, limit)
             act = self.ctrl.step(obs)
         except ControllerDiverged as e:
             code = e.code if e.code in Status._value2member_map_ and e.code != 0 else -1
@@ -108,9 +219,20 @@ class InterfaceController:
             act = getattr(self.ctrl, "action", None)
             if act is None:
                 raise ControllerFailure(self.diverged) from None
-        except Exception as e:  # noqa: BLE001 - the controller's fault: one line
-            raise ControllerFailure(f"controller {name!r} raised {type(e).__name__}: {_line(e)} "
+        except HarnessInterrupt:
+            raise
+        except BaseException as e:  # noqa: BLE001 - the controller's code: one line, never the process
+            if isinstance(e, KeyboardInterrupt) and STOP.is_set():
+                raise HarnessInterrupt from None
+            if isinstance(e, _Timeout):
+                raise self._fail(e, f"at step {k} (t = {t:.3f} s)", limit) from None
+            raise ControllerFailure(f"controller {name!r} raised {describe_exception(e)} "
                                     f"at step {k} (t = {t:.3f} s)") from None
+        finally:
+            USER_CODE[0] = False  # the timer stays armed: past the step its alarm does nothing (one system
+            #                       call per step; `close` disarms it)
+        if limit is not None and not armed and time.perf_counter() - t0 > limit:  # worker threads: no alarm
+            raise self._fail(_Timeout(), f"at step {k} (t = {t:.3f} s)", limit)
         bad = check_action(act, name, k, t, self.servo)
         if bad:
             raise ControllerFailure(bad)
@@ -128,16 +250,15 @@ class InterfaceController:
         return code
 
 
-def make_controller(scn: Scenario, model: RunModel | None = None):
+def make_controller(scn: Scenario, model: RunModel | None = None, construct: bool = True):
     """(instance, context) for a run: the class instantiated and the context its `reset` receives.
-    model: the scenario's `RunModel` (default: compiled here)."""
+    model: the scenario's `RunModel` (default: compiled here); construct=False: (the class, context)."""
     cfg = scn.controller
     cls = load_class(cfg.name)
     try:
-        params = parse_params(cls, cfg.params)
+        params = parse_params(cls, cfg.params, cfg.name)
     except ParamsError as e:
         raise ConfigError(str(e), path=f"controller.params.{e.key}") from None
-    ctrl = cls()
     a = model if model is not None else compile_model(scn)
     ctx = ControllerContext(
         dt=scn.control_dt, n_steps=scn.n_steps, actuation=plant_actuation(scn), plant=scn.plant.kind,
@@ -145,7 +266,7 @@ def make_controller(scn: Scenario, model: RunModel | None = None):
         F=a.F.reshape(2, 2).copy(), seed=scn.seed, params=params,
         models=NominalModels(scn.master, scn.slave, scn.subtask, kernels=K), q0=a.s0.copy(),
         faults=(scn.faults.e2_sign, scn.faults.null_space_scale))
-    return ctrl, ctx
+    return (cls() if construct else cls), ctx
 
 
 __all__ = ["ControllerFailure", "InterfaceController", "is_compiled", "make_controller"]

@@ -198,6 +198,8 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
     finally:
         if bar is not None:
             bar.close()
+        if ctrl is not None:
+            ctrl.close()
     wall = time.perf_counter() - t0
     traj = Trajectory.from_rows(rows[:done])
     traj.meta.update(run_meta(scn, wall))

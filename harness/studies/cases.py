@@ -113,7 +113,8 @@ def _controller_leaf(base: Scenario, f: Factor, level: Any, where: str) -> Any:
     if f.path == ("controller",) or f.path == ("controller", "name"):
         if f.mode != "values" or not isinstance(level, str):
             raise ConfigError(f"{where}: give the controllers as values = [\"paper\", \"dls_ik\", ...]")
-        return {"name": level}
+        timeout = base.controller.step_timeout
+        return {"name": level, "step_timeout": "none" if timeout is None else timeout}
     if len(f.path) != 3 or f.path[1] != "params":
         raise ConfigError(f"{where}: a controller factor is 'controller' or 'controller.params.<key>'")
     if f.mode == "values":
@@ -164,12 +165,18 @@ def _in_context(e: ValueError, context: str) -> ConfigError:
     return e.with_context(context) if isinstance(e, ConfigError) else ConfigError(f"{context}: {e}")
 
 
+def _code_policy(study: Study) -> dict:
+    """Python controllers named anywhere in a study run only if it allows them; relative controller files
+    resolve against the study file's folder (a base scenario file's own: against that file's)."""
+    return {"allow_code": study.allow_code, "code_dir": study.base_dir}
+
+
 def load_base(study: Study) -> Scenario:
     """The base scenario (with `set`), its plant checked too (harness.plant.validate_plant)."""
     from harness.plant import validate_plant
 
     try:
-        base = load_scenario(study.scenario_source, list(study.set))
+        base = load_scenario(study.scenario_source, list(study.set), **_code_policy(study))
         validate_plant(base)
         return base
     except ValueError as e:  # ConfigError, or a model's ParameterError
@@ -186,7 +193,7 @@ def expand_cases(study: Study, base: Scenario | None = None) -> list[Case]:
         params = {f.name: jsonable(v) for f, v in zip(study.factors, levels, strict=True)}
         ovr = _case_overrides(base, study.factors, levels)
         try:
-            scn = load_scenario(study.scenario_source, [*study.set, *ovr])
+            scn = load_scenario(study.scenario_source, [*study.set, *ovr], **_code_policy(study))
         except ValueError as e:
             raise _in_context(e, f"study {study.name!r}: case {params}") from None
         try:

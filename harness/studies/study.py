@@ -161,6 +161,8 @@ class Study:
     n: int | None
     seed: int
     max_cases: int = 10000  # DEFAULT_MAX_CASES
+    allow_code: bool = False  # the study may name Python controllers (--allow-code; a dict: the caller's)
+    base_dir: Path | None = None  # the study file's folder: its relative paths resolve against it
 
     @property
     def scenario_source(self) -> Path | dict | None:
@@ -235,11 +237,13 @@ def _parse_factor(t: FactorTable) -> Factor:
 
 
 def load_study(source: str | os.PathLike | dict, base_dir: str | os.PathLike | None = None, *,
-               max_cases: int | None = None) -> Study:
+               max_cases: int | None = None, allow_code: bool | None = None) -> Study:
     """Parse and check a study (TOML file or the equivalent dict).  Structural errors raise
     `ConfigError` naming the table/factor; values are checked by `expand_cases`.
-    `base_dir` resolves a relative `study.scenario` (default: the study file's folder, or cwd).
-    `max_cases` replaces [sampling] max_cases (the case count is checked here, before expansion)."""
+    `base_dir` resolves a relative `study.scenario` and relative controller files (default: the study
+    file's folder, or cwd).  `max_cases` replaces [sampling] max_cases (the case count is checked here,
+    before expansion).  allow_code: whether the study (its scenario, `set`, factors) may name Python
+    controllers; default: yes for a dict (the caller's own), no for a file (`--allow-code`)."""
     if isinstance(source, dict):
         doc_, stem, label = source, None, None
         base = Path(base_dir) if base_dir is not None else Path.cwd()
@@ -278,8 +282,10 @@ def load_study(source: str | os.PathLike | dict, base_dir: str | os.PathLike | N
         raise ConfigError(f"[sampling] n = {sp.n!r}: an integer >= 1 is required for random draws")
     if not needs_n and sp.n is not None:
         raise ConfigError("[sampling] n is used only with mode = 'random' or random factors")
+    if allow_code is None:
+        allow_code = isinstance(source, dict)
     study = Study(name, st.description, scenario, tuple(st.set), tuple(metrics), record, factors, sp.mode,
-                  sp.n, sp.seed, max_cases)
+                  sp.n, sp.seed, max_cases, bool(allow_code), base.resolve())
     check_case_count(study)
     return study
 

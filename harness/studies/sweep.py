@@ -182,7 +182,7 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
               case_fn: Callable[[dict], dict] = run_case,
               on_row: Callable[[dict], None] | None = None, max_cases: int | None = None,
               executor: str = "processes", overrides: Sequence[str] = (),
-              case_timeout: float | None = None) -> SweepResult:
+              case_timeout: float | None = None, allow_code: bool | None = None) -> SweepResult:
     """Run (or resume) a study.  Every case is built and validated before anything runs.
 
     out: output folder (default runs/sweeps/<name>); workers: number of cases run at once (default all
@@ -210,7 +210,7 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
     if max_cases is not None:
         max_cases = check_max_cases(max_cases, "--max-cases")
     if not isinstance(study, Study):
-        study = load_study(study, max_cases=max_cases)
+        study = load_study(study, max_cases=max_cases, allow_code=allow_code)
     if max_cases is not None:
         study = dataclasses.replace(study, max_cases=max_cases)
     check_study_name(study.name)
@@ -358,7 +358,7 @@ EXIT_INTERRUPTED = 130  # as `teleop run` (harness.cli)
 def main_sweep(study_path: str | os.PathLike, out: str | os.PathLike | None = None,
                workers: int | None = None, scheduler: str | None = None, progress: bool = True,
                max_cases: int | None = None, executor: str = "processes", overrides: Sequence[str] = (),
-               case_timeout: float | None = None) -> int:
+               case_timeout: float | None = None, allow_code: bool = False) -> int:
     """`teleop sweep`: 0 when every case has a row (diverged/error cases are data) and every output was
     written, 1 when cases are unfinished, the executor failed or an output (recordings, summary) could
     not be written after the cases ran, 130 when interrupted (SIGINT/SIGTERM; re-run to resume).  A bad
@@ -366,7 +366,7 @@ def main_sweep(study_path: str | os.PathLike, out: str | os.PathLike | None = No
     try:
         res = run_sweep(study_path, out=out, workers=workers, scheduler=scheduler, progress=progress,
                         max_cases=max_cases, executor=executor, overrides=overrides,
-                        case_timeout=case_timeout)
+                        case_timeout=case_timeout, allow_code=allow_code)
     except SweepError as e:
         print(f"error: {e}", file=sys.stderr)
         return 1
