@@ -306,3 +306,37 @@ def run_sweep(study, out=None, **kwargs):
     from harness.studies.sweep import run_sweep as _run_sweep
 
     return _run_sweep(study, out, **kwargs)
+
+
+def _scenario_of(scenario, overrides: Iterable[str]) -> Scenario:
+    if isinstance(scenario, Scenario):
+        if overrides:
+            raise TypeError("overrides apply to a scenario file or table, not to a Scenario object")
+        from harness.config.controller import resolve_controller
+
+        return resolve_controller(scenario)
+    return load_scenario(scenario, overrides)
+
+
+def stability(scenario: Scenario | str | os.PathLike | Mapping | None = None,
+              overrides: Iterable[str] = (), *, t: float = 1.0, h: float | None = None,
+              out: str | os.PathLike | None = None):
+    """Linear stability of the sampled-data closed loop at time t (s) of a scenario (paper law, sensing
+    without noise): the one-control-period Jacobian by central finite differences, its eigenvalues,
+    spectral radius, least stable mode and verdict (`harness.studies.stability.Stability`; `.verdict()`).
+    out: folder for spectrum.csv, stability.json and stability.png.  Raises `ConfigError` for bad input
+    and `harness.studies.stability.LinearizationError` when the run stops before t."""
+    import math
+
+    from harness.studies.stability import linearize, write_stability
+
+    if not (isinstance(t, (int, float)) and math.isfinite(t) and 0.0 <= t <= 3600.0):
+        raise ConfigError.field("t", t, "expected a time in s in [0, 3600]")
+    if h is not None and not (isinstance(h, (int, float)) and 0.0 < h < 1e-2):
+        raise ConfigError.field("h", h, "expected a finite-difference step in (0, 0.01)")
+    res = linearize(_scenario_of(scenario, overrides), float(t), h)
+    if out is not None:
+        from harness.config.textio import prepare_out_dir
+
+        write_stability(res, prepare_out_dir(out))
+    return res

@@ -22,6 +22,7 @@ import argparse
 import contextlib
 import importlib
 import json
+import math
 import os
 import sys
 import threading
@@ -349,6 +350,28 @@ def cmd_stability_map(args: argparse.Namespace) -> int:
     return int(smap.main(out, args.duration))
 
 
+def cmd_stability(args: argparse.Namespace) -> int:
+    from harness.api import stability
+
+    scn = load_from_args(args)
+    out = prepare_out_dir(args.out if args.out is not None else Path("runs") / "stability" / scn.name)
+    stab = _import("harness.studies.stability")
+    try:
+        res = stability(scn, t=args.at, h=args.fd_step, out=out)
+    except stab.LinearizationError as exc:
+        _err(exc)
+        return EXIT_FAIL
+    print(res.verdict())
+    print(f"{len(res.names)} states; least stable modes (|lambda|, angle, Hz, growth 1/s, dominant):")
+    for j in range(min(args.modes, len(res.eigenvalues))):
+        lam = res.eigenvalues[j]
+        dom = ", ".join(f"{n} {w:.2f}" for n, w in res.dominant(j, 4))
+        print(f"  {abs(lam):.6f}  {math.atan2(lam.imag, lam.real):+.4f}  {res.frequency(j):8.2f}  "
+              f"{res.growth_rate(j):+9.3g}  {dom}")
+    print(f"wrote {out / 'spectrum.csv'}, {out / 'stability.json'}, {out / 'stability.png'}")
+    return EXIT_FAIL if res.verdict_class == "unstable" else EXIT_OK
+
+
 # ---------------------------------------------------------------------------------------------
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
@@ -381,7 +404,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 COMMANDS = {"run": cmd_run, "check": cmd_check, "models": cmd_models, "sweep": cmd_sweep,
             "controllers": cmd_controllers, "fidelity": cmd_fidelity, "cache": cmd_cache,
-            "stability-map": cmd_stability_map}
+            "stability-map": cmd_stability_map, "stability": cmd_stability}
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -267,6 +267,29 @@ def build_parser() -> argparse.ArgumentParser:
     smap.add_argument("--out", metavar="DIR", type=_path, default=Path("runs/stability_map"),
                       help="output folder (created; must be writable). Default: runs/stability_map.")
 
+    stab = sub.add_parser(
+        "stability", formatter_class=_Formatter, help="linear stability of the closed loop at a time point",
+        description="Run the scenario (paper law, sensing without noise) to time --at and linearize the "
+                    "sampled-data closed loop over one control period (plant state, servo reference, "
+                    "actuation-delay ring; zero-order hold) by central finite differences of the one-period "
+                    "map (harness.studies.stability). Prints the verdict (stable / marginal: slower than "
+                    "e-fold per second / unstable), the spectral radius and the least stable modes with "
+                    "their frequency and dominant joints or sections; writes spectrum.csv, stability.json "
+                    "and stability.png (spectrum and mode shapes on the arm).",
+        epilog="exit status: 0 stable or marginal; 1 unstable, or the run stopped before --at; "
+               "2 invalid input.")
+    _add_scenario_options(stab)
+    stab.add_argument("--at", metavar="T", type=float, default=1.0,
+                      help="time of the point of linearization in s, in [0, 3600]. Default: 1.")
+    stab.add_argument("--fd-step", metavar="H", type=_positive_float, default=None,
+                      help="relative central-difference step, in (0, 0.01). Default: 1e-6 analytic, "
+                           "1e-7 MuJoCo and rod.")
+    stab.add_argument("--modes", metavar="N", type=_positive_int, default=6,
+                      help="least stable modes printed, integer >= 1. Default: 6.")
+    stab.add_argument("--out", metavar="DIR", type=_path, default=None,
+                      help="output folder (created; must be writable). "
+                           "Default: runs/stability/<scenario name>.")
+
     fid = sub.add_parser(
         "fidelity", formatter_class=_Formatter, help="plant-fidelity study over MuJoCo segment counts",
         description="Compare the generated MuJoCo Octarm with N rigid segments per section against the "

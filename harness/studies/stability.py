@@ -1,0 +1,522 @@
+"""Linear stability of the sampled-data closed loop around a point of a scenario.
+
+The closed loop is a discrete map over one control period T = control_dt,
+
+    x_{k+1} = Phi_k(x_k),   x = [plant state, servo reference (servo actuation), actuation-delay ring],
+
+made of: the plant's true state sensed without noise, the paper's law (12)-(13), (17)-(33) on it, the
+servo-reference update (semi-implicit Euler of u2), the delay ring of `plant.actuation_delay`, and the
+plant advanced over T with the command held (zero-order hold).  `linearize(scn, t)` runs the scenario
+to t with the same compiled per-step kernels as the Python-stepped loop (`harness.loop.stepped_loop`;
+`harness.loop.fast.K.stepped_paper_step`) and takes the Jacobian A = dPhi_k/dx by central finite
+differences of the WHOLE one-period map (every plant; for MuJoCo this includes the substeps, the elastic
+correction and the actuators, so `mujoco.mjd_transitionFD` is not needed).  The eigenvalues of A are the
+frozen-time poles of the loop at t: |lambda| > 1 grows, angle(lambda) / (2 pi T) is the mode's frequency
+(Hz; pi = the Nyquist frequency 1 / (2 T), a sign flip every period).
+
+Plant state coordinates (what is perturbed):
+* analytic: [q1 (2), dq1 (2), q2 (6), dq2 (6)] (rad, m, 1/m and rates);
+* mujoco: qpos (nq), qvel (nv), act (na) (the models here have hinges and slides only, nq = nv);
+  the rest of MuJoCo's physics state (warm start, time) is restored from the point of linearization;
+* cosserat: the master [q1, dq1] (4), then the rod in its plane: node X, Z (n_nodes each), element
+  angle about Y (n_elements), node velocities X, Z, element angular rate about Y (out-of-plane
+  motion is not perturbed: the arm and its loads are planar).
+
+Only the paper's law (`controller.name = "paper"`) is linearized (its state is the servo reference; a
+Python controller's internal state is not visible to the harness).
+
+Verdict: "unstable" if rho = max |lambda| > 1 + T / SLOW_S (a mode that grows by e within SLOW_S = 1 s
+or faster), "marginal" if 1 < rho <= 1 + T / SLOW_S (a slow drift, e.g. the null-space positions, which
+the law only steers through the sub-task gradient; a frozen-time analysis of a time-varying loop does
+not decide it), else "stable".
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from controllers.control import MASTER_INFO, SLAVE_INFO
+from controllers.status import Status
+from harness.config.scenario import Scenario
+
+SLOW_S = 1.0  # s: modes e-folding slower than this are "marginal" (slow drift), not "unstable"
+EXPLODING = 1e6  # as harness.loop.stepped_loop
+Q2_NAMES = ("d1", "d2", "d3", "k1", "k2", "k3")
+
+
+class LinearizationError(RuntimeError):
+    """The scenario cannot be linearized (unsupported controller, or the run failed before t)."""
+
+
+# --- plant state get / set (what the loop should expose as plant.get_state() / set_state()) ---------------
+class _AnalyticState:
+    def __init__(self, plant) -> None:
+        self.p = plant
+        self.names = ["q1[0]", "q1[1]", "dq1[0]", "dq1[1]", *Q2_NAMES, *("d" + n + "/dt" for n in Q2_NAMES)]
+
+    def get(self) -> np.ndarray:
+        return self.p.state.copy()
+
+    def set(self, x: np.ndarray) -> None:
+        self.p.state[:] = x
+
+    def restore(self, x: np.ndarray) -> None:
+        self.set(x)
+
+    def positions(self, x: np.ndarray, slave) -> np.ndarray:
+        """Slave backbone [X, Z] (m, base first) of state x."""
+        from controllers.slave import backbone
+
+        return backbone(slave, x[4:10], 20)
+
+
+class _MujocoState:
+    def __init__(self, plant) -> None:
+        import mujoco
+
+        self.mj = mujoco
+        self.p = plant
+        m = plant.m
+        if m.nq != m.nv:
+            raise LinearizationError("plant: the MuJoCo model has ball or free joints (nq != nv); "
+                                     "only hinge and slide joints are supported")
+        self.nq, self.nv, self.na = m.nq, m.nv, m.na
+        self.spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        self.full = np.empty(mujoco.mj_stateSize(m, self.spec))
+        jn = {int(m.jnt_qposadr[j]): mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint{j}"
+              for j in range(m.njnt)}
+        qn = [jn.get(i, f"qpos[{i}]") for i in range(self.nq)]
+        self.names = qn + [f"{n} (rate)" for n in qn] + [f"act[{i}]" for i in range(self.na)]
+        self.bodies = [b for b in range(m.nbody)
+                       if (mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b) or "").startswith("octarm_s")]
+
+    def get(self) -> np.ndarray:
+        d = self.p.d
+        self.mj.mj_getState(self.p.m, d, self.full, self.spec)
+        return np.concatenate([d.qpos, d.qvel, d.act])
+
+    def set(self, x: np.ndarray) -> None:
+        """Restore the physics state of the last `get`, then x."""
+        d = self.p.d
+        self.mj.mj_setState(self.p.m, d, self.full, self.spec)
+        d.qpos[:] = x[:self.nq]
+        d.qvel[:] = x[self.nq:self.nq + self.nv]
+        d.act[:] = x[self.nq + self.nv:]
+        self.mj.mj_forward(self.p.m, d)
+
+    restore = set
+
+    def positions(self, x: np.ndarray, slave) -> np.ndarray:  # noqa: ARG002
+        """[X, Z] (m) of the chain's segment bodies (MuJoCo body order, base first) at state x."""
+        m, d = self.p.m, self.mj.MjData(self.p.m)
+        d.qpos[:] = x[:self.nq]
+        self.mj.mj_kinematics(m, d)
+        base = self.p.cmap.octarm_base_pos
+        return np.array([[d.xpos[b][0] - base[0], d.xpos[b][2] - base[2]] for b in self.bodies])
+
+
+class _CosseratState:
+    def __init__(self, plant) -> None:
+        self.p = plant
+        b = plant.slave._b
+        self.nn, self.ne = b.position_collection.shape[1], b.director_collection.shape[2]
+        npe = plant.slave.n
+        sec = [f"s{i}" for i in range(3)]
+        node = [f"node{j}" for j in range(self.nn)]
+        elem = [f"{sec[j // npe]}_el{j % npe}" for j in range(self.ne)]
+        pos = [f"{n}.X" for n in node] + [f"{n}.Z" for n in node] + [f"{e}.angle" for e in elem]
+        self.names = ["q1[0]", "q1[1]", "dq1[0]", "dq1[1]", *pos, *(f"{n} (rate)" for n in pos)]
+
+    def get(self) -> np.ndarray:
+        b = self.p.slave._b
+        D = b.director_collection
+        ang = np.arctan2(D[2, 0], D[0, 0])
+        self._dirs = D.copy()
+        self._time, self._steps = self.p.slave.time, self.p.slave._steps
+        return np.concatenate([self.p._m, b.position_collection[0], b.position_collection[2], ang,
+                               b.velocity_collection[0], b.velocity_collection[2], b.omega_collection[1]])
+
+    def set(self, x: np.ndarray) -> None:
+        p, s = self.p, self.p.slave
+        b, nn, ne = s._b, self.nn, self.ne
+        p._m[:] = x[0:4]
+        i = 4
+        b.position_collection[0] = x[i:i + nn]
+        b.position_collection[2] = x[i + nn:i + 2 * nn]
+        ang = x[i + 2 * nn:i + 2 * nn + ne]
+        i += 2 * nn + ne
+        b.velocity_collection[0] = x[i:i + nn]
+        b.velocity_collection[2] = x[i + nn:i + 2 * nn]
+        b.omega_collection[1] = x[i + 2 * nn:i + 2 * nn + ne]
+        # rotate the stored directors about Y by the change of angle (exact at the stored state)
+        a0 = np.arctan2(self._dirs[2, 0], self._dirs[0, 0])
+        da = ang - a0
+        c, sn = np.cos(da), np.sin(da)
+        D = self._dirs
+        out = D.copy()
+        # D has rows d1, d2, d3 in lab coordinates; a rotation by da about lab Y maps row r to
+        # (r_x c - r_z s, r_y, r_x s + r_z c) with the convention of cosserat._rot_y
+        for r in range(3):
+            out[r, 0] = D[r, 0] * c - D[r, 2] * sn
+            out[r, 2] = D[r, 0] * sn + D[r, 2] * c
+        b.director_collection[:] = out
+        s._fit_valid = False
+        s.time, s._steps = self._time, self._steps
+
+    restore = set
+
+    def positions(self, x: np.ndarray, slave) -> np.ndarray:  # noqa: ARG002
+        nn = self.nn
+        return np.stack([x[4:4 + nn], x[4 + nn:4 + 2 * nn]], axis=1)
+
+
+# --- the one-period closed-loop map -----------------------------------------------------------------------
+class ClosedLoopMap:
+    """The closed loop of `scn` (paper law, no sensing noise) as a map over one control period.
+
+    `run_to(n)` steps it from t = 0 to step n; `x()` / `set_x(x)` read / write the loop state
+    [plant state, servo reference [q2_ref, dq2_ref] (12, servo only), delay ring (delay x 26)];
+    `phi(x, k)` is the state one control period after state x at step k (the loop is left there; `set_x`
+    goes back)."""
+
+    def __init__(self, scn: Scenario) -> None:
+        if scn.controller.name != "paper":
+            raise LinearizationError(f"controller.name: {scn.controller.name!r} cannot be linearized; only "
+                                     "'paper' (the harness sees its whole state)")
+        from harness.loop.common import compile_model
+        from harness.loop.fast import K
+        from harness.loop.stepped_plants import stepped_plant
+        from harness.plant import build_plant
+
+        self.scn, self.K = scn, K
+        self.model = compile_model(scn)
+        self.plant = stepped_plant(scn, self.model, build_plant(scn))
+        self.plant.reset(self.model.s0)
+        kind = scn.plant.kind
+        states = {"analytic": _AnalyticState, "mujoco": _MujocoState, "cosserat": _CosseratState}
+        self.ps = states[kind](self.plant)
+        self.dt = scn.control_dt
+        self.servo = self.plant.actuation == "servo"
+        self.delay = int(round(scn.plant.actuation_delay / self.dt))
+        self.slots = self.delay + 1
+        s0 = self.model.s0
+        self.ref = np.concatenate([s0[4:10], s0[10:16]])
+        self.cmdbuf = np.zeros((self.slots, 26))
+        self.cmdbuf[:, 8:20] = self.ref
+        self.views = [(c[0:2], c[2:8], c[8:14], c[14:20], c[20:26]) for c in self.cmdbuf]
+        self.state, self.sensed = np.zeros(16), np.zeros(16)
+        self.Ftrue, self.cinfo = self.model.F.copy(), np.zeros(5)
+        self.Fsens = self.model.F.copy()
+        self.ignored = scn.sensing.force.mode == "ignored"
+        self.noise = np.zeros((1, 16))
+        self.bufs = [np.zeros(2) for _ in range(3)] + [np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6)]
+        self.minfo, self.sinfo = np.empty(MASTER_INFO), np.empty(SLAVE_INFO)
+        self.row = np.zeros(_row_width())
+        from harness.loop.trajectory import ROW_SLICES
+
+        self.iF, self.iFs, self.iC = (ROW_SLICES[n].start for n in ("F_true", "F_sensed", "contact"))
+        self.forces = getattr(self.plant, "forces", None)
+        self.k = 0
+        self.names = list(self.ps.names)
+        if self.servo:
+            self.names += [f"{n}_ref" for n in Q2_NAMES] + [f"d{n}/dt_ref" for n in Q2_NAMES]
+        self.names += [f"ring[{s}][{j}]" for s in range(self.slots if self.delay else 0) for j in range(26)]
+        self.n_plant = len(self.ps.names)
+
+    # loop state
+    def x(self) -> np.ndarray:
+        parts = [self.ps.get()]
+        if self.servo:
+            parts.append(self.ref.copy())
+        if self.delay:
+            parts.append(self.cmdbuf.ravel().copy())
+        return np.concatenate(parts)
+
+    def set_x(self, x: np.ndarray) -> None:
+        i = self.n_plant
+        self.ps.set(x[:i])
+        if self.servo:
+            self.ref[:] = x[i:i + 12]
+            i += 12
+        if self.delay:
+            self.cmdbuf.ravel()[:] = x[i:]
+
+    def step(self) -> int:
+        """One control step k -> k + 1 (the per-step body of `harness.loop.stepped_loop`, noise-free).
+        Returns a `controllers.status.Status` code (0 = ok)."""
+        K, a, k, dt = self.K, self.model, self.k, self.dt
+        st = self.plant.true_state(self.state)
+        if st:
+            return int(st)
+        if self.forces is not None:
+            self.forces(self.Ftrue, self.cinfo)
+        xd, dxd, ddxd, T1, T2, u2, deN = self.bufs
+        s0, st = K.stepped_paper_step(
+            self.state, EXPLODING, self.Ftrue, self.ignored, k * dt, a.traj, self.noise, k, 0.0, a.mpk_c,
+            a.spk_c, a.nodes, a.weights, a.gains, a.spec, self.Fsens, xd, dxd, ddxd, self.sensed, T1, T2, u2,
+            deN, self.minfo, self.sinfo, self.row, self.cinfo, self.iF, self.iFs, self.iC,
+            1 if self.servo else 0, self.ref, dt, self.cmdbuf[k % self.slots])
+        if s0 or st:
+            return int(s0 or st)
+        self.plant.command(*self.views[(k - self.delay) % self.slots if k >= self.delay else 0])
+        st = self.plant.advance(dt)
+        self.k += 1
+        return int(st or 0)
+
+    def run_to(self, n: int) -> None:
+        while self.k < n:
+            st = self.step()
+            if st:
+                t = self.k * self.dt
+                text = Status(st).text if st in Status._value2member_map_ else f"status {st}"
+                raise LinearizationError(f"the run stopped before the point of linearization: {text} at "
+                                         f"t = {t:.4f} s")
+
+    def phi(self, x: np.ndarray, k: int) -> np.ndarray:
+        """Phi_k(x): the loop state one control period after state x at step k."""
+        self.set_x(x)
+        self.k = k
+        st = self.step()
+        if st:
+            raise LinearizationError(f"a perturbed step failed (status {st}); use a smaller step h")
+        return self.x()
+
+
+def _row_width() -> int:
+    from harness.loop.trajectory import ROW_WIDTH
+
+    return ROW_WIDTH
+
+
+# --- linearization and modes ---------------------------------------------------------------------------
+@dataclass
+class Stability:
+    """Result of `linearize`: A (n, n) the one-period Jacobian at t (s), its eigenvalues (n,) sorted by
+    decreasing modulus and eigenvectors (n, n) (columns), the state names (n,), T (s) and what was run."""
+
+    scenario: Scenario
+    t: float
+    T: float
+    A: np.ndarray
+    eigenvalues: np.ndarray
+    eigenvectors: np.ndarray
+    names: list[str]
+    x0: np.ndarray
+    n_plant: int
+    h: float
+    shapes: dict = field(default_factory=dict)
+
+    @property
+    def radius(self) -> float:
+        return float(abs(self.eigenvalues[0]))
+
+    def frequency(self, j: int = 0) -> float:
+        """Hz, angle(lambda_j) / (2 pi T) (0 for a real positive mode, 1 / (2 T) for a flip)."""
+        return float(abs(np.angle(self.eigenvalues[j])) / (2 * math.pi * self.T))
+
+    def growth_rate(self, j: int = 0) -> float:
+        """1/s, ln |lambda_j| / T (> 0 grows)."""
+        return float(math.log(max(abs(self.eigenvalues[j]), 1e-300)) / self.T)
+
+    @property
+    def verdict_class(self) -> str:
+        r = self.radius
+        if r > 1.0 + self.T / SLOW_S:
+            return "unstable"
+        return "marginal" if r > 1.0 else "stable"
+
+    def dominant(self, j: int = 0, n: int = 4) -> list[tuple[str, float]]:
+        """The n plant-state components of mode j with the largest share of its position part (the first
+        half of the plant state; the whole plant state if the mode has no position part), as (name, share
+        of the largest) pairs."""
+        v = np.abs(self.eigenvectors[: self.n_plant, j])
+        npos = _n_positions(self.scenario, self.n_plant)
+        part = v[:npos] if v[:npos].max() > 1e-9 * v.max() else v
+        order = np.argsort(-part)[:n]
+        return [(self.names[int(i)], float(part[i] / part[order[0]])) for i in order]
+
+    def verdict(self) -> str:
+        lam = self.eigenvalues[0]
+        dom = ", ".join(nm for nm, _ in self.dominant(0))
+        c = self.verdict_class
+        return (f"{c}: spectral radius {self.radius:.6f} at t = {self.t:g} s (T = {self.T:g} s), "
+                f"least stable mode lambda = {lam.real:+.6f}{lam.imag:+.6f}j, {self.frequency(0):.2f} Hz, "
+                f"growth "
+                f"{self.growth_rate(0):+.3g} 1/s, on {dom}")
+
+    def spectrum_rows(self) -> list[dict]:
+        return [{"index": j, "real": float(e.real), "imag": float(e.imag), "modulus": float(abs(e)),
+                 "angle": float(np.angle(e)), "frequency_hz": self.frequency(j),
+                 "growth_per_s": self.growth_rate(j), "dominant": ";".join(n for n, _ in self.dominant(j))}
+                for j, e in enumerate(self.eigenvalues)]
+
+
+def _n_positions(scn: Scenario, n_plant: int) -> int:
+    return n_plant // 2 if scn.plant.kind != "mujoco" else n_plant // 2  # qpos then qvel (act last, na = 0)
+
+
+def linearize(scn: Scenario, t: float, h: float | None = None,
+              loop: ClosedLoopMap | None = None) -> Stability:
+    """Run `scn` (paper law, sensing noise off) to time t (s, rounded to a control step) and return the
+    one-period Jacobian by central finite differences with step h (default 1e-6 on the analytic plant,
+    1e-7 on MuJoCo and the rod; relative to max(1, |x_i|)), its eigen-decomposition and mode shapes.
+    Raises LinearizationError if the run stops before t."""
+    lp = loop if loop is not None else ClosedLoopMap(scn)
+    n = int(round(t / scn.control_dt))
+    lp.run_to(n)
+    if h is None:
+        h = 1e-6 if scn.plant.kind == "analytic" else 1e-7
+    x0 = lp.x()
+    k = lp.k
+    N = len(x0)
+    A = np.zeros((N, N))
+    for i in range(N):
+        hi = h * max(1.0, abs(x0[i]))
+        xp = x0.copy()
+        xp[i] += hi
+        fp = lp.phi(xp, k)
+        xm = x0.copy()
+        xm[i] -= hi
+        fm = lp.phi(xm, k)
+        A[:, i] = (fp - fm) / (2 * hi)
+    lp.set_x(x0)
+    lp.k = k
+    ev, V = np.linalg.eig(A)
+    order = np.lexsort((-ev.imag, -np.round(np.abs(ev), 12)))
+    res = Stability(scenario=scn, t=k * scn.control_dt, T=scn.control_dt, A=A, eigenvalues=ev[order],
+                    eigenvectors=V[:, order], names=lp.names, x0=x0, n_plant=lp.n_plant, h=h)
+    res.shapes = {"positions": lp.ps.positions, "slave": scn.plant_slave}
+    return res
+
+
+def mode_shape(res: Stability, j: int = 0,
+               scale: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+    """(rest (m, 2), displaced (m, 2), scale): the slave's points [X, Z] (m) at the point of linearization
+    and displaced along the real part of mode j (phase chosen to maximise it), scaled so that the largest
+    point displacement is 5 % of the arm's length."""
+    v = res.eigenvectors[: res.n_plant, j]
+    phase = np.exp(-0.5j * np.angle(np.sum(v * v))) if np.any(v) else 1.0
+    vr = np.real(v * phase)
+    x0 = res.x0[: res.n_plant]
+    pos = res.shapes["positions"]
+    slave = res.shapes["slave"]
+    p0 = pos(x0, slave)
+    if scale is None:
+        eps = 1e-6 / max(np.abs(vr).max(), 1e-300)
+        dp = np.abs(pos(x0 + eps * vr, slave) - p0).max() / eps
+        scale = 0.05 * float(np.sum(slave.rest_lengths)) / max(dp, 1e-300)
+    return p0, pos(x0 + scale * vr, slave), float(scale)
+
+
+def plot_stability(res: Stability, path, n_modes: int = 2) -> Path:
+    """Figure: the spectrum against the unit circle (left) and the shapes of the n_modes least stable modes
+    on the slave (right)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 1 + n_modes, figsize=(4.2 * (1 + n_modes), 4.0))
+    ax = axes[0]
+    th = np.linspace(0, 2 * np.pi, 400)
+    ax.plot(np.cos(th), np.sin(th), "k-", lw=0.6)
+    ev = res.eigenvalues
+    ax.plot(ev.real, ev.imag, "x", ms=5)
+    ax.plot(ev[0].real, ev[0].imag, "ro", mfc="none", ms=9)
+    ax.set_aspect("equal")
+    ax.set_xlabel("Re lambda")
+    ax.set_ylabel("Im lambda")
+    ax.set_title(f"one-period spectrum, rho = {res.radius:.5f}", fontsize=9)
+    for j, ax in enumerate(axes[1:]):
+        j = min(j if j == 0 else _next_distinct(res, j), len(ev) - 1)
+        p0, p1, sc = mode_shape(res, j)
+        ax.plot(p0[:, 0], p0[:, 1], "k.-", lw=1, ms=3, label="at t")
+        ax.plot(p1[:, 0], p1[:, 1], "r.-", lw=1, ms=3, label=f"mode x {sc:.3g}")
+        half = 0.6 * float(np.ptp(p0[:, 1]) or 1.0)
+        ax.set_xlim(float(p0[:, 0].mean()) - half, float(p0[:, 0].mean()) + half)
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_xlabel("X (m)")
+        ax.set_ylabel("Z (m)")
+        lam = ev[j]
+        ax.set_title(f"|lambda| = {abs(lam):.5f}, {res.frequency(j):.1f} Hz\n"
+                     + ", ".join(n.removeprefix("octarm_") for n, _ in res.dominant(j, 3)), fontsize=7)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _next_distinct(res: Stability, j: int) -> int:
+    """Index of the j-th mode counting a complex pair once."""
+    idx, seen = 0, 0
+    ev = res.eigenvalues
+    while idx < len(ev) - 1 and seen < j:
+        idx += 2 if abs(ev[idx].imag) > 1e-12 and abs(ev[idx + 1] - np.conj(ev[idx])) < 1e-9 else 1
+        seen += 1
+    return idx
+
+
+def write_stability(res: Stability, out) -> list[Path]:
+    """spectrum.csv (every eigenvalue: real, imag, modulus, angle, frequency, growth, dominant states),
+    stability.json (verdict, radius, least stable mode, t, T, h) and stability.png in folder `out`."""
+    import csv
+    import json
+
+    from harness.config.textio import jsonable
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = res.spectrum_rows()
+    p_csv = out / "spectrum.csv"
+    tmp = p_csv.with_suffix(".csv.tmp")
+    with tmp.open("w", newline="", encoding="utf-8") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    tmp.replace(p_csv)
+    p_json = out / "stability.json"
+    summary = {"verdict": res.verdict(), "class": res.verdict_class, "spectral_radius": res.radius,
+               "t": res.t, "control_dt": res.T, "fd_step": res.h, "n_states": len(res.names),
+               "least_stable": rows[0], "dominant": res.dominant(0, 6),
+               "plant": res.scenario.plant.kind, "actuation": res.scenario.plant.actuation}
+    tmp = p_json.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(jsonable(summary), indent=2) + "\n", encoding="utf-8")
+    tmp.replace(p_json)
+    return [p_csv, p_json, plot_stability(res, out / "stability.png")]
+
+
+# --- predicted stability map -------------------------------------------------------------------------
+def predicted_map(kns, etas, overrides=(), t: float = 1.0, say=lambda s: None) -> list[dict]:
+    """Spectral radius over the k_n x eta_b grid of `harness.studies.stability_map` (same overrides, same
+    keys), linearized at t (s): rows {kn, eta_b, radius, class, frequency_hz, dominant}.  A run that
+    diverges before t gives class "diverged before t" and radius nan."""
+    from harness.config.load import load_scenario
+
+    rows = []
+    for kn in kns:
+        for eta in etas:
+            eta_s = f"[{eta},{eta},{eta}]"
+            sets = [*overrides, "snr_db=none", f"gains.kn={kn}", f"plant.bending_viscosity={eta_s}"]
+            scn = load_scenario(None, sets)
+            try:
+                res = linearize(scn, t)
+                row = {"kn": float(kn), "eta_b": float(eta), "radius": res.radius,
+                       "class": res.verdict_class, "frequency_hz": res.frequency(0),
+                       "dominant": ";".join(n for n, _ in res.dominant(0, 3))}
+            except LinearizationError as exc:
+                row = {"kn": float(kn), "eta_b": float(eta), "radius": float("nan"),
+                       "class": "diverged before t", "frequency_hz": float("nan"), "dominant": str(exc)}
+            rows.append(row)
+            say(f"kn = {kn:g}, eta_b = {eta:g}: rho = {row['radius']:.6f} ({row['class']})")
+    return rows
+
+
+__all__ = ["ClosedLoopMap", "LinearizationError", "SLOW_S", "Stability", "linearize", "mode_shape",
+           "plot_stability", "predicted_map", "write_stability"]
