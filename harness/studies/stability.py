@@ -120,49 +120,54 @@ class _MujocoState:
 
 
 class _CosseratState:
+    """Planar rod coordinates without the clamped base node 0 (held by the rod's boundary condition: zero
+    velocity, zero net force, so a perturbation of it would be a neutral mode of no physical meaning)."""
+
     def __init__(self, plant) -> None:
         self.p = plant
         b = plant.slave._b
         self.nn, self.ne = b.position_collection.shape[1], b.director_collection.shape[2]
         npe = plant.slave.n
-        sec = [f"s{i}" for i in range(3)]
-        node = [f"node{j}" for j in range(self.nn)]
-        elem = [f"{sec[j // npe]}_el{j % npe}" for j in range(self.ne)]
+        node = [f"node{j}" for j in range(1, self.nn)]
+        elem = [f"s{j // npe}_el{j % npe}" for j in range(self.ne)]
         pos = [f"{n}.X" for n in node] + [f"{n}.Z" for n in node] + [f"{e}.angle" for e in elem]
         self.names = ["q1[0]", "q1[1]", "dq1[0]", "dq1[1]", *pos, *(f"{n} (rate)" for n in pos)]
 
     def get(self) -> np.ndarray:
         b = self.p.slave._b
         D = b.director_collection
-        ang = np.arctan2(D[2, 0], D[0, 0])
         self._dirs = D.copy()
+        self._a0 = np.arctan2(D[2, 0], D[0, 0])
+        self._base = b.position_collection[:, 0].copy()
         self._time, self._steps = self.p.slave.time, self.p.slave._steps
-        return np.concatenate([self.p._m, b.position_collection[0], b.position_collection[2], ang,
-                               b.velocity_collection[0], b.velocity_collection[2], b.omega_collection[1]])
+        P, V = b.position_collection, b.velocity_collection
+        return np.concatenate([self.p._m, P[0, 1:], P[2, 1:], self._a0, V[0, 1:], V[2, 1:],
+                               b.omega_collection[1]])
 
     def set(self, x: np.ndarray) -> None:
         p, s = self.p, self.p.slave
-        b, nn, ne = s._b, self.nn, self.ne
+        b, m, ne = s._b, self.nn - 1, self.ne
         p._m[:] = x[0:4]
         i = 4
-        b.position_collection[0] = x[i:i + nn]
-        b.position_collection[2] = x[i + nn:i + 2 * nn]
-        ang = x[i + 2 * nn:i + 2 * nn + ne]
-        i += 2 * nn + ne
-        b.velocity_collection[0] = x[i:i + nn]
-        b.velocity_collection[2] = x[i + nn:i + 2 * nn]
-        b.omega_collection[1] = x[i + 2 * nn:i + 2 * nn + ne]
-        # rotate the stored directors about Y by the change of angle (exact at the stored state)
-        a0 = np.arctan2(self._dirs[2, 0], self._dirs[0, 0])
-        da = ang - a0
+        b.position_collection[:, 0] = self._base
+        b.position_collection[0, 1:] = x[i:i + m]
+        b.position_collection[2, 1:] = x[i + m:i + 2 * m]
+        ang = x[i + 2 * m:i + 2 * m + ne]
+        i += 2 * m + ne
+        b.velocity_collection[:, 0] = 0.0
+        b.velocity_collection[0, 1:] = x[i:i + m]
+        b.velocity_collection[2, 1:] = x[i + m:i + 2 * m]
+        b.omega_collection[1] = x[i + 2 * m:i + 2 * m + ne]
+        # rotate the stored directors about Y by the change of angle; D has rows d1, d2, d3 in lab
+        # coordinates and row r -> (r_x c + r_z s, r_y, -r_x s + r_z c) takes _rot_y(a) to _rot_y(a + da)
+        # (harness.plant.cosserat)
+        da = ang - self._a0
         c, sn = np.cos(da), np.sin(da)
         D = self._dirs
         out = D.copy()
-        # D has rows d1, d2, d3 in lab coordinates; a rotation by da about lab Y maps row r to
-        # (r_x c - r_z s, r_y, r_x s + r_z c) with the convention of cosserat._rot_y
         for r in range(3):
-            out[r, 0] = D[r, 0] * c - D[r, 2] * sn
-            out[r, 2] = D[r, 0] * sn + D[r, 2] * c
+            out[r, 0] = D[r, 0] * c + D[r, 2] * sn
+            out[r, 2] = -D[r, 0] * sn + D[r, 2] * c
         b.director_collection[:] = out
         s._fit_valid = False
         s.time, s._steps = self._time, self._steps
@@ -170,8 +175,10 @@ class _CosseratState:
     restore = set
 
     def positions(self, x: np.ndarray, slave) -> np.ndarray:  # noqa: ARG002
-        nn = self.nn
-        return np.stack([x[4:4 + nn], x[4 + nn:4 + 2 * nn]], axis=1)
+        """Rod nodes [X, Z] (m), base first."""
+        m = self.nn - 1
+        pts = np.stack([x[4:4 + m], x[4 + m:4 + 2 * m]], axis=1)
+        return np.vstack([[self._base[0], self._base[2]], pts])
 
 
 # --- the one-period closed-loop map -----------------------------------------------------------------------
