@@ -500,10 +500,34 @@ def write_stability(res: Stability, out) -> list[Path]:
 
 
 # --- predicted stability map -------------------------------------------------------------------------
-def predicted_map(kns, etas, overrides=(), t: float = 1.0, say=lambda s: None) -> list[dict]:
+def radius_along(scn: Scenario, times) -> dict:
+    """The least stable linearization along one run of `scn`: `linearize` at each of `times` (s, increasing)
+    on the same run.  Returns {radius (max over the points reached), t (where), class, frequency_hz,
+    dominant, reached (the last time linearized), stopped (message if the run stopped before the next
+    point, else ""), flip (the mode is real negative: a sign flip every period)}; radius nan if not even
+    the first point was reached."""
+    loop = ClosedLoopMap(scn)
+    best = {"radius": float("nan"), "t": float("nan"), "class": "not reached", "frequency_hz": float("nan"),
+            "dominant": "", "reached": float("nan"), "stopped": "", "flip": False}
+    for t in times:
+        try:
+            res = linearize(scn, float(t), loop=loop)
+        except LinearizationError as exc:
+            best["stopped"] = str(exc)
+            break
+        best["reached"] = res.t
+        if not res.radius <= best["radius"]:  # also replaces nan
+            best.update(radius=res.radius, t=res.t, frequency_hz=res.frequency(0),
+                        dominant=";".join(n for n, _ in res.dominant(0, 3)),
+                        flip=bool(abs(np.angle(res.eigenvalues[0])) > 0.99 * math.pi))
+            best["class"] = res.verdict_class
+    return best
+
+
+def predicted_map(kns, etas, overrides=(), times=(0.0,), say=lambda s: None) -> list[dict]:
     """Spectral radius over the k_n x eta_b grid of `harness.studies.stability_map` (same overrides, same
-    keys), linearized at t (s): rows {kn, eta_b, radius, class, frequency_hz, dominant}.  A run that
-    diverges before t gives class "diverged before t" and radius nan."""
+    keys), sensing without noise, the largest over the linearization points `times` (s) of each cell's run
+    (`radius_along`): rows {kn, eta_b, radius, t, class, frequency_hz, dominant, reached, stopped}."""
     from harness.config.load import load_scenario
 
     rows = []
@@ -511,19 +535,49 @@ def predicted_map(kns, etas, overrides=(), t: float = 1.0, say=lambda s: None) -
         for eta in etas:
             eta_s = f"[{eta},{eta},{eta}]"
             sets = [*overrides, "snr_db=none", f"gains.kn={kn}", f"plant.bending_viscosity={eta_s}"]
-            scn = load_scenario(None, sets)
-            try:
-                res = linearize(scn, t)
-                row = {"kn": float(kn), "eta_b": float(eta), "radius": res.radius,
-                       "class": res.verdict_class, "frequency_hz": res.frequency(0),
-                       "dominant": ";".join(n for n, _ in res.dominant(0, 3))}
-            except LinearizationError as exc:
-                row = {"kn": float(kn), "eta_b": float(eta), "radius": float("nan"),
-                       "class": "diverged before t", "frequency_hz": float("nan"), "dominant": str(exc)}
+            row = {"kn": float(kn), "eta_b": float(eta), **radius_along(load_scenario(None, sets), times)}
             rows.append(row)
-            say(f"kn = {kn:g}, eta_b = {eta:g}: rho = {row['radius']:.6f} ({row['class']})")
+            say(f"kn = {kn:g}, eta_b = {eta:g}: rho = {row['radius']:.6f} at t = {row['t']:g} s "
+                f"({row['class']}, {row['frequency_hz']:.1f} Hz)")
     return rows
 
 
-__all__ = ["ClosedLoopMap", "LinearizationError", "SLOW_S", "Stability", "linearize", "mode_shape",
-           "plot_stability", "predicted_map", "write_stability"]
+def predicted_markdown(rows: list[dict], sim: list[dict] | None = None) -> str:
+    """Table of the predicted map (spectral radius, class) next to the simulated one
+    (`harness.studies.stability_map.stability_map` rows) when given."""
+    kns = sorted({r["kn"] for r in rows})
+    etas = sorted({r["eta_b"] for r in rows})
+    cell = {(r["kn"], r["eta_b"]): r for r in rows}
+    simc = {(r["kn"], r["eta_b"]): r for r in (sim or [])}
+    lines = ["| k_n \\ eta_b (N m^2 s) | " + " | ".join(f"{e:g}" for e in etas) + " |",
+             "|---:|" + "---:|" * len(etas)]
+    for kn in kns:
+        out = []
+        for e in etas:
+            r = cell[kn, e]
+            txt = f"rho {r['radius']:.4f} ({r['class']}"
+            txt += ", flip)" if r["flip"] else ")"
+            if (kn, e) in simc:
+                s = simc[kn, e]
+                txt += " / sim: " + ("ok" if s["status"] == "ok" else f"diverged {s['t_end']:.3f} s")
+            out.append(txt)
+        lines.append(f"| {kn:g} | " + " | ".join(out) + " |")
+    return "\n".join(lines)
+
+
+def agreement(pred: list[dict], sim: list[dict]) -> list[dict]:
+    """Per cell: predicted diverging (class "unstable") against simulated diverging (status != "ok");
+    rows {kn, eta_b, predicted, simulated, agree}."""
+    simc = {(r["kn"], r["eta_b"]): r for r in sim}
+    out = []
+    for r in pred:
+        s = simc[r["kn"], r["eta_b"]]
+        p_div, s_div = r["class"] == "unstable", s["status"] != "ok"
+        out.append({"kn": r["kn"], "eta_b": r["eta_b"], "predicted": r["class"], "radius": r["radius"],
+                    "simulated": s["status"], "t_end": s["t_end"], "agree": p_div == s_div})
+    return out
+
+
+__all__ = ["ClosedLoopMap", "LinearizationError", "SLOW_S", "Stability", "agreement", "linearize",
+           "mode_shape", "plot_stability", "predicted_map", "predicted_markdown", "radius_along",
+           "write_stability"]
