@@ -340,3 +340,56 @@ def stability(scenario: Scenario | str | os.PathLike | Mapping | None = None,
 
         write_stability(res, prepare_out_dir(out))
     return res
+
+
+def margins(scenario: Scenario | str | os.PathLike | Mapping | None = None,
+            overrides: Iterable[str] = (), *, bounds, params: Iterable[str] | None = None,
+            rtol: float = 0.05, probes: int = 2,
+            out: str | os.PathLike | None = None, workers: int | None = None, scheduler: str | None = None,
+            executor: str = "processes", pair: tuple[str, str] | None = None, n_rays: int = 8,
+            say: Callable[[str], None] = lambda s: None):
+    """Robustness margins of a scenario against a bounds file (path, table or `Bounds`): for each mismatch
+    parameter (default `harness.studies.margin.DEFAULT_PARAMS`), the largest deviation in each direction
+    that still passes, by bracketing and bisection to `rtol` (scale factors; values: 1/100 of the range,
+    delays and integers exact), with `probes` extra points per side to detect a non-monotone edge
+    (`harness.studies.margin`).  Runs go through the sweep executor; with `out`, every run is journaled in
+    out/results.jsonl (a repeated call resumes) and margins.md / margins.json / margins.png are written.
+    pair: also trace the 2-D edge of two scale parameters along n_rays rays (edge.json, edge.png).
+    Returns (rows, edge rows or None).  Raises `ConfigError` for bad input or a nominal scenario that
+    fails the bounds."""
+    from harness.config.bounds import Bounds, load_bounds
+    from harness.studies import margin as mg
+
+    scn = _scenario_of(scenario, overrides)
+    b = bounds if isinstance(bounds, Bounds) else load_bounds(bounds)
+    if not (isinstance(probes, int) and 0 <= probes <= 10):
+        raise ConfigError.field("probes", probes, "expected an integer in [0, 10]")
+    out_dir = None
+    if out is not None:
+        from harness.config.textio import prepare_out_dir
+
+        out_dir = prepare_out_dir(out)
+    if isinstance(scenario, Scenario):  # the cases: this scenario + one override per parameter
+        from harness.config.load import scenario_to_dict
+
+        source, base = scenario_to_dict(scenario), []
+    else:
+        source, base = scenario, list(overrides)
+    kw = dict(source=source, base_set=base, rtol=rtol, probes=probes, out=out_dir, workers=workers,
+              scheduler=scheduler, executor=executor, say=say)
+    names = list(params) if params is not None else list(mg.DEFAULT_PARAMS)
+    rows = mg.margins(scn, b, names, **kw) if names else []
+    tol = (f"tolerance: scale factors to {rtol:g} relative (fail / pass - 1), values to 1/100 of the "
+           f"range, delay to one control period, integers exactly; {probes} probe(s) per side")
+    edge = None
+    if pair is not None:
+        edge = mg.edge_trace(scn, b, tuple(pair), n_rays, **kw)
+    if out_dir is not None:
+        if rows:
+            mg.write_margins(rows, out_dir, tol)
+        if edge is not None:
+            from harness.config.textio import jsonable
+
+            (out_dir / "edge.json").write_text(json.dumps(jsonable(edge), indent=2) + "\n", encoding="utf-8")
+            mg.plot_edge(edge, tuple(pair), out_dir / "edge.png")
+    return rows, edge

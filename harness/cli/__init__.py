@@ -372,6 +372,42 @@ def cmd_stability(args: argparse.Namespace) -> int:
     return EXIT_FAIL if res.verdict_class == "unstable" else EXIT_OK
 
 
+def cmd_margin(args: argparse.Namespace) -> int:
+    from harness.api import margins
+    from harness.config.bounds import load_bounds
+
+    scn = load_from_args(args)
+    bounds = load_bounds(args.bounds)
+    if not 0 < args.rtol < 1:
+        raise ConfigError(f"--rtol = {args.rtol}: expected a relative tolerance in (0, 1)", path="--rtol")
+    if args.probes > 10:
+        raise ConfigError(f"--probes = {args.probes}: expected an integer in [0, 10]", path="--probes")
+    pair = None
+    if args.pair is not None:
+        pair = tuple(x.strip() for x in args.pair.split(","))
+        if len(pair) != 2 or not all(pair):
+            raise ConfigError(f"--pair = {args.pair!r}: expected two parameter names, P1,P2", path="--pair")
+    out = prepare_out_dir(args.out if args.out is not None else Path("runs") / "margin" / scn.name)
+    say = (lambda s: None) if args.no_progress else (lambda s: print(s, file=sys.stderr))  # noqa: E731
+    if scn.plant.actuation == "servo" and scn.plant.kind != "analytic":
+        hidden = {"slave_mass", "master_mass"} & set(args.params or ["slave_mass"])
+        if hidden:
+            _warn(f"servo actuation: the position servos hide the slave's inertia; a margin over "
+                  f"{', '.join(sorted(hidden))} says little about the controller's dynamics model")
+    rows, edge = margins(scn, bounds=bounds, params=args.params, rtol=args.rtol, probes=args.probes, out=out,
+                         workers=args.workers, scheduler=args.scheduler, executor=args.executor, pair=pair,
+                         say=say)
+    mg = _import("harness.studies.margin")
+    if rows:
+        print(mg.margins_markdown(rows))
+    if edge is not None:
+        for r in edge:
+            print(f"edge {r['angle_deg']:5.0f} deg: {pair[0]} x{r['p1']:.4g}, {pair[1]} x{r['p2']:.4g}"
+                  f" ({r['first_bound'] or 'range end'})")
+    print(f"wrote {out}")
+    return EXIT_OK
+
+
 # ---------------------------------------------------------------------------------------------
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
@@ -404,7 +440,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 COMMANDS = {"run": cmd_run, "check": cmd_check, "models": cmd_models, "sweep": cmd_sweep,
             "controllers": cmd_controllers, "fidelity": cmd_fidelity, "cache": cmd_cache,
-            "stability-map": cmd_stability_map, "stability": cmd_stability}
+            "stability-map": cmd_stability_map, "stability": cmd_stability,
+            "margin": cmd_margin}
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -290,6 +290,52 @@ def build_parser() -> argparse.ArgumentParser:
                       help="output folder (created; must be writable). "
                            "Default: runs/stability/<scenario name>.")
 
+    mar = sub.add_parser(
+        "margin", formatter_class=_Formatter, help="robustness margins of a scenario against a bounds file",
+        description="For each mismatch parameter, the largest deviation from the scenario in each "
+                    "direction for which it still passes the bounds file: the pass/fail edge bracketed (x2 "
+                    "steps) and bisected to --rtol, plus --probes points inside each margin to detect a "
+                    "non-monotone edge (harness.studies.margin). Runs go through the sweep executor; each "
+                    "finished run is appended to OUT/results.jsonl and a re-run resumes. Writes margins.md "
+                    "(table: parameter, lower and upper margin, first bound to fail, metric at the edge), "
+                    "margins.json, margins.png (bars around the nominal point) and, with --pair, edge.json / "
+                    "edge.png. A margin on a servo plant over a dynamics parameter (masses) measures little: "
+                    "the servos hide the slave's inertia.",
+        epilog="parameters: slave_mass, bending_stiffness, extension_stiffness, master_mass (scale factors "
+               "in [0.05, 20]), material_damping (scale of plant.bending_viscosity and extension_viscosity, "
+               "[0.01, 100]; chain and rod), control_rate (scale, [0.1, 10]), segments (1-64, chain), delay "
+               "(s, [0, 0.1], multiples of control_dt; chain and rod), noise_snr (dB, [0, 200]), or any "
+               "dotted scenario key as a scale factor. exit status: 0 margins found; 1 the executor "
+               "failed; 2 invalid input or the nominal scenario fails the bounds; 130 interrupted (re-run "
+               "to resume).")
+    _add_scenario_options(mar)
+    mar.add_argument("--bounds", metavar="BOUNDS.toml", type=_path, required=True,
+                     help="bounds file (required; layout: bounds/paper_mujoco.toml).")
+    mar.add_argument("--param", dest="params", action="append", default=None, metavar="NAME",
+                     help="parameter to search (repeatable). Default: slave_mass, bending_stiffness, "
+                          "extension_stiffness, material_damping, segments, control_rate, delay, noise_snr, "
+                          "master_mass (those that do not apply to the plant are listed as n/a).")
+    mar.add_argument("--rtol", metavar="R", type=_positive_float, default=0.05,
+                     help="relative tolerance of a scale-factor edge (fail / pass - 1), in (0, 1). "
+                          "Default: 0.05.")
+    mar.add_argument("--probes", metavar="N", type=_nonnegative_int, default=2,
+                     help="points per side run inside the margin to detect a non-monotone edge, integer in "
+                          "[0, 10]. Default: 2.")
+    mar.add_argument("--pair", metavar="P1,P2", default=None,
+                     help="also trace the pass/fail edge of two scale parameters in their plane (8 rays). "
+                          "Default: none.")
+    mar.add_argument("--workers", metavar="N", type=_positive_int, default=None,
+                     help=f"runs at once, integer >= 1. Default: all cores ({os.cpu_count() or 1} here).")
+    mar.add_argument("--executor", choices=("processes", "threads"), default="processes",
+                     help="what runs the cases (as 'teleop sweep'). Default: processes.")
+    mar.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                     help="address of a running Dask scheduler. Default: none (local).")
+    mar.add_argument("--out", metavar="DIR", type=_path, default=None,
+                     help="output folder (created; must be writable; an existing one is resumed). "
+                          "Default: runs/margin/<scenario name>.")
+    mar.add_argument("--no-progress", action="store_true",
+                     help="do not print each round (default: printed on stderr).")
+
     fid = sub.add_parser(
         "fidelity", formatter_class=_Formatter, help="plant-fidelity study over MuJoCo segment counts",
         description="Compare the generated MuJoCo Octarm with N rigid segments per section against the "
