@@ -131,7 +131,7 @@ def test_cli_bad_time_is_one_line(capsys):
 
     rc = main(["stability", "--plant", "analytic", "--at", "-1"])
     err = capsys.readouterr().err.strip().splitlines()
-    assert rc == 2 and len(err) == 1 and "t = -1" in err[0]
+    assert rc == 2 and len(err) == 1 and "--at" in err[0] and "[0, 3600]" in err[0]
 
 
 def test_python_controller_is_refused():
@@ -156,3 +156,15 @@ def test_predicted_map_agrees_with_simulated_map():
     assert all(c["agree"] for c in cells), cells
     # both outcomes occur on this grid (the test can tell a wrong edge from a right one)
     assert {c["simulated"] == "ok" for c in cells} == {True, False}
+
+
+def test_cli_times_along_one_run(tmp_path, capsys):
+    from harness.cli import main
+
+    rc = main(["stability", "--plant", "analytic", "--at", "0:0.2:0.1", "--out", str(tmp_path)])
+    lines = capsys.readouterr().out.splitlines()
+    assert rc == 0
+    assert [ln.split()[0] for ln in lines[1:4]] == ["0.000", "0.100", "0.200"]
+    summary = json.loads((tmp_path / "stability.json").read_text())
+    radii = [float(ln.split()[1]) for ln in lines[1:4]]
+    assert summary["spectral_radius"] == pytest.approx(max(radii), abs=1e-6)

@@ -356,8 +356,10 @@ def cmd_stability(args: argparse.Namespace) -> int:
     scn = load_from_args(args)
     out = prepare_out_dir(args.out if args.out is not None else Path("runs") / "stability" / scn.name)
     stab = _import("harness.studies.stability")
+    if len(args.at) > 1:
+        return _stability_along(scn, args, out, stab)
     try:
-        res = stability(scn, t=args.at, h=args.fd_step, out=out)
+        res = stability(scn, t=args.at[0], h=args.fd_step, out=out)
     except stab.LinearizationError as exc:
         _err(exc)
         return EXIT_FAIL
@@ -370,6 +372,33 @@ def cmd_stability(args: argparse.Namespace) -> int:
               f"{res.growth_rate(j):+9.3g}  {dom}")
     print(f"wrote {out / 'spectrum.csv'}, {out / 'stability.json'}, {out / 'stability.png'}")
     return EXIT_FAIL if res.verdict_class == "unstable" else EXIT_OK
+
+
+def _stability_along(scn, args, out: Path, stab) -> int:
+    """`teleop stability --at T1,T2,...`: one run, linearized at each time; the least stable one's files."""
+    loop = stab.ClosedLoopMap(scn)
+    worst, stopped = None, ""
+    print("t (s)   radius     class     Hz       dominant")
+    for t in args.at:
+        try:
+            res = stab.linearize(scn, t, args.fd_step, loop=loop)
+        except stab.LinearizationError as exc:
+            stopped = str(exc)
+            break
+        dom = ", ".join(n for n, _ in res.dominant(0, 3))
+        print(f"{res.t:6.3f}  {res.radius:.6f}  {res.verdict_class:8s}  {res.frequency(0):7.2f}  {dom}")
+        if worst is None or res.radius > worst.radius:
+            worst = res
+    if worst is None:
+        _err(stopped)
+        return EXIT_FAIL
+    stab.write_stability(worst, out)
+    print(f"least stable: {worst.verdict()}")
+    if stopped:
+        print(f"stopped: {stopped}")
+    print(f"wrote {out / 'spectrum.csv'}, {out / 'stability.json'}, {out / 'stability.png'} "
+          f"(t = {worst.t:g} s)")
+    return EXIT_FAIL if worst.verdict_class == "unstable" or stopped else EXIT_OK
 
 
 def cmd_margin(args: argparse.Namespace) -> int:

@@ -61,6 +61,25 @@ def _positive_float(text: str) -> float:
     return v
 
 
+def _times(text: str) -> tuple[float, ...]:
+    """argparse type of `stability --at`: 'T', 'T1,T2,...' or 'START:STOP:STEP' (s), increasing."""
+    try:
+        if ":" in text:
+            a, b, c = (float(x) for x in text.split(":"))
+            if not c > 0:
+                raise ValueError
+            n = int(math.floor((b - a) / c + 1e-9))
+            ts = tuple(round(a + i * c, 12) for i in range(n + 1))
+        else:
+            ts = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected T, T1,T2,... or START:STOP:STEP in s, got {text!r}") from None
+    if not ts or any(not (0.0 <= t <= 3600.0) for t in ts) or list(ts) != sorted(set(ts)):
+        raise argparse.ArgumentTypeError(f"expected increasing times in [0, 3600] s, got {text!r}")
+    return ts
+
+
 def _path(text: str) -> Path:
     """A path argument; the empty string is rejected (Path('') would silently mean '.')."""
     if not str(text).strip():
@@ -279,8 +298,10 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="exit status: 0 stable or marginal; 1 unstable, or the run stopped before --at; "
                "2 invalid input.")
     _add_scenario_options(stab)
-    stab.add_argument("--at", metavar="T", type=float, default=1.0,
-                      help="time of the point of linearization in s, in [0, 3600]. Default: 1.")
+    stab.add_argument("--at", metavar="T[,T...]|START:STOP:STEP", type=_times, default=(1.0,),
+                      help="time(s) of the point(s) of linearization in s, each in [0, 3600]: one time, a "
+                           "comma-separated list or START:STOP:STEP (both ends included), all on one run; "
+                           "with several, one line per time and the outputs of the least stable. Default: 1.")
     stab.add_argument("--fd-step", metavar="H", type=_positive_float, default=None,
                       help="relative central-difference step, in (0, 0.01). Default: 1e-6 analytic, "
                            "1e-7 MuJoCo and rod.")
