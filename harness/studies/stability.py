@@ -276,7 +276,12 @@ class ClosedLoopMap:
 
     def run_to(self, n: int) -> None:
         while self.k < n:
-            st = self.step()
+            try:
+                st = self.step()
+            except Exception as exc:  # a plant that raises instead of returning a status: one line
+                t = self.k * self.dt
+                raise LinearizationError(f"the run stopped before the point of linearization: "
+                                         f"{type(exc).__name__}: {exc} at t = {t:.4f} s") from None
             if st:
                 t = self.k * self.dt
                 text = Status(st).text if st in Status._value2member_map_ else f"status {st}"
