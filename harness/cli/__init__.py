@@ -370,6 +370,10 @@ def cmd_stability(args: argparse.Namespace) -> int:
         dom = ", ".join(f"{n} {w:.2f}" for n, w in res.dominant(j, 4))
         print(f"  {abs(lam):.6f}  {math.atan2(lam.imag, lam.real):+.4f}  {res.frequency(j):8.2f}  "
               f"{res.growth_rate(j):+9.3g}  {dom}")
+    j = res.most_negative()
+    lam = res.eigenvalues[j]
+    print(f"most negative eigenvalue: {lam.real:+.6f}{lam.imag:+.6f}j ({res.frequency(j):.2f} Hz), on "
+          + ", ".join(n for n, _ in res.dominant(j, 4)))
     print(f"wrote {out / 'spectrum.csv'}, {out / 'stability.json'}, {out / 'stability.png'}")
     return EXIT_FAIL if res.verdict_class == "unstable" else EXIT_OK
 

@@ -334,6 +334,11 @@ class Stability:
         """1/s, ln |lambda_j| / T (> 0 grows)."""
         return float(math.log(max(abs(self.eigenvalues[j]), 1e-300)) / self.T)
 
+    def most_negative(self) -> int:
+        """Index of the eigenvalue with the most negative real part (a flip mode when it is real: a sign
+        change every period; it leaves the unit circle at -1)."""
+        return int(np.argmin(self.eigenvalues.real))
+
     @property
     def verdict_class(self) -> str:
         r = self.radius
@@ -497,6 +502,7 @@ def write_stability(res: Stability, out) -> list[Path]:
     summary = {"verdict": res.verdict(), "class": res.verdict_class, "spectral_radius": res.radius,
                "t": res.t, "control_dt": res.T, "fd_step": res.h, "n_states": len(res.names),
                "least_stable": rows[0], "dominant": res.dominant(0, 6),
+               "most_negative": rows[res.most_negative()],
                "plant": res.scenario.plant.kind, "actuation": res.scenario.plant.actuation}
     tmp = p_json.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(jsonable(summary), indent=2) + "\n", encoding="utf-8")
