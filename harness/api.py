@@ -328,7 +328,8 @@ def stability(scenario: Scenario | str | os.PathLike | Mapping | None = None,
     and `harness.studies.stability.LinearizationError` when the run stops before t."""
     import math
 
-    from harness.studies.stability import linearize, write_stability
+    from harness.studies.stability import linearize
+    from harness.studies.stability_report import write_stability
 
     if not (isinstance(t, (int, float)) and math.isfinite(t) and 0.0 <= t <= 3600.0):
         raise ConfigError.field("t", t, "expected a time in s in [0, 3600]")
@@ -359,6 +360,7 @@ def margins(scenario: Scenario | str | os.PathLike | Mapping | None = None,
     fails the bounds."""
     from harness.config.bounds import Bounds, load_bounds
     from harness.studies import margin as mg
+    from harness.studies import margin_report as mr
 
     scn = _scenario_of(scenario, overrides)
     b = bounds if isinstance(bounds, Bounds) else load_bounds(bounds)
@@ -386,10 +388,10 @@ def margins(scenario: Scenario | str | os.PathLike | Mapping | None = None,
         edge = mg.edge_trace(scn, b, tuple(pair), n_rays, **kw)
     if out_dir is not None:
         if rows:
-            mg.write_margins(rows, out_dir, tol)
+            mr.write_margins(rows, out_dir, tol)
         if edge is not None:
             from harness.config.textio import jsonable
 
             (out_dir / "edge.json").write_text(json.dumps(jsonable(edge), indent=2) + "\n", encoding="utf-8")
-            mg.plot_edge(edge, tuple(pair), out_dir / "edge.png")
+            mr.plot_edge(edge, tuple(pair), out_dir / "edge.png")
     return rows, edge

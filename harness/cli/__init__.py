@@ -396,7 +396,7 @@ def _stability_along(scn, args, out: Path, stab) -> int:
     if worst is None:
         _err(stopped)
         return EXIT_FAIL
-    stab.write_stability(worst, out)
+    _import("harness.studies.stability_report").write_stability(worst, out)
     print(f"least stable: {worst.verdict()}")
     if stopped:
         print(f"stopped: {stopped}")
@@ -430,9 +430,8 @@ def cmd_margin(args: argparse.Namespace) -> int:
     rows, edge = margins(scn, bounds=bounds, params=args.params, rtol=args.rtol, probes=args.probes, out=out,
                          workers=args.workers, scheduler=args.scheduler, executor=args.executor, pair=pair,
                          say=say)
-    mg = _import("harness.studies.margin")
     if rows:
-        print(mg.margins_markdown(rows))
+        print(_import("harness.studies.margin_report").margins_markdown(rows))
     if edge is not None:
         for r in edge:
             print(f"edge {r['angle_deg']:5.0f} deg: {pair[0]} x{r['p1']:.4g}, {pair[1]} x{r['p2']:.4g}"
