@@ -42,6 +42,9 @@ OPTIONS = {
     "controllers": [],
     "cache": ["--prune", "--clear"],
     "stability-map": ["--duration", "--out"],
+    "stability": ["--at", "--fd-step", "--modes", "--plant", "--actuation", "--set", "--out", "SCENARIO.toml"],
+    "margin": ["--bounds", "--param", "--rtol", "--probes", "--pair", "--workers", "--executor", "--scheduler",
+               "--out", "--no-progress", "--set", "SCENARIO.toml"],
 }
 
 
