@@ -42,9 +42,10 @@ OPTIONS = {
     "controllers": [],
     "cache": ["--prune", "--clear"],
     "stability-map": ["--duration", "--out"],
-    "stability": ["--at", "--fd-step", "--modes", "--plant", "--actuation", "--set", "--out", "SCENARIO.toml"],
-    "margin": ["--bounds", "--param", "--rtol", "--probes", "--pair", "--workers", "--executor", "--scheduler",
-               "--out", "--no-progress", "--set", "SCENARIO.toml"],
+    "stability": ["--at", "--fd-step", "--modes", "--plant", "--actuation", "--set", "--out",
+                  "SCENARIO.toml"],
+    "margin": ["--bounds", "--param", "--rtol", "--probes", "--pair", "--workers", "--executor",
+               "--scheduler", "--out", "--no-progress", "--set", "SCENARIO.toml"],
 }
 
 

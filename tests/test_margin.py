@@ -152,3 +152,21 @@ def test_cli_margin_bad_param_is_one_line(tmp_path, capsys):
                str(tmp_path / "m")])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "--param" in err[0]
+
+
+def test_edge_trace_of_two_masses(tmp_path):
+    """The 2-D edge: along each ray the margin passes and the failing point fails, and the axis rays agree
+    with the 1-D margins of each parameter (same bisection, same tolerance)."""
+    from harness.api import margins as api_margins
+
+    rows, edge = api_margins(None, CHEAP, bounds=STATUS, params=["slave_mass"], rtol=0.05, probes=0,
+                             out=tmp_path, workers=1, executor="threads", pair=("slave_mass", "master_mass"),
+                             n_rays=4)
+    assert [round(r["angle_deg"]) for r in edge] == [0, 90, 180, 270]
+    # levels are kept to 6 significant digits: the two searches agree to that rounding
+    assert edge[0]["p1"] == pytest.approx(rows[0].sides["upper"]["margin"], rel=1e-5)
+    assert edge[2]["p1"] == pytest.approx(rows[0].sides["lower"]["margin"], rel=1e-5)
+    for r in edge:
+        if r["fail_p1"] is not None:
+            assert r["first_bound"] == "status_ok"
+    assert (tmp_path / "edge.png").stat().st_size > 0 and (tmp_path / "edge.json").exists()
