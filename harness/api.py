@@ -383,6 +383,8 @@ def margins(scenario: Scenario | str | os.PathLike | Mapping | None = None,
     rows = mg.margins(scn, b, names, **kw) if names else []
     tol = (f"tolerance: scale factors to {rtol:g} relative (fail / pass - 1), values to 1/100 of the "
            f"range, delay to one control period, integers exactly; {probes} probe(s) per side")
+    if note := mg.servo_note(scn, names):
+        tol += f"\n\nwarning: {note}"
     edge = None
     if pair is not None:
         edge = mg.edge_trace(scn, b, tuple(pair), n_rays, **kw)

@@ -422,11 +422,9 @@ def cmd_margin(args: argparse.Namespace) -> int:
             raise ConfigError(f"--pair = {args.pair!r}: expected two parameter names, P1,P2", path="--pair")
     out = prepare_out_dir(args.out if args.out is not None else Path("runs") / "margin" / scn.name)
     say = (lambda s: None) if args.no_progress else (lambda s: print(s, file=sys.stderr))  # noqa: E731
-    if scn.plant.actuation == "servo" and scn.plant.kind != "analytic":
-        hidden = {"slave_mass", "master_mass"} & set(args.params or ["slave_mass"])
-        if hidden:
-            _warn(f"servo actuation: the position servos hide the slave's inertia; a margin over "
-                  f"{', '.join(sorted(hidden))} says little about the controller's dynamics model")
+    note = _import("harness.studies.margin").servo_note(scn, args.params or ["slave_mass"])
+    if note:
+        _warn(note)
     rows, edge = margins(scn, bounds=bounds, params=args.params, rtol=args.rtol, probes=args.probes, out=out,
                          workers=args.workers, scheduler=args.scheduler, executor=args.executor, pair=pair,
                          say=say)

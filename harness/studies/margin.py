@@ -90,6 +90,17 @@ def param_of(name: str) -> Param:
     raise ConfigError.field("--param", name, f"expected one of {', '.join(PARAMS)} or a dotted scenario key")
 
 
+def servo_note(scn: Scenario, names: Sequence[str]) -> str:
+    """One line when a margin over the slave's inertia (slave_mass, plant.slave.masses,
+    plant.slave.slice_inertia) runs on a servo-actuated plant, else ''."""
+    hidden = sorted(n for n in names if n == "slave_mass" or n.startswith(("plant.slave.masses",
+                                                                           "plant.slave.slice_inertia")))
+    if scn.plant.actuation != "servo" or scn.plant.kind == "analytic" or not hidden:
+        return ""
+    return (f"servo actuation: the position servos hide the slave's inertia; a margin over "
+            f"{', '.join(hidden)} says little about the controller's dynamics model")
+
+
 # --- points of a search ---------------------------------------------------------------------------------
 def _get(scn: Scenario, key: str) -> Any:
     from harness.studies.cases import _get as get_field
