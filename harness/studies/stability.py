@@ -56,6 +56,10 @@ class _AnalyticState:
     def __init__(self, plant) -> None:
         self.p = plant
         self.names = ["q1[0]", "q1[1]", "dq1[0]", "dq1[1]", *Q2_NAMES, *("d" + n + "/dt" for n in Q2_NAMES)]
+        self.positions_idx = np.r_[0:2, 4:10]
+
+    def anchor(self) -> None:
+        """Nothing besides the state to keep."""
 
     def get(self) -> np.ndarray:
         return self.p.state.copy()
@@ -90,16 +94,20 @@ class _MujocoState:
               for j in range(m.njnt)}
         qn = [jn.get(i, f"qpos[{i}]") for i in range(self.nq)]
         self.names = qn + [f"{n} (rate)" for n in qn] + [f"act[{i}]" for i in range(self.na)]
+        self.positions_idx = np.arange(self.nq)
         self.bodies = [b for b in range(m.nbody)
                        if (mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b) or "").startswith("octarm_s")]
 
+    def anchor(self) -> None:
+        """Keep MuJoCo's whole physics state (time, warm start, ...) of the point of linearization."""
+        self.mj.mj_getState(self.p.m, self.p.d, self.full, self.spec)
+
     def get(self) -> np.ndarray:
         d = self.p.d
-        self.mj.mj_getState(self.p.m, d, self.full, self.spec)
         return np.concatenate([d.qpos, d.qvel, d.act])
 
     def set(self, x: np.ndarray) -> None:
-        """Restore the physics state of the last `get`, then x."""
+        """Restore the physics state kept by `anchor`, then x."""
         d = self.p.d
         self.mj.mj_setState(self.p.m, d, self.full, self.spec)
         d.qpos[:] = x[:self.nq]
@@ -131,17 +139,22 @@ class _CosseratState:
         elem = [f"s{j // npe}_el{j % npe}" for j in range(self.ne)]
         pos = [f"{n}.X" for n in node] + [f"{n}.Z" for n in node] + [f"{e}.angle" for e in elem]
         self.names = ["q1[0]", "q1[1]", "dq1[0]", "dq1[1]", *pos, *(f"{n} (rate)" for n in pos)]
+        self.positions_idx = np.r_[0:2, 4:4 + len(pos)]
+
+    def anchor(self) -> None:
+        """Keep the directors, the clamped base node and the rod's clock of the point of linearization."""
+        b = self.p.slave._b
+        self._dirs = b.director_collection.copy()
+        self._a0 = np.arctan2(self._dirs[2, 0], self._dirs[0, 0])
+        self._base = b.position_collection[:, 0].copy()
+        self._time, self._steps = self.p.slave.time, self.p.slave._steps
 
     def get(self) -> np.ndarray:
         b = self.p.slave._b
         D = b.director_collection
-        self._dirs = D.copy()
-        self._a0 = np.arctan2(D[2, 0], D[0, 0])
-        self._base = b.position_collection[:, 0].copy()
-        self._time, self._steps = self.p.slave.time, self.p.slave._steps
         P, V = b.position_collection, b.velocity_collection
-        return np.concatenate([self.p._m, P[0, 1:], P[2, 1:], self._a0, V[0, 1:], V[2, 1:],
-                               b.omega_collection[1]])
+        ang = np.arctan2(D[2, 0], D[0, 0])
+        return np.concatenate([self.p._m, P[0, 1:], P[2, 1:], ang, V[0, 1:], V[2, 1:], b.omega_collection[1]])
 
     def set(self, x: np.ndarray) -> None:
         p, s = self.p, self.p.slave
@@ -319,6 +332,7 @@ class Stability:
     x0: np.ndarray
     n_plant: int
     h: float
+    positions_idx: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     shapes: dict = field(default_factory=dict)
 
     @property
@@ -346,14 +360,13 @@ class Stability:
         return "marginal" if r > 1.0 else "stable"
 
     def dominant(self, j: int = 0, n: int = 4) -> list[tuple[str, float]]:
-        """The n plant-state components of mode j with the largest share of its position part (the first
-        half of the plant state; the whole plant state if the mode has no position part), as (name, share
-        of the largest) pairs."""
+        """The n plant-state components of mode j with the largest share of its position part (the whole
+        plant state if the mode has no position part), as (name, share of the largest) pairs."""
         v = np.abs(self.eigenvectors[: self.n_plant, j])
-        npos = _n_positions(self.scenario, self.n_plant)
-        part = v[:npos] if v[:npos].max() > 1e-9 * v.max() else v
+        idx = self.positions_idx if v[self.positions_idx].max() > 1e-9 * v.max() else np.arange(len(v))
+        part = v[idx]
         order = np.argsort(-part)[:n]
-        return [(self.names[int(i)], float(part[i] / part[order[0]])) for i in order]
+        return [(self.names[int(idx[i])], float(part[i] / part[order[0]])) for i in order]
 
     def verdict(self) -> str:
         lam = self.eigenvalues[0]
@@ -371,10 +384,6 @@ class Stability:
                 for j, e in enumerate(self.eigenvalues)]
 
 
-def _n_positions(scn: Scenario, n_plant: int) -> int:
-    return n_plant // 2 if scn.plant.kind != "mujoco" else n_plant // 2  # qpos then qvel (act last, na = 0)
-
-
 def linearize(scn: Scenario, t: float, h: float | None = None,
               loop: ClosedLoopMap | None = None) -> Stability:
     """Run `scn` (paper law, sensing noise off) to time t (s, rounded to a control step) and return the
@@ -386,6 +395,7 @@ def linearize(scn: Scenario, t: float, h: float | None = None,
     lp.run_to(n)
     if h is None:
         h = 1e-6 if scn.plant.kind == "analytic" else 1e-7
+    lp.ps.anchor()
     x0 = lp.x()
     k = lp.k
     N = len(x0)
@@ -405,6 +415,7 @@ def linearize(scn: Scenario, t: float, h: float | None = None,
     order = np.lexsort((-ev.imag, -np.round(np.abs(ev), 12)))
     res = Stability(scenario=scn, t=k * scn.control_dt, T=scn.control_dt, A=A, eigenvalues=ev[order],
                     eigenvectors=V[:, order], names=lp.names, x0=x0, n_plant=lp.n_plant, h=h)
+    res.positions_idx = lp.ps.positions_idx
     res.shapes = {"positions": lp.ps.positions, "slave": scn.plant_slave}
     return res
 
