@@ -369,6 +369,7 @@ def _side(search: Search, outcomes: dict) -> dict:
             "bound_metric": metric, "metric_at_margin": at_pass.metrics.get(metric) if at_pass else None,
             "metric_at_fail": at_fail.metrics.get(metric) if at_fail else None,
             "violations_at_fail": at_fail.violations if at_fail else [],
+            "status_at_fail": at_fail.status if at_fail else None,
             "range_end": search.first_fail is None, "non_monotone": list(search.failed_probes),
             "probes": list(search.probe_levels)}
 

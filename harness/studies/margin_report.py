@@ -45,6 +45,15 @@ def _fmt(v) -> str:
     return str(v)
 
 
+def _edge_metric(d: dict) -> str:
+    """'metric: at the margin -> at the first failing point' (the run's status when not measured)."""
+    if d.get("fail") is None:
+        return "-"
+    at_fail = d.get("metric_at_fail")
+    fail = _fmt(at_fail) if at_fail is not None else f"not measured ({d.get('status_at_fail')})"
+    return f"{d.get('bound_metric')}: {_fmt(d.get('metric_at_margin'))} -> {fail}"
+
+
 def margins_markdown(rows: Sequence[Margin], tol_text: str = "") -> str:
     lines = ["| parameter | nominal | lower margin | upper margin | first bound to fail (lower / upper) | "
              "metric at the edge (lower / upper: margin -> fail) |", "|---|---:|---:|---:|---|---|"]
@@ -62,10 +71,7 @@ def margins_markdown(rows: Sequence[Margin], tol_text: str = "") -> str:
                 m += f" (non-monotone: fails at {', '.join(_fmt(x) for x in d['non_monotone'])})"
             cells.append(m)
         fb = " / ".join(r.sides.get(s, {}).get("first_bound") or "-" for s in ("lower", "upper"))
-        me = " / ".join(
-            f"{r.sides[s].get('bound_metric')}: {_fmt(r.sides[s].get('metric_at_margin'))} -> "
-            f"{_fmt(r.sides[s].get('metric_at_fail'))}" if r.sides.get(s, {}).get("fail") is not None else "-"
-            for s in ("lower", "upper"))
+        me = " / ".join(_edge_metric(r.sides.get(s, {})) for s in ("lower", "upper"))
         lines.append(f"| {r.param} | {_fmt(r.nominal)} | {cells[0]} | {cells[1]} | {fb} | {me} |")
     if tol_text:
         lines += ["", tol_text]
