@@ -340,3 +340,94 @@ def run_sweep(study, out=None, **kwargs):
     from harness.studies.sweep import run_sweep as _run_sweep
 
     return _run_sweep(study, out, **kwargs)
+
+
+def _scenario_of(scenario, overrides: Iterable[str]) -> Scenario:
+    if isinstance(scenario, Scenario):
+        if overrides:
+            raise TypeError("overrides apply to a scenario file or table, not to a Scenario object")
+        from harness.config.controller import resolve_controller
+
+        return resolve_controller(scenario)
+    return load_scenario(scenario, overrides)
+
+
+def stability(scenario: Scenario | str | os.PathLike | Mapping | None = None,
+              overrides: Iterable[str] = (), *, t: float = 1.0, h: float | None = None,
+              out: str | os.PathLike | None = None):
+    """Linear stability of the sampled-data closed loop at time t (s) of a scenario (paper law, sensing
+    without noise): the one-control-period Jacobian by central finite differences, its eigenvalues,
+    spectral radius, least stable mode and verdict (`harness.studies.stability.Stability`; `.verdict()`).
+    out: folder for spectrum.csv, stability.json and stability.png.  Raises `ConfigError` for bad input
+    and `harness.studies.stability.LinearizationError` when the run stops before t."""
+    import math
+
+    from harness.studies.stability import linearize
+    from harness.studies.stability_report import write_stability
+
+    if not (isinstance(t, (int, float)) and math.isfinite(t) and 0.0 <= t <= 3600.0):
+        raise ConfigError.field("t", t, "expected a time in s in [0, 3600]")
+    if h is not None and not (isinstance(h, (int, float)) and 0.0 < h < 1e-2):
+        raise ConfigError.field("h", h, "expected a finite-difference step in (0, 0.01)")
+    res = linearize(_scenario_of(scenario, overrides), float(t), h)
+    if out is not None:
+        from harness.config.textio import prepare_out_dir
+
+        write_stability(res, prepare_out_dir(out))
+    return res
+
+
+def margins(scenario: Scenario | str | os.PathLike | Mapping | None = None,
+            overrides: Iterable[str] = (), *, bounds, params: Iterable[str] | None = None,
+            rtol: float = 0.05, probes: int = 2,
+            out: str | os.PathLike | None = None, workers: int | None = None, scheduler: str | None = None,
+            executor: str = "processes", pair: tuple[str, str] | None = None, n_rays: int = 8,
+            say: Callable[[str], None] = lambda s: None):
+    """Robustness margins of a scenario against a bounds file (path, table or `Bounds`): for each mismatch
+    parameter (default `harness.studies.margin.DEFAULT_PARAMS`), the largest deviation in each direction
+    that still passes, by bracketing and bisection to `rtol` (scale factors; values: 1/100 of the range,
+    delays and integers exact), with `probes` extra points per side to detect a non-monotone edge
+    (`harness.studies.margin`).  Runs go through the sweep executor; with `out`, every run is journaled in
+    out/results.jsonl (a repeated call resumes) and margins.md / margins.json / margins.png are written.
+    pair: also trace the 2-D edge of two scale parameters along n_rays rays (edge.json, edge.png).
+    Returns (rows, edge rows or None).  Raises `ConfigError` for bad input or a nominal scenario that
+    fails the bounds."""
+    from harness.config.bounds import Bounds, load_bounds
+    from harness.studies import margin as mg
+    from harness.studies import margin_report as mr
+
+    scn = _scenario_of(scenario, overrides)
+    b = bounds if isinstance(bounds, Bounds) else load_bounds(bounds)
+    if not (isinstance(probes, int) and 0 <= probes <= 10):
+        raise ConfigError.field("probes", probes, "expected an integer in [0, 10]")
+    out_dir = None
+    if out is not None:
+        from harness.config.textio import prepare_out_dir
+
+        out_dir = prepare_out_dir(out)
+    if isinstance(scenario, Scenario):  # the cases: this scenario + one override per parameter
+        from harness.config.load import scenario_to_dict
+
+        source, base = scenario_to_dict(scenario), []
+    else:
+        source, base = scenario, list(overrides)
+    kw = dict(source=source, base_set=base, rtol=rtol, probes=probes, out=out_dir, workers=workers,
+              scheduler=scheduler, executor=executor, say=say)
+    names = list(params) if params is not None else list(mg.DEFAULT_PARAMS)
+    rows = mg.margins(scn, b, names, **kw) if names else []
+    tol = (f"tolerance: scale factors to {rtol:g} relative (fail / pass - 1), values to 1/100 of the "
+           f"range, delay to one control period, integers exactly; {probes} probe(s) per side")
+    if note := mg.servo_note(scn, names):
+        tol += f"\n\nwarning: {note}"
+    edge = None
+    if pair is not None:
+        edge = mg.edge_trace(scn, b, tuple(pair), n_rays, **kw)
+    if out_dir is not None:
+        if rows:
+            mr.write_margins(rows, out_dir, tol)
+        if edge is not None:
+            from harness.config.textio import jsonable
+
+            (out_dir / "edge.json").write_text(json.dumps(jsonable(edge), indent=2) + "\n", encoding="utf-8")
+            mr.plot_edge(edge, tuple(pair), out_dir / "edge.png")
+    return rows, edge

@@ -43,6 +43,10 @@ OPTIONS = {
     "cache": ["--prune", "--clear"],
     "findings": ["--table", "--figures", "--no-write", "--list", "NAME"],
     "stability-map": ["--duration", "--out"],
+    "stability": ["--at", "--fd-step", "--modes", "--plant", "--actuation", "--set", "--out",
+                  "SCENARIO.toml"],
+    "margin": ["--bounds", "--param", "--rtol", "--probes", "--pair", "--workers", "--executor",
+               "--scheduler", "--out", "--no-progress", "--set", "SCENARIO.toml"],
 }
 
 

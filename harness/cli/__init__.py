@@ -23,6 +23,7 @@ import argparse
 import contextlib
 import importlib
 import json
+import math
 import os
 import sys
 import threading
@@ -438,6 +439,94 @@ def cmd_stability_map(args: argparse.Namespace) -> int:
     return int(smap.main(out, args.duration))
 
 
+def cmd_stability(args: argparse.Namespace) -> int:
+    from harness.api import stability
+
+    scn = load_from_args(args)
+    out = prepare_out_dir(args.out if args.out is not None else Path("runs") / "stability" / scn.name)
+    stab = _import("harness.studies.stability")
+    if len(args.at) > 1:
+        return _stability_along(scn, args, out, stab)
+    try:
+        res = stability(scn, t=args.at[0], h=args.fd_step, out=out)
+    except stab.LinearizationError as exc:
+        _err(exc)
+        return EXIT_FAIL
+    print(res.verdict())
+    print(f"{len(res.names)} states; least stable modes (|lambda|, angle, Hz, growth 1/s, dominant):")
+    for j in range(min(args.modes, len(res.eigenvalues))):
+        lam = res.eigenvalues[j]
+        dom = ", ".join(f"{n} {w:.2f}" for n, w in res.dominant(j, 4))
+        print(f"  {abs(lam):.6f}  {math.atan2(lam.imag, lam.real):+.4f}  {res.frequency(j):8.2f}  "
+              f"{res.growth_rate(j):+9.3g}  {dom}")
+    j = res.most_negative()
+    lam = res.eigenvalues[j]
+    print(f"most negative eigenvalue: {lam.real:+.6f}{lam.imag:+.6f}j ({res.frequency(j):.2f} Hz), on "
+          + ", ".join(n for n, _ in res.dominant(j, 4)))
+    print(f"wrote {out / 'spectrum.csv'}, {out / 'stability.json'}, {out / 'stability.png'}")
+    return EXIT_FAIL if res.verdict_class == "unstable" else EXIT_OK
+
+
+def _stability_along(scn, args, out: Path, stab) -> int:
+    """`teleop stability --at T1,T2,...`: one run, linearized at each time; the least stable one's files."""
+    loop = stab.ClosedLoopMap(scn)
+    worst, stopped = None, ""
+    print("t (s)   radius     class     Hz       dominant")
+    for t in args.at:
+        try:
+            res = stab.linearize(scn, t, args.fd_step, loop=loop)
+        except stab.LinearizationError as exc:
+            stopped = str(exc)
+            break
+        dom = ", ".join(n for n, _ in res.dominant(0, 3))
+        print(f"{res.t:6.3f}  {res.radius:.6f}  {res.verdict_class:8s}  {res.frequency(0):7.2f}  {dom}")
+        if worst is None or res.radius > worst.radius:
+            worst = res
+    if worst is None:
+        _err(stopped)
+        return EXIT_FAIL
+    _import("harness.studies.stability_report").write_stability(worst, out)
+    print(f"least stable: {worst.verdict()}")
+    if stopped:
+        print(f"stopped: {stopped}")
+    print(f"wrote {out / 'spectrum.csv'}, {out / 'stability.json'}, {out / 'stability.png'} "
+          f"(t = {worst.t:g} s)")
+    return EXIT_FAIL if worst.verdict_class == "unstable" or stopped else EXIT_OK
+
+
+def cmd_margin(args: argparse.Namespace) -> int:
+    from harness.api import margins
+    from harness.config.bounds import load_bounds
+
+    scn = load_from_args(args)
+    bounds = load_bounds(args.bounds)
+    if not 0 < args.rtol < 1:
+        raise ConfigError(f"--rtol = {args.rtol}: expected a relative tolerance in (0, 1)", path="--rtol")
+    if args.probes > 10:
+        raise ConfigError(f"--probes = {args.probes}: expected an integer in [0, 10]", path="--probes")
+    pair = None
+    if args.pair is not None:
+        pair = tuple(x.strip() for x in args.pair.split(","))
+        if len(pair) != 2 or not all(pair):
+            raise ConfigError(f"--pair = {args.pair!r}: expected two parameter names, P1,P2", path="--pair")
+    out = prepare_out_dir(args.out if args.out is not None else Path("runs") / "margin" / scn.name)
+    say = (lambda s: None) if args.no_progress else (lambda s: print(s, file=sys.stderr))  # noqa: E731
+    note = _import("harness.studies.margin").servo_note(scn, args.params or ["slave_mass"])
+    if note:
+        _warn(note)
+    rows, edge = margins(scn, bounds=bounds, params=args.params, rtol=args.rtol, probes=args.probes, out=out,
+                         workers=args.workers, scheduler=args.scheduler, executor=args.executor, pair=pair,
+                         say=say)
+    if rows:
+        print(_import("harness.studies.margin_report").margins_markdown(rows))
+    if edge is not None:
+        for r in edge:
+            print(f"edge {r['angle_deg']:5.0f} deg: {pair[0]} x{r['p1']:.4g}, {pair[1]} x{r['p2']:.4g}"
+                  f" ({r['first_bound'] or 'range end'})")
+    print(f"wrote {out}")
+    return EXIT_OK
+
+
 # ---------------------------------------------------------------------------------------------
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
@@ -470,7 +559,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 COMMANDS = {"run": cmd_run, "check": cmd_check, "models": cmd_models, "sweep": cmd_sweep,
             "controllers": cmd_controllers, "fidelity": cmd_fidelity, "cache": cmd_cache,
-            "findings": cmd_findings, "stability-map": cmd_stability_map}
+            "findings": cmd_findings, "stability-map": cmd_stability_map, "stability": cmd_stability,
+            "margin": cmd_margin}
 
 
 if __name__ == "__main__":  # pragma: no cover

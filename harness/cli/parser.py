@@ -70,6 +70,25 @@ def _port(text: str) -> int:
     return v
 
 
+def _times(text: str) -> tuple[float, ...]:
+    """argparse type of `stability --at`: 'T', 'T1,T2,...' or 'START:STOP:STEP' (s), increasing."""
+    try:
+        if ":" in text:
+            a, b, c = (float(x) for x in text.split(":"))
+            if not c > 0:
+                raise ValueError
+            n = int(math.floor((b - a) / c + 1e-9))
+            ts = tuple(round(a + i * c, 12) for i in range(n + 1))
+        else:
+            ts = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected T, T1,T2,... or START:STOP:STEP in s, got {text!r}") from None
+    if not ts or any(not (0.0 <= t <= 3600.0) for t in ts) or list(ts) != sorted(set(ts)):
+        raise argparse.ArgumentTypeError(f"expected increasing times in [0, 3600] s, got {text!r}")
+    return ts
+
+
 def _path(text: str) -> Path:
     """A path argument; the empty string is rejected (Path('') would silently mean '.')."""
     if not str(text).strip():
@@ -313,6 +332,77 @@ def build_parser() -> argparse.ArgumentParser:
                       help="simulated seconds per cell, > 0. Default: 3.")
     smap.add_argument("--out", metavar="DIR", type=_path, default=Path("runs/stability_map"),
                       help="output folder (created; must be writable). Default: runs/stability_map.")
+
+    stab = sub.add_parser(
+        "stability", formatter_class=_Formatter, help="linear stability of the closed loop at a time point",
+        description="Run the scenario (paper law, sensing without noise) to time --at and linearize the "
+                    "sampled-data closed loop over one control period (plant state, servo reference, "
+                    "actuation-delay ring; zero-order hold) by central finite differences of the one-period "
+                    "map (harness.studies.stability). Prints the verdict (stable / marginal: slower than "
+                    "e-fold per second / unstable), the spectral radius and the least stable modes with "
+                    "their frequency and dominant joints or sections; writes spectrum.csv, stability.json "
+                    "and stability.png (spectrum and mode shapes on the arm).",
+        epilog="exit status: 0 stable or marginal; 1 unstable, or the run stopped before --at; "
+               "2 invalid input.")
+    _add_scenario_options(stab)
+    stab.add_argument("--at", metavar="T[,T...]|START:STOP:STEP", type=_times, default=(1.0,),
+                      help="time(s) of the point(s) of linearization in s, each in [0, 3600]: one time, a "
+                           "comma-separated list or START:STOP:STEP (both ends included), all on one run; "
+                           "with several, one line per time and the outputs of the least stable. Default: 1.")
+    stab.add_argument("--fd-step", metavar="H", type=_positive_float, default=None,
+                      help="relative central-difference step, in (0, 0.01). Default: 1e-6 analytic, "
+                           "1e-7 MuJoCo and rod.")
+    stab.add_argument("--modes", metavar="N", type=_positive_int, default=6,
+                      help="least stable modes printed, integer >= 1. Default: 6.")
+    stab.add_argument("--out", metavar="DIR", type=_path, default=None,
+                      help="output folder (created; must be writable). "
+                           "Default: runs/stability/<scenario name>.")
+
+    mar = sub.add_parser(
+        "margin", formatter_class=_Formatter, help="robustness margins of a scenario against a bounds file",
+        description="For each mismatch parameter, the largest deviation from the scenario in each "
+                    "direction for which it still passes the bounds file: the pass/fail edge bracketed (x2 "
+                    "steps) and bisected to --rtol, plus --probes points inside each margin to detect a "
+                    "non-monotone edge (harness.studies.margin). Runs go through the sweep executor; each "
+                    "finished run is appended to OUT/results.jsonl and a re-run resumes. Writes margins.md "
+                    "(table: parameter, lower and upper margin, first bound to fail, metric at the edge), "
+                    "margins.json, margins.png (bars around the nominal point) and, with --pair, edge.json / "
+                    "edge.png. A margin on a servo plant over a dynamics parameter (masses) measures little: "
+                    "the servos hide the slave's inertia.",
+        epilog="parameters: slave_mass, bending_stiffness, extension_stiffness, master_mass (scale factors "
+               "in [0.05, 20]), material_damping (scale of plant.bending_viscosity and extension_viscosity, "
+               "[0.01, 100]; chain and rod), control_rate (scale, [0.1, 10]), segments (1-64, chain), delay "
+               "(s, [0, 0.1], multiples of control_dt; chain and rod), noise_snr (dB, [0, 200]), or any "
+               "dotted scenario key as a scale factor. exit status: 0 margins found; 1 the executor "
+               "failed; 2 invalid input or the nominal scenario fails the bounds; 130 interrupted (re-run "
+               "to resume).")
+    _add_scenario_options(mar)
+    mar.add_argument("--bounds", metavar="BOUNDS.toml", type=_path, required=True,
+                     help="bounds file (required; layout: bounds/paper_mujoco.toml).")
+    mar.add_argument("--param", dest="params", action="append", default=None, metavar="NAME",
+                     help="parameter to search (repeatable). Default: slave_mass, bending_stiffness, "
+                          "extension_stiffness, material_damping, segments, control_rate, delay, noise_snr, "
+                          "master_mass (those that do not apply to the plant are listed as n/a).")
+    mar.add_argument("--rtol", metavar="R", type=_positive_float, default=0.05,
+                     help="relative tolerance of a scale-factor edge (fail / pass - 1), in (0, 1). "
+                          "Default: 0.05.")
+    mar.add_argument("--probes", metavar="N", type=_nonnegative_int, default=2,
+                     help="points per side run inside the margin to detect a non-monotone edge, integer in "
+                          "[0, 10]. Default: 2.")
+    mar.add_argument("--pair", metavar="P1,P2", default=None,
+                     help="also trace the pass/fail edge of two scale parameters in their plane (8 rays). "
+                          "Default: none.")
+    mar.add_argument("--workers", metavar="N", type=_positive_int, default=None,
+                     help=f"runs at once, integer >= 1. Default: all cores ({os.cpu_count() or 1} here).")
+    mar.add_argument("--executor", choices=("processes", "threads"), default="processes",
+                     help="what runs the cases (as 'teleop sweep'). Default: processes.")
+    mar.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                     help="address of a running Dask scheduler. Default: none (local).")
+    mar.add_argument("--out", metavar="DIR", type=_path, default=None,
+                     help="output folder (created; must be writable; an existing one is resumed). "
+                          "Default: runs/margin/<scenario name>.")
+    mar.add_argument("--no-progress", action="store_true",
+                     help="do not print each round (default: printed on stderr).")
 
     fid = sub.add_parser(
         "fidelity", formatter_class=_Formatter, help="plant-fidelity study over MuJoCo segment counts",

@@ -1,0 +1,196 @@
+"""Outputs of the linear stability analysis (`harness.studies.stability`): mode shapes drawn on the arm,
+the spectrum files, and the stability map predicted from the spectral radius next to the simulated one
+(`harness.studies.stability_map`)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from harness.config.scenario import Scenario
+from harness.studies.stability import ClosedLoopMap, LinearizationError, Stability, linearize
+
+
+def mode_shape(res: Stability, j: int = 0,
+               scale: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+    """(rest (m, 2), displaced (m, 2), scale): the slave's points [X, Z] (m) at the point of linearization
+    and displaced along the real part of mode j (phase chosen to maximise it), scaled so that the largest
+    point displacement is 5 % of the arm's length."""
+    v = res.eigenvectors[: res.n_plant, j]
+    phase = np.exp(-0.5j * np.angle(np.sum(v * v))) if np.any(v) else 1.0
+    vr = np.real(v * phase)
+    x0 = res.x0[: res.n_plant]
+    pos = res.shapes["positions"]
+    slave = res.shapes["slave"]
+    p0 = pos(x0, slave)
+    if scale is None:
+        eps = 1e-6 / max(np.abs(vr).max(), 1e-300)
+        dp = np.abs(pos(x0 + eps * vr, slave) - p0).max() / eps
+        scale = 0.05 * float(np.sum(slave.rest_lengths)) / max(dp, 1e-300)
+    return p0, pos(x0 + scale * vr, slave), float(scale)
+
+
+def plot_stability(res: Stability, path, n_modes: int = 2) -> Path:
+    """Figure: the spectrum against the unit circle (left) and the shapes of the n_modes least stable modes
+    on the slave (right)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 1 + n_modes, figsize=(4.2 * (1 + n_modes), 4.0))
+    ax = axes[0]
+    th = np.linspace(0, 2 * np.pi, 400)
+    ax.plot(np.cos(th), np.sin(th), "k-", lw=0.6)
+    ev = res.eigenvalues
+    ax.plot(ev.real, ev.imag, "x", ms=5)
+    ax.plot(ev[0].real, ev[0].imag, "ro", mfc="none", ms=9)
+    ax.set_aspect("equal")
+    ax.set_xlabel("Re lambda")
+    ax.set_ylabel("Im lambda")
+    ax.set_title(f"one-period spectrum, rho = {res.radius:.5f}", fontsize=9)
+    for j, ax in enumerate(axes[1:]):
+        j = min(j if j == 0 else _next_distinct(res, j), len(ev) - 1)
+        p0, p1, sc = mode_shape(res, j)
+        ax.plot(p0[:, 0], p0[:, 1], "k.-", lw=1, ms=3, label="at t")
+        ax.plot(p1[:, 0], p1[:, 1], "r.-", lw=1, ms=3, label=f"mode x {sc:.3g}")
+        half = 0.6 * float(np.ptp(p0[:, 1]) or 1.0)
+        ax.set_xlim(float(p0[:, 0].mean()) - half, float(p0[:, 0].mean()) + half)
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_xlabel("X (m)")
+        ax.set_ylabel("Z (m)")
+        lam = ev[j]
+        ax.set_title(f"|lambda| = {abs(lam):.5f}, {res.frequency(j):.1f} Hz\n"
+                     + ", ".join(n.removeprefix("octarm_") for n, _ in res.dominant(j, 3)), fontsize=7)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _next_distinct(res: Stability, j: int) -> int:
+    """Index of the j-th mode counting a complex pair once."""
+    idx, seen = 0, 0
+    ev = res.eigenvalues
+    while idx < len(ev) - 1 and seen < j:
+        idx += 2 if abs(ev[idx].imag) > 1e-12 and abs(ev[idx + 1] - np.conj(ev[idx])) < 1e-9 else 1
+        seen += 1
+    return idx
+
+
+def write_stability(res: Stability, out) -> list[Path]:
+    """spectrum.csv (every eigenvalue: real, imag, modulus, angle, frequency, growth, dominant states),
+    stability.json (verdict, radius, least stable mode, t, T, h) and stability.png in folder `out`."""
+    import csv
+    import json
+
+    from harness.config.textio import jsonable
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = res.spectrum_rows()
+    p_csv = out / "spectrum.csv"
+    tmp = p_csv.with_suffix(".csv.tmp")
+    with tmp.open("w", newline="", encoding="utf-8") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    tmp.replace(p_csv)
+    p_json = out / "stability.json"
+    summary = {"verdict": res.verdict(), "class": res.verdict_class, "spectral_radius": res.radius,
+               "t": res.t, "control_dt": res.T, "fd_step": res.h, "n_states": len(res.names),
+               "least_stable": rows[0], "dominant": res.dominant(0, 6),
+               "most_negative": rows[res.most_negative()],
+               "plant": res.scenario.plant.kind, "actuation": res.scenario.plant.actuation}
+    tmp = p_json.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(jsonable(summary), indent=2) + "\n", encoding="utf-8")
+    tmp.replace(p_json)
+    return [p_csv, p_json, plot_stability(res, out / "stability.png")]
+
+
+# --- predicted stability map -------------------------------------------------------------------------
+def radius_along(scn: Scenario, times) -> dict:
+    """The least stable linearization along one run of `scn`: `linearize` at each of `times` (s, increasing)
+    on the same run.  Returns {radius (max over the points reached), t (where), class, frequency_hz,
+    dominant, reached (the last time linearized), stopped (message if the run stopped before the next
+    point, else ""), flip (the mode is real negative: a sign flip every period)}; radius nan if not even
+    the first point was reached."""
+    loop = ClosedLoopMap(scn)
+    best = {"radius": float("nan"), "t": float("nan"), "class": "not reached", "frequency_hz": float("nan"),
+            "dominant": "", "reached": float("nan"), "stopped": "", "flip": False}
+    for t in times:
+        try:
+            res = linearize(scn, float(t), loop=loop)
+        except LinearizationError as exc:
+            best["stopped"] = str(exc)
+            break
+        best["reached"] = res.t
+        if not res.radius <= best["radius"]:  # also replaces nan
+            best.update(radius=res.radius, t=res.t, frequency_hz=res.frequency(0),
+                        dominant=";".join(n for n, _ in res.dominant(0, 3)),
+                        flip=bool(abs(np.angle(res.eigenvalues[0])) > 0.99 * math.pi))
+            best["class"] = res.verdict_class
+    return best
+
+
+def predicted_map(kns, etas, overrides=(), times=(0.0,), say=lambda s: None) -> list[dict]:
+    """Spectral radius over the k_n x eta_b grid of `harness.studies.stability_map` (same overrides, same
+    keys), sensing without noise, the largest over the linearization points `times` (s) of each cell's run
+    (`radius_along`): rows {kn, eta_b, radius, t, class, frequency_hz, dominant, reached, stopped}."""
+    from harness.config.load import load_scenario
+
+    rows = []
+    for kn in kns:
+        for eta in etas:
+            eta_s = f"[{eta},{eta},{eta}]"
+            sets = [*overrides, "snr_db=none", f"gains.kn={kn}", f"plant.bending_viscosity={eta_s}"]
+            row = {"kn": float(kn), "eta_b": float(eta), **radius_along(load_scenario(None, sets), times)}
+            rows.append(row)
+            say(f"kn = {kn:g}, eta_b = {eta:g}: rho = {row['radius']:.6f} at t = {row['t']:g} s "
+                f"({row['class']}, {row['frequency_hz']:.1f} Hz)")
+    return rows
+
+
+def predicted_markdown(rows: list[dict], sim: list[dict] | None = None) -> str:
+    """Table of the predicted map (spectral radius, class) next to the simulated one
+    (`harness.studies.stability_map.stability_map` rows) when given."""
+    kns = sorted({r["kn"] for r in rows})
+    etas = sorted({r["eta_b"] for r in rows})
+    cell = {(r["kn"], r["eta_b"]): r for r in rows}
+    simc = {(r["kn"], r["eta_b"]): r for r in (sim or [])}
+    lines = ["| k_n \\ eta_b (N m^2 s) | " + " | ".join(f"{e:g}" for e in etas) + " |",
+             "|---:|" + "---:|" * len(etas)]
+    for kn in kns:
+        out = []
+        for e in etas:
+            r = cell[kn, e]
+            txt = f"rho {r['radius']:.4f} ({r['class']}"
+            txt += ", flip)" if r["flip"] else ")"
+            if (kn, e) in simc:
+                s = simc[kn, e]
+                txt += " / sim: " + ("ok" if s["status"] == "ok" else f"diverged {s['t_end']:.3f} s")
+            out.append(txt)
+        lines.append(f"| {kn:g} | " + " | ".join(out) + " |")
+    return "\n".join(lines)
+
+
+def agreement(pred: list[dict], sim: list[dict]) -> list[dict]:
+    """Per cell: predicted diverging (class "unstable") against simulated diverging (status != "ok");
+    rows {kn, eta_b, predicted, simulated, agree}."""
+    simc = {(r["kn"], r["eta_b"]): r for r in sim}
+    out = []
+    for r in pred:
+        s = simc[r["kn"], r["eta_b"]]
+        p_div, s_div = r["class"] == "unstable", s["status"] != "ok"
+        out.append({"kn": r["kn"], "eta_b": r["eta_b"], "predicted": r["class"], "radius": r["radius"],
+                    "simulated": s["status"], "t_end": s["t_end"], "agree": p_div == s_div})
+    return out
+
+
+__all__ = ["agreement", "mode_shape", "plot_stability", "predicted_map", "predicted_markdown", "radius_along",
+           "write_stability"]
