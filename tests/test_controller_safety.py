@@ -230,7 +230,8 @@ def test_a_blocking_controller_is_stopped_by_the_step_time_limit(ctl):
                                        ('"x"', False), ("true", False)])
 def test_step_timeout_is_validated_and_written_to_config(tmp_path, value, ok):
     if ok is False:
-        with pytest.raises(ConfigError, match=r"controller.step_timeout = .*: must be a number in \(0, 86400\]"):
+        with pytest.raises(ConfigError,
+                           match=r"controller.step_timeout = .*: must be a number in \(0, 86400\]"):
             load_scenario(None, [f"controller.step_timeout={value}"])
         return
     from harness.config.load import dump_scenario

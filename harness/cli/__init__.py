@@ -23,7 +23,6 @@ import argparse
 import contextlib
 import importlib
 import json
-import math
 import os
 import sys
 import threading
@@ -444,54 +443,19 @@ def cmd_stability(args: argparse.Namespace) -> int:
 
     scn = load_from_args(args)
     out = prepare_out_dir(args.out if args.out is not None else Path("runs") / "stability" / scn.name)
-    stab = _import("harness.studies.stability")
-    if len(args.at) > 1:
-        return _stability_along(scn, args, out, stab)
+    stab, report = _import("harness.studies.stability"), _import("harness.studies.stability_report")
     try:
-        res = stability(scn, t=args.at[0], h=args.fd_step, out=out)
+        if len(args.at) > 1:  # one run, linearized at each time; the least stable one's files
+            res = report.least_stable_along(scn, args.at, args.fd_step, out)
+        else:
+            res = stability(scn, t=args.at[0], h=args.fd_step, out=out)
+            report.print_modes(res, args.modes)
     except stab.LinearizationError as exc:
         _err(exc)
         return EXIT_FAIL
-    print(res.verdict())
-    print(f"{len(res.names)} states; least stable modes (|lambda|, angle, Hz, growth 1/s, dominant):")
-    for j in range(min(args.modes, len(res.eigenvalues))):
-        lam = res.eigenvalues[j]
-        dom = ", ".join(f"{n} {w:.2f}" for n, w in res.dominant(j, 4))
-        print(f"  {abs(lam):.6f}  {math.atan2(lam.imag, lam.real):+.4f}  {res.frequency(j):8.2f}  "
-              f"{res.growth_rate(j):+9.3g}  {dom}")
-    j = res.most_negative()
-    lam = res.eigenvalues[j]
-    print(f"most negative eigenvalue: {lam.real:+.6f}{lam.imag:+.6f}j ({res.frequency(j):.2f} Hz), on "
-          + ", ".join(n for n, _ in res.dominant(j, 4)))
-    print(f"wrote {out / 'spectrum.csv'}, {out / 'stability.json'}, {out / 'stability.png'}")
-    return EXIT_FAIL if res.verdict_class == "unstable" else EXIT_OK
-
-
-def _stability_along(scn, args, out: Path, stab) -> int:
-    """`teleop stability --at T1,T2,...`: one run, linearized at each time; the least stable one's files."""
-    loop = stab.ClosedLoopMap(scn)
-    worst, stopped = None, ""
-    print("t (s)   radius     class     Hz       dominant")
-    for t in args.at:
-        try:
-            res = stab.linearize(scn, t, args.fd_step, loop=loop)
-        except stab.LinearizationError as exc:
-            stopped = str(exc)
-            break
-        dom = ", ".join(n for n, _ in res.dominant(0, 3))
-        print(f"{res.t:6.3f}  {res.radius:.6f}  {res.verdict_class:8s}  {res.frequency(0):7.2f}  {dom}")
-        if worst is None or res.radius > worst.radius:
-            worst = res
-    if worst is None:
-        _err(stopped)
-        return EXIT_FAIL
-    _import("harness.studies.stability_report").write_stability(worst, out)
-    print(f"least stable: {worst.verdict()}")
-    if stopped:
-        print(f"stopped: {stopped}")
     print(f"wrote {out / 'spectrum.csv'}, {out / 'stability.json'}, {out / 'stability.png'} "
-          f"(t = {worst.t:g} s)")
-    return EXIT_FAIL if worst.verdict_class == "unstable" or stopped else EXIT_OK
+          f"(t = {res.t:g} s)")
+    return EXIT_FAIL if res.verdict_class == "unstable" or res.stopped else EXIT_OK
 
 
 def cmd_margin(args: argparse.Namespace) -> int:

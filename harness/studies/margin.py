@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from harness.config.bounds import NUMERIC_BOUNDS, Bounds, check_bounds
+from harness.config.bounds import FLAGS, Bounds, check_bounds, limit_of
 from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
 from harness.config.textio import toml_literal
@@ -273,8 +273,8 @@ class Outcome:
 
 
 def _metric_names(bounds: Bounds) -> list[str]:
-    names = [NUMERIC_BOUNDS[f.name][0] for f in dataclasses.fields(bounds)
-             if f.name in NUMERIC_BOUNDS and getattr(bounds, f.name) is not None]
+    names = [limit_of(f.name)[0] for f in dataclasses.fields(bounds)
+             if f.name.endswith(("_max", "_min")) and getattr(bounds, f.name) is not None]
     return sorted({*names, "mujoco_warnings", "status"})
 
 
@@ -363,8 +363,7 @@ def _side(search: Search, outcomes: dict) -> dict:
     at_pass = outcomes.get((p.name, search.last_pass))
     at_fail = outcomes.get((p.name, search.first_fail)) if search.first_fail is not None else None
     first = at_fail.first if at_fail else ""
-    metric = {"status_ok": "status", "no_mujoco_warnings": "mujoco_warnings"}.get(
-        first, NUMERIC_BOUNDS.get(first, (first,))[0])
+    metric = FLAGS.get(first) or (limit_of(first)[0] if first.endswith(("_max", "_min")) else first)
     return {"margin": search.last_pass, "fail": search.first_fail, "first_bound": first,
             "bound_metric": metric, "metric_at_margin": at_pass.metrics.get(metric) if at_pass else None,
             "metric_at_fail": at_fail.metrics.get(metric) if at_fail else None,

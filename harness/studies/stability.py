@@ -334,6 +334,7 @@ class Stability:
     h: float
     positions_idx: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     shapes: dict = field(default_factory=dict)
+    stopped: str = ""  # linearized along a run (`least_stable_along`): why the run ended early, if it did
 
     @property
     def radius(self) -> float:

@@ -194,3 +194,49 @@ def agreement(pred: list[dict], sim: list[dict]) -> list[dict]:
 
 __all__ = ["agreement", "mode_shape", "plot_stability", "predicted_map", "predicted_markdown", "radius_along",
            "write_stability"]
+
+
+def print_modes(res, modes: int) -> None:
+    """`teleop stability --at T`: the verdict, the `modes` least stable modes and the most negative one."""
+    import math
+
+    print(res.verdict())
+    print(f"{len(res.names)} states; least stable modes (|lambda|, angle, Hz, growth 1/s, dominant):")
+    for j in range(min(modes, len(res.eigenvalues))):
+        lam = res.eigenvalues[j]
+        dom = ", ".join(f"{n} {w:.2f}" for n, w in res.dominant(j, 4))
+        print(f"  {abs(lam):.6f}  {math.atan2(lam.imag, lam.real):+.4f}  {res.frequency(j):8.2f}  "
+              f"{res.growth_rate(j):+9.3g}  {dom}")
+    j = res.most_negative()
+    lam = res.eigenvalues[j]
+    print(f"most negative eigenvalue: {lam.real:+.6f}{lam.imag:+.6f}j ({res.frequency(j):.2f} Hz), on "
+          + ", ".join(n for n, _ in res.dominant(j, 4)))
+
+
+def least_stable_along(scn, times, h, out):
+    """`teleop stability --at T1,T2,...`: one run linearized at each time (a table printed), the least
+    stable point's files written to `out`; returns it with `.stopped` = why the run ended early ("" if
+    it did not).  Raises LinearizationError when not even the first time could be linearized."""
+    from harness.studies import stability as stab
+
+    loop = stab.ClosedLoopMap(scn)
+    worst, stopped = None, ""
+    print("t (s)   radius     class     Hz       dominant")
+    for t in times:
+        try:
+            res = stab.linearize(scn, t, h, loop=loop)
+        except stab.LinearizationError as exc:
+            if worst is None:
+                raise
+            stopped = str(exc)
+            break
+        dom = ", ".join(n for n, _ in res.dominant(0, 3))
+        print(f"{res.t:6.3f}  {res.radius:.6f}  {res.verdict_class:8s}  {res.frequency(0):7.2f}  {dom}")
+        if worst is None or res.radius > worst.radius:
+            worst = res
+    write_stability(worst, out)
+    print(f"least stable: {worst.verdict()}")
+    if stopped:
+        print(f"stopped: {stopped}")
+    worst.stopped = stopped
+    return worst
