@@ -562,3 +562,8 @@ def test_toml_values_are_plain_python():
     assert out == [1.5, 2, True, 3, "x", "none", [0.25]]
     assert [type(v) for v in out[:5]] == [float, int, bool, int, str]
     assert type(out[6][0]) is float
+
+
+def test_continuous_control_refuses_an_actuation_delay():
+    with pytest.raises(ConfigError, match=r"continuous_control = True: .*requires plant.actuation_delay = 0"):
+        load_scenario(None, ["plant.kind=analytic", "continuous_control=true", "plant.actuation_delay=0.002"])

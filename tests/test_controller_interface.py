@@ -56,6 +56,17 @@ def test_paper_through_interface_is_bit_for_bit(actuation, snr):
         assert compiled.meta["muscle_saturated_steps"] == py.meta["muscle_saturated_steps"]
 
 
+def test_analytic_plant_applies_the_actuation_delay_like_the_interface_path():
+    """The compiled analytic loop delays the commands through the same ring as the Python-stepped loop
+    (bit for bit), and the delay changes the run."""
+    over = ["plant.kind=analytic", "snr_db=none", "plant.actuation_delay=0.003"]
+    delayed = simulate(_scn(*over))
+    _same(delayed, simulate(_scn(*over, 'controller.name="paper_interface"')))
+    undelayed = simulate(_scn(*over[:2]))
+    assert delayed.status == undelayed.status == "ok"
+    assert not np.array_equal(delayed.q2, undelayed.q2)
+
+
 def test_paper_through_interface_bit_for_bit_with_delay_and_feedforward_off():
     over = ["plant.actuation_delay=0.002", "plant.servo_feedforward=false"]
     _same(simulate(_scn(*over)), simulate(_scn(*over, 'controller.name="paper_interface"')))

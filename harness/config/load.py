@@ -153,6 +153,9 @@ def _cross_checks(scn: Scenario) -> None:
     if scn.continuous_control and p.kind != "analytic":
         raise ConfigError.field("continuous_control", True,
                                 f"requires plant.kind = 'analytic' (got {p.kind!r})")
+    if scn.continuous_control and p.actuation_delay > 0:
+        raise ConfigError.field("continuous_control", True, "evaluates the law in every RK4 stage: requires "
+                                f"plant.actuation_delay = 0 (got {p.actuation_delay:g} s)")
     if abs(scn.trajectory.omega) * scn.control_dt >= math.pi:
         nyquist = math.pi / scn.control_dt
         raise ConfigError.field("trajectory.omega", scn.trajectory.omega,

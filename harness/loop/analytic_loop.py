@@ -48,6 +48,8 @@ def simulate_analytic(scn: Scenario, progress: bool = False,
     spk_p = plant.slave.packed()
     nsub = max(1, scn.substeps)
     plant_args = (scn.control_dt, nsub, scn.continuous_control, mpk_p, spk_p)
+    delay = int(round(scn.plant.actuation_delay / scn.control_dt))
+    cmdbuf = np.zeros((delay + 1, 8))  # [T1, T2] per slot of the actuation-delay ring
     bar = progress_bar(progress, n, "analytic plant")
 
     def part(k: int, done: int) -> None:
@@ -59,7 +61,8 @@ def simulate_analytic(scn: Scenario, progress: bool = False,
     t0 = time.perf_counter()
     error = ""
     try:
-        run.run(lambda k, k1: A.analytic_chunk(k, k1, a, plant_args, (state, noise, scale, Fc, rows[k:k1])))
+        run.run(lambda k, k1: A.analytic_chunk(k, k1, a, plant_args,
+                                               (state, noise, scale, Fc, rows[k:k1], cmdbuf, delay)))
     except KeyboardInterrupt:
         run.interrupted = True
     except Exception as exc:  # keep what was computed; report the cause

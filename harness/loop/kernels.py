@@ -266,13 +266,18 @@ def analytic_chunk(k0, k1, model, plant, data):
     model: the run's `harness.loop.common.RunModel` (the controller's nominal packed params mpk_c, spk_c,
     quadrature, gains, sub-task, Fp (4,) the interaction forces the plant feels (1), desired trajectory);
     plant: (dt control period (s), nsub, continuous, mpk_p, spk_p: the plant's own packed params);
-    data: (state (16,), noise, noise_scale, F (4,) = [F1, F2] the laws get (13), (17), rows of this chunk).
+    data: (state (16,), noise, noise_scale, F (4,) = [F1, F2] the laws get (13), (17), rows of this chunk,
+    cmdbuf (delay + 1, 8): the ring of [T1, T2] commands, delay: the actuation delay in control steps).
     Zero-order hold of the commands over the control step (nsub RK4 steps of dt/nsub) unless
-    `continuous`, where both laws are evaluated in every RK4 stage on the true state (no noise).
-    Returns (status, number of completed steps)."""
+    `continuous`, where both laws are evaluated in every RK4 stage on the true state (no noise; delay 0).
+    With a delay the plant gets the commands of step k - delay (of step 0 while k < delay), as on the
+    MuJoCo plant.  Returns (status, number of completed steps)."""
     mpk_c, spk_c, nodes, weights, gains, spec, Fp, traj, _s0 = model
     dt, nsub, continuous, mpk_p, spk_p = plant
-    state, noise, noise_scale, F, rows = data
+    state, noise, noise_scale, F, rows, cmdbuf, delay = data
+    nb = delay + 1
+    T1h = scratch_zeros(2)
+    T2h = scratch_zeros(6)
     # the control step's arrays: made here, not by a shared helper (a scratch array lives in the frame that
     # makes it: a helper would hand back arrays over its finished frame)
     T1 = scratch_zeros(2)
@@ -297,8 +302,22 @@ def analytic_chunk(k0, k1, model, plant, data):
                           xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, rows[k - k0])
         if st != 0:
             return st, k - k0 + 1
-        st = plant_substeps(state, t, h, nsub, continuous, model, F, mpk_p, spk_p, T1, T2, u2, deN, minfo,
-                            sinfo, xd, dxd, ddxd, k1s, k2s, k3s, k4s, tmp)
+        if delay > 0:  # the plant gets the commands of step k - delay (the ring cmdbuf)
+            slot = cmdbuf[k % nb]
+            for i in range(2):
+                slot[i] = T1[i]
+            for i in range(6):
+                slot[2 + i] = T2[i]
+            use = cmdbuf[(k - delay) % nb] if k >= delay else cmdbuf[0]
+            for i in range(2):
+                T1h[i] = use[i]
+            for i in range(6):
+                T2h[i] = use[2 + i]
+            st = plant_substeps(state, t, h, nsub, continuous, model, F, mpk_p, spk_p, T1h, T2h, u2, deN,
+                                minfo, sinfo, xd, dxd, ddxd, k1s, k2s, k3s, k4s, tmp)
+        else:
+            st = plant_substeps(state, t, h, nsub, continuous, model, F, mpk_p, spk_p, T1, T2, u2, deN,
+                                minfo, sinfo, xd, dxd, ddxd, k1s, k2s, k3s, k4s, tmp)
         if st != ST_OK:
             return st, k - k0 + 1
         for i in range(16):
