@@ -60,7 +60,7 @@ def using_options(opts: RuntimeOptions) -> Iterator[RuntimeOptions]:
 # Python's garbage collector in a command's or worker's process: a run imports hundreds of thousands
 # of long-lived objects (numba, MuJoCo, Rerun, matplotlib) and each full collection traverses all of
 # them.  With the default thresholds (700, 10, 10) a `teleop run` spent 0.46-0.51 s in 3 full and ~490
-# young collections; with these, 0.13-0.18 s in ~34 young ones (benchmarks/RESULTS.md).  Reference
+# young collections; with these, 0.13-0.18 s in ~34 young ones.  Reference
 # cycles are still collected, just in larger batches.
 GC_THRESHOLDS = (10_000, 50, 50)
 
@@ -73,7 +73,7 @@ def set_gc_thresholds() -> None:
 def end_process(rc: int) -> NoReturn:
     """Flush stdout/stderr and end the process with `os._exit(rc)`, skipping the interpreter's module
     teardown and final garbage collection: with numba, MuJoCo, Rerun and matplotlib loaded that teardown
-    takes about 1 s and writes nothing (benchmarks/RESULTS.md).  Callers make sure every file they
+    takes about 1 s and writes nothing.  Callers make sure every file they
     wrote is complete and closed first."""
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(Exception):

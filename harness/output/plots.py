@@ -34,7 +34,7 @@ from harness.output.obstacles import obstacle_outline
 DPI = 130
 # Time-series lines are drawn from their min/max envelope at this many columns per inch of figure
 # width (2 per pixel at DPI): every extremum is kept and the PNG is the same to the eye (compare
-# with FULL_RESOLUTION = True; measured in benchmarks/RESULTS.md), 5-7x fewer points to draw.
+# with FULL_RESOLUTION = True), 5-7x fewer points to draw.
 COLUMNS_PER_INCH = 2 * DPI
 FULL_RESOLUTION = False  # True: draw every sample (reference for comparisons)
 _SEC_COLORS = ("tab:green", "tab:purple", "tab:brown")
@@ -81,8 +81,7 @@ def _finish_time_axis(ax, traj: Trajectory) -> None:
 
 def _save(fig: Figure, path: Path) -> Path:
     """Lay out (`layout.fix_layout`) and save under a temporary name, renamed into place when complete
-    (harness.config.textio).  zlib level 1: the same pixels, ~10 % larger files, ~10 % less figure time
-    (benchmarks/RESULTS.md)."""
+    (harness.config.textio).  zlib level 1: the same pixels, ~10 % larger files, ~10 % less figure time."""
     fix_layout(fig)
     return write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=DPI, format=Path(path).suffix[1:] or "png",
                                                       pil_kwargs={"compress_level": 1}))

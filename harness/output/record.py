@@ -89,7 +89,7 @@ MAX_STATIC_PATH_POINTS = 4000  # the static desired path is decimated to at most
 # strips, 500-row chunks 4.3 s, 100-row chunks 1.1 s); strip chunks are capped at this many points.
 STRIP_POINTS_PER_CHUNK = 2500
 # Rate (Hz) of the 3-D geometry in `teleop run`'s recording (`geometry_rate`; time series stay at the
-# control rate, bit-exact).  Measured on the paper run (benchmarks/RESULTS.md, "End to end"): every
+# control rate, bit-exact).  Measured on the paper run: every
 # step (1 kHz) writes 22 MB, 100 Hz 8.4 MB in about half the time; 50 Hz saves no more (the scalars
 # dominate) and 100 Hz is above a viewer's 60 fps playback.
 DEFAULT_GEOMETRY_RATE = 100.0
