@@ -115,7 +115,7 @@ _NO_ALLOCATION_SCRIPT = textwrap.dedent("""
 
     def run(k0, k1, state):
         noise, scale = noise_table(scn, n)  # fresh: its running power sums are updated in place
-        return K.analytic_chunk(k0, k1, model, plant, (state, noise, scale, model.F, rows))
+        return K.analytic_chunk(k0, k1, model, plant, (state, noise, scale, model.F, rows, np.zeros((1, 8)), 0))
 
     run(0, 1, initial_state(scn))  # compile or load
     counts = []
