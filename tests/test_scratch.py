@@ -115,7 +115,8 @@ _NO_ALLOCATION_SCRIPT = textwrap.dedent("""
 
     def run(k0, k1, state):
         noise, scale = noise_table(scn, n)  # fresh: its running power sums are updated in place
-        return K.analytic_chunk(k0, k1, model, plant, (state, noise, scale, model.F, rows, np.zeros((1, 8)), 0))
+        ring = np.zeros((1, 8))  # the actuation-delay ring (no delay)
+        return K.analytic_chunk(k0, k1, model, plant, (state, noise, scale, model.F, rows, ring, 0))
 
     run(0, 1, initial_state(scn))  # compile or load
     counts = []
