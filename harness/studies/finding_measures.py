@@ -193,6 +193,23 @@ def _measure_chain_vs_rod(scn, traj) -> dict[str, float]:
     return out
 
 
+def _measure_flip(scn, traj) -> dict[str, float]:
+    """The closed loop linearized over one control period at the run's end (`harness.studies.stability`,
+    noise off): radius = its spectral radius, flip = -Re of its most negative eigenvalue (> 1: a mode that
+    flips sign every period and grows, at the Nyquist frequency of the control rate), flip_on_junction =
+    1 if that mode's largest components are hinges next to a section boundary, else 0."""
+    from harness.studies.stability import linearize
+
+    res = linearize(scn, float(traj.t[-1]) if len(traj) else 0.0)
+    j = res.most_negative()
+    top = [name for name, _ in res.dominant(j, 2)]
+    n = scn.plant.segments
+    junction = ({f"octarm_s{i}_seg{n - 1}_hinge" for i in range(2)}
+                | {f"octarm_s{i}_seg0_hinge" for i in (1, 2)})
+    return {"radius": res.radius, "flip": float(-res.eigenvalues[j].real),
+            "flip_on_junction": float(all(any(name.startswith(x) for x in junction) for name in top))}
+
+
 MEASURES: dict[str, Callable[[Any, Any], dict[str, float]]] = {
     "diverged": _measure_diverged,
     "closed_forms": _measure_closed_forms,
@@ -202,6 +219,7 @@ MEASURES: dict[str, Callable[[Any, Any], dict[str, float]]] = {
     "rod_statics": _measure_rod_statics,
     "elastic_laws": _measure_elastic_laws,
     "chain_vs_rod": _measure_chain_vs_rod,
+    "flip": _measure_flip,
 }
 
 MEASURE_UNITS = {"diverged_at": "s", "arc_departure": "mm", "chained_cc_tip": "mm", "settle_3s_error": "mm",
