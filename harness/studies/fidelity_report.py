@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from harness.studies.fidelity_reference import modal_comparison, static_comparison
+from harness.studies.figures import save_figure
 
 
 # ------------------------------------------------------------------------------------------------
@@ -90,11 +91,7 @@ def plot_reference(static_rows, modal_rows, path) -> Path:
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def main_reference(segments, out, progress: bool = True, seed: int = 0, loop_duration: float = 20.0) -> int:

@@ -7,6 +7,7 @@ import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
 
+from harness.studies.figures import save_figure
 from harness.studies.margin import Margin, param_of
 
 
@@ -30,10 +31,7 @@ def plot_edge(rows: list[dict], pair: tuple[str, str], path) -> Path:
     ax.set_ylabel(f"{pair[1]} (x nominal)")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 # --- outputs --------------------------------------------------------------------------------------------
@@ -105,11 +103,7 @@ def plot_margins(rows: Sequence[Margin], path) -> Path:
         ax.tick_params(axis="x", labelsize=7)
     axes[0, 0].set_title("passing range (green), first failing level (x), nominal (line)", fontsize=9)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def write_margins(rows: Sequence[Margin], out, tol_text: str = "") -> list[Path]:

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.studies.figures import save_figure
+
 
 def stability_map(kns, etas, overrides=(), duration: float = 3.0, say=lambda s: None) -> list[dict]:
     """Rows over the k_n x eta_b grid: status, t_end (s, time reached), e2_rms (m, nan if diverged or
@@ -79,11 +81,7 @@ def plot_stability_map(maps: dict[str, list[dict]], duration: float, path) -> Pa
                 ax.text(j, i, "ok" if r["status"] == "ok" else f"{r['t_end']:.2f}", ha="center",
                         va="center", fontsize=7, color="w" if Z[i, j] < 0.6 * duration else "k")
     fig.colorbar(im, ax=axes[0].tolist(), label="survival time (s)")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 MAPS = {

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from harness.config.scenario import Scenario
+from harness.studies.figures import save_figure
 from harness.studies.stability import ClosedLoopMap, LinearizationError, Stability, linearize
 
 
@@ -66,11 +67,7 @@ def plot_stability(res: Stability, path, n_modes: int = 2) -> Path:
                      + ", ".join(n.removeprefix("octarm_") for n, _ in res.dominant(j, 3)), fontsize=7)
         ax.legend(fontsize=7)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def _next_distinct(res: Stability, j: int) -> int:
