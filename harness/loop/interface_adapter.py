@@ -54,6 +54,7 @@ REF_SHAPES = (("q2_ref", 6), ("dq2_ref", 6))
 FIRST_CALL_TIMEOUT = 120.0  # s, at least this long for construction, reset and step 0 (they may compile
 #                             the nominal models' kernels on first use)
 _TIMER = hasattr(signal, "setitimer")
+STATUS_CODES = frozenset(int(s) for s in Status)
 
 
 class ControllerFailure(RuntimeError):
@@ -157,10 +158,14 @@ class InterfaceController:
                                      "controller.step_timeout = \"none\")")
         return ControllerFailure(f"controller {self.name!r} raised {describe_exception(e)} {phase}")
 
-    def _once(self, phase: str, fn, *args):
-        """Call controller code once (construction, reset) under the first-call time limit."""
-        limit = None if self.limit is None else max(self.limit, FIRST_CALL_TIMEOUT)
-        self._install()
+    def _call(self, where: str, limit: float | None, fn, *args):
+        """Call controller code under the time limit `limit` (s, None: none); `where` names the phase for
+        the one-line failure ("in reset", "at step 3 (t = 0.003 s)").  The user's Ctrl-C passes as
+        `HarnessInterrupt`; anything else the code raises (`SystemExit` and `KeyboardInterrupt` included),
+        or running past the limit, is a `ControllerFailure`.  `ControllerDiverged` passes through.  The
+        timer stays armed after the call: past it the alarm does nothing (`close` disarms it)."""
+        if self._saved is None:
+            self._install()
         armed = self.main and limit is not None and _TIMER
         USER_CODE[0] = self.main
         t0 = time.perf_counter()
@@ -168,20 +173,27 @@ class InterfaceController:
             if armed:
                 signal.setitimer(signal.ITIMER_REAL, limit)
             out = fn(*args)
-        except HarnessInterrupt:
+        except (HarnessInterrupt, ControllerDiverged):
             raise
         except BaseException as e:  # noqa: BLE001 - the controller's code: one line, never the process
             if isinstance(e, KeyboardInterrupt) and STOP.is_set():
                 raise HarnessInterrupt from None  # the user's Ctrl-C reached the controller's code
-            raise self._fail(e, f"in {phase}", limit) from None
+            raise self._fail(e, where, limit) from None
         finally:
             USER_CODE[0] = False
-            if armed:
-                signal.setitimer(signal.ITIMER_REAL, 0.0)
-            self.close()
         if limit is not None and not armed and time.perf_counter() - t0 > limit:  # worker threads: no alarm
-            raise self._fail(_Timeout(), f"in {phase}", limit)
+            raise self._fail(_Timeout(), where, limit)
         return out
+
+    def _once(self, phase: str, fn, *args):
+        """Call controller code once (construction, reset) under the first-call time limit."""
+        limit = None if self.limit is None else max(self.limit, FIRST_CALL_TIMEOUT)
+        try:
+            return self._call(f"in {phase}", limit, fn, *args)
+        except ControllerDiverged as e:  # before the run: the controller's failure, not a divergence
+            raise self._fail(e, f"in {phase}", limit) from None
+        finally:
+            self.close()
 
     # -- the loop's protocol ------------------------------------------------------------------------
     def reset(self, model: RunModel) -> None:
@@ -203,36 +215,14 @@ class InterfaceController:
         limit = self.limit
         if limit is not None and k == 0:
             limit = max(limit, FIRST_CALL_TIMEOUT)
-        if self._saved is None:
-            self._install()
-        main = self.main
-        armed = main and limit is not None and _TIMER
-        USER_CODE[0] = main
-        t0 = time.perf_counter()
         try:
-            if armed:
-                signal.setitimer(signal.ITIMER_REAL, limit)
-            act = self.ctrl.step(obs)
+            act = self._call(f"at step {k} (t = {t:.3f} s)", limit, self.ctrl.step, obs)
         except ControllerDiverged as e:
-            code = e.code if e.code in Status._value2member_map_ and e.code != 0 else -1
+            code = e.code if e.code in STATUS_CODES and e.code != 0 else -1
             self.diverged = f"controller {name!r} stopped: {_line(e)} at step {k} (t = {t:.3f} s)"
             act = getattr(self.ctrl, "action", None)
             if act is None:
                 raise ControllerFailure(self.diverged) from None
-        except HarnessInterrupt:
-            raise
-        except BaseException as e:  # noqa: BLE001 - the controller's code: one line, never the process
-            if isinstance(e, KeyboardInterrupt) and STOP.is_set():
-                raise HarnessInterrupt from None
-            if isinstance(e, _Timeout):
-                raise self._fail(e, f"at step {k} (t = {t:.3f} s)", limit) from None
-            raise ControllerFailure(f"controller {name!r} raised {describe_exception(e)} "
-                                    f"at step {k} (t = {t:.3f} s)") from None
-        finally:
-            USER_CODE[0] = False  # the timer stays armed: past the step its alarm does nothing (one system
-            #                       call per step; `close` disarms it)
-        if limit is not None and not armed and time.perf_counter() - t0 > limit:  # worker threads: no alarm
-            raise self._fail(_Timeout(), f"at step {k} (t = {t:.3f} s)", limit)
         bad = check_action(act, name, k, t, self.servo)
         if bad:
             raise ControllerFailure(bad)
