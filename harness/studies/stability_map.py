@@ -39,18 +39,22 @@ def stability_map(kns, etas, overrides=(), duration: float = 3.0, say=lambda s: 
     return rows
 
 
-def stability_markdown(rows: list[dict], duration: float) -> str:
+def grid_lines(rows: list[dict], text) -> list[str]:
+    """Markdown table lines of a k_n x eta_b grid: one row per k_n, one column per eta_b, each cell
+    `text(row)` of the grid point's row."""
     kns = sorted({r["kn"] for r in rows})
     etas = sorted({r["eta_b"] for r in rows})
     cell = {(r["kn"], r["eta_b"]): r for r in rows}
     lines = ["| k_n \\ eta_b (N m^2 s) | " + " | ".join(f"{e:g}" for e in etas) + " |",
              "|---:|" + "---:|" * len(etas)]
     for kn in kns:
-        out = []
-        for e in etas:
-            r = cell[kn, e]
-            out.append(f"ok, {r['e2_rms'] * 1e3:.2f} mm" if r["status"] == "ok" else f"{r['t_end']:.3f} s")
-        lines.append(f"| {kn:g} | " + " | ".join(out) + " |")
+        lines.append(f"| {kn:g} | " + " | ".join(text(cell[kn, e]) for e in etas) + " |")
+    return lines
+
+
+def stability_markdown(rows: list[dict], duration: float) -> str:
+    lines = grid_lines(rows, lambda r: f"ok, {r['e2_rms'] * 1e3:.2f} mm" if r["status"] == "ok"
+                       else f"{r['t_end']:.3f} s")
     lines.append("")
     lines.append(f"cells: 'ok, e2 RMS' if the {duration:g} s run finished, else the time it diverged")
     return "\n".join(lines)

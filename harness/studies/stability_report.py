@@ -12,6 +12,7 @@ import numpy as np
 from harness.config.scenario import Scenario
 from harness.studies.figures import save_figure
 from harness.studies.stability import ClosedLoopMap, LinearizationError, Stability, linearize
+from harness.studies.stability_map import grid_lines
 
 
 def mode_shape(res: Stability, j: int = 0,
@@ -156,23 +157,16 @@ def predicted_map(kns, etas, overrides=(), times=(0.0,), say=lambda s: None) -> 
 def predicted_markdown(rows: list[dict], sim: list[dict] | None = None) -> str:
     """Table of the predicted map (spectral radius, class) next to the simulated one
     (`harness.studies.stability_map.stability_map` rows) when given."""
-    kns = sorted({r["kn"] for r in rows})
-    etas = sorted({r["eta_b"] for r in rows})
-    cell = {(r["kn"], r["eta_b"]): r for r in rows}
     simc = {(r["kn"], r["eta_b"]): r for r in (sim or [])}
-    lines = ["| k_n \\ eta_b (N m^2 s) | " + " | ".join(f"{e:g}" for e in etas) + " |",
-             "|---:|" + "---:|" * len(etas)]
-    for kn in kns:
-        out = []
-        for e in etas:
-            r = cell[kn, e]
-            txt = f"rho {r['radius']:.4f} ({r['class']}"
-            txt += ", flip)" if r["flip"] else ")"
-            if (kn, e) in simc:
-                s = simc[kn, e]
-                txt += " / sim: " + ("ok" if s["status"] == "ok" else f"diverged {s['t_end']:.3f} s")
-            out.append(txt)
-        lines.append(f"| {kn:g} | " + " | ".join(out) + " |")
+
+    def text(r: dict) -> str:
+        txt = f"rho {r['radius']:.4f} ({r['class']}" + (", flip)" if r["flip"] else ")")
+        s = simc.get((r["kn"], r["eta_b"]))
+        if s is not None:
+            txt += " / sim: " + ("ok" if s["status"] == "ok" else f"diverged {s['t_end']:.3f} s")
+        return txt
+
+    lines = grid_lines(rows, text)
     return "\n".join(lines)
 
 
@@ -214,15 +208,13 @@ def least_stable_along(scn, times, h, out):
     """`teleop stability --at T1,T2,...`: one run linearized at each time (a table printed), the least
     stable point's files written to `out`; returns it with `.stopped` = why the run ended early ("" if
     it did not).  Raises LinearizationError when not even the first time could be linearized."""
-    from harness.studies import stability as stab
-
-    loop = stab.ClosedLoopMap(scn)
+    loop = ClosedLoopMap(scn)
     worst, stopped = None, ""
     print("t (s)   radius     class     Hz       dominant")
     for t in times:
         try:
-            res = stab.linearize(scn, t, h, loop=loop)
-        except stab.LinearizationError as exc:
+            res = linearize(scn, t, h, loop=loop)
+        except LinearizationError as exc:
             if worst is None:
                 raise
             stopped = str(exc)

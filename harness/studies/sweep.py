@@ -167,13 +167,14 @@ def hidden_warning(names: Sequence[str]) -> str:
 
 def sensitivity(result: SweepResult, name: str, metric: str = "e2_rms") -> str:
     """The measured spread of `metric` over the levels of factor `name` (finite rows only)."""
-    pts = sorted((float(r["params"][name]), float(r["metrics"][metric])) for r in result.rows.values()
-                 if r.get("params", {}).get(name) is not None and isinstance(r.get("metrics", {}).get(metric),
-                                                                            (int, float))
-                 and math.isfinite(r["metrics"][metric]))
+    pts = []
+    for r in result.rows.values():
+        x, y = r.get("params", {}).get(name), r.get("metrics", {}).get(metric)
+        if is_real(x) and is_real(y) and math.isfinite(y):
+            pts.append((float(x), float(y)))
     if len(pts) < 2:
         return f"{name}: fewer than 2 finite {metric} values"
-    (x0, y0), (x1, y1) = pts[0], pts[-1]
+    (x0, y0), (x1, y1) = min(pts), max(pts)
     return f"{name}: {metric} {y0:.4g} at {x0:g} -> {y1:.4g} at {x1:g}"
 
 
