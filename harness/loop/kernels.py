@@ -302,22 +302,18 @@ def analytic_chunk(k0, k1, model, plant, data):
                           xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, rows[k - k0])
         if st != 0:
             return st, k - k0 + 1
-        if delay > 0:  # the plant gets the commands of step k - delay (the ring cmdbuf)
-            slot = cmdbuf[k % nb]
-            for i in range(2):
-                slot[i] = T1[i]
-            for i in range(6):
-                slot[2 + i] = T2[i]
-            use = cmdbuf[(k - delay) % nb] if k >= delay else cmdbuf[0]
-            for i in range(2):
-                T1h[i] = use[i]
-            for i in range(6):
-                T2h[i] = use[2 + i]
-            st = plant_substeps(state, t, h, nsub, continuous, model, F, mpk_p, spk_p, T1h, T2h, u2, deN,
-                                minfo, sinfo, xd, dxd, ddxd, k1s, k2s, k3s, k4s, tmp)
-        else:
-            st = plant_substeps(state, t, h, nsub, continuous, model, F, mpk_p, spk_p, T1, T2, u2, deN,
-                                minfo, sinfo, xd, dxd, ddxd, k1s, k2s, k3s, k4s, tmp)
+        slot = cmdbuf[k % nb]  # the plant gets the commands of step k - delay (the ring cmdbuf)
+        for i in range(2):
+            slot[i] = T1[i]
+        for i in range(6):
+            slot[2 + i] = T2[i]
+        use = cmdbuf[(k - delay) % nb] if k >= delay else cmdbuf[0]
+        for i in range(2):
+            T1h[i] = use[i]
+        for i in range(6):
+            T2h[i] = use[2 + i]
+        st = plant_substeps(state, t, h, nsub, continuous, model, F, mpk_p, spk_p, T1h, T2h, u2, deN, minfo,
+                            sinfo, xd, dxd, ddxd, k1s, k2s, k3s, k4s, tmp)
         if st != ST_OK:
             return st, k - k0 + 1
         for i in range(16):
