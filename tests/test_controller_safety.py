@@ -26,6 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SHORT = ["duration=0.05", "transient=0.0"]
 
 CONTROLLERS = textwrap.dedent('''
+    import os
     import sys
     import time
 
@@ -104,6 +105,7 @@ CONTROLLERS = textwrap.dedent('''
     class Blocks(Base):
         def step(self, obs):
             if obs.k == 3:
+                open(os.path.join(os.path.dirname(__file__), "blocking"), "w").close()  # it blocks now
                 time.sleep(600)
             return super().step(obs)
 
@@ -259,10 +261,12 @@ def test_one_ctrl_c_interrupts_a_blocking_controller(ctl, tmp_path):
                              "controller.step_timeout=none", "--no-progress", "--out", str(out)],
                             cwd=tmp_path, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
-    deadline = time.monotonic() + 240
-    while proc.poll() is None and not (out / "config.toml").exists() and time.monotonic() < deadline:
-        time.sleep(0.2)  # config.toml is written before simulating
-    time.sleep(3.0)  # in step 3's sleep
+    deadline = time.monotonic() + 240  # a cold kernel cache compiles first
+    marker = ctl.parent / "blocking"  # written by Blocks beside its file when step 3 starts blocking
+    while proc.poll() is None and not marker.exists() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert proc.poll() is None and marker.exists(), "the controller never reached step 3"
+    time.sleep(0.5)  # in step 3's sleep
     proc.send_signal(signal.SIGINT)
     try:
         _, err = proc.communicate(timeout=120)
