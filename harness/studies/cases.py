@@ -1,7 +1,6 @@
-"""Case expansion of a study: the levels of every factor (lists, seeded random draws, grid or random
-sampling), one fully resolved `Scenario` per case (base scenario + `set` + one override per varied
-field), and the case id (a hash of the resolved scenario).  The study file itself: `harness.studies.study`.
-"""
+"""Case expansion of a study (`harness.studies.study`): the levels of every factor (lists or seeded random
+draws; grid or random sampling), one resolved `Scenario` per case (base scenario + `set` + one override per
+varied field) and its id (a hash of the resolved scenario)."""
 
 from __future__ import annotations
 
@@ -27,7 +26,6 @@ log = logging.getLogger(__name__)
 PLANT_TABLES = (("plant", "master"), ("plant", "slave"))  # plant sub-tables defaulting to the nominal model
 
 
-# --- case expansion ---------------------------------------------------------------------------------
 def _clean(x: float) -> float:
     """Round to 12 significant digits: 0.35000000000000003 -> 0.35 (stable labels and ids)."""
     return float(f"{x:.12g}")
@@ -161,26 +159,28 @@ def scenario_id(scn: Scenario) -> str:
     return hashlib.sha256(canon(d).encode()).hexdigest()[:12]
 
 
-def _in_context(e: ValueError, context: str) -> ConfigError:
-    return e.with_context(context) if isinstance(e, ConfigError) else ConfigError(f"{context}: {e}")
-
-
-def _code_policy(study: Study) -> dict:
-    """Python controllers named anywhere in a study run only if it allows them; relative controller files
-    resolve against the study file's folder (a base scenario file's own: against that file's)."""
-    return {"allow_code": study.allow_code, "code_dir": study.base_dir}
+def _load(study: Study, overrides: Sequence[str], context: str, check=None) -> Scenario:
+    """The study's base scenario with `overrides`, then check(scenario) (a scenario-returning step);
+    ConfigError (or a model's ParameterError) in `context`.  Python controllers named anywhere run only if
+    the study allows them; relative controller files resolve against the study file's folder."""
+    try:
+        scn = load_scenario(study.scenario_source, list(overrides), allow_code=study.allow_code,
+                            code_dir=study.base_dir)
+        return scn if check is None else check(scn)
+    except ValueError as e:
+        err = e.with_context(context) if isinstance(e, ConfigError) else ConfigError(f"{context}: {e}")
+        raise err from None
 
 
 def load_base(study: Study) -> Scenario:
     """The base scenario (with `set`), its plant checked too (harness.plant.validate_plant)."""
     from harness.plant import validate_plant
 
-    try:
-        base = load_scenario(study.scenario_source, list(study.set), **_code_policy(study))
-        validate_plant(base)
-        return base
-    except ValueError as e:  # ConfigError, or a model's ParameterError
-        raise _in_context(e, f"study {study.name!r}: base scenario (with [study] set)") from None
+    def check(scn):
+        validate_plant(scn)
+        return scn
+
+    return _load(study, study.set, f"study {study.name!r}: base scenario (with [study] set)", check)
 
 
 def expand_cases(study: Study, base: Scenario | None = None) -> list[Case]:
@@ -192,14 +192,7 @@ def expand_cases(study: Study, base: Scenario | None = None) -> list[Case]:
     for levels in _level_combinations(study):
         params = {f.name: jsonable(v) for f, v in zip(study.factors, levels, strict=True)}
         ovr = _case_overrides(base, study.factors, levels)
-        try:
-            scn = load_scenario(study.scenario_source, [*study.set, *ovr], **_code_policy(study))
-        except ValueError as e:
-            raise _in_context(e, f"study {study.name!r}: case {params}") from None
-        try:
-            scn = resolve_controller(scn)
-        except ValueError as e:
-            raise _in_context(e, f"study {study.name!r}: case {params}") from None
+        scn = _load(study, [*study.set, *ovr], f"study {study.name!r}: case {params}", resolve_controller)
         cid = scenario_id(scn)
         if cid not in cases:
             scn = dataclasses.replace(scn, name=f"{study.name}-{cid}")

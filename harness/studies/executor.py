@@ -1,13 +1,7 @@
-"""Executors of a sweep: the worker function (`run_case`), a process pool (recreated after a worker
-died; a dying worker's case is isolated and blamed), threads of this process, or a Dask client, and the
-loop that keeps cases in flight and hands each result to the parent as it finishes.
-
-Threads (`--executor threads`, the in-process batch path): the compiled loops release the GIL while they
-step (`harness.loop.releases_gil`), so the cases of one process run on every core without worker
-processes, with the same results.  Processes stay the default: a crashing case then takes only its
-worker (benchmarks/bench_core.py measures both).
-"""
-
+"""Executors of a sweep: the worker function (`run_case`); a process pool (the default: a crashing case
+takes only its worker, which is isolated and blamed, and the pool is recreated), threads of this process
+(the compiled loops release the GIL, `harness.loop.releases_gil`) or a Dask client; and `run_cases`, which
+keeps cases in flight and hands each result to the parent as it finishes."""
 
 from __future__ import annotations
 
@@ -36,14 +30,33 @@ from harness.studies.study import Case
 
 log = logging.getLogger(__name__)
 
+EXECUTORS = ("processes", "threads")  # run_sweep(executor=...), teleop sweep --executor
+CONNECT_TIMEOUT = 5.0  # s: connecting to a Dask scheduler, and waiting for its first worker
+PARENT_POLL = 0.5  # s: how often a pool worker checks that the main process is still alive
+HARD_LIMIT_GRACE = 10.0  # s past the per-case time limit before the parent stops a worker that blocks
+# modules a case needs, imported by the parent before it forks its workers (they then start with them)
+WARM_MODULES = ("harness.loop", "harness.loop.mujoco_loop", "harness.loop.analytic_loop",
+                "harness.loop.metrics", "harness.plant")
 
-def _error_result(e: BaseException) -> dict:
-    return {"status": "error", "message": f"{type(e).__name__}: {e}",
-            "traceback": "".join(traceback.format_exception(e))}
+
+class SweepError(RuntimeError):
+    """The executor failed (not a case): the sweep stops; finished rows are kept, a re-run resumes."""
 
 
 class CaseTimeout(RuntimeError):
     """A case ran longer than the sweep's per-case time limit."""
+
+
+def _error_result(e: BaseException | None = None, message: str = "") -> dict:
+    if e is None:
+        return {"status": "error", "message": message, "traceback": ""}
+    return {"status": "error", "message": f"{type(e).__name__}: {e}",
+            "traceback": "".join(traceback.format_exception(e))}
+
+
+def _timeout_result(limit: float) -> dict:
+    return _error_result(message=f"the case exceeded the time limit of {limit:g} s (--case-timeout) and did "
+                         f"not return; its worker was stopped {HARD_LIMIT_GRACE:g} s later")
 
 
 def check_case_timeout(value) -> float | None:
@@ -56,36 +69,29 @@ def check_case_timeout(value) -> float | None:
     return float(value)
 
 
-def _deadline_check(t0: float, limit: float):
-    """on_chunk callback raising CaseTimeout once `limit` seconds have passed since t0."""
-    def check(part) -> None:
+def run_case(case: dict) -> dict:
+    """Worker: simulate one case and compute its metrics.  Never raises (an exception gives status "error"
+    with the message and traceback); a diverged run keeps the Trajectory's status.
+
+    case: {"case_id", "scenario": Scenario, "metrics": [names], "record": bool, "time_limit": s or None};
+    past the time limit the loop stops at its next chunk of steps (`CaseTimeout`).  Returns {"case_id",
+    "status", "message", "metrics", "wall_time", "traceback"} (+ "recording": the .rrd bytes if "record")."""
+    t0 = time.perf_counter()
+    out = {"case_id": case.get("case_id"), "metrics": {}, "traceback": ""}
+    limit = case.get("time_limit")
+
+    def deadline(part) -> None:
         if time.perf_counter() - t0 > limit:
             t = float(part.t[-1]) if len(part) else 0.0
             raise CaseTimeout(f"the case exceeded the time limit of {limit:g} s (--case-timeout) at "
                               f"t = {t:.3f} s of simulated time")
-    return check
 
-
-def run_case(case: dict) -> dict:
-    """Worker: simulate one case and compute its metrics.  Never raises (an exception gives status
-    "error" with the message and traceback); a diverged run keeps the Trajectory's status.
-
-    case: {"case_id", "scenario": Scenario, "metrics": [names], "record": bool, "time_limit": s or None}.
-    With a time limit the loop checks it after each chunk of steps (`CaseTimeout`: status "error"); a case
-    that blocks inside a step is stopped by the parent (`run_cases`).
-    Returns {"case_id", "status", "message", "metrics", "wall_time", "traceback"} (+ "recording":
-    the .rrd bytes when case["record"])."""
-    t0 = time.perf_counter()
-    out = {"case_id": case.get("case_id"), "metrics": {}, "traceback": ""}
     try:
         from harness.loop import simulate
         from harness.loop.metrics import compute_metrics
 
         scn = case["scenario"]
-        # a sweep keeps every core busy with cases: no second thread per case (it would spin-wait for a core)
-        limit = case.get("time_limit")
-        traj = simulate(scn, progress=False,
-                        on_chunk=_deadline_check(t0, limit) if limit else None)
+        traj = simulate(scn, progress=False, on_chunk=deadline if limit else None)
         metrics = compute_metrics(traj, scn)
         out.update(status=traj.status, message=traj.message,
                    metrics={k: jsonable(metrics.get(k)) for k in case["metrics"]})
@@ -104,15 +110,16 @@ def run_case(case: dict) -> dict:
 
 
 def _call(case_fn: Callable[[dict], dict], payload: dict) -> dict:
-    """Runs in the worker: an exception raised by case_fn is the case's result, so that any exception
-    a future raises in the parent comes from the executor itself."""
+    """In the worker: an exception of case_fn is the case's result, so that an exception a future raises
+    in the parent comes from the executor itself."""
     try:
         return case_fn(payload)
     except Exception as e:
         return _error_result(e)
 
 
-PARENT_POLL = 0.5  # s: how often a pool worker checks that the main process is still alive
+def _probe() -> int:
+    return os.getpid()
 
 
 def _watch_parent(parent: int) -> None:
@@ -123,31 +130,60 @@ def _watch_parent(parent: int) -> None:
 
 
 def _worker_init() -> None:
-    # Ctrl-C reaches the whole process group: only the parent reacts (it cancels and stops us).
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # a forked worker inherits the parent's SIGTERM handler (the sweep's clean stop): not ours
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    # registered last, so run first at exit: the worker ends without the interpreter's teardown (~0.7 s
-    # with numba and MuJoCo loaded, which the pool's shutdown, i.e. the sweep, would wait for); every
-    # result has been sent by then
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the process group: the parent reacts
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the parent's clean-stop handler (inherited by fork)
+    # registered last, so run first at exit: no interpreter teardown (~0.7 s with numba and MuJoCo) for
+    # the pool's shutdown to wait for; every result has been sent by then
     atexit.register(end_process, 0)
-    set_gc_thresholds()  # fewer collections while the first case imports the loop and MuJoCo
-    # A killed main process cannot stop its pool: the kernel kills each worker when its parent ends (Linux
-    # parent-death signal; it works while a case blocks holding the GIL); elsewhere each worker ends
-    # itself within PARENT_POLL s.
+    set_gc_thresholds()
+    # a killed main process cannot stop its pool: Linux kills each worker when its parent ends (it works
+    # while a case blocks holding the GIL); elsewhere each worker ends itself within PARENT_POLL s
     die_with_parent(signal.SIGKILL)
     threading.Thread(target=_watch_parent, args=(os.getppid(),), name="parent-watchdog", daemon=True).start()
 
 
-# --- execution --------------------------------------------------------------------------------------
-class SweepError(RuntimeError):
-    """The executor failed (not a case): the sweep stops; finished rows are kept, a re-run resumes."""
+def start_method() -> str:
+    """How pool workers start: "fork" on Linux when this process runs no other Python thread (the workers
+    inherit the imported harness, numpy and MuJoCo: no interpreter start-up or imports); else "spawn"
+    (fresh interpreters: safe beside threads, and they see the current environment)."""
+    return "fork" if sys.platform.startswith("linux") and threading.active_count() == 1 else "spawn"
 
 
-CONNECT_TIMEOUT = 5.0  # s: connecting to a Dask scheduler, and waiting for its first worker
+def _process_pool(workers: int) -> cf.ProcessPoolExecutor:
+    method = start_method()
+    if method == "fork":
+        for name in WARM_MODULES:
+            importlib.import_module(name)
+        sys.stdout.flush()  # a forked worker flushes its copy of unwritten output when it ends
+        sys.stderr.flush()
+    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method),
+                                  initializer=_worker_init)
 
 
-EXECUTORS = ("processes", "threads")  # run_sweep(executor=...), teleop sweep --executor
+def _stop(ex: cf.Executor, cancel: bool) -> None:
+    """Shut an executor down; cancel: drop the pending cases and stop the running ones (pool workers are
+    terminated; threads stop at their next chunk of steps, `harness.loop.common.STOP`, and come back
+    "interrupted"; either way they re-run on resume)."""
+    if not cancel or not isinstance(ex, cf.ProcessPoolExecutor | cf.ThreadPoolExecutor):
+        ex.shutdown(wait=not cancel)
+    elif isinstance(ex, cf.ThreadPoolExecutor):
+        from harness.loop.common import STOP
+
+        STOP.set()
+        try:  # a thread cannot be killed: wait for them (a compiled chunk lasts about 0.25 s)
+            ex.shutdown(wait=True, cancel_futures=True)
+        finally:
+            STOP.clear()
+    elif hasattr(ex, "terminate_workers"):  # Python >= 3.14
+        ex.terminate_workers()
+    else:
+        procs = list((getattr(ex, "_processes", None) or {}).values())
+        ex.shutdown(wait=False, cancel_futures=True)
+        for p in procs:
+            if p.is_alive():
+                p.terminate()
+        for p in procs:
+            p.join(timeout=10)
 
 
 def pick_executor(executor: str, scheduler: str | None, cases: Sequence[Case]) -> str:
@@ -173,47 +209,41 @@ def pick_executor(executor: str, scheduler: str | None, cases: Sequence[Case]) -
 
 
 class Runner:
-    """An executor created on demand: a process pool (recreated after a worker died), a thread pool, or a
-    Dask client (`kind`: "processes", "threads", "dask")."""
+    """An executor created on demand (`kind`: "processes", a pool recreated after a worker died;
+    "threads"; "dask", a client of `scheduler`) running `workers` cases at once (Dask: all)."""
 
     def __init__(self, workers: int | None, scheduler: str | None, kind: str = "processes"):
         self.workers = max(1, workers or os.cpu_count() or 1)
         self.scheduler = scheduler
-        self.kind = kind  # `pick_executor`: "dask" exactly when there is a scheduler
+        self.kind = kind
+        self.window = math.inf if scheduler else self.workers  # cases in flight
         self._ex: cf.Executor | None = None
         self._client = None
 
-    @property
-    def window(self) -> float:
-        # Process pool: only `workers` cases in flight, so a dead worker implicates few cases.
-        return math.inf if self.scheduler else self.workers
-
     def connect(self) -> None:
         """Connect to the Dask scheduler now and check it has a worker (ConfigError within about
-        CONNECT_TIMEOUT s otherwise).  No-op for a process pool."""
-        if self.scheduler and self._client is None:
-            from distributed import Client
+        CONNECT_TIMEOUT s otherwise).  No-op without a scheduler."""
+        if not self.scheduler or self._client is not None:
+            return
+        from distributed import Client
 
-            where = f"--scheduler = {self.scheduler!r}"
-            try:
-                self._client = Client(self.scheduler, timeout=f"{CONNECT_TIMEOUT}s")
-            except Exception as e:  # noqa: BLE001 - OSError/TimeoutError/ValueError/TypeError: all input
-                why = " ".join(str(e).split())[:200]
-                raise ConfigError(f"{where}: cannot connect to the Dask scheduler "
-                                  f"(timeout {CONNECT_TIMEOUT:g} s; {type(e).__name__}: {why})",
-                                  path="scheduler") from None
-            try:
-                self._client.wait_for_workers(1, timeout=CONNECT_TIMEOUT)
-            except Exception:  # noqa: BLE001 - TimeoutError (type differs between versions)
-                self._client.close()
-                self._client = None
-                raise ConfigError(f"{where}: the scheduler has no worker (none joined within "
-                                  f"{CONNECT_TIMEOUT:g} s)", path="scheduler") from None
+        where = f"--scheduler = {self.scheduler!r}"
+        try:
+            self._client = Client(self.scheduler, timeout=f"{CONNECT_TIMEOUT}s")
+        except Exception as e:  # noqa: BLE001 - OSError/TimeoutError/ValueError/TypeError: all input
+            why = " ".join(str(e).split())[:200]
+            raise ConfigError(f"{where}: cannot connect to the Dask scheduler (timeout {CONNECT_TIMEOUT:g} "
+                              f"s; {type(e).__name__}: {why})", path="scheduler") from None
+        try:
+            self._client.wait_for_workers(1, timeout=CONNECT_TIMEOUT)
+        except Exception:  # noqa: BLE001 - TimeoutError (type differs between versions)
+            self.close()
+            raise ConfigError(f"{where}: the scheduler has no worker (none joined within "
+                              f"{CONNECT_TIMEOUT:g} s)", path="scheduler") from None
 
     def start(self) -> None:
-        """Start the process pool's workers now (no-op for threads, Dask or a started pool): called by the
-        sweep before it starts threads of its own (progress bar, imports), so that the workers can be forked
-        (see `_process_pool`)."""
+        """Start a process pool's workers now, before the sweep starts threads of its own (progress bar,
+        imports), so that they can be forked (`start_method`).  No-op for threads, Dask or a started pool."""
         if self.kind != "processes" or self._ex is not None:
             return
         ex = self.executor()
@@ -237,100 +267,23 @@ class Runner:
     def close(self, cancel: bool = False) -> None:
         ex, self._ex = self._ex, None
         if ex is not None:
-            if isinstance(ex, cf.ProcessPoolExecutor):
-                _stop_pool(ex, cancel)
-            elif isinstance(ex, cf.ThreadPoolExecutor):
-                _stop_threads(ex, cancel)
-            else:
-                ex.shutdown(wait=not cancel)
+            _stop(ex, cancel)
         if self._client is not None:
             self._client.close()
             self._client = None
 
 
-# modules a case needs, imported by the parent before it forks its workers (they then start with them)
-WARM_MODULES = ("harness.loop", "harness.loop.mujoco_loop", "harness.loop.analytic_loop",
-                "harness.loop.metrics", "harness.plant")
-
-
-def start_method() -> str:
-    """How pool workers start: "fork" on Linux when this process runs no other Python thread (the
-    workers inherit the imported harness, numpy and MuJoCo: no interpreter start-up, no imports, an
-    estimated 0.8 s less per worker on the reference machine, not measured apart); else "spawn" (fresh
-    interpreters: safe beside threads, and unlike "forkserver" they see the current environment)."""
-    if sys.platform.startswith("linux") and threading.active_count() == 1:
-        return "fork"
-    return "spawn"
-
-
-def _process_pool(workers: int) -> cf.ProcessPoolExecutor:
-    method = start_method()
-    if method == "fork":
-        for name in WARM_MODULES:
-            importlib.import_module(name)
-        sys.stdout.flush()  # a forked worker flushes its copy of unwritten output when it ends
-        sys.stderr.flush()
-    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method),
-                                  initializer=_worker_init)
-
-
-def _stop_pool(ex: cf.ProcessPoolExecutor, cancel: bool) -> None:
-    if not cancel:
-        ex.shutdown(wait=True)
-        return
-    if hasattr(ex, "terminate_workers"):  # Python >= 3.14
-        ex.terminate_workers()
-        return
-    procs = list((getattr(ex, "_processes", None) or {}).values())
-    ex.shutdown(wait=False, cancel_futures=True)
-    for p in procs:  # running cases are lost (they re-run on resume); don't wait for them
-        if p.is_alive():
-            p.terminate()
-    for p in procs:
-        p.join(timeout=10)
-
-
-def _stop_threads(ex: cf.ThreadPoolExecutor, cancel: bool) -> None:
-    """Shut a thread pool down; cancel: the pending cases are dropped and the running ones stop at their
-    next chunk of steps (`harness.loop.common.STOP`; they come back "interrupted" and re-run on resume).
-    A thread cannot be killed: this waits for them (a compiled chunk lasts about 0.25 s, 250 steps of the
-    Python-stepped loop about 0.05 s on the Cosserat rod)."""
-    from harness.loop.common import STOP
-
-    if not cancel:
-        ex.shutdown(wait=True)
-        return
-    STOP.set()
-    try:
-        ex.shutdown(wait=True, cancel_futures=True)
-    finally:
-        STOP.clear()
-
-
-def _payload(case: Case, metrics: Sequence[str], record: bool, time_limit: float | None = None) -> dict:
-    return {"case_id": case.case_id, "scenario": case.scenario, "metrics": list(metrics), "record": record,
-            "time_limit": time_limit}
-
-
-HARD_LIMIT_GRACE = 10.0  # s past the per-case time limit before the parent stops a worker that blocks
-
-
-def _timeout_result(limit: float) -> dict:
-    return {"status": "error", "traceback": "", "message":
-            f"the case exceeded the time limit of {limit:g} s (--case-timeout) and did not return; its "
-            f"worker was stopped {HARD_LIMIT_GRACE:g} s later"}
-
-
 def run_cases(runner: Runner, case_fn: Callable, cases: Sequence[Case], metrics: Sequence[str],
-               record: bool, on_result: Callable[[Case, dict], None],
-               time_limit: float | None = None) -> None:
-    """Run cases through the runner, calling on_result(case, result) in the parent as each finishes.
-    An exception raised by case_fn counts as the case's result (status "error"); a dead process pool
-    re-runs the cases that were in flight one by one to find the one that kills its worker.
+              record: bool, on_result: Callable[[Case, dict], None], time_limit: float | None = None) -> None:
+    """Run cases through the runner, calling on_result(case, result) in the parent as each finishes.  An
+    exception of case_fn is the case's result (status "error"); a dead process pool re-runs the cases that
+    were in flight one by one to find the one that kills its worker.  time_limit: seconds per case; on the
+    process pool a case still running HARD_LIMIT_GRACE s past it (blocked inside a step) gets an error
+    row, the workers are stopped and the other cases in flight run again."""
+    def payload(case: Case) -> dict:
+        return {"case_id": case.case_id, "scenario": case.scenario, "metrics": list(metrics),
+                "record": record, "time_limit": time_limit}
 
-    time_limit: seconds per case.  The worker stops a case over it at its next chunk of steps; on the
-    process pool, a case still running HARD_LIMIT_GRACE s later (blocked inside a step) gets an error row,
-    the pool's workers are stopped and the other cases in flight run again."""
     queue = deque(cases)
     inflight: dict[cf.Future, Case] = {}
     started: dict[cf.Future, float] = {}
@@ -341,7 +294,7 @@ def run_cases(runner: Runner, case_fn: Callable, cases: Sequence[Case], metrics:
             while queue and len(inflight) < runner.window:
                 case = queue.popleft()
                 try:
-                    fut = ex.submit(_call, case_fn, _payload(case, metrics, record, time_limit))
+                    fut = ex.submit(_call, case_fn, payload(case))
                 except cf.BrokenExecutor:  # a worker died since the last wait: its futures say which
                     queue.appendleft(case)
                     break
@@ -352,19 +305,16 @@ def run_cases(runner: Runner, case_fn: Callable, cases: Sequence[Case], metrics:
                 continue
             wait = None if hard is None else max(0.1, min(started.values()) + hard - time.monotonic())
             done, _ = cf.wait(inflight, timeout=wait, return_when=cf.FIRST_COMPLETED)
-            if not done and hard is not None:  # a case blocks past its limit: stop the pool
-                now = time.monotonic()
-                late = [f for f in inflight if now - started[f] >= hard]
-                if not late:  # woke up a little early
-                    continue
-                runner.close(cancel=True)
-                for fut in list(inflight):
-                    case = inflight.pop(fut)
-                    if fut in late:
-                        on_result(case, _timeout_result(time_limit))
-                    else:
-                        queue.appendleft(case)  # innocent: runs again in the fresh pool
-                started.clear()
+            if not done and hard is not None:  # a case blocks past its limit (or: woke up a little early)
+                late = [f for f in inflight if time.monotonic() - started[f] >= hard]
+                if late:
+                    runner.close(cancel=True)
+                    for fut in list(inflight):
+                        if fut in late:
+                            on_result(inflight.pop(fut), _timeout_result(time_limit))
+                        else:  # innocent: runs again in the fresh pool
+                            queue.appendleft(inflight.pop(fut))
+                    started.clear()
                 continue
             if any(not f.cancelled() and isinstance(f.exception(), cf.BrokenExecutor) for f in done):
                 cf.wait(inflight)  # a broken pool fails every future at once
@@ -390,21 +340,16 @@ def run_cases(runner: Runner, case_fn: Callable, cases: Sequence[Case], metrics:
                 log.warning("a worker process died; re-running %d case(s) one at a time", len(suspects))
                 runner.close(cancel=True)
                 for case in suspects:
-                    on_result(case, _isolated(case_fn, _payload(case, metrics, record, time_limit),
-                                              hard))
+                    on_result(case, _isolated(case_fn, payload(case), hard))
     finally:
         for fut in inflight:
             fut.cancel()
 
 
-def _probe() -> int:
-    return os.getpid()
-
-
 def _isolated(case_fn: Callable, payload: dict, hard: float | None = None) -> dict:
-    """Run one case alone in a fresh 1-process pool whose worker has first run a no-op, so that a
-    dead worker is this case's doing (else: SweepError, e.g. workers that cannot start).  hard: seconds
-    after which a case that has not returned is an error row (its worker is stopped)."""
+    """Run one case alone in a fresh 1-process pool whose worker has first run a no-op, so that a dead
+    worker is this case's doing (else SweepError: workers that cannot start).  hard: seconds after which a
+    case that has not returned is an error row (its worker is stopped)."""
     ex = _process_pool(1)
     try:
         try:
@@ -417,9 +362,7 @@ def _isolated(case_fn: Callable, payload: dict, hard: float | None = None) -> di
     except cf.TimeoutError:
         return _timeout_result(payload["time_limit"])
     except cf.BrokenExecutor:
-        return {"status": "error", "traceback": "", "message":
-                "the worker process died while running this case (segfault, abort or out of memory)"}
+        return _error_result(message="the worker process died while running this case (segfault, abort or "
+                             "out of memory)")
     finally:
-        _stop_pool(ex, cancel=True)
-
-
+        _stop(ex, cancel=True)

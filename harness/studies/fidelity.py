@@ -1,42 +1,22 @@
-"""Fidelity of the MuJoCo plant against the analytic models (controllers.master / controllers.slave).
+"""Fidelity of the MuJoCo plant against the analytic models (`teleop fidelity`).
 
-Slave: at seeded random in-range q2 (d in [L0, max_extension L0], |k d| <= max_bend) the discretized
-Octarm is put on the constant-curvature manifold (qpos_chain = joints_from_q2(q2)) and compared with the
-analytic model through A = d qpos_chain / d q2:
-
-* tip position: ``octarm_tip_site`` (mj_kinematics) vs ``slave.tip_position``;
-* tip Jacobian: ``mj_jacSite`` (x and z rows, chain columns) times A vs ``slave.jacobian``;
-* inertia: A^T M_chain A vs ``slave.mass_matrix`` (M from ``mj_fullM``, chain block).  The joint
-  armature (a deliberate regularizer) is subtracted for the discretization error ("mass") and its own
-  contribution A^T diag(armature) A is reported separately ("armature");
-* gravity: A^T qfrc_bias_chain (zero velocity) vs ``slave.gravity_force`` (= dV_gravity/dq2);
-* elasticity: -A^T (qfrc_spring_chain + elastic correction) vs ``slave.elastic_force`` (= dV_el/dq2).
-
-Errors are made dimensionless with the coordinate scales s = [L0_1..3, max_bend / L0_1..3] (so
-q2 / s is O(1)): J s, diag(s) M diag(s), diag(s) f; matrix errors are spectral norms, vector errors
-2-norms, each relative to the norm of the analytic value; the table holds the maximum over samples.
-The observed order between two resolutions is log(err_N / err_N') / log(N' / N).
-
-Master: MuJoCo inertia, bias (gravity at rest, plus Coriolis with velocity), tip site and site
-Jacobian vs ``controllers.master`` (must agree to ~1e-12).
-
-Constant curvature enforced or not (``cc_study``): the same chain with and without the equality
-constraints (``plant.enforce_cc``), servo actuation.  At seeded random bent q2 the servos hold the
-commanded shape under gravity with the analytic static feed-forward (gravity + elastic T2 mapped by
-virtual work, as the harness does) and the elastic correction, for ``settle_steps`` physics steps;
-then the chain's departure from constant curvature is measured: the tip site against the tip of the
-same discrete chain put on the CC manifold at the sensed q2 (so the discretization error of the
-table above cancels), and the largest hinge angle's departure from its section's CC value.  Also:
-mj_step cost (compiled replay of the held commands) and whether the paper scenario's closed loop
-runs (``loop_duration`` s).  A real continuum arm is not exactly CC; the free chain shows how far
-gravity alone bends it away, the constrained one how tightly the soft equalities hold.
+Slave: at seeded random in-range q2 the chain is put on the constant-curvature (CC) manifold and compared
+with `controllers.slave` through A = d qpos_chain / d q2: the tip site vs `tip_position`; mj_jacSite
+(x, z rows) A vs `jacobian`; A^T M_chain A vs `mass_matrix` with the joint armature removed ("mass") and
+the armature's own share A^T diag(armature) A ("armature"); A^T qfrc_bias at rest vs `gravity_force`;
+-A^T (qfrc_spring + elastic correction) vs `elastic_force`.  Errors are relative, in the coordinate
+scales s = [L0, max_bend / L0] (spectral norms of matrices, 2-norms of vectors; the tip: |dx| / sum(L0)),
+maximised over the samples; observed order between resolutions N < N': log(e_N / e_N') / log(N' / N).
+Master: MuJoCo inertia, bias, tip and Jacobian vs `controllers.master` (absolute; exact to rounding).
+CC enforced or not (`cc_study`): the servo chain with and without the CC equality constraints holding
+seeded bent q2 under gravity (static feed-forward + elastic correction), its departure from the CC chain
+at the sensed q2, the mj_step cost and the paper scenario's closed loop on it.
 """
 
 from __future__ import annotations
 
-import csv
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import mujoco
@@ -46,11 +26,10 @@ from controllers import master as master_model
 from controllers import slave as slave_model
 from controllers.params import MasterParams, SlaveParams
 from harness.config.scenario import PlantConfig
-from harness.config.textio import write_atomic
 from harness.plant.mujoco_model import ChainMap, build_model
+from harness.studies.figures import md_table, printer, pyplot, save, save_figure, save_rows
 
 ROUNDING_LEVEL = 1e-12  # relative errors below this are rounding (no convergence order is shown)
-QUANTITIES = ("tip", "jacobian", "mass", "gravity", "elastic", "armature")
 QUANTITY_TEXT = {
     "tip": "tip position |dx| / sum(L0)",
     "jacobian": "tip Jacobian (scaled, spectral)",
@@ -59,6 +38,7 @@ QUANTITY_TEXT = {
     "elastic": "elastic force (scaled, with correction)",
     "armature": "armature share of M2 (modelled mismatch)",
 }
+QUANTITIES = tuple(QUANTITY_TEXT)
 
 
 def sample_q2(slave: SlaveParams, n: int, seed: int = 0) -> np.ndarray:
@@ -71,20 +51,19 @@ def sample_q2(slave: SlaveParams, n: int, seed: int = 0) -> np.ndarray:
 
 
 def q2_scales(slave: SlaveParams) -> np.ndarray:
-    """Coordinate scales s (6,) = [L0 (m), max_bend / L0 (1/m)] used to make errors dimensionless."""
+    """Coordinate scales s (6,) = [L0 (m), max_bend / L0 (1/m)] making the errors dimensionless."""
     L0 = np.asarray(slave.rest_lengths)
     return np.concatenate([L0, slave.max_bend / L0])
 
 
 def _rel(err: np.ndarray, ref: np.ndarray) -> float:
-    if err.ndim == 2:
-        return float(np.linalg.norm(err, 2) / np.linalg.norm(ref, 2))
-    return float(np.linalg.norm(err) / np.linalg.norm(ref))
+    order = 2 if err.ndim == 2 else None
+    return float(np.linalg.norm(err, order) / np.linalg.norm(ref, order))
 
 
 def slave_errors(m: mujoco.MjModel, cm: ChainMap, slave: SlaveParams, q2: np.ndarray,
                  d: mujoco.MjData | None = None) -> dict[str, float]:
-    """Relative errors (see module docstring) of the MuJoCo chain at one q2 (6,) on the CC manifold."""
+    """Relative errors (module docstring) of the MuJoCo chain at one q2 (6,) on the CC manifold."""
     d = mujoco.MjData(m) if d is None else d
     d.qpos[:] = m.qpos0
     d.qvel[:] = 0.0
@@ -92,71 +71,56 @@ def slave_errors(m: mujoco.MjModel, cm: ChainMap, slave: SlaveParams, q2: np.nda
     mujoco.mj_forward(m, d)
     A = cm.jacobian(q2)
     s = q2_scales(slave)
+    S = np.outer(s, s)
     idx = np.asarray(cm.chain_dof_adr)
-
-    tip = cm.octarm_tip(m, d)
-    tip_ref = slave_model.tip_position(slave, q2)
-    out = {"tip": float(np.linalg.norm(tip - tip_ref) / np.sum(slave.rest_lengths))}
-
     jacp = np.zeros((3, m.nv))
     mujoco.mj_jacSite(m, d, jacp, None, cm.tip_site_id)
-    J = jacp[[0, 2]][:, idx] @ A
-    J_ref = slave_model.jacobian(slave, q2)
-    out["jacobian"] = _rel((J - J_ref) * s, J_ref * s)
-
     M = np.zeros((m.nv, m.nv))
     mujoco.mj_fullM(m, d, M)
-    Mc = M[np.ix_(idx, idx)]
     arm = np.diag(np.asarray(m.dof_armature)[idx])
-    M2 = A.T @ (Mc - arm) @ A
-    M2_arm = A.T @ arm @ A
     M_ref = slave_model.mass_matrix(slave, q2)
-    S = np.outer(s, s)
-    out["mass"] = _rel((M2 - M_ref) * S, M_ref * S)
-    out["armature"] = _rel(M2_arm * S, M_ref * S)
-
-    G = A.T @ d.qfrc_bias[idx]
-    G_ref = slave_model.gravity_force(slave, q2)
-    out["gravity"] = _rel((G - G_ref) * s, G_ref * s)
-
-    q = cm.chain_qpos(d)
-    f_el = d.qfrc_spring[idx] + cm.elastic_correction(q)
-    E = -(A.T @ f_el)
-    E_ref = slave_model.elastic_force(slave, q2)
-    out["elastic"] = _rel((E - E_ref) * s, E_ref * s)
+    f_el = d.qfrc_spring[idx] + cm.elastic_correction(cm.chain_qpos(d))
+    pairs = {  # quantity: (MuJoCo through A, analytic, scale)
+        "jacobian": (jacp[[0, 2]][:, idx] @ A, slave_model.jacobian(slave, q2), s),
+        "mass": (A.T @ (M[np.ix_(idx, idx)] - arm) @ A, M_ref, S),
+        "gravity": (A.T @ d.qfrc_bias[idx], slave_model.gravity_force(slave, q2), s),
+        "elastic": (-(A.T @ f_el), slave_model.elastic_force(slave, q2), s),
+    }
+    tip_err = np.linalg.norm(cm.octarm_tip(m, d) - slave_model.tip_position(slave, q2))
+    out = {"tip": float(tip_err / np.sum(slave.rest_lengths)), "armature": _rel(A.T @ arm @ A * S, M_ref * S)}
+    out.update({q: _rel((x - ref) * sc, ref * sc) for q, (x, ref, sc) in pairs.items()})
     return out
 
 
 def master_errors(m: mujoco.MjModel, cm: ChainMap, master: MasterParams, q1, dq1=(0.0, 0.0),
                   d: mujoco.MjData | None = None) -> dict[str, float]:
-    """Absolute errors of the MuJoCo master vs controllers.master at (q1, dq1):
-    tip (m), jacobian, mass (kg m^2), gravity (bias at rest, N m), bias (with velocity, friction
-    excluded, N m)."""
+    """Absolute errors of the MuJoCo master vs controllers.master at (q1, dq1): tip (m), jacobian, mass
+    (kg m^2), gravity (bias at rest, N m), bias (with velocity, friction excluded, N m)."""
     d = mujoco.MjData(m) if d is None else d
     q1, dq1 = np.asarray(q1, float), np.asarray(dq1, float)
-    qa, da = np.asarray(cm.master_qpos_adr), np.asarray(cm.master_dof_adr)
+    da = np.asarray(cm.master_dof_adr)
     d.qpos[:] = m.qpos0
     d.qvel[:] = 0.0
-    d.qpos[qa] = q1
+    d.qpos[np.asarray(cm.master_qpos_adr)] = q1
     mujoco.mj_forward(m, d)
-    out = {"tip": float(np.abs(cm.master_tip(m, d) - master_model.fk(master, q1)).max())}
     jacp = np.zeros((3, m.nv))
     mujoco.mj_jacSite(m, d, jacp, None, cm.master_site_id)
-    out["jacobian"] = float(np.abs(jacp[[0, 2]][:, da] - master_model.jacobian(master, q1)).max())
     M = np.zeros((m.nv, m.nv))
     mujoco.mj_fullM(m, d, M)
-    out["mass"] = float(np.abs(M[np.ix_(da, da)] - master_model.mass_matrix(master, q1)).max())
-    out["gravity"] = float(np.abs(d.qfrc_bias[da] - master_model.gravity_force(master, q1)).max())
+    out = {"tip": cm.master_tip(m, d) - master_model.fk(master, q1),
+           "jacobian": jacp[[0, 2]][:, da] - master_model.jacobian(master, q1),
+           "mass": M[np.ix_(da, da)] - master_model.mass_matrix(master, q1),
+           "gravity": d.qfrc_bias[da] - master_model.gravity_force(master, q1)}
     d.qvel[da] = dq1
     mujoco.mj_forward(m, d)
     friction = np.asarray(master.damping) * dq1
-    out["bias"] = float(np.abs(d.qfrc_bias[da] - (master_model.nle(master, q1, dq1) - friction)).max())
-    return out
+    out["bias"] = d.qfrc_bias[da] - (master_model.nle(master, q1, dq1) - friction)
+    return {k: float(np.abs(v).max()) for k, v in out.items()}
 
 
 @dataclass
 class FidelityTable:
-    """Result of ``fidelity_study``: per N the maximum relative error of each quantity."""
+    """Result of `fidelity_study`: per N the maximum relative error of each quantity."""
 
     Ns: tuple[int, ...]
     errors: dict[str, np.ndarray]  # quantity -> (len(Ns),)
@@ -177,31 +141,26 @@ class FidelityTable:
         return out
 
     def to_markdown(self) -> str:
-        head = "| N | " + " | ".join(f"{q} | order" for q in QUANTITIES) + " |"
-        sep = "|---:|" + "---:|---:|" * len(QUANTITIES)
-        lines = [head, sep]
+        cells = []
         for r in self.rows():
-            cells = [str(r["N"])]
+            cells.append([str(r["N"])])
             for q in QUANTITIES:
-                o = r[f"{q}_order"]
-                # an order between two values at rounding level (the elastic force is exact) means nothing
-                exact = r[q] < ROUNDING_LEVEL
-                cells += [f"{r[q]:.3e}", "" if np.isnan(o) else ("exact" if exact else f"{o:.2f}")]
-            lines.append("| " + " | ".join(cells) + " |")
-        lines.append("")
-        lines.append(f"max over {self.n_samples} random in-range q2 (seed {self.seed}); " + "; ".join(
-            f"{q}: {QUANTITY_TEXT[q]}" for q in QUANTITIES))
-        lines.append("master vs analytic (max abs): "
-                     + ", ".join(f"{k} {v:.1e}" for k, v in self.master.items()))
+                o = r[f"{q}_order"]  # between two values at rounding level (elastic force): no order
+                order = "" if np.isnan(o) else ("exact" if r[q] < ROUNDING_LEVEL else f"{o:.2f}")
+                cells[-1] += [f"{r[q]:.3e}", order]
+        head = ["N", *(f"{q} | order" for q in QUANTITIES)]
+        lines = md_table(head, cells, ["---:"] * (1 + 2 * len(QUANTITIES)))
+        lines += ["", f"max over {self.n_samples} random in-range q2 (seed {self.seed}); "
+                  + "; ".join(f"{q}: {QUANTITY_TEXT[q]}" for q in QUANTITIES),
+                  "master vs analytic (max abs): "
+                  + ", ".join(f"{k} {v:.1e}" for k, v in self.master.items())]
         return "\n".join(lines)
 
     def write_csv(self, path) -> Path:
-        return write_rows_csv(self.rows(), path)
+        return save_rows(path, self.rows())
 
     def write_markdown(self, path) -> Path:
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        return write_atomic(path, self.to_markdown() + "\n")
+        return save(path, self.to_markdown() + "\n")
 
 
 def observed_orders(Ns, errs) -> np.ndarray:
@@ -215,10 +174,8 @@ def observed_orders(Ns, errs) -> np.ndarray:
 def fidelity_study(Ns=(4, 8, 16, 32), n_samples: int = 20, seed: int = 0,
                    master: MasterParams | None = None, slave: SlaveParams | None = None,
                    plant: PlantConfig | None = None) -> FidelityTable:
-    """Compare MuJoCo models with N segments per section against the analytic models (see module doc).
-
-    plant: template config (actuation, armature_fraction, ...); its ``segments`` is replaced by each N.
-    """
+    """MuJoCo models with N segments per section against the analytic models (module docstring).
+    plant: template config (actuation, armature_fraction, ...); its `segments` is replaced by each N."""
     master = MasterParams() if master is None else master
     slave = SlaveParams() if slave is None else slave
     plant = PlantConfig() if plant is None else plant
@@ -228,7 +185,7 @@ def fidelity_study(Ns=(4, 8, 16, 32), n_samples: int = 20, seed: int = 0,
     master_err: dict[str, float] = {}
     rng = np.random.default_rng(seed + 1)
     for k, N in enumerate(Ns):
-        m, cm = build_model(master, slave, _with_segments(plant, N))
+        m, cm = build_model(master, slave, replace(plant, segments=N))
         d = mujoco.MjData(m)
         for q2 in q2s:
             e = slave_errors(m, cm, slave, q2, d)
@@ -246,54 +203,35 @@ def fidelity_study(Ns=(4, 8, 16, 32), n_samples: int = 20, seed: int = 0,
                                           "armature_fraction": plant.armature_fraction})
 
 
-def _with_segments(plant: PlantConfig, N: int) -> PlantConfig:
-    from dataclasses import replace
-
-    return replace(plant, segments=int(N))
-
-
 def plot_fidelity(table: FidelityTable, path) -> Path:
-    """Log-log plot of the relative errors vs N with an N^-2 guide; saved to ``path`` (png/pdf/svg)."""
-    import matplotlib
+    """Log-log plot of the relative errors vs N with N^-1 and N^-2 guides, saved to `path` (png/pdf/svg)."""
     import matplotlib.ticker
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     Ns = np.asarray(table.Ns, float)
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
     for q in QUANTITIES:
-        e = table.errors[q]
-        if np.all(e > 0):
-            ax.loglog(Ns, e, "o-", label=QUANTITY_TEXT[q])
+        if np.all(table.errors[q] > 0):
+            ax.loglog(Ns, table.errors[q], "o-", label=QUANTITY_TEXT[q])
     ref = table.errors["mass"][0] if table.errors["mass"][0] > 0 else 1e-2
     ax.loglog(Ns, ref * (Ns / Ns[0]) ** -2, "k--", lw=0.8, label="$N^{-2}$")
     ax.loglog(Ns, ref * (Ns / Ns[0]) ** -1, "k:", lw=0.8, label="$N^{-1}$")
     ax.set_xticks(Ns)
     ax.set_xticklabels([str(int(n)) for n in Ns])
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-    ax.set_xlabel("segments per section N")
-    ax.set_ylabel("max relative error")
-    ax.set_title("MuJoCo Octarm vs analytic CC model")
+    ax.set(xlabel="segments per section N", ylabel="max relative error",
+           title="MuJoCo Octarm vs analytic CC model")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        return write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=120, format=path.suffix[1:] or "png"))
-    finally:
-        plt.close(fig)
-
-
-CC_COLUMNS = ("N", "enforce_cc", "us_per_step", "tip_dev_mm", "hinge_dev_mrad", "closed_loop")
+    return save_figure(fig, path, dpi=120)
 
 
 def _held_bend(m: mujoco.MjModel, cm: ChainMap, slave: SlaveParams, q2: np.ndarray,
                settle_steps: int) -> tuple[float, float, np.ndarray]:
-    """Servos hold q2 under gravity (static feed-forward + elastic correction every step): returns
-    (tip departure from the CC chain at the sensed q2 (m), largest hinge departure (rad), the command
-    log (settle_steps, nu + nv) of constant held commands for timing)."""
+    """Servos hold q2 under gravity (static feed-forward + elastic correction every step): (tip departure
+    from the CC chain at the sensed q2 (m), largest hinge departure (rad); nan if the hold went unstable)
+    and the held commands (settle_steps, nu + nv) for timing."""
     d = mujoco.MjData(m)
     cm.set_q2(d, q2)
     d.ctrl[np.asarray(cm.chain_actuator_ids)] = cm.joints_from_q2(q2)
@@ -306,27 +244,23 @@ def _held_bend(m: mujoco.MjModel, cm: ChainMap, slave: SlaveParams, q2: np.ndarr
     mujoco.mj_kinematics(m, d)
     q = cm.chain_qpos(d)
     q2_s = cm.q2_from_joints(q)
-    tip = cm.octarm_tip(m, d)
+    if not (np.all(np.isfinite(q)) and warning_count(d) == 0):
+        return float("nan"), float("nan"), log
     d_cc = mujoco.MjData(m)
     cm.set_q2(d_cc, q2_s)
     mujoco.mj_kinematics(m, d_cc)
-    hinge = np.asarray(cm.is_hinge) == 1
-    resid = (q - cm.joints_from_q2(q2_s))[hinge]
-    if not (np.all(np.isfinite(q)) and warning_count(d) == 0):
-        return float("nan"), float("nan"), log
-    return float(np.linalg.norm(tip - cm.octarm_tip(m, d_cc))), float(np.abs(resid).max()), log
+    resid = (q - cm.joints_from_q2(q2_s))[np.asarray(cm.is_hinge) == 1]
+    tip_dev = np.linalg.norm(cm.octarm_tip(m, d) - cm.octarm_tip(m, d_cc))
+    return float(tip_dev), float(np.abs(resid).max()), log
 
 
 def cc_study(Ns=(4, 8, 16, 32), n_samples: int = 4, seed: int = 0, settle_steps: int = 1500,
              loop_duration: float = 2.0, master: MasterParams | None = None, slave: SlaveParams | None = None,
              plant: PlantConfig | None = None) -> list[dict]:
-    """Constrained vs free chain (see module docstring), servo actuation.  Rows (one per N and
-    enforce_cc): N, enforce_cc, us_per_step (best of 3 compiled replays of the held commands),
-    tip_dev_mm and hinge_dev_mrad (max over n_samples bent q2; nan if the hold went unstable),
-    closed_loop (status of the paper scenario on that plant for loop_duration s, with the time if it
-    diverged)."""
-    from dataclasses import replace
-
+    """Constrained vs free chain (module docstring), servo actuation.  Rows (one per N and enforce_cc):
+    N, enforce_cc, us_per_step (best of 3 compiled replays of the held commands), tip_dev_mm and
+    hinge_dev_mrad (max over n_samples bent q2; nan if a hold went unstable), closed_loop (status of the
+    paper scenario on that plant for loop_duration s, with the time if it diverged)."""
     from harness.config.scenario import Scenario
     from harness.loop.fast import K
     from harness.loop.mujoco_loop import simulate_mujoco
@@ -341,13 +275,11 @@ def cc_study(Ns=(4, 8, 16, 32), n_samples: int = 4, seed: int = 0, settle_steps:
         for cc in (True, False):
             p = replace(plant, segments=int(N), enforce_cc=cc, actuation="servo")
             m, cm = build_model(master, slave, p)
-            tip_dev = hinge_dev = 0.0
-            log = None
-            for q2 in q2s:
-                t, h, log = _held_bend(m, cm, slave, q2, settle_steps)
-                tip_dev, hinge_dev = max(tip_dev, t), max(hinge_dev, h)  # nan propagates
-                if not np.isfinite(t):
-                    tip_dev = hinge_dev = float("nan")
+            held = [_held_bend(m, cm, slave, q2, settle_steps) for q2 in q2s]
+            tip_dev, hinge_dev = (max(h[i] for h in held) for i in (0, 1))
+            if not all(np.isfinite(h[0]) for h in held):
+                tip_dev = hinge_dev = float("nan")
+            log = held[-1][2]
             best = np.inf
             for _ in range(3):
                 d = mujoco.MjData(m)
@@ -363,84 +295,57 @@ def cc_study(Ns=(4, 8, 16, 32), n_samples: int = 4, seed: int = 0, settle_steps:
 
 
 def cc_markdown(rows: list[dict], n_samples: int, settle_steps: int, loop_duration: float) -> str:
-    lines = ["| N | CC enforced | mj_step (us) | tip off the CC shape (mm) | hinge off CC (mrad) | "
-             f"closed loop, paper scenario {loop_duration:g} s |", "|---:|:---:|---:|---:|---:|---|"]
-    for r in rows:
-        lines.append(f"| {r['N']} | {'yes' if r['enforce_cc'] else 'no'} | {r['us_per_step']:.1f} | "
-                     f"{r['tip_dev_mm']:.3f} | {r['hinge_dev_mrad']:.2f} | {r['closed_loop']} |")
-    lines.append("")
-    lines.append(f"servos holding {n_samples} random bent q2 under gravity for {settle_steps} steps "
-                 "(static feed-forward + elastic correction); max over the samples; mj_step = compiled "
-                 "replay of the held commands, best of 3.")
-    return "\n".join(lines)
-
-
-def write_rows_csv(rows: list[dict], path) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-
-    def write(tmp: Path) -> None:
-        with tmp.open("w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(rows)
-
-    return write_atomic(path, write)
-
-
-def main_fidelity(segments, out, progress: bool = True, samples: int = 50, seed: int = 0,
-                  cc_samples: int = 4) -> int:
-    """`teleop fidelity`: the discretization table (fidelity.md/.csv/.png) and the constant-curvature
-    study (fidelity_cc.md/.csv) for the given segment counts, printed and written into `out`."""
-    import sys
-
-    out = Path(out)
-    say = (lambda msg: print(msg, file=sys.stderr, flush=True)) if progress else (lambda msg: None)
-    say(f"discretization errors at {samples} random q2 for N = {', '.join(map(str, segments))} ...")
-    table = fidelity_study(Ns=tuple(segments), n_samples=samples, seed=seed)
-    written = [table.write_markdown(out / "fidelity.md"), table.write_csv(out / "fidelity.csv"),
-               plot_fidelity(table, out / "fidelity.png")]
-    print(table.to_markdown())
-    say("worst-case tip error by optimization (corners + random starts + Nelder-Mead) ...")
-    worst = worst_case_markdown(segments, seed)
-    (out / "fidelity_worst.md").write_text(worst + "\n")
-    written.append(out / "fidelity_worst.md")
-    print()
-    print(worst)
-    say("constant curvature enforced vs free chain (held bends, mj_step cost, closed loop) ...")
-    settle, loop = 1500, 2.0
-    rows = cc_study(Ns=tuple(segments), n_samples=cc_samples, seed=seed, settle_steps=settle,
-                    loop_duration=loop)
-    text = cc_markdown(rows, cc_samples, settle, loop)
-    write_atomic(out / "fidelity_cc.md", text + "\n")
-    written += [out / "fidelity_cc.md", write_rows_csv(rows, out / "fidelity_cc.csv")]
-    print()
-    print(text)
-    print(f"outputs in {out}/: " + ", ".join(Path(p).name for p in written))
-    return 0
+    head = ["N", "CC enforced", "mj_step (us)", "tip off the CC shape (mm)", "hinge off CC (mrad)",
+            f"closed loop, paper scenario {loop_duration:g} s"]
+    cells = [[str(r["N"]), "yes" if r["enforce_cc"] else "no", f"{r['us_per_step']:.1f}",
+              f"{r['tip_dev_mm']:.3f}", f"{r['hinge_dev_mrad']:.2f}", r["closed_loop"]] for r in rows]
+    return "\n".join([*md_table(head, cells, ["---:", ":---:", "---:", "---:", "---:", "---"]), "",
+                      f"servos holding {n_samples} random bent q2 under gravity for {settle_steps} steps "
+                      "(static feed-forward + elastic correction); max over the samples; mj_step = compiled "
+                      "replay of the held commands, best of 3."])
 
 
 def worst_case_markdown(segments, seed: int = 0) -> str:
-    """Table of the worst-case relative tip error over the in-range q2 box, by optimization
-    (`fidelity_reference.worst_tip_error`), for each N: error, in mm of sum(L0), and the q2."""
+    """Table of the worst-case relative tip error over the in-range q2 box by optimization
+    (`fidelity_reference.worst_tip_error`) for each N: error, in mm of sum(L0), and where."""
     from harness.studies.fidelity_reference import worst_tip_error
 
     slave = SlaveParams()
     L = float(np.sum(slave.rest_lengths))
-    lines = ["| N | worst tip error (rel.) | mm | at d (m) | at k d (rad) |", "|---:|---:|---:|---|---|"]
+    cells = []
     for N in segments:
         e, q = worst_tip_error(int(N), slave, seed=seed)
-        lines.append(f"| {int(N)} | {e:.3e} | {e * L * 1e3:.2f} | {np.round(q[:3], 3).tolist()} | "
-                     f"{np.round(q[3:] * q[:3], 3).tolist()} |")
-    return "\n".join(lines)
+        cells.append([str(int(N)), f"{e:.3e}", f"{e * L * 1e3:.2f}", str(np.round(q[:3], 3).tolist()),
+                      str(np.round(q[3:] * q[:3], 3).tolist())])
+    head = ["N", "worst tip error (rel.)", "mm", "at d (m)", "at k d (rad)"]
+    return "\n".join(md_table(head, cells, ["---:", "---:", "---:", "---", "---"]))
+
+
+def main_fidelity(segments, out, progress: bool = True, samples: int = 50, seed: int = 0,
+                  cc_samples: int = 4) -> int:
+    """`teleop fidelity`: the discretization table (fidelity.md/.csv/.png), the worst case
+    (fidelity_worst.md) and the CC study (fidelity_cc.md/.csv) for the given N, printed and written."""
+    out, say, Ns = Path(out), printer(progress), tuple(segments)
+    say(f"discretization errors at {samples} random q2 for N = {', '.join(map(str, Ns))} ...")
+    table = fidelity_study(Ns=Ns, n_samples=samples, seed=seed)
+    written = [table.write_markdown(out / "fidelity.md"), table.write_csv(out / "fidelity.csv"),
+               plot_fidelity(table, out / "fidelity.png")]
+    print(table.to_markdown())
+    say("worst-case tip error by optimization (corners + random starts + Nelder-Mead) ...")
+    worst = worst_case_markdown(Ns, seed)
+    written.append(save(out / "fidelity_worst.md", worst + "\n"))
+    print(f"\n{worst}")
+    say("constant curvature enforced vs free chain (held bends, mj_step cost, closed loop) ...")
+    settle, loop = 1500, 2.0
+    rows = cc_study(Ns=Ns, n_samples=cc_samples, seed=seed, settle_steps=settle, loop_duration=loop)
+    text = cc_markdown(rows, cc_samples, settle, loop)
+    written += [save(out / "fidelity_cc.md", text + "\n"), save_rows(out / "fidelity_cc.csv", rows)]
+    print(f"\n{text}")
+    print(f"outputs in {out}/: " + ", ".join(p.name for p in written))
+    return 0
 
 
 def warning_count(d: mujoco.MjData) -> int:
     """Total number of MuJoCo warnings of every kind recorded in d."""
     return int(sum(d.warning[int(w)].number for name, w in mujoco.mjtWarning.__members__.items()
                    if name != "mjNWARNING"))
-
-
-__all__ = ["QUANTITIES", "FidelityTable", "cc_study", "fidelity_study", "main_fidelity", "master_errors",
-           "observed_orders", "plot_fidelity", "q2_scales", "sample_q2", "slave_errors",
-           "warning_count", "worst_case_markdown"]

@@ -1,38 +1,18 @@
-"""Fidelity against a continuum-mechanics reference: the analytic CC model and the MuJoCo chain (CC
-equalities on and off, N segments per section) against the Cosserat rod (``harness.plant.cosserat``),
-on the same loads (``teleop fidelity --reference cosserat``).
+"""Fidelity against a continuum-mechanics reference (`teleop fidelity --reference cosserat`): the analytic
+CC model and the MuJoCo chain (CC equalities on and off, N segments per section) against the Cosserat rod.
 
-One material for all three
---------------------------
-For the comparisons below every body is a *passive* elastic rod whose rest shape is the commanded
-q2c = [d, k] ("servo": rest strains = q2c, the section's own stiffness is the servo), with the same
-mass distribution (SlaveParams), gravity, material damping (eta_b, eta_a) and the textbook (linear)
-elastic law, energy per section 1/2 Kb (Theta - Theta_c)^2 / L0 + 1/2 Ke (d - d_c)^2, Theta = k d:
+All three are *passive* rods with rest shape the commanded q2c = [d, k], the same mass distribution,
+gravity, material damping (eta_b, eta_a) and linear elastic energy per section
+1/2 Kb (k d - k_c d_c)^2 / L0 + 1/2 Ke (d - d_c)^2: the rod as `CosseratSlave(elastic_law="linear",
+actuation="servo")`; the chain with torque actuation, zero commands and its joint springs at rest at
+joints_from_q2(q2c) (`PassiveChain`); the CC model on its 6 coordinates (`cc_gradient`, `cc_static`,
+`cc_modes`: K phi = w^2 M phi, modal damping from D = diag(eta_a / L0, eta_b L0)).
 
-* Cosserat rod: ``CosseratSlave(elastic_law="linear", actuation="servo")`` commanded q2c, no
-  feed-forward (10 elements per section, its default);
-* MuJoCo chain: torque actuation with zero commands, the joint springs' rest positions
-  (``qpos_spring``) at ``joints_from_q2(q2c)`` (hinge N Kb / L0 and slide springs give exactly the
-  energy above on uniform sections), joint damping from (eta_b, eta_a) (``chain_params.joint_damping``),
-  no elastic correction (which maps the *analytic* law, rest at (L0, 0));
-* analytic CC model: the same energy on the 6 CC coordinates, gravity ``slave.gravity_force``, tip
-  load J^T F; static equilibrium by Newton, small motion by the generalized eigenproblem
-  K phi = w^2 M phi, K the Hessian of the potential, M = ``slave.mass_matrix``, with modal damping
-  ratio phi^T D phi / (2 w phi^T M phi), D = diag(eta_a / L0, eta_b L0) (the CC rates' dissipation).
-
-(a) Statics: over a set of commanded shapes (`static_shapes`) and two loads (gravity; gravity + a
-1 N tip force along +X) each body settles with raised damping (chain: 30x; rod: eta_b 30x, eta_a 10x;
-the equilibrium does not depend on it) to a converged equilibrium: until its tip moves slower than
-`SETTLE_V_TOL` over two successive 50-ms windows (at most `settle` s; a body still moving then is
-reported as not converged); reported per model: the largest tip distance to the rod (mm), and the body's
-own departure from CC: |tip - CC tip of its sensed q2| (mm).
-(b) Small motion: the arm commanded straight at rest length, held by a 1 N tip force along +X at
-equilibrium, released with the default damping; the tip X response over ``release_time`` is fitted
-after the first 0.5 s (zero crossings -> first-mode frequency; least-squares logarithmic decrement of
-the successive peaks -> damping ratio).
-(c) Worst case of the discretization tip error (`worst_tip_error`): multi-start bounded Nelder-Mead
-over the in-range box of q2 (the 64 corners of the (d, k d) box + random starts, the best starts refined),
-instead of the maximum over random samples.
+(a) Statics (`static_comparison`): 5 commanded shapes x 2 loads (gravity; + 1 N tip force along +X), each
+body settled with raised damping until its tip moves slower than SETTLE_V_TOL over two successive
+windows.  (b) Small motion (`modal_comparison`): the straight arm released from a 1 N tip deflection;
+first-mode frequency and damping ratio by `fit_decay`.  (c) Worst-case discretization tip error over
+the in-range q2 box (`worst_tip_error`): multi-start bounded Nelder-Mead.
 """
 
 from __future__ import annotations
@@ -52,30 +32,25 @@ SETTLE_V_TOL = 1e-6  # m/s, tip speed below which a settling body is at its stat
 SETTLE_WINDOW = 0.05  # s, window over which the tip speed is measured
 SETTLE_MAX = 30.0  # s, longest settling
 TIP_LOAD = (1.0, 0.0)  # N, [FX, FZ] tip load of the static and release tests
+LOADS = {"gravity": (0.0, 0.0), "gravity + 1 N tip": TIP_LOAD}
 
 
 def static_shapes(slave: SlaveParams) -> dict[str, np.ndarray]:
-    """Named commanded q2c (6,): straight, uniform C, extended C, S, and the worst-case alternating
-    +-max_bend at full extension (the discretization's worst case)."""
+    """Named commanded q2c (6,): straight, uniform C, extended C, S, and alternating +-max_bend at full
+    extension (the discretization's worst case)."""
     L0 = np.asarray(slave.rest_lengths, float)
-    b, ext = slave.max_bend, slave.max_extension
+    b = slave.max_bend
 
     def q(d, th):
         d = np.asarray(d, float)
         return np.concatenate([d, np.asarray(th, float) / d])
 
-    return {
-        "straight": q(L0, [0.0, 0.0, 0.0]),
-        "C 0.8 rad": q(L0, [0.8, 0.8, 0.8]),
-        "C extended": q(1.25 * L0, [1.2, 1.2, 1.2]),
-        "S": q(1.1 * L0, [1.0, -1.0, 1.0]),
-        "alternating max": q(ext * L0, [b, -b, b]),
-    }
+    return {"straight": q(L0, [0.0, 0.0, 0.0]), "C 0.8 rad": q(L0, [0.8, 0.8, 0.8]),
+            "C extended": q(1.25 * L0, [1.2, 1.2, 1.2]), "S": q(1.1 * L0, [1.0, -1.0, 1.0]),
+            "alternating max": q(slave.max_extension * L0, [b, -b, b])}
 
 
-# ------------------------------------------------------------------------------------------------
-# analytic CC model with the linear law, rest at q2c
-# ------------------------------------------------------------------------------------------------
+# --- the analytic CC model with the linear law, rest at q2c ---------------------------------------------
 def cc_gradient(slave: SlaveParams, q2, q2c, F=(0.0, 0.0)) -> np.ndarray:
     """dV/dq2 (6,) of V = gravity + 1/2 Kb (k d - k_c d_c)^2 / L0 + 1/2 Ke (d - d_c)^2 - F . tip."""
     q2, q2c = np.asarray(q2, float), np.asarray(q2c, float)
@@ -98,7 +73,7 @@ def _hessian(f, q, h=1e-6) -> np.ndarray:
 
 
 def cc_static(slave: SlaveParams, q2c, F=(0.0, 0.0), tol=1e-12, iters=60) -> np.ndarray:
-    """Static equilibrium q2 (6,) of the CC model (Newton, backtracking on |grad|)."""
+    """Static equilibrium q2 (6,) of the CC model under tip force F (N; Newton, backtracking on |grad|)."""
     q = np.asarray(q2c, float).copy()
 
     def g(x):
@@ -124,19 +99,29 @@ def cc_modes(slave: SlaveParams, q2c, eta_b, eta_a) -> tuple[np.ndarray, np.ndar
     M = slave_model.mass_matrix(slave, q)
     L0 = np.asarray(slave.rest_lengths, float)
     D = np.diag(np.concatenate([np.broadcast_to(eta_a, 3) / L0, np.broadcast_to(eta_b, 3) * L0]))
-    Lc = np.linalg.cholesky(M)
-    Li = np.linalg.inv(Lc)
+    Li = np.linalg.inv(np.linalg.cholesky(M))
     w2, V = np.linalg.eigh(Li @ K @ Li.T)
     phi = Li.T @ V
     w = np.sqrt(np.maximum(w2, 0.0))
-    zeta = np.array([phi[:, i] @ D @ phi[:, i] / (2 * w[i] * (phi[:, i] @ M @ phi[:, i]))
-                     for i in range(6)])
+    zeta = np.array([phi[:, i] @ D @ phi[:, i] / (2 * w[i] * (phi[:, i] @ M @ phi[:, i])) for i in range(6)])
     return w / (2 * np.pi), zeta
 
 
-# ------------------------------------------------------------------------------------------------
-# MuJoCo chain as a passive rod with rest shape q2c
-# ------------------------------------------------------------------------------------------------
+# --- the bodies ----------------------------------------------------------------------------------------
+def _settle(advance, tip, t_max: float) -> bool:
+    """advance() by SETTLE_WINDOW until the tip speed is below SETTLE_V_TOL in two successive windows
+    (True), or t_max s have passed (False)."""
+    calm, t, x = 0, 0.0, tip()
+    while t < t_max:
+        advance()
+        t += SETTLE_WINDOW
+        x, x0 = tip(), x
+        calm = calm + 1 if np.linalg.norm(x - x0) < SETTLE_V_TOL * SETTLE_WINDOW else 0
+        if calm >= 2:
+            return True
+    return False
+
+
 class PassiveChain:
     """The MuJoCo chain (N, enforce_cc) as a passive rod: torque actuation, zero commands, joint springs
     at rest at joints_from_q2(q2c), material damping (eta_b, eta_a), optional tip force."""
@@ -145,27 +130,26 @@ class PassiveChain:
         plant = PlantConfig(segments=int(N), enforce_cc=bool(enforce_cc), actuation="torque", physics_dt=dt,
                             bending_viscosity=tuple(np.broadcast_to(eta_b, 3).astype(float)),
                             extension_viscosity=tuple(np.broadcast_to(eta_a, 3).astype(float)))
-        self.slave = slave
         self.m, self.cm = build_model(MasterParams(), slave, plant)
         self.d = mujoco.MjData(self.m)
         self.dof = np.asarray(self.cm.chain_dof_adr)
-        self.qadr = np.asarray(self.cm.chain_qpos_adr)
         self.damping0 = self.m.dof_damping.copy()
         self.tip_body = mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_BODY, "octarm_tip_body")
-        # hold the master still: it shares the world but is not part of these tests
-        self.m.dof_damping[np.asarray(self.cm.master_dof_adr)] = 1e6
+        self.m.dof_damping[np.asarray(self.cm.master_dof_adr)] = 1e6  # the master (not tested) held still
 
     def reset(self, q2c) -> None:
         mujoco.mj_resetData(self.m, self.d)
-        self.m.qpos_spring[self.qadr] = self.cm.joints_from_q2(q2c)
+        self.m.qpos_spring[np.asarray(self.cm.chain_qpos_adr)] = self.cm.joints_from_q2(q2c)
         self.cm.set_q2(self.d, q2c)
         mujoco.mj_forward(self.m, self.d)
 
     def force(self, F) -> None:
+        """Tip force F = [FX, FZ] (N) from now on."""
         self.d.xfrc_applied[self.tip_body, :] = 0.0
         self.d.xfrc_applied[self.tip_body, [0, 2]] = F
 
     def run(self, T: float, damping_scale: float = 1.0, sample=None) -> np.ndarray | None:
+        """Step T s with the chain's damping scaled; sample: return the tip (n, 2) after every step."""
         self.m.dof_damping[self.dof] = self.damping0[self.dof] * damping_scale
         n = int(round(T / self.m.opt.timestep))
         out = np.empty((n, 2)) if sample else None
@@ -177,8 +161,6 @@ class PassiveChain:
         return out
 
     def settle(self, t_max: float = SETTLE_MAX, damping_scale: float = SETTLE_DAMPING) -> bool:
-        """Run with raised damping until the tip moves slower than SETTLE_V_TOL over two successive
-        windows (True) or t_max s have passed (False)."""
         return _settle(lambda: self.run(SETTLE_WINDOW, damping_scale), self.tip, t_max)
 
     def tip(self) -> np.ndarray:
@@ -197,22 +179,8 @@ def _rod(slave: SlaveParams, eta_b, eta_a):
     return CosseratSlave(slave, actuation="servo", elastic_law="linear", material_damping=(eta_b, eta_a))
 
 
-def _settle(advance, tip, t_max: float) -> bool:
-    """advance() by SETTLE_WINDOW until the tip speed is below SETTLE_V_TOL in two successive windows."""
-    calm, t, x = 0, 0.0, tip()
-    while t < t_max:
-        advance()
-        t += SETTLE_WINDOW
-        x, x0 = tip(), x
-        calm = calm + 1 if np.linalg.norm(x - x0) < SETTLE_V_TOL * SETTLE_WINDOW else 0
-        if calm >= 2:
-            return True
-    return False
-
-
 def _rod_settled(slave, q2c, F, eta_b, eta_a, t_max=SETTLE_MAX):
-    # both viscosities raised: the axial modes must settle too (the extension part is explicit, so it is
-    # raised 10x only: the rod picks a smaller step for it)
+    # both viscosities raised so that the axial modes settle too; the explicit extension part 10x only
     r = _rod(slave, SETTLE_DAMPING * np.asarray(eta_b), 10.0 * np.asarray(eta_a))
     r.reset(q2c)
     r.external_tip_force(F)
@@ -221,21 +189,18 @@ def _rod_settled(slave, q2c, F, eta_b, eta_a, t_max=SETTLE_MAX):
     return r
 
 
-# ------------------------------------------------------------------------------------------------
-# (a) statics
-# ------------------------------------------------------------------------------------------------
+# --- (a) statics, (b) small motion ---------------------------------------------------------------------
 def static_comparison(slave: SlaveParams | None = None, Ns=(4, 8, 16, 32), eta_b=0.01, eta_a=0.3,
                       settle: float = SETTLE_MAX, say=lambda s: None) -> list[dict]:
     """Rows: model, N, enforce_cc, tip_err_mm (max over shapes x loads of |tip - rod tip|), cc_dev_mm
-    (max |tip - CC tip of the body's sensed q2|), worst (shape / load of the max tip error; "not
-    converged" is appended where a body did not settle within `settle` s)."""
+    (max |tip - CC tip of the body's sensed q2|), worst (shape / load of the max tip error, with "not
+    converged" where a body did not settle within `settle` s)."""
     slave = SlaveParams() if slave is None else slave
     shapes = static_shapes(slave)
-    loads = {"gravity": (0.0, 0.0), "gravity + 1 N tip": TIP_LOAD}
     ref = {}
     rod_dev, rod_note = 0.0, ""
     for sn, q2c in shapes.items():
-        for ln, F in loads.items():
+        for ln, F in LOADS.items():
             r = _rod_settled(slave, q2c, F, eta_b, eta_a, settle)
             if not r.converged:
                 rod_note = f"{sn} / {ln}: rod not converged"
@@ -247,7 +212,7 @@ def static_comparison(slave: SlaveParams | None = None, Ns=(4, 8, 16, 32), eta_b
              "cc_dev_mm": rod_dev * 1e3, "worst": rod_note}]
     err, worst = 0.0, ""
     for (sn, ln), tip in ref.items():
-        q = cc_static(slave, shapes[sn], loads[ln])
+        q = cc_static(slave, shapes[sn], LOADS[ln])
         e = float(np.linalg.norm(slave_model.tip_position(slave, q) - tip))
         if e > err:
             err, worst = e, f"{sn} / {ln}"
@@ -259,7 +224,7 @@ def static_comparison(slave: SlaveParams | None = None, Ns=(4, 8, 16, 32), eta_b
             err, dev, worst, note = 0.0, 0.0, "", ""
             for (sn, ln), tip in ref.items():
                 ch.reset(shapes[sn])
-                ch.force(loads[ln])
+                ch.force(LOADS[ln])
                 converged = ch.settle(settle)
                 if not ch.ok():
                     err, worst = float("nan"), f"{sn} / {ln}: diverged"
@@ -276,22 +241,23 @@ def static_comparison(slave: SlaveParams | None = None, Ns=(4, 8, 16, 32), eta_b
     return rows
 
 
-# ------------------------------------------------------------------------------------------------
-# (b) small motion
-# ------------------------------------------------------------------------------------------------
+def upward_crossings(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(indices k with y[k] < 0 <= y[k+1], the crossing times interpolated linearly)."""
+    up = np.nonzero((y[:-1] < 0) & (y[1:] >= 0))[0]
+    return up, t[up] - y[up] * (t[up + 1] - t[up]) / (y[up + 1] - y[up])
+
+
 def fit_decay(t: np.ndarray, x: np.ndarray, x_eq: float, skip: float = 0.5) -> tuple[float, float]:
-    """(frequency Hz, damping ratio) of the dominant oscillation of x(t) about x_eq after t >= skip (s;
-    the faster modes excited by the release, damped faster by the Kelvin-Voigt material, die out
-    first): frequency from the mean spacing of upward zero crossings; damping from the logarithmic
-    decrement delta = -slope of a least-squares line through log(positive peak) vs peak index,
+    """(frequency Hz, damping ratio) of the dominant oscillation of x(t) about x_eq after t >= skip (s):
+    frequency from the mean spacing of upward zero crossings; damping from the logarithmic decrement
+    delta = -slope of a least-squares line through log(positive peak) vs peak index,
     zeta = delta / sqrt(4 pi^2 + delta^2).  nan when fewer than two periods are seen."""
     y = np.asarray(x, float) - x_eq
     keep = t >= skip
     t, y = t[keep], y[keep]
-    up = np.nonzero((y[:-1] < 0) & (y[1:] >= 0))[0]
+    up, tc = upward_crossings(t, y)
     if len(up) < 3:
         return float("nan"), float("nan")
-    tc = t[up] - y[up] * (t[up + 1] - t[up]) / (y[up + 1] - y[up])
     period = (tc[-1] - tc[0]) / (len(tc) - 1)
     peaks = np.array([y[a:b].max() for a, b in zip(up[:-1], up[1:], strict=True)])
     if np.any(peaks <= 0):
@@ -306,7 +272,6 @@ def modal_comparison(slave: SlaveParams | None = None, Ns=(4, 8, 16, 32), eta_b=
     straight arm at rest length; the analytic CC row is its linearization)."""
     slave = SlaveParams() if slave is None else slave
     q2c = static_shapes(slave)["straight"]
-    rows = []
     # rod: equilibrium under the load with raised damping, copied into a rod with the default damping
     r0 = _rod_settled(slave, q2c, TIP_LOAD, eta_b, eta_a, settle)
     eq = _rod_settled(slave, q2c, (0.0, 0.0), eta_b, eta_a, settle).tip()[0]
@@ -314,19 +279,17 @@ def modal_comparison(slave: SlaveParams | None = None, Ns=(4, 8, 16, 32), eta_b=
     r.reset(q2c)
     for name in ("position_collection", "director_collection"):
         getattr(r._b, name)[:] = getattr(r0._b, name)
-    n = int(round(release_time / 1e-3))
-    k = round(1e-3 / r.dt)
+    n, k = int(round(release_time / 1e-3)), round(1e-3 / r.dt)
     x = np.empty(n)
     for i in range(n):
         r.step(q2c, k * r.dt)
         x[i] = r.tip()[0]
-    t = np.arange(1, n + 1) * 1e-3
-    f, z = fit_decay(t, x, eq)
-    rows.append({"model": "Cosserat rod (reference)", "N": 10, "enforce_cc": False, "f1_hz": f, "zeta1": z})
+    f, z = fit_decay(np.arange(1, n + 1) * 1e-3, x, eq)
     say(f"rod release: {f:.3f} Hz, zeta {z:.4f}")
     fcc, zcc = cc_modes(slave, q2c, eta_b, eta_a)
-    rows.append({"model": "analytic CC", "N": 0, "enforce_cc": True, "f1_hz": float(fcc[0]),
-                 "zeta1": float(zcc[0])})
+    rows = [{"model": "Cosserat rod (reference)", "N": 10, "enforce_cc": False, "f1_hz": f, "zeta1": z},
+            {"model": "analytic CC", "N": 0, "enforce_cc": True, "f1_hz": float(fcc[0]),
+             "zeta1": float(zcc[0])}]
     for N in Ns:
         for cc in (True, False):
             ch = PassiveChain(slave, N, cc, eta_b, eta_a)
@@ -343,16 +306,15 @@ def modal_comparison(slave: SlaveParams | None = None, Ns=(4, 8, 16, 32), eta_b=
     return rows
 
 
-# ------------------------------------------------------------------------------------------------
-# (c) worst-case discretization error by optimization
-# ------------------------------------------------------------------------------------------------
+# --- (c) worst-case discretization error by optimization ------------------------------------------------
 def nelder_mead_box(f, x0, lo, hi, scale, iters=400, tol=1e-10) -> tuple[np.ndarray, float]:
-    """Minimize f over the box [lo, hi] (points clipped into it) by Nelder-Mead from x0 with an
-    initial simplex of steps 0.1 * scale.  Returns (x, f(x))."""
-    n = len(x0)
-    clip = lambda x: np.minimum(np.maximum(x, lo), hi)  # noqa: E731
+    """Minimize f over the box [lo, hi] (points clipped into it) by Nelder-Mead from x0 with an initial
+    simplex of steps 0.1 * scale.  Returns (x, f(x))."""
+    def clip(x):
+        return np.minimum(np.maximum(x, lo), hi)
+
     S = [clip(np.asarray(x0, float))]
-    for i in range(n):
+    for i in range(len(x0)):
         e = S[0].copy()
         e[i] += 0.1 * scale[i] * (1 if S[0][i] + 0.1 * scale[i] <= hi[i] else -1)
         S.append(clip(e))
@@ -385,28 +347,25 @@ def nelder_mead_box(f, x0, lo, hi, scale, iters=400, tol=1e-10) -> tuple[np.ndar
 
 def worst_tip_error(N: int, slave: SlaveParams | None = None, n_random: int = 32, n_refine: int = 6,
                     seed: int = 0, plant: PlantConfig | None = None) -> tuple[float, np.ndarray]:
-    """Largest relative tip error |tip_MuJoCo - tip_CC| / sum(L0) over the in-range box of q2 (lengths
-    [L0, max_extension L0], bends |k d| <= max_bend), the chain on the CC manifold: the 64 corners
-    (each length and each bend at an end of its range) and n_random random points, the n_refine best
-    refined by bounded Nelder-Mead in (d, k d).  Returns (error, q2 (6,))."""
+    """Largest relative tip error |tip_MuJoCo - tip_CC| / sum(L0) over the in-range q2 box, the chain on
+    the CC manifold: the 64 corners (each length and bend at an end of its range) and n_random random
+    points, the n_refine best refined by bounded Nelder-Mead in (d, k d).  Returns (error, q2 (6,))."""
     slave = SlaveParams() if slave is None else slave
     plant = PlantConfig(actuation="torque") if plant is None else plant
     m, cm = build_model(MasterParams(), slave, replace(plant, segments=int(N)))
     d = mujoco.MjData(m)
     lo_d, hi_d = slave.length_range
-    b = slave.max_bend
-    lo = np.concatenate([lo_d, [-b] * 3])
-    hi = np.concatenate([hi_d, [b] * 3])
-
+    lo = np.concatenate([lo_d, [-slave.max_bend] * 3])
+    hi = np.concatenate([hi_d, [slave.max_bend] * 3])
     L = float(np.sum(slave.rest_lengths))
 
-    def err(x):  # x = [d, theta]; the tip part of fidelity.slave_errors, kinematics only
+    def err(x):  # x = [d, theta]: the tip part of fidelity.slave_errors, kinematics only
         q2 = np.concatenate([x[:3], x[3:] / x[:3]])
         cm.set_q2(d, q2)
         mujoco.mj_kinematics(m, d)
         return -float(np.linalg.norm(cm.octarm_tip(m, d) - slave_model.tip_position(slave, q2))) / L
 
-    starts = [np.where([(s >> j) & 1 for j in range(6)], hi, lo) for s in range(64)]  # the 64 corners
+    starts = [np.where([(s >> j) & 1 for j in range(6)], hi, lo) for s in range(64)]
     rng = np.random.default_rng(seed)
     starts += [rng.uniform(lo, hi) for _ in range(n_random)]
     vals = [err(x) for x in starts]
@@ -416,7 +375,3 @@ def worst_tip_error(N: int, slave: SlaveParams | None = None, n_random: int = 32
         if fx < best_f:
             best_x, best_f = x, fx
     return -best_f, np.concatenate([best_x[:3], best_x[3:] / best_x[:3]])
-
-
-__all__ = ["PassiveChain", "cc_gradient", "cc_modes", "cc_static", "fit_decay", "modal_comparison",
-           "nelder_mead_box", "static_comparison", "static_shapes", "worst_tip_error"]

@@ -1,28 +1,24 @@
-"""Report of the fidelity-vs-reference study (`teleop fidelity --reference cosserat`): the closed loop
-of the paper scenario on each plant, the markdown tables, the figure and the files written.  The
-comparisons themselves (statics, small motion, worst cases) are in `harness.studies.fidelity_reference`.
-"""
+"""Report of `teleop fidelity --reference cosserat`: the comparisons of `harness.studies.fidelity_reference`,
+the paper scenario's closed loop on each plant, the Markdown tables, the JSON rows and the figure."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 
 from harness.studies.fidelity_reference import modal_comparison, static_comparison
-from harness.studies.figures import save_figure
+from harness.studies.figures import md_table, printer, pyplot, run_paper, save, save_figure
+
+METRICS_MM = {"e2_rms_mm": "e2_rms", "e2_max_mm": "e2_max", "beta_min": "beta_min",
+              "range_violation_mm": "range_violation"}  # column: metric (m, shown in mm when "_mm")
 
 
-# ------------------------------------------------------------------------------------------------
-# closed loop and the report
-# ------------------------------------------------------------------------------------------------
 def closed_loop_rows(N: int = 8, duration: float = 20.0, seed: int = 0, say=lambda s: None) -> list[dict]:
-    """The paper scenario (servo) on each plant: analytic, MuJoCo chain CC on / off at N, and the
-    Cosserat rod when the harness has ``plant.kind = "cosserat"`` (else a row saying it is missing)."""
-    from harness.config.load import load_scenario
+    """The paper scenario (servo) on each plant: analytic, MuJoCo chain CC on / off at N, and the Cosserat
+    rod when the harness has `plant.kind = "cosserat"` (else a row saying it is missing)."""
     from harness.config.scenario import PLANTS
-    from harness.loop import simulate
-    from harness.loop.metrics import compute_metrics
 
     cases = [("analytic CC (RK4)", ["plant.kind=analytic"]),
              (f"MuJoCo chain N = {N}, CC on", [f"plant.segments={N}", "plant.enforce_cc=true"]),
@@ -31,19 +27,14 @@ def closed_loop_rows(N: int = 8, duration: float = 20.0, seed: int = 0, say=lamb
         cases.append(("Cosserat rod", ["plant.kind=cosserat"]))
     rows = []
     for name, sets in cases:
-        scn = load_scenario(None, [*sets, f"duration={duration}", f"seed={seed}"])
-        tr = simulate(scn)
-        m = compute_metrics(tr, scn)
+        tr, m = run_paper([*sets, f"duration={duration}", f"seed={seed}"])
         status = tr.status if tr.status == "ok" else f"{tr.status}: {tr.message}"
-        rows.append({"plant": name, "status": status,
-                     "e2_rms_mm": 1e3 * m.get("e2_rms", np.nan), "e2_max_mm": 1e3 * m.get("e2_max", np.nan),
-                     "beta_min": m.get("beta_min", np.nan),
-                     "range_violation_mm": 1e3 * m.get("range_violation", np.nan)})
+        values = {c: (1e3 if c.endswith("_mm") else 1) * m.get(k, np.nan) for c, k in METRICS_MM.items()}
+        rows.append({"plant": name, "status": status, **values})
         say(f"closed loop {name}: {rows[-1]['status']}")
     if "cosserat" not in PLANTS:
         rows.append({"plant": "Cosserat rod", "status": "not available: plant.kind = cosserat is not in this "
-                     "build", "e2_rms_mm": np.nan, "e2_max_mm": np.nan, "beta_min": np.nan,
-                     "range_violation_mm": np.nan})
+                     "build", **dict.fromkeys(METRICS_MM, np.nan)})
     return rows
 
 
@@ -51,43 +42,32 @@ def _md(rows: list[dict], cols: dict[str, str]) -> str:
     def f(v):
         if isinstance(v, bool):
             return "on" if v else "off"
-        if isinstance(v, (float, np.floating)):
-            return f"{v:.4g}"
-        return str(v)
+        return f"{v:.4g}" if isinstance(v, (float, np.floating)) else str(v)
 
-    head = "| " + " | ".join(cols.values()) + " |"
-    return "\n".join([head, "|" + "---|" * len(cols)] + ["| " + " | ".join(f(r[c]) for c in cols) + " |"
-                                                        for r in rows])
+    cells = [[f(r[c]) for c in cols] for r in rows]
+    return "\n".join(md_table(list(cols.values()), cells, ["---"] * len(cols)))
 
 
 def plot_reference(static_rows, modal_rows, path) -> Path:
     """Static tip error vs the rod and first-mode frequency vs N (CC on / off, analytic and rod lines)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (a, b) = plt.subplots(1, 2, figsize=(9.6, 3.8))
+    fig, (a, b) = pyplot().subplots(1, 2, figsize=(9.6, 3.8))
     for cc, st in ((True, "s-"), (False, "o-")):
-        rs = [r for r in static_rows if r["model"] == "MuJoCo chain" and r["enforce_cc"] == cc]
-        a.semilogx([r["N"] for r in rs], [r["tip_err_mm"] for r in rs], st, base=2,
-                   label=f"MuJoCo chain, CC {'on' if cc else 'off'}")
-        rs = [r for r in modal_rows if r["model"] == "MuJoCo chain" and r["enforce_cc"] == cc]
-        b.semilogx([r["N"] for r in rs], [r["f1_hz"] for r in rs], st, base=2,
-                   label=f"MuJoCo chain, CC {'on' if cc else 'off'}")
+        for ax, rows, key in ((a, static_rows, "tip_err_mm"), (b, modal_rows, "f1_hz")):
+            rs = [r for r in rows if r["model"] == "MuJoCo chain" and r["enforce_cc"] == cc]
+            ax.semilogx([r["N"] for r in rs], [r[key] for r in rs], st, base=2,
+                        label=f"MuJoCo chain, CC {'on' if cc else 'off'}")
     cc_static_err = next(r["tip_err_mm"] for r in static_rows if r["model"] == "analytic CC")
     a.axhline(cc_static_err, color="k", ls="--", lw=0.8, label="analytic CC")
     for r in modal_rows:
         if r["model"] != "MuJoCo chain":
             b.axhline(r["f1_hz"], ls="--" if r["model"] == "analytic CC" else ":", color="k", lw=0.8,
                       label=r["model"])
-    a.set_xlabel("segments per section N")
-    a.set_ylabel("max static tip error vs rod (mm)")
+    a.set(ylabel="max static tip error vs rod (mm)")
     a.set_title("statics (gravity, 1 N tip load)", fontsize=9)
-    b.set_xlabel("segments per section N")
-    b.set_ylabel("first bending mode (Hz)")
+    b.set(ylabel="first bending mode (Hz)")
     b.set_title("released 1 N tip deflection", fontsize=9)
     for ax in (a, b):
+        ax.set_xlabel("segments per section N")
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
     fig.tight_layout()
@@ -95,15 +75,10 @@ def plot_reference(static_rows, modal_rows, path) -> Path:
 
 
 def main_reference(segments, out, progress: bool = True, seed: int = 0, loop_duration: float = 20.0) -> int:
-    """`teleop fidelity --reference cosserat`: statics, small motion and closed loop of the analytic
-    CC model and the MuJoCo chain (CC on / off, each N) against the Cosserat rod; writes
+    """`teleop fidelity --reference cosserat`: statics, small motion and closed loop of the analytic CC
+    model and the MuJoCo chain (CC on / off, each N) against the Cosserat rod; writes
     fidelity_reference.md, fidelity_reference.json and fidelity_reference.png into `out`."""
-    import json
-    import sys
-
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    say = (lambda msg: print(msg, file=sys.stderr, flush=True)) if progress else (lambda msg: None)
+    out, say = Path(out), printer(progress)
     Ns = tuple(int(n) for n in segments)
     st = static_comparison(Ns=Ns, say=say)
     mo = modal_comparison(Ns=Ns, say=say)
@@ -118,13 +93,10 @@ def main_reference(segments, out, progress: bool = True, seed: int = 0, loop_dur
         + _md(cl, {"plant": "plant", "status": "status", "e2_rms_mm": "e2 RMS (mm)",
                    "e2_max_mm": "e2 max (mm)", "beta_min": "beta min",
                    "range_violation_mm": "range violation (mm)"})])
-    (out / "fidelity_reference.md").write_text(text + "\n")
-    (out / "fidelity_reference.json").write_text(json.dumps({"static": st, "modal": mo, "closed_loop": cl},
-                                                            indent=1, default=float))
+    save(out / "fidelity_reference.md", text + "\n")
+    save(out / "fidelity_reference.json", json.dumps({"static": st, "modal": mo, "closed_loop": cl}, indent=1,
+                                                     default=float))
     plot_reference(st, mo, out / "fidelity_reference.png")
     print(text)
     print(f"outputs in {out}/: fidelity_reference.md, fidelity_reference.json, fidelity_reference.png")
     return 0
-
-
-__all__ = ["closed_loop_rows", "main_reference", "plot_reference"]

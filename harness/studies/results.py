@@ -1,7 +1,5 @@
-"""The results folder of a sweep: the append-only `results.jsonl` (one fsynced line per case), its
-reader (torn tails ignored), the folder lock and atomic writes.
-"""
-
+"""The results folder of a sweep: the append-only `results.jsonl` (one fsynced line per case), its reader
+(a torn tail ignored) and the folder lock; nothing is read or written through a symbolic link."""
 
 from __future__ import annotations
 
@@ -19,14 +17,13 @@ log = logging.getLogger(__name__)
 RESULTS = "results.jsonl"  # the results table in a sweep's output folder
 
 
-# --- results table ----------------------------------------------------------------------------------
 def read_results(path: str | os.PathLike) -> dict[str, dict]:
-    """Rows of a results.jsonl by case id (first occurrence wins).  A last line without its newline
-    (torn by a crash) is ignored; other unreadable lines are skipped with a warning."""
+    """Rows of a results.jsonl by case id (first occurrence wins).  A last line without its newline (torn
+    by a crash) is ignored; other unreadable lines are skipped with a warning."""
     path = Path(path)
-    rows: dict[str, dict] = {}
     if not path.exists():
-        return rows
+        return {}
+    rows: dict[str, dict] = {}
     lines = path.read_bytes().split(b"\n")
     if lines[-1].strip():
         log.warning("%s: ignoring a torn last line (%d bytes)", path, len(lines[-1]))
@@ -45,8 +42,7 @@ def read_results(path: str | os.PathLike) -> dict[str, dict]:
 
 
 def refuse_link(path: Path) -> None:
-    """ConfigError (one line) if `path` is a symbolic link: a sweep writes its results into its own
-    folder only, never through a link planted there."""
+    """ConfigError (one line) if `path` is a symbolic link."""
     if path.is_symlink():
         raise ConfigError(f"{path}: is a symbolic link; a sweep does not read or write results through a "
                           "link (remove it, or choose another --out)", path=str(path))
@@ -58,22 +54,17 @@ def open_no_follow(path: Path, flags: int, mode: int = 0o644) -> int:
     try:
         return os.open(path, flags | getattr(os, "O_NOFOLLOW", 0), mode)
     except OSError as e:
-        if path.is_symlink():  # planted between the check and the open
-            refuse_link(path)
+        refuse_link(path)  # planted between the check and the open
         raise OSError(e.errno, e.strerror, str(path)) from None
 
 
 class ResultsWriter:
-    """Appends rows to results.jsonl, one fsynced line each; cuts a torn tail off first.  A symbolic
-    link at the table's name is refused (ConfigError), never followed."""
+    """Appends rows to results.jsonl, one fsynced line each, after cutting off a torn tail."""
 
     def __init__(self, path: Path):
-        fd = open_no_follow(path, os.O_RDWR | os.O_CREAT)
-        self._fh = os.fdopen(fd, "r+b")
+        self._fh = os.fdopen(open_no_follow(path, os.O_RDWR | os.O_CREAT), "r+b")
         data = self._fh.read()
-        keep = data.rfind(b"\n") + 1
-        if keep != len(data):
-            self._fh.truncate(keep)
+        self._fh.truncate(data.rfind(b"\n") + 1)
         self._fh.seek(0, os.SEEK_END)
 
     def append(self, row: dict) -> None:
@@ -86,19 +77,15 @@ class ResultsWriter:
 
 
 def make_row(case: Case, result: dict) -> dict:
-    return {
-        "case_id": case.case_id,
-        "params": case.params,
-        "status": str(result.get("status", "error")),
-        "message": str(result.get("message", "")),
-        "metrics": jsonable(result.get("metrics") or {}),
-        "wall_time": jsonable(result.get("wall_time")),
-        "traceback": str(result.get("traceback", "")),
-    }
+    """The results.jsonl row of a case's result (`executor.run_case`)."""
+    return {"case_id": case.case_id, "params": case.params, "status": str(result.get("status", "error")),
+            "message": str(result.get("message", "")), "metrics": jsonable(result.get("metrics") or {}),
+            "wall_time": jsonable(result.get("wall_time")), "traceback": str(result.get("traceback", ""))}
 
 
 class OutputLock:
-    """Exclusive lock on the output folder: two sweeps must not append to the same table."""
+    """Exclusive lock on the output folder: two sweeps must not append to the same table (no lock where
+    the system has no fcntl)."""
 
     def __init__(self, out: Path):
         self._fh = os.fdopen(open_no_follow(out / ".lock", os.O_WRONLY | os.O_CREAT), "w")
@@ -106,7 +93,7 @@ class OutputLock:
             import fcntl
 
             fcntl.flock(self._fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except ImportError:  # not POSIX: no lock
+        except ImportError:
             pass
         except OSError:
             self._fh.close()

@@ -4,26 +4,14 @@ rotary-inertia radius, and what each setting costs in rod steps per control step
 
     python -m harness.studies.rod_convergence [--out docs/rod-convergence.md] [--quick]
 
-Independent reference (`beam_fe`): the arm's three uniform sections as a planar cantilever of
-Timoshenko beam elements (exact static element stiffness with Phi = 12 EI / (GA l^2), consistent
-translational and rotary mass), 120 elements per section, clamped at s = 0; with GA -> infinity and
-rho I = 0 it is the Euler-Bernoulli cantilever, which is what the analytic CC model and the MuJoCo chain
-assume (no shear, no section rotary inertia).  The beam is checked against the closed forms of the
-uniform cantilever (f1 = 1.8751^2 / (2 pi) sqrt(EI / (rho A L^4)), tip deflection q L^4 / (8 EI) +
-q L^2 / (2 GA)) in tests/test_rod_convergence.py.  Same material as the rod
-(`harness.plant.cosserat.limits._material`: EI = Kb, EA = Ke L0, GA = shear_factor EA, rho A = m / L0,
-rho I = rho A r^2 / 4).
-
-Measurements on the rod (`CosseratSlave`, default elastic law, no gravity along the axis):
-* first mode: no gravity, no material damping, released from the beam's first mode shape (tip 1 mm),
-  frequency from the upward zero crossings of the tip X over `PERIODS` periods (sampled every 1 ms,
-  crossings interpolated linearly);
-* statics: gravity across the arm (g_X = `G_STATIC`, small enough for the linear regime), settled with
-  raised material damping until every node moves slower than `V_TOL` (a stated residual velocity, not
-  a fixed time), tip X against the beam's;
-* cost: the rod's automatic step, rod steps per 1 ms control step and the wall time of one control step
-  (fastest of 5 timings of 100 control steps);
-* closed loop: the paper scenario on the rod (`closed_loop`) with the candidate settings.
+Reference (`beam_fe`): the three sections as a clamped planar cantilever of Timoshenko elements (exact
+static element stiffness, Phi = 12 EI / (GA l^2); consistent translational and rotary mass), 120 per
+section, with the rod's material (`harness.plant.cosserat.limits._material`); GA -> infinity and rho I = 0
+give the Euler-Bernoulli (EB) cantilever the CC model and the MuJoCo chain assume.  On the rod: the first
+mode without gravity or damping, released from the beam's mode shape (tip 1 mm), from the upward zero
+crossings of the tip X over PERIODS periods; the static tip under a transverse gravity G_STATIC, settled
+until every node is slower than V_TOL; the cost (rod step, steps and wall time per 1 ms control step);
+the paper scenario's closed loop with the candidate settings.
 """
 
 from __future__ import annotations
@@ -32,12 +20,13 @@ import argparse
 import math
 import time
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
 from controllers.params import SlaveParams
 from harness.plant.cosserat.limits import DEFAULT_ROTARY_RADIUS, DEFAULT_SHEAR_FACTOR, _material
+from harness.studies.fidelity_reference import upward_crossings
+from harness.studies.figures import md_table, printer, run_paper, save
 
 FE_ELEMENTS = 120  # beam elements per section of the reference
 PERIODS = 3  # periods of the first mode measured on the rod
@@ -47,9 +36,7 @@ SETTLE_ETA = (1.0, 3.0)  # (eta_b N m^2 s, eta_a N s) while settling (the equili
 MAX_SETTLE = 30.0  # s, give up settling after this (reported)
 
 
-# ------------------------------------------------------------------------------------------------
-# independent reference: Timoshenko / Euler-Bernoulli cantilever by finite elements
-# ------------------------------------------------------------------------------------------------
+# --- independent reference: Timoshenko / Euler-Bernoulli cantilever by finite elements -----------------
 def beam_fe(slave: SlaveParams, shear_factor: float | None, rotary_radius: float,
             per_section: int = FE_ELEMENTS) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(K, M, q, s): stiffness and mass (2 nn - 2 square, dofs [w_1, theta_1, ..., w_n, theta_n] of the
@@ -85,11 +72,9 @@ def beam_first_mode(slave: SlaveParams, shear_factor: float | None, rotary_radiu
                     per_section: int = FE_ELEMENTS) -> tuple[float, np.ndarray, np.ndarray]:
     """(f1 Hz, s (nn,), w (nn,) the first mode's transverse displacement, tip normalized to 1)."""
     K, M, _, s = beam_fe(slave, shear_factor, rotary_radius, per_section)
-    Lc = np.linalg.cholesky(M)
-    Li = np.linalg.inv(Lc)
+    Li = np.linalg.inv(np.linalg.cholesky(M))
     w2, V = np.linalg.eigh(Li @ K @ Li.T)
-    phi = Li.T @ V[:, 0]
-    w = np.concatenate([[0.0], phi[0::2]])
+    w = np.concatenate([[0.0], (Li.T @ V[:, 0])[0::2]])
     return float(np.sqrt(w2[0]) / (2 * np.pi)), s, w / w[-1]
 
 
@@ -100,31 +85,30 @@ def beam_static_tip(slave: SlaveParams, shear_factor: float | None, g: float,
     return float(np.linalg.solve(K, g * q)[-2])
 
 
-# ------------------------------------------------------------------------------------------------
-# the rod
-# ------------------------------------------------------------------------------------------------
+# --- the rod -------------------------------------------------------------------------------------------
 def _rod(slave, n, shear_factor, rotary_radius, eta):
+    """The straight rod at rest and its rest q2 (6,)."""
     from harness.plant.cosserat import CosseratSlave
 
-    return CosseratSlave(slave, elements_per_section=n, shear_factor=shear_factor,
-                         rotary_radius=rotary_radius, material_damping=eta)
+    r = CosseratSlave(slave, elements_per_section=n, shear_factor=shear_factor, rotary_radius=rotary_radius,
+                      material_damping=eta)
+    q0 = np.concatenate([slave.rest_lengths, np.zeros(3)])
+    r.reset(q0)
+    return r, q0
 
 
 def rod_first_mode(slave: SlaveParams, n: int, shear_factor: float, rotary_radius: float,
                    amplitude: float = 1e-3) -> float:
     """First bending frequency (Hz) of the undamped rod without gravity, released from the reference
-    beam's first mode shape (tip `amplitude` m); see the module docstring."""
+    beam's first mode shape (tip `amplitude` m)."""
     slave = replace(slave, gravity=(0.0, 0.0))
     f_ref, s_ref, w_ref = beam_first_mode(slave, shear_factor, rotary_radius)
-    r = _rod(slave, n, shear_factor, rotary_radius, (0.0, 0.0))
-    q0 = np.concatenate([slave.rest_lengths, np.zeros(3)])
-    r.reset(q0)
+    r, q0 = _rod(slave, n, shear_factor, rotary_radius, (0.0, 0.0))
     b = r._b
     z = b.position_collection[2].copy()
     x = amplitude * np.interp(z, s_ref, w_ref)
     b.position_collection[0] = x
-    ang = np.arctan2(np.diff(x), np.diff(z))
-    for j, a in enumerate(ang):
+    for j, a in enumerate(np.arctan2(np.diff(x), np.diff(z))):
         c, sn = math.cos(a), math.sin(a)
         b.director_collection[:, :, j] = [[c, 0.0, -sn], [0.0, 1.0, 0.0], [sn, 0.0, c]]
     steps = int(math.ceil((PERIODS + 0.75) / f_ref / 1e-3))
@@ -133,9 +117,7 @@ def rod_first_mode(slave: SlaveParams, n: int, shear_factor: float, rotary_radiu
     for k in range(steps):
         r.step(q0, 1e-3)
         xs[k + 1] = r.tip()[0]
-    t = np.arange(steps + 1) * 1e-3
-    up = np.nonzero((xs[:-1] < 0) & (xs[1:] >= 0))[0]
-    tc = t[up] - xs[up] * (t[up + 1] - t[up]) / (xs[up + 1] - xs[up])
+    _, tc = upward_crossings(np.arange(steps + 1) * 1e-3, xs)
     return float((len(tc) - 1) / (tc[-1] - tc[0]))
 
 
@@ -143,13 +125,9 @@ def rod_static_tip(slave: SlaveParams, n: int, shear_factor: float, rotary_radiu
                    g: float = G_STATIC) -> tuple[float, float]:
     """(tip X (m), settle time (s)) of the rod under a transverse gravity g (m/s^2) at a converged
     equilibrium: every node slower than V_TOL (nan if not reached within MAX_SETTLE)."""
-    slave = replace(slave, gravity=(g, 0.0))
-    r = _rod(slave, n, shear_factor, rotary_radius, SETTLE_ETA)
-    q0 = np.concatenate([slave.rest_lengths, np.zeros(3)])
-    r.reset(q0)
-    chunk = 0.05
+    r, q0 = _rod(replace(slave, gravity=(g, 0.0)), n, shear_factor, rotary_radius, SETTLE_ETA)
     while r.time < MAX_SETTLE:
-        r.step(q0, round(chunk / r.dt) * r.dt)
+        r.step(q0, round(0.05 / r.dt) * r.dt)
         if float(np.abs(r._b.velocity_collection).max()) < V_TOL:
             return float(r.tip()[0]), r.time
     return float("nan"), r.time
@@ -158,9 +136,7 @@ def rod_static_tip(slave: SlaveParams, n: int, shear_factor: float, rotary_radiu
 def rod_cost(slave: SlaveParams, n: int, shear_factor: float, rotary_radius: float,
              reps: int = 5, steps: int = 100) -> tuple[float, int, float]:
     """(rod dt (s), rod steps per 1 ms control step, wall time per control step (us, fastest of reps))."""
-    r = _rod(slave, n, shear_factor, rotary_radius, None)
-    q0 = np.concatenate([slave.rest_lengths, np.zeros(3)])
-    r.reset(q0)
+    r, q0 = _rod(slave, n, shear_factor, rotary_radius, None)
     r.step(q0, 1e-3)
     times = []
     for _ in range(reps):
@@ -173,25 +149,16 @@ def rod_cost(slave: SlaveParams, n: int, shear_factor: float, rotary_radius: flo
 
 def closed_loop(shear_factor: float, rotary_radius: float, duration: float = 20.0) -> dict:
     """The paper scenario (servo, seed 0) on the rod with these settings: status, message, e2 RMS and max
-    (m), the rod step (s) and the run's wall time (s)."""
-    from harness.config.load import load_scenario
-    from harness.loop import simulate
-    from harness.loop.metrics import compute_metrics
-
-    scn = load_scenario(None, ["plant.kind=cosserat", f"plant.cosserat.shear_factor={shear_factor!r}",
-                               f"plant.cosserat.rotary_radius={rotary_radius!r}", f"duration={duration!r}"])
+    (m), the rod step (s) and the run's wall time (s, with loading the scenario and the metrics)."""
     t0 = time.perf_counter()
-    tr = simulate(scn)
-    wall = time.perf_counter() - t0
-    m = compute_metrics(tr, scn)
+    tr, m = run_paper(["plant.kind=cosserat", f"plant.cosserat.shear_factor={shear_factor!r}",
+                       f"plant.cosserat.rotary_radius={rotary_radius!r}", f"duration={duration!r}"])
     return {"shear_factor": shear_factor, "r": rotary_radius, "status": tr.status, "message": tr.message,
             "e2_rms": m.get("e2_rms", float("nan")), "e2_max": m.get("e2_max", float("nan")),
-            "rod_dt": tr.meta.get("rod_dt", float("nan")), "wall": wall}
+            "rod_dt": tr.meta.get("rod_dt", float("nan")), "wall": time.perf_counter() - t0}
 
 
-# ------------------------------------------------------------------------------------------------
-# the study and its page
-# ------------------------------------------------------------------------------------------------
+# --- the study and its page ----------------------------------------------------------------------------
 def _pct(a: float, b: float) -> str:
     return f"{100.0 * (a / b - 1.0):+.3f} %"
 
@@ -200,15 +167,13 @@ def study(elements=(5, 10, 20, 40), settings=((10.0, 0.04), (100.0, 0.04)),
           shear_factors=(10.0, 30.0, 100.0, 300.0, 1000.0), rotary_radii=(0.01, 0.02, 0.04),
           loop_settings=((10.0, 0.04), (100.0, 0.04), (100.0, 0.02)), loop_duration: float = 20.0,
           base_n: int = 10, say=lambda s: None) -> dict:
-    """Every number of the page (see the module docstring), paper slave parameters: the convergence in
-    the elements per section for each (shear factor, rotary radius) of `settings`, and the first mode
-    and cost at `base_n` elements for every shear factor x rotary radius."""
+    """Every number of the page, paper slave parameters: the convergence in the elements per section for
+    each (shear factor, rotary radius) of `settings`, the first mode and cost at `base_n` elements for
+    every shear factor x rotary radius, and the closed loop for each of `loop_settings`."""
     p = SlaveParams()
     p0 = replace(p, gravity=(0.0, 0.0))
-    f_eb = beam_first_mode(p0, None, 0.0)[0]
-    d_eb = beam_static_tip(p, None, G_STATIC)
-    out = {"f_eb": f_eb, "d_eb": d_eb, "base_n": base_n, "elements": [], "shear": [], "loop": [],
-           "loop_duration": loop_duration}
+    out = {"f_eb": beam_first_mode(p0, None, 0.0)[0], "d_eb": beam_static_tip(p, None, G_STATIC),
+           "base_n": base_n, "elements": [], "shear": [], "loop": [], "loop_duration": loop_duration}
     for sf, r in settings:
         f_ref = beam_first_mode(p0, sf, r)[0]
         d_ref = beam_static_tip(p, sf, G_STATIC)
@@ -260,15 +225,12 @@ def page(res: dict, command: str) -> str:
         "'vs beam': against the beam with the rod's own shear and rotary settings (the discretization",
         "error); 'vs EB': against the target.",
         "",
-        "| shear factor | rotary radius (m) | elements / section | f1 (Hz) | f1 vs beam | f1 vs EB "
-        "| static tip (mm) | tip vs beam | tip vs EB | settled after (s) |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
-    ]
-    for r in res["elements"]:
-        lines.append(f"| {r['shear_factor']:g} | {r['r']:g} | {r['n']} | {r['f1']:.5f} | "
-                     f"{_pct(r['f1'], r['f1_beam'])} | {_pct(r['f1'], f_eb)} | {r['tip'] * 1e3:.5f} | "
-                     f"{_pct(r['tip'], r['tip_beam'])} | {_pct(r['tip'], d_eb)} | {r['settle']:.2f} |")
-    lines += [
+        *md_table(["shear factor", "rotary radius (m)", "elements / section", "f1 (Hz)", "f1 vs beam",
+                   "f1 vs EB", "static tip (mm)", "tip vs beam", "tip vs EB", "settled after (s)"],
+                  [[f"{r['shear_factor']:g}", f"{r['r']:g}", str(r["n"]), f"{r['f1']:.5f}",
+                    _pct(r["f1"], r["f1_beam"]), _pct(r["f1"], f_eb), f"{r['tip'] * 1e3:.5f}",
+                    _pct(r["tip"], r["tip_beam"]), _pct(r["tip"], d_eb), f"{r['settle']:.2f}"]
+                   for r in res["elements"]]),
         "",
         "## Shear stiffness and rotary inertia",
         "",
@@ -276,29 +238,24 @@ def page(res: dict, command: str) -> str:
         "step, and the wall time of one control step of the rod alone (fastest of 5 timings of 100 control",
         "steps on the machine that generated this page; shared machines vary by 2x and more).",
         "",
-        "| shear factor | rotary radius (m) | f1 (Hz) | f1 vs beam | f1 vs EB | beam f1 vs EB "
-        "| rod step (us) | rod steps / control step | us / control step |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
-    ]
-    for r in res["shear"]:
-        lines.append(f"| {r['shear_factor']:g} | {r['r']:g} | {r['f1']:.5f} | "
-                     f"{_pct(r['f1'], r['f1_beam'])} | {_pct(r['f1'], f_eb)} | {_pct(r['f1_beam'], f_eb)} | "
-                     f"{r['dt'] * 1e6:.2f} | {r['steps']} | {r['us']:.0f} |")
-    lines += [
+        *md_table(["shear factor", "rotary radius (m)", "f1 (Hz)", "f1 vs beam", "f1 vs EB", "beam f1 vs EB",
+                   "rod step (us)", "rod steps / control step", "us / control step"],
+                  [[f"{r['shear_factor']:g}", f"{r['r']:g}", f"{r['f1']:.5f}", _pct(r["f1"], r["f1_beam"]),
+                    _pct(r["f1"], f_eb), _pct(r["f1_beam"], f_eb), f"{r['dt'] * 1e6:.2f}", str(r["steps"]),
+                    f"{r['us']:.0f}"] for r in res["shear"]]),
         "",
         "## Closed loop",
         "",
         f"The paper scenario (servo, seed 0, {res['loop_duration']:g} s) on the rod, {res['base_n']} "
         "elements per section, automatic rod step:",
         "",
-        "| shear factor | rotary radius (m) | rod step (us) | status | e2 RMS (mm) | e2 max (mm) "
-        "| wall (s) |",
-        "|---:|---:|---:|---|---:|---:|---:|",
+        *md_table(["shear factor", "rotary radius (m)", "rod step (us)", "status", "e2 RMS (mm)",
+                   "e2 max (mm)", "wall (s)"],
+                  [[f"{r['shear_factor']:g}", f"{r['r']:g}", f"{r['rod_dt'] * 1e6:.2f}",
+                    r["status"] if r["status"] == "ok" else f"{r['status']}: {r['message']}",
+                    f"{r['e2_rms'] * 1e3:.4f}", f"{r['e2_max'] * 1e3:.4f}", f"{r['wall']:.1f}"]
+                   for r in res["loop"]], ["---:", "---:", "---:", "---", "---:", "---:", "---:"]),
     ]
-    for r in res["loop"]:
-        st = r["status"] if r["status"] == "ok" else f"{r['status']}: {r['message']}"
-        lines.append(f"| {r['shear_factor']:g} | {r['r']:g} | {r['rod_dt'] * 1e6:.2f} | {st} | "
-                     f"{r['e2_rms'] * 1e3:.4f} | {r['e2_max'] * 1e3:.4f} | {r['wall']:.1f} |")
     by = {(r["shear_factor"], r["r"]): r for r in res["shear"]}
     new = by.get((DEFAULT_SHEAR_FACTOR, DEFAULT_ROTARY_RADIUS))
     old = by.get((10.0, 0.04))
@@ -329,21 +286,11 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="elements 5, 10, shear factors 10, 100, radii "
                     "0.02, 0.04 and a 2-s closed loop only")
     args = ap.parse_args(argv)
-    import sys
-
-    say = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731
-    if args.quick:
-        res = study(elements=(5, 10), shear_factors=(10.0, 100.0), rotary_radii=(0.02, 0.04),
-                    loop_settings=((10.0, 0.04), (100.0, 0.04)), loop_duration=2.0, say=say)
-    else:
-        res = study(say=say)
-    command = "python -m harness.studies.rod_convergence" + (" --quick" if args.quick else "")
-    text = page(res, command)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(out)
+    quick = {"elements": (5, 10), "shear_factors": (10.0, 100.0), "rotary_radii": (0.02, 0.04),
+             "loop_settings": ((10.0, 0.04), (100.0, 0.04)), "loop_duration": 2.0}
+    res = study(say=printer(True), **(quick if args.quick else {}))
+    text = page(res, "python -m harness.studies.rod_convergence" + (" --quick" if args.quick else ""))
+    save(args.out, text)
     print(text)
     return 0
 

@@ -1,11 +1,8 @@
 """Summaries of a sweep: `summary.csv` (one row per case) and the plots (metric vs factor lines,
-2-factor heatmaps).
-"""
-
+2-factor heatmaps)."""
 
 from __future__ import annotations
 
-import csv
 import itertools
 import json
 import math
@@ -17,11 +14,10 @@ from typing import Any
 
 import numpy as np
 
-from harness.config.textio import write_atomic
+from harness.studies.figures import save_csv, save_figure
 from harness.studies.study import METRIC_LABELS, Case, Study, canon, is_real
 
 
-# --- summary ----------------------------------------------------------------------------------------
 def _cell(v: Any) -> Any:
     return "" if v is None else (json.dumps(v) if isinstance(v, list | dict) else v)
 
@@ -42,18 +38,11 @@ def write_summary(study: Study, cases: Sequence[Case], rows: dict[str, dict],
     out = Path(out)
     done = [rows[c.case_id] for c in cases if c.case_id in rows]
     names = [f.name for f in study.factors]
-    path = out / "summary.csv"
-
-    def write(tmp: Path) -> None:
-        with open(tmp, "w", newline="", encoding="utf-8") as fh:
-            w = csv.writer(fh)
-            w.writerow(["case_id", *names, "status", *study.metrics, "case_wall_time", "message"])
-            for r in done:
-                w.writerow([r["case_id"], *(_cell(r["params"].get(n)) for n in names), r["status"],
-                            *(_cell(r["metrics"].get(m)) for m in study.metrics), _cell(r["wall_time"]),
-                            r["message"]])
-
-    write_atomic(path, write)  # renamed into place when complete (harness.config.textio)
+    head = ["case_id", *names, "status", *study.metrics, "case_wall_time", "message"]
+    path = save_csv(out / "summary.csv", head, [
+        [r["case_id"], *(_cell(r["params"].get(n)) for n in names), r["status"],
+         *(_cell(r["metrics"].get(m)) for m in study.metrics), _cell(r["wall_time"]), r["message"]]
+        for r in done])
     return [path, *_plots(study, done, out)]
 
 
@@ -90,8 +79,7 @@ def _plots(study: Study, rows: Sequence[dict], out: Path) -> list[Path]:
         for ax in axes[len(metrics):]:
             ax.set_visible(False)
         fix_layout(fig)
-        p = write_atomic(out / name, lambda tmp: fig.savefig(tmp, dpi=_DPI, format="png"))
-        paths.append(p)
+        paths.append(save_figure(fig, out / name, _DPI))
 
     sampled = study.mode == "random"
     grid_factors = [f for f in study.factors if not f.is_random and not sampled]

@@ -1,35 +1,14 @@
-"""Mismatch sweeps: run every case of a study (`harness.studies.study`) through an executor
-(`harness.studies.executor`), append results as they finish (`harness.studies.results`), resume, and
-write the summary (`harness.studies.summary`).
+"""Mismatch sweeps (`teleop sweep`): run every case of a study (`harness.studies.study`) through an executor
+(`harness.studies.executor`), append each row as it finishes, resume, and write the summary.
 
-Outputs (folder `out`, default `runs/sweeps/<name>/`)
-  * `results.jsonl`: one JSON object per finished case, appended by the parent process as soon as
-    the case finishes (write + flush + fsync): `case_id`, `params` (factor -> value), `status`
-    ("ok" | "diverged" | "error"), `message`, `metrics` (selected; non-finite numbers as null),
-    `wall_time` (s, in the worker), `traceback` ("" unless an exception was caught).  A torn last
-    line (crash while writing) is ignored and cut off before appending.
-  * Resuming: re-running the same study into the same folder skips every case id already in the
-    table, whatever its status (nothing runs twice; delete rows or the file to re-run).
-  * `case_id`: the first 12 hex digits of the SHA-256 of the case's resolved scenario
-    (`scenario_to_dict`, canonical JSON, without `name`): same study -> same ids in every process;
-    a changed base scenario or `set` gives new ids (old rows stay in the table, unused).
-  * `study.toml`: the resolved study (inline base scenario included) for provenance; it can be
-    run again as a study file and gives the same case ids.
-  * `summary.csv` (one row per case of the study), `metric_vs_<factor>.png` for each factor with
-    more than one value, `heatmap_<a>__<b>.png` for each pair of list factors.
-  * `.lock`: locked while a sweep runs; a second sweep into the same folder is refused (ConfigError).
-  * `recordings/<case_id>.rrd` for the worst k cases (re-run after the sweep; the simulation is
-    deterministic for a given seed).  The worker returns the file's bytes, so recordings also work
-    on a remote Dask cluster without a shared file system.
-
-Nothing is written through a symbolic link planted in the folder (results.jsonl, .lock, recordings/:
-refused in one line).  Output failures after the cases ran (recordings, summary) are listed in
-`SweepResult.failures` (exit 1) and the other outputs are still written.
-
-Interrupts: Ctrl-C / SIGTERM cancel the pending cases, stop the workers and raise `SweepInterrupted`
-(a `KeyboardInterrupt`); every finished row is already on disk and a later run resumes.  A worker
-process that dies (segfault, out of memory) breaks the process pool: the cases that were in flight
-are re-run one at a time in a fresh 1-process pool, the culprit is recorded with status "error".
+Outputs in the folder `out` (default runs/sweeps/<name>/; user guide: docs/guide/sweeps.md):
+`results.jsonl`, one fsynced JSON row per finished case (`results.make_row`: case_id, params, status
+"ok" | "diverged" | "error", message, metrics (non-finite as null), wall_time (s, in the worker),
+traceback); a re-run skips every case id already there.  case_id: the first 12 hex digits of the SHA-256
+of the case's resolved scenario without its name (`cases.scenario_id`).  `study.toml`, the resolved study
+(re-runnable, same ids); `summary.csv` and the plots (`summary.write_summary`); `recordings/<case_id>.rrd`
+of the worst cases (re-run after the sweep; the worker returns the bytes, so a remote Dask cluster needs
+no shared file system); `.lock` while a sweep runs.
 """
 
 from __future__ import annotations
@@ -42,6 +21,7 @@ import signal
 import sys
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -80,11 +60,8 @@ from harness.studies.summary import write_summary
 
 log = logging.getLogger(__name__)
 
-__all__ = [  # the sweep API (some names re-exported from the modules that define them)
-    "METRIC_LABELS", "METRIC_NAMES", "RESULTS", "Case", "Study", "SweepError", "SweepInterrupted",
-    "SweepResult",
-    "expand_cases", "load_study", "main_sweep", "read_results", "run_case", "run_sweep", "write_summary",
-]
+__all__ = ["METRIC_LABELS", "METRIC_NAMES", "RESULTS", "Case", "Study", "SweepError", "SweepInterrupted",
+           "SweepResult", "expand_cases", "load_study", "main_sweep", "read_results", "run_case", "run_sweep"]
 
 
 class SweepInterrupted(KeyboardInterrupt):
@@ -108,9 +85,8 @@ class SweepResult:
     summary: list[Path] = dataclasses.field(default_factory=list)
     executor: str = ""  # "processes" | "threads" | "dask": what ran the cases (`pick_executor`)
     failures: list[str] = dataclasses.field(default_factory=list)  # outputs that could not be written
-    # wall seconds of this call's phases: "setup" (from the call: study, cases, output folder, workers),
-    # "cases" (first submit to last result), "recordings" (the worst cases re-run), "summary" (summary.csv,
-    # plots, the wait for their imports)
+    # wall seconds of this call's phases: "setup" (study, cases, output folder, workers), "cases" (first
+    # submit to last result), "recordings" (the worst cases re-run), "summary" (summary.csv and plots)
     timings: dict[str, float] = dataclasses.field(default_factory=dict)
     hidden: list[str] = dataclasses.field(default_factory=list)  # factors a servo plant hides
 
@@ -119,10 +95,7 @@ class SweepResult:
         return all(c.case_id in self.rows for c in self.cases)
 
     def counts(self) -> dict[str, int]:
-        out: dict[str, int] = {}
-        for r in self.rows.values():
-            out[r["status"]] = out.get(r["status"], 0) + 1
-        return out
+        return dict(Counter(r["status"] for r in self.rows.values()))
 
 
 def _raise_interrupt(signum, frame):
@@ -135,15 +108,12 @@ def _study_document(study: Study, base: Scenario) -> dict:
         st["description"] = study.description
     if study.record:
         st["record"] = dataclasses.asdict(study.record)
-    factors = []
-    for f in study.factors:
-        factors.append({"name": f.name, "param": f.param, f.mode: f.dist if f.is_random else list(f.levels)})
+    factors = [{"name": f.name, "param": f.param, f.mode: f.dist if f.is_random else list(f.levels)}
+               for f in study.factors]
     sampling: dict[str, Any] = {"mode": study.mode, "seed": study.seed, "max_cases": study.max_cases}
     if study.n is not None:
         sampling["n"] = study.n
     return {"study": st, "sampling": sampling, "factor": factors, "scenario": scenario_to_dict(base)}
-
-
 
 
 # slave dynamics parameters whose effect a servo-actuated plant hides: its stiff position servos track the
@@ -184,23 +154,17 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
               on_row: Callable[[dict], None] | None = None, max_cases: int | None = None,
               executor: str = "processes", overrides: Sequence[str] = (),
               case_timeout: float | None = None, allow_code: bool | None = None) -> SweepResult:
-    """Run (or resume) a study.  Every case is built and validated before anything runs.
+    """Run (or resume) a study; every case is built and validated before anything runs.
 
-    out: output folder (default runs/sweeps/<name>); workers: number of cases run at once (default all
-    cores); scheduler: Dask scheduler address (then `workers` is ignored); executor: "processes" (a
-    process pool) or "threads" (threads of this process, the in-process batch path: the compiled loops
-    release the GIL; `harness.studies.executor.pick_executor`); results are the same.  case_fn: the worker
-    function (top-level, picklable; default `run_case`); on_row(row): called in the parent after
-    each row is on disk.  max_cases: overrides the study's [sampling] max_cases (the case count is
-    checked before expansion).  overrides: 'key=value' scenario overrides (the dotted syntax of `teleop run
-    --set`) applied to the study's base scenario after its [study] set, before the factors (a factor of
-    the same key wins); they are part of study.toml and of the case ids.  case_timeout: seconds a case
-    may take (its wall time in the worker, set-up included); a case over it becomes a row with status
-    "error" and the others run (`harness.studies.executor.run_cases`).  Raises ConfigError for a bad
-    study, an unreachable scheduler (checked before any file is written), an unusable output folder or a
-    symbolic link at results.jsonl; SweepInterrupted on Ctrl-C/SIGTERM.  Output failures after the cases
-    ran (recordings, summary) do not raise: they are listed in `SweepResult.failures`, and whatever could
-    be written is."""
+    workers: cases run at once (default all cores; ignored with a Dask `scheduler` address); executor:
+    "processes" or "threads" (`executor.pick_executor`; the same results); case_fn: the worker function
+    (top-level, picklable); on_row(row): called in the parent after each row is on disk; max_cases:
+    replaces the study's [sampling] max_cases; overrides: 'key=value' (as `teleop run --set`) on the base
+    scenario after the study's set, before the factors (part of study.toml and the case ids);
+    case_timeout: seconds a case may take in its worker, set-up included (over it: a row with status
+    "error").  Raises ConfigError for a bad study, an unreachable scheduler (before any file is written),
+    an unusable output folder or a link at results.jsonl; SweepInterrupted on Ctrl-C/SIGTERM.  Output
+    failures after the cases ran (recordings, summary) are listed in `SweepResult.failures`."""
     clock = [time.perf_counter()]  # SweepResult.timings: each lap adds the time since the last one
 
     def lap(phase: str) -> None:
@@ -228,8 +192,7 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
     if hidden:
         log.warning(hidden_warning(hidden))
     runner = Runner(workers, scheduler, pick_executor(executor, scheduler, cases))
-    if scheduler:
-        runner.connect()  # a bad or unreachable scheduler is input: found before anything is written
+    runner.connect()  # a bad or unreachable scheduler is input: found before anything is written
     if out is not None:
         out = prepare_out_dir(Path(out), "--out")
     else:
@@ -246,9 +209,9 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
         refuse_link(table)
         known = read_results(table)
         todo = [c for c in cases if c.case_id not in known]
-        result = SweepResult(study, out, cases, {c.case_id: known[c.case_id] for c in cases
-                                                 if c.case_id in known}, skipped=len(cases) - len(todo),
-                             executor=runner.kind, hidden=hidden)
+        done = {c.case_id: known[c.case_id] for c in cases if c.case_id in known}
+        result = SweepResult(study, out, cases, done, skipped=len(cases) - len(todo), executor=runner.kind,
+                             hidden=hidden)
         extra = len(set(known) - {c.case_id for c in cases})
         log.info("study %s: %d cases, %d already done, %d to run on %d %s%s", study.name, len(cases),
                  result.skipped, len(todo), runner.workers, runner.kind,
@@ -257,7 +220,7 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
         if todo:
             runner.start()  # before this process starts threads (bar, imports): the workers can be forked
         bar = progress_bar_class()(total=len(cases), initial=result.skipped, desc=study.name, unit="case",
-                   disable=not progress or not todo, file=sys.stderr)
+                                   disable=not progress or not todo, file=sys.stderr)
 
         def on_result(case: Case, res: dict) -> None:
             row = make_row(case, res)
@@ -272,8 +235,7 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
             result.rows[case.case_id] = row
             result.ran += 1
             bar.update(1)
-            bad = sum(r["status"] != "ok" for r in result.rows.values())
-            if bad:
+            if bad := sum(r["status"] != "ok" for r in result.rows.values()):
                 bar.set_postfix_str(f"{bad} not ok", refresh=False)
             if on_row is not None:
                 on_row(row)
@@ -311,20 +273,9 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
     return result
 
 
-def _worst(study: Study, cases: Sequence[Case], rows: dict[str, dict]) -> list[Case]:
-    spec = study.record
-
-    def value(case):
-        v = rows[case.case_id]["metrics"].get(spec.by)
-        return v if is_real(v) and rows[case.case_id]["status"] in ("ok", "diverged") else None
-
-    ranked = [c for c in cases if value(c) is not None]
-    ranked.sort(key=value, reverse=spec.order == "max")
-    return ranked[: spec.worst]
-
-
 def _record_worst(study: Study, result: SweepResult, runner: Runner, case_fn: Callable,
                   case_timeout: float | None = None) -> list[Path]:
+    """Recordings of the study's worst cases (record = {worst, by, order}) not yet in recordings/."""
     folder = result.out / "recordings"
     if folder.is_symlink():
         raise OutputError(f"{folder}: is a symbolic link; recordings are not written through a link",
@@ -333,7 +284,14 @@ def _record_worst(study: Study, result: SweepResult, runner: Runner, case_fn: Ca
         folder.mkdir(exist_ok=True)
     except OSError as e:
         raise OutputError(f"cannot create {folder}: {describe_os_error(e)}", path=str(folder)) from None
-    worst = _worst(study, result.cases, result.rows)
+    spec, rows = study.record, result.rows
+
+    def value(case):
+        v = rows[case.case_id]["metrics"].get(spec.by)
+        return v if is_real(v) and rows[case.case_id]["status"] in ("ok", "diverged") else None
+
+    worst = sorted((c for c in result.cases if value(c) is not None), key=value,
+                   reverse=spec.order == "max")[: spec.worst]
     todo = [c for c in worst if not (folder / f"{c.case_id}.rrd").exists()]
     written = [folder / f"{c.case_id}.rrd" for c in worst if c not in todo]
 
@@ -342,9 +300,7 @@ def _record_worst(study: Study, result: SweepResult, runner: Runner, case_fn: Ca
         if not isinstance(data, bytes | bytearray):
             log.warning("recording of case %s failed: %s", case.case_id, res.get("message", "no data"))
             return
-        path = folder / f"{case.case_id}.rrd"
-        write_atomic(path, bytes(data))
-        written.append(path)
+        written.append(write_atomic(folder / f"{case.case_id}.rrd", bytes(data)))
 
     if todo:
         log.info("recording the %d worst case(s) by %s", len(todo), study.record.by)
@@ -352,7 +308,6 @@ def _record_worst(study: Study, result: SweepResult, runner: Runner, case_fn: Ca
     return written
 
 
-# --- CLI entry --------------------------------------------------------------------------------------
 EXIT_INTERRUPTED = 130  # as `teleop run` (harness.cli)
 
 
@@ -361,9 +316,8 @@ def main_sweep(study_path: str | os.PathLike, out: str | os.PathLike | None = No
                max_cases: int | None = None, executor: str = "processes", overrides: Sequence[str] = (),
                case_timeout: float | None = None, allow_code: bool = False) -> int:
     """`teleop sweep`: 0 when every case has a row (diverged/error cases are data) and every output was
-    written, 1 when cases are unfinished, the executor failed or an output (recordings, summary) could
-    not be written after the cases ran, 130 when interrupted (SIGINT/SIGTERM; re-run to resume).  A bad
-    study or an unusable output folder raises ConfigError before anything runs."""
+    written; 1 when cases are unfinished, the executor failed or an output (recordings, summary) could not
+    be written; 130 when interrupted (re-run to resume).  A bad study or output folder raises ConfigError."""
     try:
         res = run_sweep(study_path, out=out, workers=workers, scheduler=scheduler, progress=progress,
                         max_cases=max_cases, executor=executor, overrides=overrides,
@@ -381,16 +335,13 @@ def main_sweep(study_path: str | os.PathLike, out: str | os.PathLike | None = No
     rec = f"recordings {t['recordings']:.1f} s, " if res.recordings else ""
     rate = (f" in {t['cases']:.1f} s ({60.0 * res.ran / t['cases']:.0f} cases/min; set-up "
             f"{t['setup']:.1f} s, {rec}summary {t['summary']:.1f} s)" if res.ran and t.get("cases") else "")
-    print(f"study {res.study.name}: {len(res.cases)} cases ({counts}); ran {res.ran} ({res.executor}){rate}, "
-          f"{res.skipped} already done -> {res.out}", file=sys.stderr)
-    for p in res.recordings:
-        print(f"recording: {p}", file=sys.stderr)
+    lines = [f"study {res.study.name}: {len(res.cases)} cases ({counts}); ran {res.ran} ({res.executor})"
+             f"{rate}, {res.skipped} already done -> {res.out}", *(f"recording: {p}" for p in res.recordings)]
     if res.hidden:
-        print(f"{hidden_warning(res.hidden)} (measured: "
-              f"{'; '.join(sensitivity(res, n) for n in res.hidden)})", file=sys.stderr)
-    for f in res.failures:
-        print(f"error: {f}", file=sys.stderr)
+        lines.append(f"{hidden_warning(res.hidden)} (measured: "
+                     f"{'; '.join(sensitivity(res, n) for n in res.hidden)})")
+    lines += [f"error: {f}" for f in res.failures]
     if not res.complete:
-        print(f"{res.unfinished} case(s) did not finish; run again to resume", file=sys.stderr)
-        return 1
-    return 1 if res.failures else 0
+        lines.append(f"{res.unfinished} case(s) did not finish; run again to resume")
+    print("\n".join(lines), file=sys.stderr)
+    return 1 if res.failures or not res.complete else 0
