@@ -16,7 +16,7 @@ at the sensed q2, the mj_step cost and the paper scenario's closed loop on it.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import mujoco
@@ -128,7 +128,6 @@ class FidelityTable:
     master: dict[str, float]  # max absolute master errors
     n_samples: int
     seed: int
-    meta: dict = field(default_factory=dict)
 
     def rows(self) -> list[dict]:
         out = []
@@ -199,8 +198,7 @@ def fidelity_study(Ns=(4, 8, 16, 32), n_samples: int = 20, seed: int = 0,
                     master_err[key] = max(master_err.get(key, 0.0), v)
     orders = {q: observed_orders(Ns, errors[q]) for q in QUANTITIES}
     return FidelityTable(Ns=Ns, errors=errors, orders=orders, master=master_err, n_samples=n_samples,
-                         seed=seed, meta={"actuation": plant.actuation,
-                                          "armature_fraction": plant.armature_fraction})
+                         seed=seed)
 
 
 def plot_fidelity(table: FidelityTable, path) -> Path:

@@ -307,49 +307,13 @@ def modal_comparison(slave: SlaveParams | None = None, Ns=(4, 8, 16, 32), eta_b=
 
 
 # --- (c) worst-case discretization error by optimization ------------------------------------------------
-def nelder_mead_box(f, x0, lo, hi, scale, iters=400, tol=1e-10) -> tuple[np.ndarray, float]:
-    """Minimize f over the box [lo, hi] (points clipped into it) by Nelder-Mead from x0 with an initial
-    simplex of steps 0.1 * scale.  Returns (x, f(x))."""
-    def clip(x):
-        return np.minimum(np.maximum(x, lo), hi)
-
-    S = [clip(np.asarray(x0, float))]
-    for i in range(len(x0)):
-        e = S[0].copy()
-        e[i] += 0.1 * scale[i] * (1 if S[0][i] + 0.1 * scale[i] <= hi[i] else -1)
-        S.append(clip(e))
-    F = [f(x) for x in S]
-    for _ in range(iters):
-        o = np.argsort(F)
-        S, F = [S[i] for i in o], [F[i] for i in o]
-        if abs(F[-1] - F[0]) <= tol * max(1e-30, abs(F[0])):
-            break
-        c = np.mean(S[:-1], axis=0)
-        xr = clip(c + (c - S[-1]))
-        fr = f(xr)
-        if fr < F[0]:
-            xe = clip(c + 2 * (c - S[-1]))
-            fe = f(xe)
-            S[-1], F[-1] = (xe, fe) if fe < fr else (xr, fr)
-        elif fr < F[-2]:
-            S[-1], F[-1] = xr, fr
-        else:
-            xc = clip(c + 0.5 * (S[-1] - c))
-            fc = f(xc)
-            if fc < F[-1]:
-                S[-1], F[-1] = xc, fc
-            else:
-                S = [S[0]] + [clip(S[0] + 0.5 * (s - S[0])) for s in S[1:]]
-                F = [F[0]] + [f(s) for s in S[1:]]
-    i = int(np.argmin(F))
-    return S[i], F[i]
-
-
 def worst_tip_error(N: int, slave: SlaveParams | None = None, n_random: int = 32, n_refine: int = 6,
                     seed: int = 0, plant: PlantConfig | None = None) -> tuple[float, np.ndarray]:
     """Largest relative tip error |tip_MuJoCo - tip_CC| / sum(L0) over the in-range q2 box, the chain on
     the CC manifold: the 64 corners (each length and bend at an end of its range) and n_random random
-    points, the n_refine best refined by bounded Nelder-Mead in (d, k d).  Returns (error, q2 (6,))."""
+    points, the n_refine best refined by scipy's bounded Nelder-Mead in (d, k d).  Returns (error, q2)."""
+    from scipy.optimize import minimize
+
     slave = SlaveParams() if slave is None else slave
     plant = PlantConfig(actuation="torque") if plant is None else plant
     m, cm = build_model(MasterParams(), slave, replace(plant, segments=int(N)))
@@ -369,9 +333,7 @@ def worst_tip_error(N: int, slave: SlaveParams | None = None, n_random: int = 32
     rng = np.random.default_rng(seed)
     starts += [rng.uniform(lo, hi) for _ in range(n_random)]
     vals = [err(x) for x in starts]
-    best_x, best_f = None, np.inf
-    for i in np.argsort(vals)[:n_refine]:
-        x, fx = nelder_mead_box(err, starts[i], lo, hi, hi - lo)
-        if fx < best_f:
-            best_x, best_f = x, fx
-    return -best_f, np.concatenate([best_x[:3], best_x[3:] / best_x[:3]])
+    best = min((minimize(err, starts[i], method="Nelder-Mead", bounds=list(zip(lo, hi, strict=True)),
+                         options={"maxiter": 400, "xatol": 1e-10, "fatol": 1e-14})
+                for i in np.argsort(vals)[:n_refine]), key=lambda r: r.fun)
+    return -float(best.fun), np.concatenate([best.x[:3], best.x[3:] / best.x[:3]])
