@@ -241,18 +241,6 @@ class Runner:
             raise ConfigError(f"{where}: the scheduler has no worker (none joined within "
                               f"{CONNECT_TIMEOUT:g} s)", path="scheduler") from None
 
-    def start(self) -> None:
-        """Start a process pool's workers now, before the sweep starts threads of its own (progress bar,
-        imports), so that they can be forked (`start_method`).  No-op for threads, Dask or a started pool."""
-        if self.kind != "processes" or self._ex is not None:
-            return
-        ex = self.executor()
-        for _ in range(self.workers):
-            try:  # a fork pool forks every worker at its first submit; spawn: one per submit
-                ex.submit(_probe)
-            except cf.BrokenExecutor:  # a worker died already: run_cases replaces the pool
-                return
-
     def executor(self) -> cf.Executor:
         if self._ex is None:
             if self.scheduler:

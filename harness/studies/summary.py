@@ -59,6 +59,14 @@ def _nan_stats(values) -> tuple[float, float, float]:
 _DPI = 110
 
 
+def _groups(rows: Sequence[dict], names: Sequence[str]) -> dict[str, list[dict]]:
+    """Rows grouped by their values of the factors `names` ("a=1, b=2" labels)."""
+    out: dict[str, list[dict]] = {}
+    for r in rows:
+        out.setdefault(", ".join(f"{o}={_label(r['params'].get(o))}" for o in names), []).append(r)
+    return out
+
+
 def _plots(study: Study, rows: Sequence[dict], out: Path) -> list[Path]:
     from matplotlib.figure import Figure
 
@@ -104,16 +112,10 @@ def _plots(study: Study, rows: Sequence[dict], out: Path) -> list[Path]:
             keys = [canon(v) for v in levels]
             x = np.array(levels, dtype=float) if all(is_real(v) for v in levels) else np.arange(len(levels))
             pos = np.array([x[keys.index(canon(v))] for v in xs], dtype=float)
-            others = [g.name for g in grid_factors if g is not f]
-            groups: dict[str, list[dict]] = {}
-            for r in rows:
-                key = ", ".join(f"{o}={_label(r['params'].get(o))}" for o in others)
-                groups.setdefault(key, []).append(r)
+            groups = _groups(rows, [g.name for g in grid_factors if g is not f])
             ctl = [g.name for g in grid_factors if g is not f and g.path[:1] == ("controller",)]
             if len(groups) > 6 and ctl:  # one line per controller, band over the other factors
-                groups = {}
-                for r in rows:
-                    groups.setdefault(f"{ctl[0]}={_label(r['params'].get(ctl[0]))}", []).append(r)
+                groups = _groups(rows, ctl[:1])
             if len(groups) > 6:  # too many lines: one mean line with a min/max band
                 groups = {"mean, min-max over the other factors": list(rows)}
             for ax, m in zip(axes, metrics, strict=False):
@@ -132,8 +134,7 @@ def _plots(study: Study, rows: Sequence[dict], out: Path) -> list[Path]:
                            label="diverged / error (partial run)")
             if ax is axes[0] and ax.get_legend_handles_labels()[0]:
                 ax.legend(fontsize="x-small")
-            ax.set_xlabel(f"{f.name} ({f.mode} of {f.param})")
-            ax.set_ylabel(METRIC_LABELS.get(m, m))
+            ax.set(xlabel=f"{f.name} ({f.mode} of {f.param})", ylabel=METRIC_LABELS.get(m, m))
             ax.grid(alpha=0.3)
         fig.suptitle(f"{study.name}: metrics vs {f.name}")
         finish(fig, axes, f"metric_vs_{_safe(f.name)}.png")
@@ -162,9 +163,7 @@ def _plots(study: Study, rows: Sequence[dict], out: Path) -> list[Path]:
                 ax.text(i, j, text, ha="center", va="center", fontsize=7, color="w")
             ax.set_xticks(range(len(ka)), [_label(v) for v in fa.levels])
             ax.set_yticks(range(len(kb)), [_label(v) for v in fb.levels])
-            ax.set_xlabel(fa.name)
-            ax.set_ylabel(fb.name)
-            ax.set_title(METRIC_LABELS.get(m, m))
+            ax.set(xlabel=fa.name, ylabel=fb.name, title=METRIC_LABELS.get(m, m))
         more = " (mean over the other factors)" if len(study.factors) > 2 else ""
         star = "; * = some cases diverged or failed (partial runs)" if bad.any() else ""
         fig.suptitle(f"{study.name}: {fb.name} vs {fa.name}{more}{star}")

@@ -217,8 +217,6 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
                  result.skipped, len(todo), runner.workers, runner.kind,
                  f" ({extra} rows of other cases in the table)" if extra else "")
         writer = ResultsWriter(table)
-        if todo:
-            runner.start()  # before this process starts threads (bar, imports): the workers can be forked
         bar = progress_bar_class()(total=len(cases), initial=result.skipped, desc=study.name, unit="case",
                                    disable=not progress or not todo, file=sys.stderr)
 
