@@ -404,7 +404,7 @@ def cmd_fidelity(args: argparse.Namespace) -> int:
     segments = parse_segment_list(args.segments)
     out = prepare_out_dir(args.out)
     if args.reference == "cosserat":
-        report = _import("harness.studies.fidelity_report")
+        report = _import("harness.studies.fidelity_reference")
         rc = report.main_reference(segments, out, not args.no_progress, args.seed)
     else:
         fidelity = _import("harness.studies.fidelity")
