@@ -118,10 +118,6 @@ def _call(case_fn: Callable[[dict], dict], payload: dict) -> dict:
         return _error_result(e)
 
 
-def _probe() -> int:
-    return os.getpid()
-
-
 def _watch_parent(parent: int) -> None:
     while True:
         time.sleep(PARENT_POLL)
@@ -341,7 +337,7 @@ def _isolated(case_fn: Callable, payload: dict, hard: float | None = None) -> di
     ex = _process_pool(1)
     try:
         try:
-            ex.submit(_probe).result()
+            ex.submit(os.getpid).result()  # a no-op
         except cf.BrokenExecutor:
             raise SweepError(
                 "worker processes die before running any case (if run_sweep is called from a script, "

@@ -27,7 +27,7 @@ from controllers import slave as slave_model
 from controllers.params import MasterParams, SlaveParams
 from harness.config.scenario import PlantConfig
 from harness.plant.mujoco_model import ChainMap, build_model
-from harness.studies.figures import md_table, printer, pyplot, save, save_figure, save_rows
+from harness.studies.figures import md_table, printer, pyplot, save, save_csv, save_figure
 
 ROUNDING_LEVEL = 1e-12  # relative errors below this are rounding (no convergence order is shown)
 QUANTITY_TEXT = {
@@ -156,7 +156,7 @@ class FidelityTable:
         return "\n".join(lines)
 
     def write_csv(self, path) -> Path:
-        return save_rows(path, self.rows())
+        return save_csv(path, self.rows())
 
     def write_markdown(self, path) -> Path:
         return save(path, self.to_markdown() + "\n")
@@ -337,7 +337,7 @@ def main_fidelity(segments, out, progress: bool = True, samples: int = 50, seed:
     settle, loop = 1500, 2.0
     rows = cc_study(Ns=Ns, n_samples=cc_samples, seed=seed, settle_steps=settle, loop_duration=loop)
     text = cc_markdown(rows, cc_samples, settle, loop)
-    written += [save(out / "fidelity_cc.md", text + "\n"), save_rows(out / "fidelity_cc.csv", rows)]
+    written += [save(out / "fidelity_cc.md", text + "\n"), save_csv(out / "fidelity_cc.csv", rows)]
     print(f"\n{text}")
     print(f"outputs in {out}/: " + ", ".join(p.name for p in written))
     return 0

@@ -56,8 +56,12 @@ def save_figure(fig, path, dpi: int = 110) -> Path:
             plt.close(fig)
 
 
-def save_csv(path, header: Sequence[str], rows) -> Path:
-    """A CSV file: the header, then one row per sequence of cells."""
+def save_csv(path, rows, header: Sequence[str] | None = None) -> Path:
+    """A CSV file: `header`, then one row per sequence of cells; without a header the rows are dicts and
+    the first one's keys are the header."""
+    if header is None:
+        header, rows = list(rows[0]), [list(r.values()) for r in rows]
+
     def write(tmp: Path) -> None:
         with open(tmp, "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh)
@@ -65,11 +69,6 @@ def save_csv(path, header: Sequence[str], rows) -> Path:
             w.writerows(rows)
 
     return save(path, write)
-
-
-def save_rows(path, rows: list[dict]) -> Path:
-    """A CSV file of dict rows, the first row's keys as the header."""
-    return save_csv(path, list(rows[0]), [list(r.values()) for r in rows])
 
 
 def md_table(head: Sequence[str], rows, align: Sequence[str] | None = None) -> list[str]:

@@ -39,10 +39,10 @@ def write_summary(study: Study, cases: Sequence[Case], rows: dict[str, dict],
     done = [rows[c.case_id] for c in cases if c.case_id in rows]
     names = [f.name for f in study.factors]
     head = ["case_id", *names, "status", *study.metrics, "case_wall_time", "message"]
-    path = save_csv(out / "summary.csv", head, [
+    path = save_csv(out / "summary.csv", [
         [r["case_id"], *(_cell(r["params"].get(n)) for n in names), r["status"],
          *(_cell(r["metrics"].get(m)) for m in study.metrics), _cell(r["wall_time"]), r["message"]]
-        for r in done])
+        for r in done], head)
     return [path, *_plots(study, done, out)]
 
 
