@@ -1,37 +1,10 @@
-"""Scenario TOML <-> `harness.config.Scenario`, with complete validation before any simulation.
+"""Scenario TOML <-> `Scenario`: defaults, `--set key=value` overrides, cross-field checks, dumping.
 
-The TOML layout mirrors the dataclasses of `harness.config.scenario` (`scenarios/paper.toml` spells
-out every default; docs/config_reference.md lists every field with its range).
-
-Rules:
-
-* Every key is optional; a missing key takes the dataclass default.  Exception: missing keys of
-  ``[plant.master]`` / ``[plant.slave]`` take the value of the resolved *nominal* ``[master]`` /
-  ``[slave]``, so a mismatch is written as the difference only (``plant.slave.masses = [...]``).
-  ``plant.master = "none"`` (or no such table) means "the plant uses the nominal model".
-* Optional values (``snr_db``, ``initial.slave_q2``, ``plant.master``, ``plant.slave``, ...) are
-  written as the string ``"none"`` (or false) when unset; `dump_scenario` writes them that way so
-  that ``load_scenario(dump(x)) == x`` exactly.
-* Integers are accepted where floats are expected, booleans never count as numbers, floats are
-  never accepted as integers, NaN/inf are rejected everywhere.
-* ``subtask.weights`` defaults to the default weight of each kind in ``subtask.kinds``.
-* ``name`` defaults to the file stem when loading from a file (``"paper"`` otherwise); ``transient``
-  to 5 s, or a quarter of a shorter ``duration``.
-
-Overrides are dotted ``key=value`` strings whose value is parsed as a TOML value
-(``plant.segments=16``, ``plant.slave.masses=[1.2,0.7,0.4]``, ``snr_db=30``); a bare word that
-is not valid TOML is taken as a string (``plant.kind=analytic``, ``snr_db=none``).  An override of a
-field of an environment object names an existing object (``environment.objects.wall.stiffness=1e5``);
-a new object is added as a whole table (``environment.objects.box2={kind="box"}``).
-
-Every error raises `harness.config.errors.ConfigError` with one line naming the dotted field, its value
-and the allowed range or type.
-
-Files run no code unless the user says so: a scenario file (or a replayed config.toml) whose
-``controller.name`` is Python code (``file.py:Class``, ``package.module:Class``) is refused unless
-``allow_code`` (``--allow-code``); a controller given by an override (``--controller``, ``--set``) or in
-a table passed by the caller is the caller's say-so.  A relative ``file.py`` path in a file resolves
-against that file's folder; config.toml records it as an absolute path.
+Missing keys take the schema defaults, except that [plant.master] / [plant.slave] start from the resolved
+nominal [master] / [slave]; "none" (or false) unsets an optional field; `transient` defaults to 5 s or a
+quarter of a shorter `duration`; `subtask.weights` to each kind's default weight.  A file naming a
+controller by Python code is refused unless `allow_code` (`--allow-code`); relative controller file paths
+resolve against the naming file's folder.  Every error is a one-line `ConfigError`.
 """
 
 from __future__ import annotations
@@ -61,6 +34,8 @@ REACH_MARGIN = 1e-3  # m, the desired trajectory must stay this far inside the m
 MULTIPLE_RTOL = 1e-9  # relative tolerance for "integer multiple of a time step"
 MAX_SUBSTEPS = 100_000  # control_dt / physics_dt
 MAX_STEPS = 100_000_000  # duration / control_dt
+
+
 def _is_multiple(x: float, step: float) -> tuple[bool, float]:
     ratio = x / step
     if not math.isfinite(ratio):
@@ -124,6 +99,9 @@ def _check_reach(scn: Scenario) -> None:
 
 def _cross_checks(scn: Scenario) -> None:
     p = scn.plant
+    if p.scene_xml is not None and not Path(p.scene_xml).is_file():
+        raise ConfigError.field("plant.scene_xml", p.scene_xml, "must be an existing MJCF file (relative "
+                                "paths: from the current directory); file not found")
     if not scn.transient < scn.duration:
         raise ConfigError.field("transient", scn.transient,
                                 f"must be in [0, duration) = [0, {scn.duration:g}) s "
@@ -184,7 +162,7 @@ def _cross_checks(scn: Scenario) -> None:
 
 
 def _contact_checks(scn: Scenario) -> None:
-    """Environment, force sensing and operator (the plant checks object/arm intersection at t = 0)."""
+    """Environment, force sensing and operator (the plant checks object/arm overlap at t = 0)."""
     fs, env, op = scn.sensing.force, scn.environment, scn.operator
     ok, ratio = _is_multiple(fs.delay, scn.control_dt)
     if not ok or not fs.delay < scn.duration:
@@ -204,16 +182,11 @@ def _contact_checks(scn: Scenario) -> None:
                                                          and scn.plant.kind == "cosserat"):
             plants = "'mujoco' or 'cosserat'" if key == "environment.objects" else "'mujoco'"
             raise ConfigError(f"{key}: requires plant.kind = {plants} (got {scn.plant.kind!r})", path=key)
-    names = [o.name for o in env.objects]
-    if len(set(names)) != len(names):
-        raise ConfigError.field("environment.objects", names, "object names must be distinct")
 
 
 def _check_auto_slave_start(scn: Scenario) -> None:
-    """`initial.slave_q2 = none`: harness.loop.common starts the slave with three equal sections of curvature
-    k = initial.slave_curvature whose tip height equals the master's initial tip height Z0.  Equal
-    sections of equal curvature form one arc of length 3d, tip height f(d) = sin(3 d k) / k (3d for
-    k = 0); Z0 must be in the range of f over the common section-length range [d_lo, d_hi]."""
+    """`initial.slave_q2 = none`: three equal sections of curvature k (one arc, tip height sin(3 d k) / k)
+    must reach the master's initial tip height Z0 for some common section length d."""
     ps, k = scn.plant_slave, scn.initial.slave_curvature
     tr, off = scn.trajectory, scn.initial.master_offset
     z0 = tr.center[1] + tr.amplitude[1] + off[1]
@@ -236,25 +209,6 @@ def _check_auto_slave_start(scn: Scenario) -> None:
             path="trajectory.center")
 
 
-def _field_checks(scn: Scenario) -> None:
-    """Single-field rules a type cannot say: files exist, times increase, normals are non-zero."""
-    xml = scn.plant.scene_xml
-    if xml is not None and not Path(xml).is_file():
-        raise ConfigError.field("plant.scene_xml", xml, "must be an existing MJCF file (relative paths: from "
-                                "the current directory); file not found")
-    ts = [r[0] for r in scn.operator.targets]
-    if any(t < 0 for t in ts) or any(b <= a for a, b in zip(ts, ts[1:], strict=False)):
-        raise ConfigError.field("operator.targets", [list(r) for r in scn.operator.targets], "must be an "
-                                "array of [t, X, Z] triples (s, m, m) with strictly increasing t >= 0")
-    for o in scn.environment.objects:
-        if o.kind == "plane" and math.hypot(*o.normal) < 1e-9:
-            raise ConfigError.field(f"environment.objects.{o.name}.normal", list(o.normal),
-                                    "must be a non-zero vector")
-
-
-# ---------------------------------------------------------------------------------------------
-# public API
-# ---------------------------------------------------------------------------------------------
 def parse_override(text: str) -> tuple[list[str], Any]:
     """'a.b.c=value' -> (['a', 'b', 'c'], parsed TOML value).  Bare words become strings."""
     if not isinstance(text, str) or "=" not in text:
@@ -303,7 +257,7 @@ def _apply_override(raw: dict, text: str) -> str:
 
 
 def _read_source(source: str | Path | Mapping | None) -> tuple[dict, str | None, str | None]:
-    """-> (raw dict, label for messages, default name)."""
+    """-> (raw table, file label for messages, default name)."""
     if source is None:
         return {}, None, None
     if isinstance(source, Mapping):
@@ -317,7 +271,7 @@ def _read_source(source: str | Path | Mapping | None) -> tuple[dict, str | None,
 
 
 def _plain_copy(obj: Any, depth: int = 0) -> Any:
-    """Deep copy of a user mapping (tuples -> lists); rejects absurd nesting."""
+    """Deep copy of a user table (tuples -> lists) within the nesting limit."""
     if depth > 50:
         raise ConfigError("scenario table nested too deeply")
     if isinstance(obj, Mapping):
@@ -341,8 +295,7 @@ def _file_reference(name: str) -> tuple[str, str] | None:
 
 
 def _rebase_controller(raw: dict, base: Path | None) -> None:
-    """A relative controller file path in `raw` made relative to `base` (the folder of the file that
-    names it); anything else is left for the schema to check."""
+    """A relative controller file path in `raw` made relative to `base` (the naming file's folder)."""
     node = raw.get("controller")
     table = node if isinstance(node, dict) else None
     name = table.get("name") if table is not None else node
@@ -359,17 +312,13 @@ def _rebase_controller(raw: dict, base: Path | None) -> None:
 def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterable[str] = (), *,
                   labels: Iterable[str | None] | None = None, allow_code: bool | None = None,
                   code_dir: str | Path | None = None) -> Scenario:
-    """Read (TOML file path or already-parsed table; None = all defaults), apply dotted `key=value`
-    overrides in order, validate everything and return the frozen `Scenario`.  Raises `ConfigError`.
+    """The validated `Scenario` of a TOML file, a parsed table or None (defaults), after the `key=value`
+    overrides in order.  Raises `ConfigError`.
 
-    labels: optional description of each override for error messages (e.g. "--segments 100");
-    by default an error caused by an override says "(from override 'key=value')".
-    allow_code: None = a controller named as Python code is refused when the scenario FILE names it (the
-    overrides and a table are the caller's); True = allowed; False = refused whatever names it (a study
-    file's overrides).  code_dir: the folder relative controller file paths of a table source and of the
-    overrides resolve against (a study file's folder; default: the current folder); a scenario file's own
-    resolve against its folder.
-    """
+    labels: how each override is named in errors (e.g. "--segments 100"; default "override 'k=v'").
+    allow_code: None = a Python controller is refused only when the scenario file names it; True =
+    allowed; False = always refused.  code_dir: where relative controller files of a table or of the
+    overrides resolve (default: the current folder)."""
     raw, label, default_name = _read_source(source)
     origin = "table" if isinstance(source, Mapping) else None
     if label is not None:  # a file
@@ -407,15 +356,13 @@ def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterabl
         what = f"scenario file {label}" if origin == "file" else "the study"
         raise ConfigError(f"controller.name = {name!r} in {what} is Python code; files run no code unless "
                           "you allow it: add --allow-code (API: allow_code=True) if you trust it, or give "
-                          "the controller on the command line (--controller)", path="controller.name",
-                          value=name)
+                          "the controller on the command line (--controller)", path="controller.name")
     return scn
 
 
 def _prepare(raw: Mapping, default_name: str | None) -> tuple[dict, dict[int, str]]:
-    """The TOML layout -> the schema's: fields in schema order, [controller] given as a name, named
-    [environment.objects.<name>] tables -> a list, [plant.master]/[plant.slave] on top of the nominal
-    [master]/[slave], default sub-task weights per kind.  -> (table, object names)."""
+    """The TOML layout -> the schema's (named objects -> a list, plant models on top of the nominal
+    ones, default sub-task weights) -> (table, {index: object name})."""
     order = [f.name for f in info(Scenario).fields]
     raw = {**{k: raw[k] for k in raw if k not in order}, **{k: raw[k] for k in order if k in raw}}
     if "name" not in raw and default_name:
@@ -457,9 +404,7 @@ def _scenario_from_dict(raw: Mapping, default_name: str | None) -> Scenario:
     table, names = _prepare(raw, default_name)
     scn = decode(table, Scenario, names=names, elsewhere=schema_paths())
     if "transient" not in table and scn.duration <= Scenario.transient:
-        # short runs: the default 5 s transient would leave nothing to measure; use a quarter
         scn = dataclasses.replace(scn, transient=scn.duration / 4.0)
-    _field_checks(scn)
     _cross_checks(scn)
     return scn
 
@@ -490,8 +435,7 @@ def _to_toml_value(v: Any) -> Any:
 
 
 def scenario_to_dict(scn: Scenario) -> dict[str, Any]:
-    """The fully resolved scenario as a TOML-ready dict, every schema field in schema order (None ->
-    "none", tuples -> lists)."""
+    """The resolved scenario as a TOML-ready dict, every field in schema order (None -> "none")."""
     return _to_toml_value(scn)
 
 
@@ -509,8 +453,7 @@ def _toml_lines(table: Mapping[str, Any], name: str = "") -> list[str]:
 
 
 def dumps_scenario(scn: Scenario) -> str:
-    """The fully resolved scenario as TOML text (see `dump_scenario`); a relative controller file path
-    (relative to the current folder) is written absolute, so that the file replays from anywhere."""
+    """The resolved scenario as TOML text; a relative controller file path is written absolute."""
     ref = _file_reference(scn.controller.name)
     if ref is not None and not Path(ref[0]).is_absolute():
         scn = dataclasses.replace(scn, controller=dataclasses.replace(
@@ -522,7 +465,7 @@ def dumps_scenario(scn: Scenario) -> str:
         "",
     ]
     text = "\n".join(header + _toml_lines(scenario_to_dict(scn))) + "\n"
-    tomllib.loads(text)  # never write a file we could not read back
+    tomllib.loads(text)  # never write a file that does not read back
     return text
 
 
