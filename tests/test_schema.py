@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from harness.config import reference
-from harness.config.bounds import Bounds
+from harness.config.bounds import BoundsFile
 from harness.config.controller import parse_params
 from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
@@ -19,7 +19,7 @@ from harness.config.study import StudyFile
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.mark.parametrize(("kind", "cls"), [("scenario", Scenario), ("bounds", Bounds), ("study", StudyFile)])
+@pytest.mark.parametrize(("kind", "cls"), [("scenario", Scenario), ("bounds", BoundsFile), ("study", StudyFile)])
 def test_reference_lists_every_schema_field(kind, cls):
     page = reference.markdown(kind)
     paths = [p for p, _, _ in fields_of(cls, arrays=True)]
