@@ -1,15 +1,5 @@
-"""The shipped files: `mjcf/`, `scenarios/`, `bounds/`, `studies/` of the checkout.
-
-They stay at the top of the checkout (the customer's layout) and are installed as package data
-`harness._data.<kind>` (pyproject.toml maps each folder there with `package-dir`), so that a wheel
-(non-editable) install finds them inside the package.  `asset_dir(kind)` locates them with the
-import system (`importlib.util.find_spec`: regular install, editable install) and falls back to the
-checkout folder when the harness is imported from a checkout (`PYTHONPATH=checkout`).
-
-`shipped(path, kind)` lets every command name a shipped file from any folder: a path that does not
-exist and is a bare name (`paper_mujoco`, `paper_mujoco.toml`) or `<kind>/<name>` resolves to the
-shipped file of that name; anything else is returned unchanged (and reported as not found later).
-"""
+"""The shipped `mjcf/`, `scenarios/`, `bounds/`, `studies/` files: top-level folders of the checkout,
+installed as package data `harness._data.<kind>`; `shipped` lets a command name one from any folder."""
 
 from __future__ import annotations
 
@@ -37,7 +27,7 @@ def asset_dir(kind: str) -> Path:
 
 
 def shipped(path: str | Path, kind: str) -> Path:
-    """`path` itself if it exists, else the shipped file it names (see the module docstring)."""
+    """`path` if it exists, else the shipped file a bare name (`paper_mujoco`) or `<kind>/<name>` names."""
     path = Path(path)
     if path.exists() or path.is_absolute():
         return path
