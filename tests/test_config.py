@@ -556,9 +556,9 @@ def test_positivity_check_fast_path_matches_numpy(values, allow_zero):
 
 
 def test_toml_values_are_plain_python():
-    from harness.config.load import _to_toml_value
+    from harness.config.load import to_toml
 
-    out = _to_toml_value((np.float64(1.5), np.int64(2), True, 3, "x", None, [np.float32(0.25)]))
+    out = to_toml((np.float64(1.5), np.int64(2), True, 3, "x", None, [np.float32(0.25)]))
     assert out == [1.5, 2, True, 3, "x", "none", [0.25]]
     assert [type(v) for v in out[:5]] == [float, int, bool, int, str]
     assert type(out[6][0]) is float

@@ -7,17 +7,17 @@ controller and the phase; while the main thread runs it `USER_CODE[0]` is True (
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import importlib
 import importlib.util
 import sys
 from pathlib import Path
 
-import numpy as np
-
 from controllers.baselines import BUILTINS, FAST_PATH
 from controllers.interface import Controller, ParamsError
 from harness.config.errors import ConfigError
+from harness.config.load import to_toml
 from harness.config.scenario import Scenario
 from harness.config.schema import decode
 from harness.config.textio import toml_literal
@@ -58,14 +58,6 @@ def plant_actuation(scn: Scenario) -> str:
 
 def _bad(name: str, why: str) -> ConfigError:
     return ConfigError(f"controller.name = {name!r}: {why}", path="controller.name")
-
-
-def _setting(scn: Scenario, key: str):
-    """The value of a dotted scenario key (None where the path does not exist)."""
-    obj = scn
-    for part in key.split("."):
-        obj = getattr(obj, part, None)
-    return obj
 
 
 def load_class(name: str) -> type:
@@ -143,14 +135,6 @@ def parse_params(cls: type, raw: dict | None, name: str | None = None):
     return p
 
 
-def _as_toml(v):
-    if isinstance(v, (list, tuple)):
-        return [_as_toml(x) for x in v]
-    if isinstance(v, np.generic):
-        return v.item()
-    return v
-
-
 def resolve_controller(scn: Scenario) -> Scenario:
     """The scenario with its controller's params spelled out, after checking the class, its actuations,
     plants and requirements and the params.  Raises ConfigError (one line)."""
@@ -169,7 +153,7 @@ def resolve_controller(scn: Scenario) -> Scenario:
         raise _bad(cfg.name, f"supports actuation {', '.join(map(repr, supported))} only, but {plant} "
                              f"needs {need}")
     for key, want in (getattr(cls, "requires", None) or {}).get(scn.plant.kind, {}).items():
-        have = _setting(scn, key)
+        have = functools.reduce(lambda obj, part: getattr(obj, part, None), key.split("."), scn)
         if have != want:
             raise _bad(cfg.name, f"needs {key} = {toml_literal(want)} on plant.kind {scn.plant.kind!r} "
                                  f"(it is {toml_literal(have)})")
@@ -177,8 +161,7 @@ def resolve_controller(scn: Scenario) -> Scenario:
         p = parse_params(cls, cfg.params, cfg.name)
     except ParamsError as e:
         raise ConfigError(str(e), path=f"controller.params.{e.key}") from None
-    full = ({f.name: _as_toml(getattr(p, f.name)) for f in dataclasses.fields(p)}
-            if dataclasses.is_dataclass(p) else dict(cfg.params))
+    full = to_toml(p) if dataclasses.is_dataclass(p) else dict(cfg.params)
     if cfg.name == FAST_PATH or full == cfg.params:
         return scn
     return dataclasses.replace(scn, controller=dataclasses.replace(cfg, params=full))

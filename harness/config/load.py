@@ -97,91 +97,64 @@ def _check_reach(scn: Scenario) -> None:
                 path="trajectory")
 
 
-def _cross_checks(scn: Scenario) -> None:
-    p = scn.plant
-    if p.scene_xml is not None and not Path(p.scene_xml).is_file():
-        raise ConfigError.field("plant.scene_xml", p.scene_xml, "must be an existing MJCF file (relative "
-                                "paths: from the current directory); file not found")
-    if not scn.transient < scn.duration:
-        raise ConfigError.field("transient", scn.transient,
-                                f"must be in [0, duration) = [0, {scn.duration:g}) s "
-                                "(set transient = 0 for short runs)")
-    if scn.control_dt > scn.duration:
-        raise ConfigError.field("control_dt", scn.control_dt, f"must be <= duration = {scn.duration:g} s")
-    if scn.duration / scn.control_dt > MAX_STEPS:
-        raise ConfigError.field("control_dt", scn.control_dt,
-                                f"gives duration / control_dt > {MAX_STEPS:g} control steps")
-    ok, ratio = _is_multiple(scn.control_dt, p.physics_dt)
-    if not ok or round(ratio) < 1:
-        raise ConfigError.field(
-            "control_dt", scn.control_dt,
-            f"must be an integer multiple (>= 1) of plant.physics_dt = {p.physics_dt:g} s "
-            f"(ratio {ratio:.12g}, relative tolerance {MULTIPLE_RTOL:g})")
-    if round(ratio) > MAX_SUBSTEPS:
-        raise ConfigError.field("plant.physics_dt", p.physics_dt,
-                                f"gives control_dt / physics_dt = {ratio:.6g} > {MAX_SUBSTEPS} substeps")
-    ok, ratio = _is_multiple(p.actuation_delay, scn.control_dt)
+def _need(ok: bool, path: str, value: Any, expected: str) -> None:
     if not ok:
-        raise ConfigError.field(
-            "plant.actuation_delay", p.actuation_delay,
-            f"must be >= 0 and an integer multiple of control_dt = {scn.control_dt:g} s (ratio {ratio:.12g})")
-    if not p.actuation_delay < scn.duration:
-        raise ConfigError.field("plant.actuation_delay", p.actuation_delay,
-                                f"must be < duration = {scn.duration:g} s")
-    if scn.continuous_control and p.kind != "analytic":
-        raise ConfigError.field("continuous_control", True,
-                                f"requires plant.kind = 'analytic' (got {p.kind!r})")
-    if scn.continuous_control and p.actuation_delay > 0:
-        raise ConfigError.field("continuous_control", True, "evaluates the law in every RK4 stage: requires "
-                                f"plant.actuation_delay = 0 (got {p.actuation_delay:g} s)")
-    if abs(scn.trajectory.omega) * scn.control_dt >= math.pi:
-        nyquist = math.pi / scn.control_dt
-        raise ConfigError.field("trajectory.omega", scn.trajectory.omega,
-                                f"must satisfy |omega| < pi / control_dt = {nyquist:.6g} rad/s")
+        raise ConfigError.field(path, value, expected)
 
-    ps = scn.plant_slave
+
+def _cross_checks(scn: Scenario) -> None:
+    p, dt, fs = scn.plant, scn.control_dt, scn.sensing.force
+    _need(p.scene_xml is None or Path(p.scene_xml).is_file(), "plant.scene_xml", p.scene_xml,
+          "must be an existing MJCF file (relative paths: from the current directory); file not found")
+    _need(scn.transient < scn.duration, "transient", scn.transient,
+          f"must be in [0, duration) = [0, {scn.duration:g}) s (set transient = 0 for short runs)")
+    _need(dt <= scn.duration, "control_dt", dt, f"must be <= duration = {scn.duration:g} s")
+    _need(scn.duration / dt <= MAX_STEPS, "control_dt", dt,
+          f"gives duration / control_dt > {MAX_STEPS:g} control steps")
+    ok, ratio = _is_multiple(dt, p.physics_dt)
+    _need(ok and round(ratio) >= 1, "control_dt", dt, "must be an integer multiple (>= 1) of "
+          f"plant.physics_dt = {p.physics_dt:g} s (ratio {ratio:.12g}, relative tolerance {MULTIPLE_RTOL:g})")
+    _need(round(ratio) <= MAX_SUBSTEPS, "plant.physics_dt", p.physics_dt,
+          f"gives control_dt / physics_dt = {ratio:.6g} > {MAX_SUBSTEPS} substeps")
+    ok, ratio = _is_multiple(p.actuation_delay, dt)
+    _need(ok, "plant.actuation_delay", p.actuation_delay,
+          f"must be >= 0 and an integer multiple of control_dt = {dt:g} s (ratio {ratio:.12g})")
+    _need(p.actuation_delay < scn.duration, "plant.actuation_delay", p.actuation_delay,
+          f"must be < duration = {scn.duration:g} s")
+    if scn.continuous_control:
+        _need(p.kind == "analytic", "continuous_control", True,
+              f"requires plant.kind = 'analytic' (got {p.kind!r})")
+        _need(p.actuation_delay == 0, "continuous_control", True, "evaluates the law in every RK4 stage: "
+              f"requires plant.actuation_delay = 0 (got {p.actuation_delay:g} s)")
+    _need(abs(scn.trajectory.omega) * dt < math.pi, "trajectory.omega", scn.trajectory.omega,
+          f"must satisfy |omega| < pi / control_dt = {math.pi / dt:.6g} rad/s")
+    ps, q2 = scn.plant_slave, scn.initial.slave_q2
     lo, hi = ps.length_range
-    q2 = scn.initial.slave_q2
-    if q2 is not None:
-        d, k = np.asarray(q2[:3]), np.asarray(q2[3:])
-        for i in range(3):
-            if not lo[i] <= d[i] <= hi[i]:
-                raise ConfigError.field(
-                    "initial.slave_q2", list(q2),
-                    f"section length d{i + 1} = {d[i]:g} m must be in [L0, max_extension*L0] = "
-                    f"[{lo[i]:g}, {hi[i]:g}] m of the plant slave")
-            if abs(k[i] * d[i]) > ps.max_bend:
-                raise ConfigError.field(
-                    "initial.slave_q2", list(q2),
-                    f"bend |k{i + 1} d{i + 1}| = {abs(k[i] * d[i]):g} rad exceeds the plant slave "
-                    f"max_bend = {ps.max_bend:g} rad")
-    _contact_checks(scn)
+    for i in range(3 if q2 is not None else 0):
+        d, k = q2[i], q2[3 + i]
+        _need(lo[i] <= d <= hi[i], "initial.slave_q2", list(q2), f"section length d{i + 1} = {d:g} m must be "
+              f"in [L0, max_extension*L0] = [{lo[i]:g}, {hi[i]:g}] m of the plant slave")
+        _need(abs(k * d) <= ps.max_bend, "initial.slave_q2", list(q2), f"bend |k{i + 1} d{i + 1}| = "
+              f"{abs(k * d):g} rad exceeds the plant slave max_bend = {ps.max_bend:g} rad")
+    ok, ratio = _is_multiple(fs.delay, dt)
+    _need(ok and fs.delay < scn.duration, "sensing.force.delay", fs.delay, "must be >= 0, < duration and an "
+          f"integer multiple of control_dt = {dt:g} s (ratio {ratio:.12g})")
+    if fs.cutoff is not None:
+        _need(fs.cutoff * scn.duration * 2.0 * math.pi > 1.0, "sensing.force.cutoff", fs.cutoff,
+              "is slower than the run: the filter time constant 1/(2 pi cutoff) must be < duration = "
+              f"{scn.duration:g} s")
+        _need(fs.cutoff < 0.5 / dt, "sensing.force.cutoff", fs.cutoff,
+              f"must be < the control Nyquist frequency 1/(2 control_dt) = {0.5 / dt:g} Hz")
+    needs = [("environment.objects", bool(scn.environment.objects), ("mujoco", "cosserat")),
+             ("operator.enabled", scn.operator.enabled, ("mujoco",)),
+             ("sensing.force.mode", fs.mode == "sensed", ("mujoco",))]
+    for key, used, plants in needs:
+        if used and p.kind not in plants:
+            kinds = " or ".join(map(repr, plants))
+            raise ConfigError(f"{key}: requires plant.kind = {kinds} (got {p.kind!r})", path=key)
     _check_reach(scn)
     if q2 is None:
         _check_auto_slave_start(scn)
-
-
-def _contact_checks(scn: Scenario) -> None:
-    """Environment, force sensing and operator (the plant checks object/arm overlap at t = 0)."""
-    fs, env, op = scn.sensing.force, scn.environment, scn.operator
-    ok, ratio = _is_multiple(fs.delay, scn.control_dt)
-    if not ok or not fs.delay < scn.duration:
-        raise ConfigError.field("sensing.force.delay", fs.delay, "must be >= 0, < duration and an integer "
-                                f"multiple of control_dt = {scn.control_dt:g} s (ratio {ratio:.12g})")
-    if fs.cutoff is not None and fs.cutoff * scn.duration * 2.0 * math.pi <= 1.0:
-        raise ConfigError.field("sensing.force.cutoff", fs.cutoff, "is slower than the run: the filter time "
-                                f"constant 1/(2 pi cutoff) must be < duration = {scn.duration:g} s")
-    if fs.cutoff is not None and fs.cutoff >= 0.5 / scn.control_dt:
-        raise ConfigError.field("sensing.force.cutoff", fs.cutoff,
-                                f"must be < the control Nyquist frequency 1/(2 control_dt) = "
-                                f"{0.5 / scn.control_dt:g} Hz")
-    needs = [("environment.objects", bool(env.objects)), ("operator.enabled", op.enabled),
-             ("sensing.force.mode", fs.mode == "sensed")]
-    for key, used in needs:
-        if used and scn.plant.kind != "mujoco" and not (key == "environment.objects"
-                                                         and scn.plant.kind == "cosserat"):
-            plants = "'mujoco' or 'cosserat'" if key == "environment.objects" else "'mujoco'"
-            raise ConfigError(f"{key}: requires plant.kind = {plants} (got {scn.plant.kind!r})", path=key)
 
 
 def _check_auto_slave_start(scn: Scenario) -> None:
@@ -281,11 +254,6 @@ def _plain_copy(obj: Any, depth: int = 0) -> Any:
     return copy.copy(obj)
 
 
-def is_code_reference(name: str) -> bool:
-    """True for a controller named as Python code ('file.py:Class', 'package.module:Class')."""
-    return ":" in name
-
-
 def _file_reference(name: str) -> tuple[str, str] | None:
     """(path, class) of a 'path/to/file.py:Class' reference, None for anything else."""
     where, sep, attr = name.rpartition(":")
@@ -352,7 +320,7 @@ def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterabl
                 raise e.with_context(f"(from {where})") from None
         raise (e.with_context(label) if label else e) from None
     name = scn.controller.name
-    if is_code_reference(name) and not allow_code and (allow_code is False or origin == "file"):
+    if ":" in name and not allow_code and (allow_code is False or origin == "file"):
         what = f"scenario file {label}" if origin == "file" else "the study"
         raise ConfigError(f"controller.name = {name!r} in {what} is Python code; files run no code unless "
                           "you allow it: add --allow-code (API: allow_code=True) if you trust it, or give "
@@ -415,20 +383,21 @@ def schema_paths() -> tuple[str, ...]:
     return tuple(p for p, _, _ in fields_of(Scenario))
 
 
-def _to_toml_value(v: Any) -> Any:
+def to_toml(v: Any) -> Any:
+    """A TOML-ready copy of `v`: dataclasses -> tables in schema order, None -> "none", tuples -> lists."""
     if v is None:
         return "none"
     if type(v) in (bool, int, float, str):  # exact types: numpy scalars (float subclasses) go to .item()
         return v
     if isinstance(v, EnvironmentConfig):  # named objects: [environment.objects.<name>]
-        return {"objects": {o.name: {k: x for k, x in _to_toml_value(o).items() if k != "name"}
+        return {"objects": {o.name: {k: x for k, x in to_toml(o).items() if k != "name"}
                             for o in v.objects}}
     if dataclasses.is_dataclass(v) and not isinstance(v, type):
-        return {f.name: _to_toml_value(getattr(v, f.name)) for f in info(type(v)).fields}
+        return {f.name: to_toml(getattr(v, f.name)) for f in info(type(v)).fields}
     if isinstance(v, dict):
-        return {k: _to_toml_value(x) for k, x in v.items()}
+        return {k: to_toml(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_to_toml_value(x) for x in v]
+        return [to_toml(x) for x in v]
     if isinstance(v, np.generic):
         return v.item()
     return v
@@ -436,7 +405,7 @@ def _to_toml_value(v: Any) -> Any:
 
 def scenario_to_dict(scn: Scenario) -> dict[str, Any]:
     """The resolved scenario as a TOML-ready dict, every field in schema order (None -> "none")."""
-    return _to_toml_value(scn)
+    return to_toml(scn)
 
 
 def _toml_lines(table: Mapping[str, Any], name: str = "") -> list[str]:
@@ -475,6 +444,6 @@ def dump_scenario(scn: Scenario, path: str | Path) -> Path:
 
 
 __all__ = [
-    "REACH_MARGIN", "dump_scenario", "dumps_scenario", "is_code_reference", "load_scenario", "parse_override",
-    "scenario_to_dict", "schema_paths", "trajectory_radius_range",
+    "REACH_MARGIN", "dump_scenario", "dumps_scenario", "load_scenario", "parse_override", "scenario_to_dict",
+    "schema_paths", "to_toml", "trajectory_radius_range",
 ]

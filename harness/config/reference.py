@@ -38,12 +38,12 @@ def _type(t: Any) -> str:
 
 
 def _default(v: Any) -> str:
-    from harness.config.load import _to_toml_value
+    from harness.config.load import to_toml
     from harness.config.textio import toml_literal
 
     if v is NODEFAULT:
         return "required"
-    v = _to_toml_value(v)
+    v = to_toml(v)
     return "" if isinstance(v, dict) and v else f"`{toml_literal(v)}`"
 
 

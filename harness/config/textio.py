@@ -23,32 +23,23 @@ MAX_DEPTH = 32  # nesting of tables and arrays
 TMP_MARK = ".tmp-"  # temporary names: .<final name>.tmp-<pid>-<n>
 
 
-def check_document(doc: Any, what: str) -> Any:
-    """`doc`, or a ConfigError if it nests tables/arrays deeper than MAX_DEPTH."""
-    stack = [(doc, 1)]
-    while stack:  # iterative: no recursion limit
-        node, depth = stack.pop()
-        if isinstance(node, dict):
-            children = list(node.values())
-        elif isinstance(node, (list, tuple)):
-            children = list(node)
-        else:
-            continue
-        if depth > MAX_DEPTH:
-            raise ConfigError(f"{what}: nested deeper than {MAX_DEPTH} levels of tables/arrays")
-        stack += [(c, depth + 1) for c in children]
-    return doc
-
-
 def loads_toml(text: str, what: str) -> dict:
     """`tomllib.loads` within the size and depth limits (TOMLDecodeError is left to the caller)."""
     if len(text) > MAX_DOCUMENT_BYTES:
         raise ConfigError(f"{what}: {len(text)} characters, more than the limit of {MAX_DOCUMENT_BYTES}")
+    deep = ConfigError(f"{what}: nested deeper than {MAX_DEPTH} levels of tables/arrays")
     try:
         doc = tomllib.loads(text)
     except RecursionError:
-        raise ConfigError(f"{what}: nested deeper than {MAX_DEPTH} levels of tables/arrays") from None
-    return check_document(doc, what)
+        raise deep from None
+    stack = [(doc, 1)]
+    while stack:  # iterative: no recursion limit
+        node, depth = stack.pop()
+        if isinstance(node, (dict, list)):
+            if depth > MAX_DEPTH:
+                raise deep
+            stack += [(c, depth + 1) for c in (node.values() if isinstance(node, dict) else node)]
+    return doc
 
 
 def _open_regular(path: Path, what: str):
@@ -159,17 +150,12 @@ def describe_os_error(e: BaseException) -> str:
 _counter = iter(range(1 << 62))
 
 
-def temp_name(path: Path) -> Path:
-    """A temporary name next to `path` (same folder: the rename is atomic)."""
-    return path.with_name(f".{path.name}{TMP_MARK}{os.getpid()}-{next(_counter)}")
-
-
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """A temporary path next to `path`, fsynced and renamed to `path` when the block succeeds, removed
     otherwise; an OSError is an `OutputError`."""
     path = Path(path)
-    tmp = temp_name(path)
+    tmp = path.with_name(f".{path.name}{TMP_MARK}{os.getpid()}-{next(_counter)}")
     try:
         yield tmp
         if not tmp.exists():
