@@ -108,15 +108,9 @@ class PlantConfig:
                 "take the nominal [master] value") = None
     slave: doc(Slave | None, '"none" = same as [slave]; or a [plant.slave] table whose missing keys take '
                "the nominal [slave] value") = None
-    actuation: doc(Literal[ACTUATIONS], '"servo" | "torque" | "muscle" (mujoco only).  "servo": position '
-                   "servos, defined per unit length, track the integrated command q2_ref: they hide the "
-                   "slave's inertia and the controller's dynamics model (the stiff inner loop does the "
-                   'work).  "torque": the controller\'s T2 acts on the body as ideal, instantaneous '
-                   'generalized forces: hides actuator dynamics and limits.  "muscle": two one-sided '
-                   "extensor groups per section "
-                   "(force >= 0, lengthening the fibres at +-muscle_radius) with first-order force dynamics "
-                   "(muscle_time_constant) and limits (muscle_max_force): hides none of these; it cannot "
-                   "realize every T2 (commands outside [0, F_max] are clipped) and lags by tau") = "servo"
+    actuation: doc(Literal[ACTUATIONS], '(mujoco only) "servo": position servos track the integrated '
+                   'command; "torque": T2 as ideal generalized forces; "muscle": two one-sided extensor '
+                   "groups per section with force lag and limits (docs/plants.md)") = "servo"
     segments: integer("rigid segments per section N (mujoco only)", ge=1, le=64) = 8
     enforce_cc: doc(bool, "equality constraints holding each section at constant curvature (mujoco "
                     "only)") = False
@@ -127,15 +121,13 @@ class PlantConfig:
     servo_damping_ratio: num("servo damping ratio (section level)", **POS) = 1.0
     servo_feedforward: doc(bool, "add the analytic T2 (mapped to segment joints) in servo mode") = True
     actuation_delay: num("s, pure command delay, a multiple of control_dt", **NONNEG) = 0.0
-    muscle_time_constant: vec(3, "s, tau of the muscle groups' first-order force dynamics per section "
-                              "(assumption: pneumatic muscles with their valves and lines respond in tens of "
-                              "ms)", gt=0.0, le=10.0) = (0.05, 0.05, 0.05)
-    muscle_max_force: vec(3, "N, force limit F_max of one muscle group per section (assumption: supply "
-                          "pressure x bore area of the group)", gt=0.0, le=1e5) = (400.0, 300.0, 200.0)
-    muscle_radius: vec(3, "m, lateral offset r of the two groups from the backbone per section; "
-                       "default: the radius at which two fibres carrying the section's extension stiffness "
-                       "give its bending stiffness, r = sqrt(Kb / (Ke L0)) for the default [slave] "
-                       "(0.163, 0.120, 0.091 m), rounded", gt=0.0, le=0.5) = (0.16, 0.12, 0.09)
+    muscle_time_constant: vec(3, "s, tau of the muscle groups' first-order force dynamics per section",
+                              gt=0.0, le=10.0) = (0.05, 0.05, 0.05)
+    muscle_max_force: vec(3, "N, force limit F_max of one muscle group per section", gt=0.0,
+                          le=1e5) = (400.0, 300.0, 200.0)
+    muscle_radius: vec(3, "m, lateral offset of the two groups from the backbone per section (default: "
+                       "sqrt(Kb / (Ke L0)) of the default [slave], rounded)", gt=0.0,
+                       le=0.5) = (0.16, 0.12, 0.09)
     armature_fraction: num("segment-joint armature as a fraction of the section inertia", **NONNEG) = 0.01
     scene_xml: doc(doc(str, "", expect="the path of an existing MJCF scene file") | None,
                    "alternative scene MJCF file (must include master + octarm base); relative paths "

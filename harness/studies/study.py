@@ -48,10 +48,8 @@ METRIC_LABELS = {
 DEFAULT_OUT_ROOT = Path("runs") / "sweeps"
 
 
-# --- study file -------------------------------------------------------------------------------------
 def check_study_name(name: Any) -> str:
-    """A study name is a folder name inside the output root: letters, digits, '_', '-', '.', not only
-    dots ('.' or '..' would leave the folder); else a one-line ConfigError."""
+    """`name` if it is a folder name inside the output root (not only dots), else ConfigError."""
     if not isinstance(name, str) or not re.fullmatch(r"[\w.-]+", name) or not name.strip("."):
         raise ConfigError(f"[study] name = {name!r}: required; letters, digits, '_', '-', '.' only, and not "
                           "only dots (the name is a folder inside the output folder)")
@@ -170,17 +168,14 @@ def _parse_factor(t: FactorTable) -> Factor:
 
 def load_study(source: str | os.PathLike | dict, base_dir: str | os.PathLike | None = None, *,
                max_cases: int | None = None, allow_code: bool | None = None) -> Study:
-    """Parse and check a study (TOML file or the equivalent dict).  Structural errors raise
-    `ConfigError` naming the table/factor; values are checked by `expand_cases`.
-    `base_dir` resolves a relative `study.scenario` and relative controller files (default: the study
-    file's folder, or cwd).  `max_cases` replaces [sampling] max_cases (the case count is checked here,
-    before expansion).  allow_code: whether the study (its scenario, `set`, factors) may name Python
-    controllers; default: yes for a dict (the caller's own), no for a file (`--allow-code`)."""
+    """The checked `Study` of a TOML file or table (values: `expand_cases`).  Raises ConfigError.
+    base_dir: where relative paths resolve (default: the file's folder, or cwd); max_cases: replaces
+    [sampling] max_cases; allow_code: may it name Python controllers (default: only a table may)."""
     if isinstance(source, dict):
         doc_, stem, label = source, None, None
         base = Path(base_dir) if base_dir is not None else Path.cwd()
     else:
-        path = shipped(source, "studies")  # a shipped name (segments) works from any folder
+        path = shipped(source, "studies")
         doc_, stem, label = read_toml(path, "study file"), path.stem, f"study file {source}"
         base = Path(base_dir) if base_dir is not None else path.resolve().parent
     try:
@@ -228,20 +223,14 @@ def check_max_cases(v: Any, where: str) -> int:
     return v
 
 
-def case_count(study: Study) -> int:
-    """Number of cases before duplicates are removed, computed without expanding the study."""
-    if study.mode == "random":
-        return int(study.n)
-    count = math.prod(len(f.levels) for f in study.factors if not f.is_random)
-    return count * (study.n if any(f.is_random for f in study.factors) else 1)
-
-
 def check_case_count(study: Study) -> None:
-    """ConfigError (with the count) if the study has more than `study.max_cases` cases."""
-    count = case_count(study)
+    """ConfigError if the study has more than `study.max_cases` cases (counted without expanding it)."""
+    if study.mode == "random":
+        count = int(study.n)
+    else:
+        count = math.prod(len(f.levels) for f in study.factors if not f.is_random)
+        count *= study.n if any(f.is_random for f in study.factors) else 1
     if count > study.max_cases:
         raise ConfigError(f"study {study.name!r}: {count} cases, more than the limit of {study.max_cases} "
                           "([sampling] max_cases or --max-cases raise it)", path="[sampling] max_cases")
 
-
-# --- worker -----------------------------------------------------------------------------------------
