@@ -17,9 +17,9 @@ from pathlib import Path
 from controllers.baselines import BUILTINS, FAST_PATH
 from controllers.interface import Controller, ParamsError
 from harness.config.errors import ConfigError
-from harness.config.load import to_toml
+from harness.config.load import file_reference, to_toml
 from harness.config.scenario import Scenario
-from harness.config.schema import decode
+from harness.config.schema import decode, did_you_mean, suggest
 from harness.config.textio import toml_literal
 
 
@@ -65,12 +65,12 @@ def load_class(name: str) -> type:
     if name in BUILTINS:
         return BUILTINS[name]
     if ":" not in name:
-        close = ", ".join(BUILTINS)
-        raise _bad(name, f"unknown built-in controller (built-ins: {close}; or give 'file.py:ClassName' "
-                         "or 'package.module:ClassName')")
+        hint = did_you_mean(suggest(name, BUILTINS))
+        raise _bad(name, f"unknown built-in controller; {hint}built-ins: {', '.join(BUILTINS)}; or give "
+                         "'file.py:ClassName' or 'package.module:ClassName'")
     where, _, attr = name.rpartition(":")
     try:
-        if where.endswith(".py") or "/" in where or "\\" in where:
+        if file_reference(name):
             path = Path(where)
             if not path.is_file():
                 raise _bad(name, f"file {where} not found")

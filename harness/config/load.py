@@ -254,7 +254,7 @@ def _plain_copy(obj: Any, depth: int = 0) -> Any:
     return copy.copy(obj)
 
 
-def _file_reference(name: str) -> tuple[str, str] | None:
+def file_reference(name: str) -> tuple[str, str] | None:
     """(path, class) of a 'path/to/file.py:Class' reference, None for anything else."""
     where, sep, attr = name.rpartition(":")
     if sep and (where.endswith(".py") or "/" in where or "\\" in where):
@@ -267,7 +267,7 @@ def _rebase_controller(raw: dict, base: Path | None) -> None:
     node = raw.get("controller")
     table = node if isinstance(node, dict) else None
     name = table.get("name") if table is not None else node
-    ref = _file_reference(name.strip()) if isinstance(name, str) and base is not None else None
+    ref = file_reference(name.strip()) if isinstance(name, str) and base is not None else None
     if ref is None or Path(ref[0]).is_absolute():
         return
     new = f"{base / ref[0]}:{ref[1]}"
@@ -423,7 +423,7 @@ def _toml_lines(table: Mapping[str, Any], name: str = "") -> list[str]:
 
 def dumps_scenario(scn: Scenario) -> str:
     """The resolved scenario as TOML text; a relative controller file path is written absolute."""
-    ref = _file_reference(scn.controller.name)
+    ref = file_reference(scn.controller.name)
     if ref is not None and not Path(ref[0]).is_absolute():
         scn = dataclasses.replace(scn, controller=dataclasses.replace(
             scn.controller, name=f"{os.path.abspath(ref[0])}:{ref[1]}"))
