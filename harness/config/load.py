@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import functools
 import math
 import os
 import re
@@ -26,7 +25,7 @@ from controllers.params import SubtaskSpec
 from harness.config.assets import shipped
 from harness.config.errors import ConfigError, short_repr
 from harness.config.scenario import KEY_RE, NAME_RE, EnvironmentConfig, Scenario, TrajectoryConfig
-from harness.config.schema import decode, did_you_mean, fields_of, info, suggest, type_name
+from harness.config.schema import decode, did_you_mean, info, suggest, type_name
 from harness.config.textio import loads_toml, read_toml, toml_literal, write_atomic
 
 BARE_WORD = r"^[A-Za-z_][A-Za-z0-9_.+-]*$"
@@ -370,17 +369,11 @@ def _prepare(raw: Mapping, default_name: str | None) -> tuple[dict, dict[int, st
 
 def _scenario_from_dict(raw: Mapping, default_name: str | None) -> Scenario:
     table, names = _prepare(raw, default_name)
-    scn = decode(table, Scenario, names=names, elsewhere=schema_paths())
+    scn = decode(table, Scenario, names=names)
     if "transient" not in table and scn.duration <= Scenario.transient:
         scn = dataclasses.replace(scn, transient=scn.duration / 4.0)
     _cross_checks(scn)
     return scn
-
-
-@functools.cache
-def schema_paths() -> tuple[str, ...]:
-    """Every settable dotted key of a scenario file (suggestions, tests)."""
-    return tuple(p for p, _, _ in fields_of(Scenario))
 
 
 def to_toml(v: Any) -> Any:
@@ -445,5 +438,5 @@ def dump_scenario(scn: Scenario, path: str | Path) -> Path:
 
 __all__ = [
     "REACH_MARGIN", "dump_scenario", "dumps_scenario", "load_scenario", "parse_override", "scenario_to_dict",
-    "schema_paths", "to_toml", "trajectory_radius_range",
+    "to_toml", "trajectory_radius_range",
 ]

@@ -178,7 +178,9 @@ def unknown_keys(prefix: str, bad: Mapping, allowed: Iterable[str],
         close = [prefix + c for c in suggest(k, allowed)]
         other = [e for e in elsewhere if e.rsplit(".", 1)[-1] == k and e != prefix + k and e not in close]
         text = did_you_mean(close + other, k if len(bad) > 1 else "")
-        hints.append(text + (f"({k!r} belongs under [{other[0].rsplit('.', 1)[0]}]) " if other else ""))
+        where = other[0].rpartition(".")[0] if other else ""
+        hints.append(text + (f"({k!r} belongs {f'under [{where}]' if where else 'at the top level'}) "
+                             if other else ""))
     if len(bad) == 1:
         (k, v), = bad.items()
         head, path = f"{prefix}{k} = {short_repr(v, 40)}: unknown key", prefix + str(k)
@@ -214,6 +216,12 @@ def fields_of(cls: type, prefix: str = "", arrays: bool = False) -> Iterator[tup
             sub, path = _dataclass_of(bare(f.type).item_type), path + (item if item == "[]" else "." + item)
         if sub is not None:
             yield from fields_of(sub.cls, path + ".", arrays)
+
+
+@functools.cache
+def paths(cls: type, prefix: str = "") -> tuple[str, ...]:
+    """Every dotted key of a `cls` table (for "did you mean" of keys put in the wrong table)."""
+    return tuple(prefix + p for p, _, _ in fields_of(cls))
 
 
 def _check_keys(raw: Any, t: Any, path: str, elsewhere: tuple[str, ...], names: dict | None = None) -> None:
@@ -340,13 +348,12 @@ def _bad_key(table: Mapping, tp: Any) -> str | None:
     return None
 
 
-def decode(raw: Any, cls: type, *, prefix: str = "", names: dict[int, str] | None = None,
-           elsewhere: tuple[str, ...] = ()) -> Any:
+def decode(raw: Any, cls: type, *, prefix: str = "", names: dict[int, str] | None = None) -> Any:
     """`raw` (a parsed TOML table) as a `cls` instance, or a one-line ConfigError ("none" or false unset
     an optional field).  `prefix`: before every field path; `names`: {index: name} of array tables."""
     if not isinstance(raw, Mapping):
         raise ConfigError.field(prefix.rstrip(".") or "file", raw, f"must be a table (got {type_name(raw)})")
-    _check_keys(raw, info(cls), prefix.rstrip("."), elsewhere, names)
+    _check_keys(raw, info(cls), prefix.rstrip("."), paths(cls, prefix), names)
     raw = none_words(raw, info(cls))
     bad = _non_finite(raw, [])
     if bad is not None:
@@ -377,6 +384,6 @@ def none_words(raw: Any, t: Any) -> Any:
 
 
 __all__ = ["ConfigError", "Meta", "checked", "decode", "describe", "did_you_mean", "doc", "field_error",
-           "fields_of", "info", "integer", "none_words", "num", "plain", "suggest", "type_name",
+           "fields_of", "info", "integer", "none_words", "num", "paths", "plain", "suggest", "type_name",
            "unknown_keys", "vec"]
 

@@ -18,7 +18,7 @@ from typing import Any
 from harness.config.assets import shipped
 from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
-from harness.config.schema import decode, did_you_mean, fields_of, suggest, unknown_keys
+from harness.config.schema import decode, did_you_mean, suggest, unknown_keys
 from harness.config.study import (  # noqa: F401 - DEFAULT_MAX_CASES, METRIC_NAMES re-exported
     DEFAULT_MAX_CASES,
     DISTRIBUTIONS,
@@ -179,7 +179,7 @@ def load_study(source: str | os.PathLike | dict, base_dir: str | os.PathLike | N
         doc_, stem, label = read_toml(path, "study file"), path.stem, f"study file {source}"
         base = Path(base_dir) if base_dir is not None else path.resolve().parent
     try:
-        f = decode(doc_, StudyFile, elsewhere=tuple(p for p, _, _ in fields_of(StudyFile)))
+        f = decode(doc_, StudyFile)
     except ConfigError as e:
         raise (e.with_context(label) if label else e) from None
     if not f.factor:
