@@ -23,6 +23,7 @@ from harness.config.study import (  # noqa: F401 - DEFAULT_MAX_CASES, METRIC_NAM
     DEFAULT_MAX_CASES,
     DISTRIBUTIONS,
     METRIC_NAMES,
+    METRIC_UNITS,
     PARAM_RE,
     FactorTable,
     StudyFile,
@@ -33,18 +34,8 @@ log = logging.getLogger(__name__)
 
 
 LOWER_IS_WORSE = frozenset({"beta_min"})
-# axis labels of the summary plots (units as in harness.loop.metrics)
-METRIC_LABELS = {
-    "e1_rms": "e1_rms [m]", "e1_max": "e1_max [m]", "e2_rms": "e2_rms [m]", "e2_max": "e2_max [m]",
-    "e2_plant_rms": "e2_plant_rms [m]", "e2_plant_max": "e2_plant_max [m]",
-    "deN_rms": "deN_rms [mixed: m/s, 1/(m s)]", "beta_min": "beta_min [-] (41)", "ya_max": "ya_max [-] (29)",
-    "e1_final": "e1_final [m]", "e2_final": "e2_final [m]", "range_violation": "range_violation [m or rad]",
-    "mujoco_warnings": "mujoco_warnings [count]", "sim_time_reached": "sim_time_reached [s]",
-    "wall_time": "wall_time [s]", "realtime_factor": "realtime_factor [x real time]",
-    "contact_force_peak": "contact_force_peak [N]", "contact_force_rms": "contact_force_rms [N]",
-    "penetration_max": "penetration_max [m]", "contact_time": "contact_time [s]",
-    "body_contact_time": "body_contact_time [s]", "force_tracking_rms": "force_tracking_rms [N]",
-}
+METRIC_LABELS = {k: f"{k} [{u}]" for k, u in METRIC_UNITS.items()} | {
+    "beta_min": "beta_min [-] (41)", "ya_max": "ya_max [-] (29)"}
 DEFAULT_OUT_ROOT = Path("runs") / "sweeps"
 
 
