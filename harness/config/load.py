@@ -26,7 +26,7 @@ from harness.config.assets import shipped
 from harness.config.errors import ConfigError, short_repr
 from harness.config.scenario import KEY_RE, NAME_RE, EnvironmentConfig, Scenario, TrajectoryConfig
 from harness.config.schema import decode, did_you_mean, info, suggest, type_name
-from harness.config.textio import loads_toml, read_toml, toml_literal, write_atomic
+from harness.config.textio import MAX_DEPTH, loads_toml, read_toml, toml_literal, write_atomic
 
 BARE_WORD = r"^[A-Za-z_][A-Za-z0-9_.+-]*$"
 REACH_MARGIN = 1e-3  # m, the desired trajectory must stay this far inside the master workspace annulus
@@ -243,9 +243,9 @@ def _read_source(source: str | Path | Mapping | None) -> tuple[dict, str | None,
 
 
 def _plain_copy(obj: Any, depth: int = 0) -> Any:
-    """Deep copy of a user table (tuples -> lists) within the nesting limit."""
-    if depth > 50:
-        raise ConfigError("scenario table nested too deeply")
+    """Deep copy of a user table (tuples -> lists) within the nesting limit of files."""
+    if depth >= MAX_DEPTH and isinstance(obj, (Mapping, list, tuple)):
+        raise ConfigError(f"scenario table: nested deeper than {MAX_DEPTH} levels of tables/arrays")
     if isinstance(obj, Mapping):
         return {k: _plain_copy(v, depth + 1) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
