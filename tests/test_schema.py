@@ -19,7 +19,8 @@ from harness.config.study import StudyFile
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.mark.parametrize(("kind", "cls"), [("scenario", Scenario), ("bounds", BoundsFile), ("study", StudyFile)])
+@pytest.mark.parametrize(("kind", "cls"),
+                         [("scenario", Scenario), ("bounds", BoundsFile), ("study", StudyFile)])
 def test_reference_lists_every_schema_field(kind, cls):
     page = reference.markdown(kind)
     paths = [p for p, _, _ in fields_of(cls, arrays=True)]
