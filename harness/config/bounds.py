@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -49,8 +49,8 @@ class Bounds:
 
 @dataclass(frozen=True)
 class BoundsFile:
+    bounds: doc(Bounds, "the acceptance limits")
     description: doc(str, "free text") = ""
-    bounds: doc(Bounds, "the acceptance limits") = field(default_factory=Bounds)
 
 
 FLAGS = {"no_mujoco_warnings": "mujoco_warnings", "status_ok": "status"}  # flag -> metric it checks
@@ -103,10 +103,7 @@ class Violation:
 def bounds_from_dict(raw: Mapping, label: str | None = None) -> Bounds:
     """The `Bounds` of a parsed bounds file ({"bounds": {...}, "description": ...})."""
     try:
-        bounds = decode(raw, BoundsFile).bounds
-        if "bounds" not in raw:
-            raise ConfigError("missing [bounds] table", path="bounds")
-        return bounds
+        return decode(raw, BoundsFile).bounds
     except ConfigError as e:
         raise (e.with_context(label) if label else e) from None
 

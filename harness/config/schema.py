@@ -300,8 +300,14 @@ def field_error(cls: type, raw: Any, tokens: list, why: str = "", names: dict[in
                 prefix: str = "") -> ConfigError:
     """The one-line error for the field at `tokens` of `raw` (decoded as `cls`)."""
     path, value, ftype, rest = _locate(cls, raw, tokens, names)
-    path = prefix + path if path else prefix.rstrip(".") or "file"
     t = bare(ftype)
+    required = re.fullmatch(r"Object missing required field `(\w+)`", why)
+    if required and isinstance(t, mi.DataclassType):
+        key = prefix + (f"{path}.{required.group(1)}" if path else required.group(1))
+        kind = next(f.type for f in t.fields if f.name == required.group(1))
+        what = f"[{key}] table" if _dataclass_of(kind) else f"key {key} ({describe(kind)})"
+        return ConfigError(f"missing {what}", path=key)
+    path = prefix + path if path else prefix.rstrip(".") or "file"
     expected = describe(ftype)
     got = ""
     if rest:
