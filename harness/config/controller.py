@@ -120,11 +120,14 @@ def parse_params(cls: type, raw: dict | None, name: str | None = None):
             raise ConfigError.field(f"controller.params.{key}", raw[key],
                                     f"unknown key; controller {label!r} takes no parameters")
         return None
-    p = decode(raw, params, prefix="controller.params.")
+    if not dataclasses.is_dataclass(params):
+        raise ConfigError(f"controller {label!r}: its Params must be a dataclass with defaults",
+                          path="controller.params")
     try:
+        p = decode(raw, params, prefix="controller.params.")
         if callable(getattr(p, "check", None)):
             p.check()
-    except (ParamsError, HarnessInterrupt):
+    except (ConfigError, ParamsError, HarnessInterrupt):
         raise
     except (TypeError, ValueError) as e:
         raise ConfigError(f"controller.params (controller {label!r}): {' '.join(str(e).split())}",
