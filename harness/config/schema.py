@@ -224,26 +224,27 @@ def paths(cls: type, prefix: str = "") -> tuple[str, ...]:
     return tuple(prefix + p for p, _, _ in fields_of(cls))
 
 
-def _check_keys(raw: Any, t: Any, path: str, elsewhere: tuple[str, ...], names: dict | None = None) -> None:
-    t = _dataclass_of(t)
-    if t is None or not isinstance(raw, Mapping):
-        return
-    fields = {f.name: f for f in t.fields}
-    for k in raw:
-        if not isinstance(k, str):
-            raise ConfigError(f"{path or 'file'}: key {short_repr(k)} is not a string", path=path)
-    bad = {k: v for k, v in raw.items() if k not in fields}
-    if bad:
-        raise unknown_keys(f"{path}." if path else "", bad, fields, elsewhere)
-    for k, v in raw.items():
-        p = f"{path}.{k}" if path else k
-        ft = bare(fields[k].type)
-        if isinstance(ft, (mi.VarTupleType, mi.ListType)) and isinstance(v, (list, tuple)):
-            for i, item in enumerate(v):
-                where = f"{p}.{names[i]}" if names and i in names else f"{p}[{i}]"
-                _check_keys(item, ft.item_type, where, elsewhere, names)
-        else:
-            _check_keys(v, fields[k].type, p, elsewhere, names)
+def _normalize(raw: Any, t: Any, path: str, elsewhere: tuple[str, ...], names: dict | None) -> Any:
+    """A copy of `raw` with "none" (or false) as None where `t` allows None; unknown keys raise."""
+    t0 = bare(t)
+    if isinstance(t0, mi.UnionType) and any(isinstance(u, mi.NoneType) for u in t0.types) and (
+            raw is False or (isinstance(raw, str) and raw.strip().lower() in NONE_WORDS)):
+        return None
+    dc = _dataclass_of(t)
+    if dc is not None and isinstance(raw, Mapping):
+        fields = {f.name: f.type for f in dc.fields}
+        for k in raw:
+            if not isinstance(k, str):
+                raise ConfigError(f"{path or 'file'}: key {short_repr(k)} is not a string", path=path)
+        bad = {k: v for k, v in raw.items() if k not in fields}
+        if bad:
+            raise unknown_keys(f"{path}." if path else "", bad, fields, elsewhere)
+        return {k: _normalize(v, fields[k], f"{path}.{k}" if path else k, elsewhere, names)
+                for k, v in raw.items()}
+    if isinstance(t0, (mi.VarTupleType, mi.ListType)) and isinstance(raw, (list, tuple)):
+        return [_normalize(v, t0.item_type, f"{path}.{names[i]}" if names and i in names else f"{path}[{i}]",
+                           elsewhere, names) for i, v in enumerate(raw)]
+    return raw
 
 
 def _non_finite(raw: Any, tokens: list) -> list | None:
@@ -359,8 +360,7 @@ def decode(raw: Any, cls: type, *, prefix: str = "", names: dict[int, str] | Non
     an optional field).  `prefix`: before every field path; `names`: {index: name} of array tables."""
     if not isinstance(raw, Mapping):
         raise ConfigError.field(prefix.rstrip(".") or "file", raw, f"must be a table (got {type_name(raw)})")
-    _check_keys(raw, info(cls), prefix.rstrip("."), paths(cls, prefix), names)
-    raw = none_words(raw, info(cls))
+    raw = _normalize(raw, info(cls), prefix.rstrip("."), paths(cls, prefix), names)
     bad = _non_finite(raw, [])
     if bad is not None:
         raise field_error(cls, raw, bad, "finite", names, prefix)
@@ -374,22 +374,7 @@ def decode(raw: Any, cls: type, *, prefix: str = "", names: dict[int, str] | Non
         raise ConfigError(f"{prefix.rstrip('.') or 'file'}: {' '.join(str(e).split())}") from None
 
 
-def none_words(raw: Any, t: Any) -> Any:
-    """A copy of `raw` with "none" (and false) replaced by None where the schema allows None."""
-    t0 = bare(t)
-    if isinstance(t0, mi.UnionType) and any(isinstance(u, mi.NoneType) for u in t0.types) and (
-            raw is False or (isinstance(raw, str) and raw.strip().lower() in NONE_WORDS)):
-        return None
-    dc = _dataclass_of(t)
-    if dc is not None and isinstance(raw, Mapping):
-        fs = {f.name: f.type for f in dc.fields}
-        return {k: none_words(v, fs[k]) if k in fs else v for k, v in raw.items()}
-    if isinstance(t0, (mi.VarTupleType, mi.ListType)) and isinstance(raw, list):
-        return [none_words(v, t0.item_type) for v in raw]
-    return raw
-
-
 __all__ = ["ConfigError", "Meta", "checked", "decode", "describe", "did_you_mean", "doc", "field_error",
-           "fields_of", "info", "integer", "none_words", "num", "paths", "plain", "suggest", "type_name",
+           "fields_of", "info", "integer", "num", "paths", "plain", "suggest", "type_name",
            "unknown_keys", "vec"]
 
