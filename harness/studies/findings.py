@@ -39,7 +39,6 @@ deterministic: the same files give the same numbers.
 
 from __future__ import annotations
 
-import difflib
 import importlib.util
 import math
 import time
@@ -50,6 +49,7 @@ from typing import Any
 
 from harness.config.bounds import Bounds, Violation, bounds_from_dict, check_bounds
 from harness.config.errors import ConfigError
+from harness.config.schema import unknown_keys
 from harness.config.textio import read_toml
 from harness.studies.finding_measures import MEASURE_UNITS, MEASURES
 
@@ -104,12 +104,9 @@ def _str_list(v: Any, path: str) -> tuple[str, ...]:
 
 
 def _check_keys(table: Mapping, allowed: Sequence[str], where: str) -> None:
-    for k in table:
-        if k not in allowed:
-            close = difflib.get_close_matches(str(k), list(allowed), n=1)
-            hint = f"did you mean {close[0]!r}? " if close else ""
-            raise ConfigError(f"unknown key {where + '.' if where else ''}{k}; {hint}allowed: "
-                              f"{', '.join(allowed)}", path=f"{where}.{k}" if where else str(k))
+    bad = {k: v for k, v in table.items() if k not in allowed}
+    if bad:
+        raise unknown_keys(f"{where}." if where else "", bad, allowed)
 
 
 def finding_from_dict(raw: Mapping, name: str, path: Path | None = None) -> Finding:
