@@ -1,5 +1,6 @@
-"""The shipped `mjcf/`, `scenarios/`, `bounds/`, `studies/` files: top-level folders of the checkout,
-installed as package data `harness._data.<kind>`; `shipped` lets a command name one from any folder."""
+"""The shipped `mjcf/`, `scenarios/`, `bounds/`, `studies/`, `findings/` files: top-level folders of the
+checkout, installed as package data `harness._data.<kind>`; `shipped` lets a command name one from any
+folder."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import importlib.util
 from functools import cache
 from pathlib import Path
 
-KINDS = ("mjcf", "scenarios", "bounds", "studies")
+KINDS = ("mjcf", "scenarios", "bounds", "studies", "findings")
 _CHECKOUT = Path(__file__).resolve().parents[2]
 
 
