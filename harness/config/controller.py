@@ -111,7 +111,7 @@ def load_class(name: str) -> type:
 
 def parse_params(cls: type, raw: dict | None, name: str | None = None):
     """The validated `Params` of `cls` (None for a class without) from its [controller.params] table.
-    Raises ConfigError / ParamsError (one line), ControllerCodeError for anything else its check raises."""
+    Raises ConfigError (one line), ControllerCodeError for anything else its check raises."""
     params, raw = getattr(cls, "Params", None), dict(raw or {})
     label = name or getattr(cls, "name", cls.__name__)
     if params is None:
@@ -127,8 +127,10 @@ def parse_params(cls: type, raw: dict | None, name: str | None = None):
         p = decode(raw, params, prefix="controller.params.")
         if callable(getattr(p, "check", None)):
             p.check()
-    except (ConfigError, ParamsError, HarnessInterrupt):
+    except (ConfigError, HarnessInterrupt):
         raise
+    except ParamsError as e:
+        raise ConfigError(str(e), path=f"controller.params.{e.key}") from None
     except (TypeError, ValueError) as e:
         raise ConfigError(f"controller.params (controller {label!r}): {' '.join(str(e).split())}",
                           path="controller.params") from None
@@ -160,10 +162,7 @@ def resolve_controller(scn: Scenario) -> Scenario:
         if have != want:
             raise _bad(cfg.name, f"needs {key} = {toml_literal(want)} on plant.kind {scn.plant.kind!r} "
                                  f"(it is {toml_literal(have)})")
-    try:
-        p = parse_params(cls, cfg.params, cfg.name)
-    except ParamsError as e:
-        raise ConfigError(str(e), path=f"controller.params.{e.key}") from None
+    p = parse_params(cls, cfg.params, cfg.name)
     full = to_toml(p) if dataclasses.is_dataclass(p) else dict(cfg.params)
     if cfg.name == FAST_PATH or full == cfg.params:
         return scn
