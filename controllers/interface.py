@@ -31,9 +31,9 @@ Action (the controller owns one, preallocated by ``Controller.__init__``; write 
 Which slave command a controller provides is its ``actuations`` tuple ("torque" needs T2, "servo"
 needs u2 or the reference); the harness rejects a mismatch with the plant before running.
 
-Parameters: a controller declares ``Params`` (a dataclass with defaults); ``[controller] params`` of
-the scenario are checked by `parse_params` (unknown keys, wrong types, non-finite numbers, and the
-dataclass' own ``check()``), each error one line naming ``controller.params.<key>``.
+Parameters: a controller declares ``Params`` (a frozen dataclass with defaults, optional ``check()``
+raising ParamsError, see `check_range`); the harness decodes ``[controller] params`` into it with the
+scenario's validator (one-line errors naming ``controller.params.<key>``).
 
 The nominal analytic models are available as plain functions bound to the nominal parameters:
 `NominalModels` (``ctx.models``).  With the compiled kernels (the harness passes them) a call costs
@@ -42,8 +42,6 @@ microseconds; the maths is the interpreted ``controllers/`` code either way.
 
 from __future__ import annotations
 
-import dataclasses
-import math
 import types
 from dataclasses import dataclass
 from typing import Any
@@ -201,32 +199,6 @@ class ControllerContext:
     faults: tuple = (1, 1.0)
 
 
-def _check_value(key: str, default: Any, value: Any) -> Any:
-    """Convert a TOML value to the type of a Params field's default, or raise ParamsError."""
-    if isinstance(default, bool):
-        if not isinstance(value, bool):
-            raise ParamsError(key, value, "must be true or false")
-        return value
-    if isinstance(default, int):
-        if not isinstance(value, int) or isinstance(value, bool):
-            raise ParamsError(key, value, "must be an integer")
-        return int(value)
-    if isinstance(default, float):
-        if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
-            raise ParamsError(key, value, "must be a finite number")
-        return float(value)
-    if isinstance(default, str):
-        if not isinstance(value, str):
-            raise ParamsError(key, value, "must be a string")
-        return value
-    if isinstance(default, tuple):
-        if not isinstance(value, (list, tuple)) or len(value) != len(default):
-            raise ParamsError(key, value, f"must be an array of {len(default)} entries")
-        return tuple(_check_value(f"{key}[{i}]", d, v) for i, (d, v) in enumerate(zip(default, value,
-                                                                                      strict=True)))
-    return value
-
-
 def check_range(key: str, value: float, lo: float | None = None, hi: float | None = None,
                 lo_open: bool = False) -> None:
     """Raise ParamsError unless lo (<, or <= with lo_open) value <= hi."""
@@ -259,32 +231,6 @@ class Controller:
     def __init__(self) -> None:
         self.action = Action()
         self.ctx: ControllerContext | None = None
-
-    @classmethod
-    def parse_params(cls, raw: dict | None) -> Any:
-        """Validated `Params` instance from a TOML table (missing keys: defaults).  Raises ParamsError."""
-        raw = dict(raw or {})
-        params = getattr(cls, "Params", None)  # a plain class (not derived from Controller) may have none
-        if params is None:
-            if raw:
-                key = sorted(raw)[0]
-                label = getattr(cls, "name", cls.__name__)
-                raise ParamsError(key, raw[key], f"unknown key; controller {label!r} takes no parameters")
-            return None
-        if not dataclasses.is_dataclass(params):
-            raise TypeError(f"controller {cls.__name__}: Params must be a dataclass with defaults")
-        names = [f.name for f in dataclasses.fields(params)]
-        defaults = params()
-        kwargs = {}
-        for key, value in raw.items():
-            if key not in names:
-                raise ParamsError(key, value, f"unknown key; allowed: {', '.join(names)}")
-            kwargs[key] = _check_value(key, getattr(defaults, key), value)
-        p = params(**kwargs)
-        check = getattr(p, "check", None)
-        if callable(check):
-            check()
-        return p
 
     def reset(self, ctx: ControllerContext) -> None:
         """Called once before the first step.  Default: keep the context, zero the action."""

@@ -10,6 +10,7 @@ from __future__ import annotations
 import importlib
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -20,7 +21,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness import cli
 from harness.cli import main
 from harness.config.load import load_scenario
 from harness.config.scenario import Scenario
@@ -141,18 +141,39 @@ def test_help_for_each_command(command, capsys):
     assert "Default" in out
 
 
-def test_every_option_has_a_help_text():
-    parser = cli.build_parser()
-    sub = next(a for a in parser._actions if isinstance(a, type(parser._subparsers._group_actions[0])))
-    assert set(sub.choices) == set(OPTIONS)
-    for name, p in sub.choices.items():
-        for action in p._actions:
-            if action.dest == "help":
-                continue
-            assert action.help and len(action.help) > 20, (name, action.dest)
-            no_default = ("no_progress", "bounds", "overrides")
-            if action.option_strings and action.dest not in no_default:
-                assert "Default" in action.help, (name, action.dest)
+def _help_entries(text: str) -> dict[str, str]:
+    """{invocation: help text} of every argument an argparse help page lists (two-space indented
+    entries, their help to the right or on the more indented lines below)."""
+    entries: dict[str, str] = {}
+    key = None
+    for line in text.splitlines():
+        start = re.match(r"^  (\S.*?)(?:\s{2,}(\S.*))?$", line)
+        if start:
+            key = start.group(1)
+            entries[key] = start.group(2) or ""
+        elif key is not None and re.match(r"^\s{3,}\S", line):
+            entries[key] = (entries[key] + " " + line.strip()).strip()
+        else:
+            key = None
+    return entries
+
+
+def test_every_option_has_a_help_text(capsys):
+    assert main(["--help"]) == 0
+    top = capsys.readouterr().out
+    commands = re.findall(r"^    (\S+)", top.split("commands:", 1)[1], re.M)
+    assert set(commands) == set(OPTIONS)
+    no_default = ("--no-progress", "--bounds", "--set")
+    for name in commands:
+        assert main([name, "--help"]) == 0
+        entries = _help_entries(capsys.readouterr().out)
+        entries.pop("-h, --help")
+        for opt in OPTIONS[name]:  # the page was parsed: every known option has its entry
+            assert any(opt in re.split(r"[\s,]+", inv) for inv in entries), (name, opt)
+        for invocation, text in entries.items():
+            assert len(text) > 20, (name, invocation)
+            if invocation.startswith("-") and not invocation.startswith(no_default):
+                assert "Default" in text, (name, invocation)
 
 
 def test_top_level_help_and_no_command(capsys):

@@ -384,7 +384,7 @@ def test_dump_load_round_trip(tmp_path, source, overrides):
     assert load_scenario(scenario_to_dict(scn)) == scn
     # the dump is complete: every schema key is present
     raw = tomllib.loads(path.read_text())
-    for key in io_config.schema_paths():
+    for key in schema.paths(Scenario):
         node = raw
         parts = key.split(".")
         if parts[0] == "plant" and len(parts) == 3 and not isinstance(raw["plant"][parts[1]], dict):
@@ -421,7 +421,7 @@ def test_round_trip_property(tmp_path, gains, snr, seed, segments, masses, amp):
 
 
 # --------------------------------------------------------------------------------------------- fuzzing
-_KEYS = sorted({p for path in io_config.schema_paths() for p in path.split(".")} | {"x", "", "none"})
+_KEYS = sorted({p for path in schema.paths(Scenario) for p in path.split(".")} | {"x", "", "none"})
 _scalars = (
     st.none() | st.booleans() | st.integers() | st.integers(-(10**400), 10**400)
     | st.floats(allow_nan=True, allow_infinity=True) | st.text(max_size=8)
@@ -458,7 +458,7 @@ def test_fuzz_mutated_valid_scenario(data):
     """Replace a few leaves (or whole tables) of a valid scenario with random values."""
     src = scenario_to_dict(Scenario())
     for _ in range(data.draw(st.integers(1, 3))):
-        path = data.draw(st.sampled_from(io_config.schema_paths())).split(".")
+        path = data.draw(st.sampled_from(schema.paths(Scenario))).split(".")
         node = src
         for p in path[:-1]:
             if not isinstance(node.get(p), dict):
@@ -556,9 +556,9 @@ def test_positivity_check_fast_path_matches_numpy(values, allow_zero):
 
 
 def test_toml_values_are_plain_python():
-    from harness.config.load import _to_toml_value
+    from harness.config.load import to_toml
 
-    out = _to_toml_value((np.float64(1.5), np.int64(2), True, 3, "x", None, [np.float32(0.25)]))
+    out = to_toml((np.float64(1.5), np.int64(2), True, 3, "x", None, [np.float32(0.25)]))
     assert out == [1.5, 2, True, 3, "x", "none", [0.25]]
     assert [type(v) for v in out[:5]] == [float, int, bool, int, str]
     assert type(out[6][0]) is float

@@ -196,11 +196,11 @@ def test_cosserat_settings_and_viscosities_are_sweep_factors():
 def test_cosserat_schema_covers_every_field():
     import dataclasses
 
-    from harness.config.load import schema_paths
-    from harness.config.scenario import CosseratConfig
+    from harness.config.scenario import CosseratConfig, Scenario
+    from harness.config.schema import paths
 
-    assert {f"plant.cosserat.{f.name}" for f in dataclasses.fields(CosseratConfig)} <= set(schema_paths())
-    assert {"plant.cosserat.dt", "plant.bending_viscosity"} <= set(schema_paths())
+    assert {f"plant.cosserat.{f.name}" for f in dataclasses.fields(CosseratConfig)} <= set(paths(Scenario))
+    assert {"plant.cosserat.dt", "plant.bending_viscosity"} <= set(paths(Scenario))
 
 
 def test_paper_controller_fast_path_equals_its_step_interface():

@@ -1,7 +1,4 @@
-"""Configuration: the typed scenario declared once (`scenario`: each field's type, default, range and
-description), the one decoder and one-line error of every input file (`schema`, on msgspec), TOML
-loading, `--set` overrides, cross-field checks and dumping (`load`), bounds files (`bounds`), the study
-file's schema (`study`), the reference pages rendered from the schema (`reference`), shared text IO
-(`textio`) and the one-line input error (`errors`).  Knows nothing of plants or of running: a plant
-validates its own inputs (`harness.plant.validate_plant`).
-"""
+"""Configuration: the typed schema of every input file declared once (`scenario`, `bounds`, `study`), its
+one decoder and one-line errors (`schema`, `errors`), loading and overrides (`load`), the controller class
+(`controller`), the generated reference (`reference`), file IO (`textio`, `assets`), process settings
+(`runtime`).  Knows nothing of plants or of running."""

@@ -1,15 +1,6 @@
-"""The shipped files: `mjcf/`, `scenarios/`, `bounds/`, `studies/` of the checkout.
-
-They stay at the top of the checkout (the customer's layout) and are installed as package data
-`harness._data.<kind>` (pyproject.toml maps each folder there with `package-dir`), so that a wheel
-(non-editable) install finds them inside the package.  `asset_dir(kind)` locates them with the
-import system (`importlib.util.find_spec`: regular install, editable install) and falls back to the
-checkout folder when the harness is imported from a checkout (`PYTHONPATH=checkout`).
-
-`shipped(path, kind)` lets every command name a shipped file from any folder: a path that does not
-exist and is a bare name (`paper_mujoco`, `paper_mujoco.toml`) or `<kind>/<name>` resolves to the
-shipped file of that name; anything else is returned unchanged (and reported as not found later).
-"""
+"""The shipped `mjcf/`, `scenarios/`, `bounds/`, `studies/`, `findings/` files: top-level folders of the
+checkout, installed as package data `harness._data.<kind>`; `shipped` lets a command name one from any
+folder."""
 
 from __future__ import annotations
 
@@ -17,7 +8,7 @@ import importlib.util
 from functools import cache
 from pathlib import Path
 
-KINDS = ("mjcf", "scenarios", "bounds", "studies")
+KINDS = ("mjcf", "scenarios", "bounds", "studies", "findings")
 _CHECKOUT = Path(__file__).resolve().parents[2]
 
 
@@ -37,7 +28,7 @@ def asset_dir(kind: str) -> Path:
 
 
 def shipped(path: str | Path, kind: str) -> Path:
-    """`path` itself if it exists, else the shipped file it names (see the module docstring)."""
+    """`path` if it exists, else the shipped file a bare name (`paper_mujoco`) or `<kind>/<name>` names."""
     path = Path(path)
     if path.exists() or path.is_absolute():
         return path

@@ -1,27 +1,7 @@
-"""Acceptance bounds on run metrics (`teleop check`).
-
-A bounds file is TOML with one ``[bounds]`` table (and an optional top-level ``description``)::
-
-    description = "paper scenario on the MuJoCo plant"
-    [bounds]
-    e1_rms_max = 1.0e-3        # m, RMS of |e1| after the transient must be <= this
-    e1_max_max = 2.0e-3        # m, max of |e1| after the transient
-    e2_rms_max = 1.0e-2        # m
-    e2_max_max = 2.0e-2        # m
-    e2_plant_rms_max = 1.0e-2  # m, against the MuJoCo tip site (optional)
-    e2_plant_max_max = 2.0e-2  # m (optional)
-    beta_min_min = 1.0e-3      # the minimum of beta must stay >= this
-    no_mujoco_warnings = true  # mujoco_warnings must be 0
-    status_ok = true           # status must be "ok" (default true)
-
-Every key is optional; ``<metric>_max`` bounds a metric from above, ``<metric>_min`` from below.
-Numeric limits must be finite numbers > 0.  A bound whose metric is missing (absent, None or NaN,
-which `harness.loop.metrics` reports for e.g. e2_plant_* on the analytic plant or a run that stopped before
-the transient) is a violation ("not measured"), as is an infinite or non-numeric measured value.
-
-Metric names (from `harness.loop.metrics.compute_metrics`): e1_rms, e1_max, e2_rms, e2_max, e2_plant_rms,
-e2_plant_max, beta_min, deN_rms, range_violation, the contact metrics (contact_force_peak,
-contact_force_rms, penetration_max, contact_time, force_tracking_rms), mujoco_warnings (int), status (str).
+"""Acceptance bounds on run metrics (`teleop check`): a bounds file is an optional top-level
+`description` and a [bounds] table of ``<metric>_max`` / ``<metric>_min`` limits (metrics of
+`harness.loop.metrics.compute_metrics`) and flags.  A bounded metric that was not measured (absent,
+None, NaN) or is not a finite number violates its bound.
 """
 
 from __future__ import annotations
@@ -34,7 +14,7 @@ from typing import Any
 
 from harness.config.assets import shipped
 from harness.config.errors import ConfigError, short_repr
-from harness.config.schema import decode, doc, info, num, unknown_keys
+from harness.config.schema import decode, doc, info, num
 from harness.config.textio import read_toml
 
 
@@ -65,7 +45,12 @@ class Bounds:
     force_tracking_rms_max: _limit("N", "RMS |F2 given to the law - true F2| after the transient") = None
     no_mujoco_warnings: doc(bool, "mujoco_warnings must be 0") = False
     status_ok: doc(bool, 'status must be "ok"') = True
-    description: doc(str, "free text (top-level key of the file)") = ""
+
+
+@dataclass(frozen=True)
+class BoundsFile:
+    bounds: doc(Bounds, "the acceptance limits")
+    description: doc(str, "free text") = ""
 
 
 FLAGS = {"no_mujoco_warnings": "mujoco_warnings", "status_ok": "status"}  # flag -> metric it checks
@@ -116,30 +101,15 @@ class Violation:
 
 
 def bounds_from_dict(raw: Mapping, label: str | None = None) -> Bounds:
-    """Validate a parsed bounds table (the whole file: {"bounds": {...}, "description": ...})."""
+    """The `Bounds` of a parsed bounds file ({"bounds": {...}, "description": ...})."""
     try:
-        if not isinstance(raw, Mapping):
-            raise ConfigError(f"bounds file must be a table, got {short_repr(raw)}")
-        bad = {k: v for k, v in raw.items() if k not in ("bounds", "description")}
-        if bad:
-            raise unknown_keys("", bad, ("bounds", "description"))
-        if "bounds" not in raw:
-            raise ConfigError("missing [bounds] table", path="bounds")
-        table, desc = raw["bounds"], raw.get("description", "")
-        if not isinstance(desc, str):
-            raise ConfigError.field("description", desc, "must be a string")
-        if isinstance(table, Mapping) and "description" in table:
-            allowed = [f.name for f in fields(Bounds)][:-1]
-            raise unknown_keys("bounds.", {"description": table["description"]}, allowed)
-        if isinstance(table, Mapping):
-            table = {**table, "description": desc}
-        return decode(table, Bounds, prefix="bounds.")
+        return decode(raw, BoundsFile).bounds
     except ConfigError as e:
         raise (e.with_context(label) if label else e) from None
 
 
 def load_bounds(source: str | Path | Mapping) -> Bounds:
-    """Read and validate a bounds TOML file (or an already-parsed table).  Raises ConfigError."""
+    """The `Bounds` of a bounds TOML file or parsed table.  Raises ConfigError."""
     if isinstance(source, Mapping):
         return bounds_from_dict(source)
     path = shipped(source, "bounds")  # a shipped name (paper_mujoco) works from any folder
@@ -173,7 +143,7 @@ def check_bounds(metrics: Mapping[str, Any], bounds: Bounds) -> list[Violation]:
             good = v == want and (name == "status" or is_num)
             if limit and not good:
                 out.append(Violation(name, v, want, key, rel))
-        elif key != "description" and limit is not None:
+        elif limit is not None:
             name, rel, unit = limit_of(key)
             v = _measured(metrics, name)
             is_num = isinstance(v, (int, float)) and not isinstance(v, bool)
@@ -183,4 +153,4 @@ def check_bounds(metrics: Mapping[str, Any], bounds: Bounds) -> list[Violation]:
     return out
 
 
-__all__ = ["FLAGS", "Bounds", "Violation", "check_bounds", "limit_of", "load_bounds"]
+__all__ = ["FLAGS", "Bounds", "BoundsFile", "Violation", "check_bounds", "limit_of", "load_bounds"]

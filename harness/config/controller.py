@@ -1,42 +1,30 @@
-"""The scenario's controller as a class: the registry of built-ins (`controllers.baselines.BUILTINS`), the
-loader of user classes and the checks a controller's declarations ask for, before anything runs.
-
-`controller.name`: a built-in name, "path/to/file.py:ClassName" or "package.module:ClassName".  The one
-place in the harness that imports a module by name (user code, on the user's request).
-`resolve_controller(scn)` loads and checks the class (ConfigError, one line, exit 2, before anything is
-written): a class with callable `reset` and `step`, supporting the plant's actuation (`actuations`)
-and plant kind (`plants`, when it declares them), accepting the scenario's params; it returns the scenario
-with every parameter spelled out (for config.toml).
-
-Controller code is the user's: whatever it raises (`SystemExit` and `KeyboardInterrupt` included) while
-it is imported, constructed, checks its `Params`, resets or steps is one line naming the controller and
-the phase (`ControllerCodeError` before a run, exit 1; `harness.loop.interface_adapter.ControllerFailure`
-during one, status "error").  A Ctrl-C of the user is the harness' own `HarnessInterrupt`: it always
-interrupts.  While the main thread runs controller code `USER_CODE[0]` is True, so that the harness'
-signal handlers interrupt it at once (`harness.api.stop_on_signals`).
+"""The scenario's controller class: built-ins (`controllers.baselines.BUILTINS`) or user code named
+"path/to/file.py:ClassName" / "package.module:ClassName" (the one place that imports a module by name),
+checked against the plant before anything runs.  Whatever controller code raises is one line naming the
+controller and the phase; while the main thread runs it `USER_CODE[0]` is True (signal handlers use it).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import importlib
 import importlib.util
 import sys
 from pathlib import Path
 
-import numpy as np
-
 from controllers.baselines import BUILTINS, FAST_PATH
 from controllers.interface import Controller, ParamsError
 from harness.config.errors import ConfigError
+from harness.config.load import file_reference, to_toml
 from harness.config.scenario import Scenario
+from harness.config.schema import decode, did_you_mean, suggest
 from harness.config.textio import toml_literal
 
 
 class HarnessInterrupt(KeyboardInterrupt):
-    """A Ctrl-C / SIGTERM received by the harness (its signal handlers raise this one); a plain
-    KeyboardInterrupt raised by a controller is the controller's failure, not the user's interrupt."""
+    """A Ctrl-C / SIGTERM of the user (a controller's own KeyboardInterrupt is its failure)."""
 
 
 class ControllerCodeError(ConfigError):
@@ -45,7 +33,7 @@ class ControllerCodeError(ConfigError):
     exit_code = 1
 
 
-USER_CODE = [False]  # the main thread is running controller code (set by the loop's adapter)
+USER_CODE = [False]
 
 
 def describe_exception(e: BaseException) -> str:
@@ -64,21 +52,12 @@ def describe_builtins() -> list[tuple[str, str, tuple[str, ...]]]:
 
 
 def plant_actuation(scn: Scenario) -> str:
-    """What the plant needs from the slave command: "torque" (T2: the analytic plant, motors, muscles) or
-    "servo" (u2 / reference)."""
+    """What the plant needs from the slave command: "torque" (T2) or "servo" (u2 / reference)."""
     return "servo" if scn.plant.kind != "analytic" and scn.plant.actuation == "servo" else "torque"
 
 
 def _bad(name: str, why: str) -> ConfigError:
-    return ConfigError(f"controller.name = {name!r}: {why}", path="controller.name", value=name)
-
-
-def _setting(scn: Scenario, key: str):
-    """The value of a dotted scenario key (None where the path does not exist)."""
-    obj = scn
-    for part in key.split("."):
-        obj = getattr(obj, part, None)
-    return obj
+    return ConfigError(f"controller.name = {name!r}: {why}", path="controller.name")
 
 
 def load_class(name: str) -> type:
@@ -86,12 +65,12 @@ def load_class(name: str) -> type:
     if name in BUILTINS:
         return BUILTINS[name]
     if ":" not in name:
-        close = ", ".join(BUILTINS)
-        raise _bad(name, f"unknown built-in controller (built-ins: {close}; or give 'file.py:ClassName' "
-                         "or 'package.module:ClassName')")
+        hint = did_you_mean(suggest(name, BUILTINS))
+        raise _bad(name, f"unknown built-in controller; {hint}built-ins: {', '.join(BUILTINS)}; or give "
+                         "'file.py:ClassName' or 'package.module:ClassName'")
     where, _, attr = name.rpartition(":")
     try:
-        if where.endswith(".py") or "/" in where or "\\" in where:
+        if file_reference(name):
             path = Path(where)
             if not path.is_file():
                 raise _bad(name, f"file {where} not found")
@@ -101,7 +80,7 @@ def load_class(name: str) -> type:
             if mod is None:
                 spec = importlib.util.spec_from_file_location(modname, path)
                 mod = importlib.util.module_from_spec(spec)
-                sys.modules[modname] = mod  # dataclasses and pickling need the module registered
+                sys.modules[modname] = mod  # dataclasses and pickling need it registered
                 try:
                     spec.loader.exec_module(mod)
                 except BaseException:
@@ -113,7 +92,7 @@ def load_class(name: str) -> type:
         raise
     except (SystemExit, KeyboardInterrupt) as e:  # user code tried to end the process: an error
         raise ControllerCodeError(f"controller.name = {name!r}: importing {where} raised "
-                                  f"{describe_exception(e)}", path="controller.name", value=name) from None
+                                  f"{describe_exception(e)}", path="controller.name") from None
     except Exception as e:  # noqa: BLE001 - any import failure is one line
         raise _bad(name, f"cannot import {where}: {describe_exception(e)}") from None
     cls = getattr(mod, attr, None)
@@ -130,39 +109,44 @@ def load_class(name: str) -> type:
     return cls
 
 
-def parse_params(cls: type, raw: dict, name: str | None = None):
-    """Validated params of `cls` (its `parse_params` classmethod, or the base class' rules; a class
-    without `Params` takes no parameters).  Raises ParamsError / TypeError / ValueError for bad values,
-    ControllerCodeError (one line) for anything else the controller's code raises."""
-    fn = getattr(cls, "parse_params", None)
+def parse_params(cls: type, raw: dict | None, name: str | None = None):
+    """The validated `Params` of `cls` (None for a class without) from its [controller.params] table.
+    Raises ConfigError (one line), ControllerCodeError for anything else its check raises."""
+    params, raw = getattr(cls, "Params", None), dict(raw or {})
+    label = name or getattr(cls, "name", cls.__name__)
+    if params is None:
+        if raw:
+            key = sorted(raw)[0]
+            raise ConfigError.field(f"controller.params.{key}", raw[key],
+                                    f"unknown key; controller {label!r} takes no parameters")
+        return None
+    if not dataclasses.is_dataclass(params):
+        raise ConfigError(f"controller {label!r}: its Params must be a dataclass with defaults",
+                          path="controller.params")
     try:
-        if fn is None:
-            return Controller.parse_params.__func__(cls, raw)
-        return fn(raw)
-    except (ParamsError, TypeError, ValueError, HarnessInterrupt):
+        p = decode(raw, params, prefix="controller.params.")
+        if callable(getattr(p, "check", None)):
+            p.check()
+    except (ConfigError, HarnessInterrupt):
         raise
+    except ParamsError as e:
+        raise ConfigError(str(e), path=f"controller.params.{e.key}") from None
+    except (TypeError, ValueError) as e:
+        raise ConfigError(f"controller.params (controller {label!r}): {' '.join(str(e).split())}",
+                          path="controller.params") from None
     except BaseException as e:  # noqa: BLE001 - the controller's code: one line
-        label = name or getattr(cls, "__name__", "?")
         raise ControllerCodeError(f"controller {label!r} raised {describe_exception(e)} in its Params check",
                                   path="controller.params") from None
-
-
-def _as_toml(v):
-    if isinstance(v, (list, tuple)):
-        return [_as_toml(x) for x in v]
-    if isinstance(v, np.generic):
-        return v.item()
-    return v
+    return p
 
 
 def resolve_controller(scn: Scenario) -> Scenario:
-    """Load and check the scenario's controller; returns the scenario with its params spelled out.
-    Raises ConfigError (one line) for an unknown/unimportable class, a missing interface, an actuation
-    the controller does not support, or a bad parameter."""
+    """The scenario with its controller's params spelled out, after checking the class, its actuations,
+    plants and requirements and the params.  Raises ConfigError (one line)."""
     cfg = scn.controller
     cls = load_class(cfg.name)
     act = plant_actuation(scn)
-    plants = getattr(cls, "plants", None)  # declared by the class (controllers.interface.Controller)
+    plants = getattr(cls, "plants", None)
     if plants is not None and scn.plant.kind not in plants:
         raise _bad(cfg.name, f"runs on plant.kind {', '.join(map(repr, plants))} only, not "
                              f"{scn.plant.kind!r}")
@@ -174,21 +158,12 @@ def resolve_controller(scn: Scenario) -> Scenario:
         raise _bad(cfg.name, f"supports actuation {', '.join(map(repr, supported))} only, but {plant} "
                              f"needs {need}")
     for key, want in (getattr(cls, "requires", None) or {}).get(scn.plant.kind, {}).items():
-        have = _setting(scn, key)
+        have = functools.reduce(lambda obj, part: getattr(obj, part, None), key.split("."), scn)
         if have != want:
             raise _bad(cfg.name, f"needs {key} = {toml_literal(want)} on plant.kind {scn.plant.kind!r} "
                                  f"(it is {toml_literal(have)})")
-    try:
-        p = parse_params(cls, cfg.params, cfg.name)
-    except ControllerCodeError:
-        raise
-    except ParamsError as e:
-        raise ConfigError(str(e), path=f"controller.params.{e.key}") from None
-    except (TypeError, ValueError) as e:
-        raise ConfigError(f"controller.params (controller {cfg.name!r}): {' '.join(str(e).split())}",
-                          path="controller.params") from None
-    full = ({f.name: _as_toml(getattr(p, f.name)) for f in dataclasses.fields(p)}
-            if dataclasses.is_dataclass(p) else dict(cfg.params))
+    p = parse_params(cls, cfg.params, cfg.name)
+    full = to_toml(p) if dataclasses.is_dataclass(p) else dict(cfg.params)
     if cfg.name == FAST_PATH or full == cfg.params:
         return scn
     return dataclasses.replace(scn, controller=dataclasses.replace(cfg, params=full))

@@ -1,44 +1,16 @@
-"""Scenario TOML <-> `harness.config.Scenario`, with complete validation before any simulation.
+"""Scenario TOML <-> `Scenario`: defaults, `--set key=value` overrides, cross-field checks, dumping.
 
-The TOML layout mirrors the dataclasses of `harness.config.scenario` (`scenarios/paper.toml` spells
-out every default; docs/config_reference.md lists every field with its range).
-
-Rules:
-
-* Every key is optional; a missing key takes the dataclass default.  Exception: missing keys of
-  ``[plant.master]`` / ``[plant.slave]`` take the value of the resolved *nominal* ``[master]`` /
-  ``[slave]``, so a mismatch is written as the difference only (``plant.slave.masses = [...]``).
-  ``plant.master = "none"`` (or no such table) means "the plant uses the nominal model".
-* Optional values (``snr_db``, ``initial.slave_q2``, ``plant.master``, ``plant.slave``, ...) are
-  written as the string ``"none"`` (or false) when unset; `dump_scenario` writes them that way so
-  that ``load_scenario(dump(x)) == x`` exactly.
-* Integers are accepted where floats are expected, booleans never count as numbers, floats are
-  never accepted as integers, NaN/inf are rejected everywhere.
-* ``subtask.weights`` defaults to the default weight of each kind in ``subtask.kinds``.
-* ``name`` defaults to the file stem when loading from a file (``"paper"`` otherwise); ``transient``
-  to 5 s, or a quarter of a shorter ``duration``.
-
-Overrides are dotted ``key=value`` strings whose value is parsed as a TOML value
-(``plant.segments=16``, ``plant.slave.masses=[1.2,0.7,0.4]``, ``snr_db=30``); a bare word that
-is not valid TOML is taken as a string (``plant.kind=analytic``, ``snr_db=none``).  An override of a
-field of an environment object names an existing object (``environment.objects.wall.stiffness=1e5``);
-a new object is added as a whole table (``environment.objects.box2={kind="box"}``).
-
-Every error raises `harness.config.errors.ConfigError` with one line naming the dotted field, its value
-and the allowed range or type.
-
-Files run no code unless the user says so: a scenario file (or a replayed config.toml) whose
-``controller.name`` is Python code (``file.py:Class``, ``package.module:Class``) is refused unless
-``allow_code`` (``--allow-code``); a controller given by an override (``--controller``, ``--set``) or in
-a table passed by the caller is the caller's say-so.  A relative ``file.py`` path in a file resolves
-against that file's folder; config.toml records it as an absolute path.
+Missing keys take the schema defaults, except that [plant.master] / [plant.slave] start from the resolved
+nominal [master] / [slave]; "none" (or false) unsets an optional field; `transient` defaults to 5 s or a
+quarter of a shorter `duration`; `subtask.weights` to each kind's default weight.  A file naming a
+controller by Python code is refused unless `allow_code` (`--allow-code`); relative controller file paths
+resolve against the naming file's folder.  Every error is a one-line `ConfigError`.
 """
 
 from __future__ import annotations
 
 import copy
 import dataclasses
-import functools
 import math
 import os
 import re
@@ -53,14 +25,16 @@ from controllers.params import SubtaskSpec
 from harness.config.assets import shipped
 from harness.config.errors import ConfigError, short_repr
 from harness.config.scenario import KEY_RE, NAME_RE, EnvironmentConfig, Scenario, TrajectoryConfig
-from harness.config.schema import decode, did_you_mean, fields_of, info, suggest, type_name
-from harness.config.textio import loads_toml, read_toml, toml_literal, write_atomic
+from harness.config.schema import decode, did_you_mean, info, suggest, type_name
+from harness.config.textio import MAX_DEPTH, loads_toml, read_toml, toml_literal, write_atomic
 
 BARE_WORD = r"^[A-Za-z_][A-Za-z0-9_.+-]*$"
 REACH_MARGIN = 1e-3  # m, the desired trajectory must stay this far inside the master workspace annulus
 MULTIPLE_RTOL = 1e-9  # relative tolerance for "integer multiple of a time step"
 MAX_SUBSTEPS = 100_000  # control_dt / physics_dt
 MAX_STEPS = 100_000_000  # duration / control_dt
+
+
 def _is_multiple(x: float, step: float) -> tuple[bool, float]:
     ratio = x / step
     if not math.isfinite(ratio):
@@ -122,98 +96,69 @@ def _check_reach(scn: Scenario) -> None:
                 path="trajectory")
 
 
-def _cross_checks(scn: Scenario) -> None:
-    p = scn.plant
-    if not scn.transient < scn.duration:
-        raise ConfigError.field("transient", scn.transient,
-                                f"must be in [0, duration) = [0, {scn.duration:g}) s "
-                                "(set transient = 0 for short runs)")
-    if scn.control_dt > scn.duration:
-        raise ConfigError.field("control_dt", scn.control_dt, f"must be <= duration = {scn.duration:g} s")
-    if scn.duration / scn.control_dt > MAX_STEPS:
-        raise ConfigError.field("control_dt", scn.control_dt,
-                                f"gives duration / control_dt > {MAX_STEPS:g} control steps")
-    ok, ratio = _is_multiple(scn.control_dt, p.physics_dt)
-    if not ok or round(ratio) < 1:
-        raise ConfigError.field(
-            "control_dt", scn.control_dt,
-            f"must be an integer multiple (>= 1) of plant.physics_dt = {p.physics_dt:g} s "
-            f"(ratio {ratio:.12g}, relative tolerance {MULTIPLE_RTOL:g})")
-    if round(ratio) > MAX_SUBSTEPS:
-        raise ConfigError.field("plant.physics_dt", p.physics_dt,
-                                f"gives control_dt / physics_dt = {ratio:.6g} > {MAX_SUBSTEPS} substeps")
-    ok, ratio = _is_multiple(p.actuation_delay, scn.control_dt)
+def _need(ok: bool, path: str, value: Any, expected: str) -> None:
     if not ok:
-        raise ConfigError.field(
-            "plant.actuation_delay", p.actuation_delay,
-            f"must be >= 0 and an integer multiple of control_dt = {scn.control_dt:g} s (ratio {ratio:.12g})")
-    if not p.actuation_delay < scn.duration:
-        raise ConfigError.field("plant.actuation_delay", p.actuation_delay,
-                                f"must be < duration = {scn.duration:g} s")
-    if scn.continuous_control and p.kind != "analytic":
-        raise ConfigError.field("continuous_control", True,
-                                f"requires plant.kind = 'analytic' (got {p.kind!r})")
-    if scn.continuous_control and p.actuation_delay > 0:
-        raise ConfigError.field("continuous_control", True, "evaluates the law in every RK4 stage: requires "
-                                f"plant.actuation_delay = 0 (got {p.actuation_delay:g} s)")
-    if abs(scn.trajectory.omega) * scn.control_dt >= math.pi:
-        nyquist = math.pi / scn.control_dt
-        raise ConfigError.field("trajectory.omega", scn.trajectory.omega,
-                                f"must satisfy |omega| < pi / control_dt = {nyquist:.6g} rad/s")
+        raise ConfigError.field(path, value, expected)
 
-    ps = scn.plant_slave
+
+def _cross_checks(scn: Scenario) -> None:
+    p, dt, fs = scn.plant, scn.control_dt, scn.sensing.force
+    _need(p.scene_xml is None or Path(p.scene_xml).is_file(), "plant.scene_xml", p.scene_xml,
+          "must be an existing MJCF file (relative paths: from the current directory); file not found")
+    _need(scn.transient < scn.duration, "transient", scn.transient,
+          f"must be in [0, duration) = [0, {scn.duration:g}) s (set transient = 0 for short runs)")
+    _need(dt <= scn.duration, "control_dt", dt, f"must be <= duration = {scn.duration:g} s")
+    _need(scn.duration / dt <= MAX_STEPS, "control_dt", dt,
+          f"gives duration / control_dt > {MAX_STEPS:g} control steps")
+    ok, ratio = _is_multiple(dt, p.physics_dt)
+    _need(ok and round(ratio) >= 1, "control_dt", dt, "must be an integer multiple (>= 1) of "
+          f"plant.physics_dt = {p.physics_dt:g} s (ratio {ratio:.12g}, relative tolerance {MULTIPLE_RTOL:g})")
+    _need(round(ratio) <= MAX_SUBSTEPS, "plant.physics_dt", p.physics_dt,
+          f"gives control_dt / physics_dt = {ratio:.6g} > {MAX_SUBSTEPS} substeps")
+    ok, ratio = _is_multiple(p.actuation_delay, dt)
+    _need(ok, "plant.actuation_delay", p.actuation_delay,
+          f"must be >= 0 and an integer multiple of control_dt = {dt:g} s (ratio {ratio:.12g})")
+    _need(p.actuation_delay < scn.duration, "plant.actuation_delay", p.actuation_delay,
+          f"must be < duration = {scn.duration:g} s")
+    if scn.continuous_control:
+        _need(p.kind == "analytic", "continuous_control", True,
+              f"requires plant.kind = 'analytic' (got {p.kind!r})")
+        _need(p.actuation_delay == 0, "continuous_control", True, "evaluates the law in every RK4 stage: "
+              f"requires plant.actuation_delay = 0 (got {p.actuation_delay:g} s)")
+    _need(abs(scn.trajectory.omega) * dt < math.pi, "trajectory.omega", scn.trajectory.omega,
+          f"must satisfy |omega| < pi / control_dt = {math.pi / dt:.6g} rad/s")
+    ps, q2 = scn.plant_slave, scn.initial.slave_q2
     lo, hi = ps.length_range
-    q2 = scn.initial.slave_q2
-    if q2 is not None:
-        d, k = np.asarray(q2[:3]), np.asarray(q2[3:])
-        for i in range(3):
-            if not lo[i] <= d[i] <= hi[i]:
-                raise ConfigError.field(
-                    "initial.slave_q2", list(q2),
-                    f"section length d{i + 1} = {d[i]:g} m must be in [L0, max_extension*L0] = "
-                    f"[{lo[i]:g}, {hi[i]:g}] m of the plant slave")
-            if abs(k[i] * d[i]) > ps.max_bend:
-                raise ConfigError.field(
-                    "initial.slave_q2", list(q2),
-                    f"bend |k{i + 1} d{i + 1}| = {abs(k[i] * d[i]):g} rad exceeds the plant slave "
-                    f"max_bend = {ps.max_bend:g} rad")
-    _contact_checks(scn)
+    for i in range(3 if q2 is not None else 0):
+        d, k = q2[i], q2[3 + i]
+        _need(lo[i] <= d <= hi[i], "initial.slave_q2", list(q2), f"section length d{i + 1} = {d:g} m must be "
+              f"in [L0, max_extension*L0] = [{lo[i]:g}, {hi[i]:g}] m of the plant slave")
+        _need(abs(k * d) <= ps.max_bend, "initial.slave_q2", list(q2), f"bend |k{i + 1} d{i + 1}| = "
+              f"{abs(k * d):g} rad exceeds the plant slave max_bend = {ps.max_bend:g} rad")
+    ok, ratio = _is_multiple(fs.delay, dt)
+    _need(ok and fs.delay < scn.duration, "sensing.force.delay", fs.delay, "must be >= 0, < duration and an "
+          f"integer multiple of control_dt = {dt:g} s (ratio {ratio:.12g})")
+    if fs.cutoff is not None:
+        _need(fs.cutoff * scn.duration * 2.0 * math.pi > 1.0, "sensing.force.cutoff", fs.cutoff,
+              "is slower than the run: the filter time constant 1/(2 pi cutoff) must be < duration = "
+              f"{scn.duration:g} s")
+        _need(fs.cutoff < 0.5 / dt, "sensing.force.cutoff", fs.cutoff,
+              f"must be < the control Nyquist frequency 1/(2 control_dt) = {0.5 / dt:g} Hz")
+    needs = [("environment.objects", bool(scn.environment.objects), ("mujoco", "cosserat")),
+             ("operator.enabled", scn.operator.enabled, ("mujoco",)),
+             ("sensing.force.mode", fs.mode == "sensed", ("mujoco",))]
+    for key, used, plants in needs:
+        if used and p.kind not in plants:
+            kinds = " or ".join(map(repr, plants))
+            raise ConfigError(f"{key}: requires plant.kind = {kinds} (got {p.kind!r})", path=key)
     _check_reach(scn)
     if q2 is None:
         _check_auto_slave_start(scn)
 
 
-def _contact_checks(scn: Scenario) -> None:
-    """Environment, force sensing and operator (the plant checks object/arm intersection at t = 0)."""
-    fs, env, op = scn.sensing.force, scn.environment, scn.operator
-    ok, ratio = _is_multiple(fs.delay, scn.control_dt)
-    if not ok or not fs.delay < scn.duration:
-        raise ConfigError.field("sensing.force.delay", fs.delay, "must be >= 0, < duration and an integer "
-                                f"multiple of control_dt = {scn.control_dt:g} s (ratio {ratio:.12g})")
-    if fs.cutoff is not None and fs.cutoff * scn.duration * 2.0 * math.pi <= 1.0:
-        raise ConfigError.field("sensing.force.cutoff", fs.cutoff, "is slower than the run: the filter time "
-                                f"constant 1/(2 pi cutoff) must be < duration = {scn.duration:g} s")
-    if fs.cutoff is not None and fs.cutoff >= 0.5 / scn.control_dt:
-        raise ConfigError.field("sensing.force.cutoff", fs.cutoff,
-                                f"must be < the control Nyquist frequency 1/(2 control_dt) = "
-                                f"{0.5 / scn.control_dt:g} Hz")
-    needs = [("environment.objects", bool(env.objects)), ("operator.enabled", op.enabled),
-             ("sensing.force.mode", fs.mode == "sensed")]
-    for key, used in needs:
-        if used and scn.plant.kind != "mujoco" and not (key == "environment.objects"
-                                                         and scn.plant.kind == "cosserat"):
-            plants = "'mujoco' or 'cosserat'" if key == "environment.objects" else "'mujoco'"
-            raise ConfigError(f"{key}: requires plant.kind = {plants} (got {scn.plant.kind!r})", path=key)
-    names = [o.name for o in env.objects]
-    if len(set(names)) != len(names):
-        raise ConfigError.field("environment.objects", names, "object names must be distinct")
-
-
 def _check_auto_slave_start(scn: Scenario) -> None:
-    """`initial.slave_q2 = none`: harness.loop.common starts the slave with three equal sections of curvature
-    k = initial.slave_curvature whose tip height equals the master's initial tip height Z0.  Equal
-    sections of equal curvature form one arc of length 3d, tip height f(d) = sin(3 d k) / k (3d for
-    k = 0); Z0 must be in the range of f over the common section-length range [d_lo, d_hi]."""
+    """`initial.slave_q2 = none`: three equal sections of curvature k (one arc, tip height sin(3 d k) / k)
+    must reach the master's initial tip height Z0 for some common section length d."""
     ps, k = scn.plant_slave, scn.initial.slave_curvature
     tr, off = scn.trajectory, scn.initial.master_offset
     z0 = tr.center[1] + tr.amplitude[1] + off[1]
@@ -236,25 +181,6 @@ def _check_auto_slave_start(scn: Scenario) -> None:
             path="trajectory.center")
 
 
-def _field_checks(scn: Scenario) -> None:
-    """Single-field rules a type cannot say: files exist, times increase, normals are non-zero."""
-    xml = scn.plant.scene_xml
-    if xml is not None and not Path(xml).is_file():
-        raise ConfigError.field("plant.scene_xml", xml, "must be an existing MJCF file (relative paths: from "
-                                "the current directory); file not found")
-    ts = [r[0] for r in scn.operator.targets]
-    if any(t < 0 for t in ts) or any(b <= a for a, b in zip(ts, ts[1:], strict=False)):
-        raise ConfigError.field("operator.targets", [list(r) for r in scn.operator.targets], "must be an "
-                                "array of [t, X, Z] triples (s, m, m) with strictly increasing t >= 0")
-    for o in scn.environment.objects:
-        if o.kind == "plane" and math.hypot(*o.normal) < 1e-9:
-            raise ConfigError.field(f"environment.objects.{o.name}.normal", list(o.normal),
-                                    "must be a non-zero vector")
-
-
-# ---------------------------------------------------------------------------------------------
-# public API
-# ---------------------------------------------------------------------------------------------
 def parse_override(text: str) -> tuple[list[str], Any]:
     """'a.b.c=value' -> (['a', 'b', 'c'], parsed TOML value).  Bare words become strings."""
     if not isinstance(text, str) or "=" not in text:
@@ -303,7 +229,7 @@ def _apply_override(raw: dict, text: str) -> str:
 
 
 def _read_source(source: str | Path | Mapping | None) -> tuple[dict, str | None, str | None]:
-    """-> (raw dict, label for messages, default name)."""
+    """-> (raw table, file label for messages, default name)."""
     if source is None:
         return {}, None, None
     if isinstance(source, Mapping):
@@ -317,9 +243,9 @@ def _read_source(source: str | Path | Mapping | None) -> tuple[dict, str | None,
 
 
 def _plain_copy(obj: Any, depth: int = 0) -> Any:
-    """Deep copy of a user mapping (tuples -> lists); rejects absurd nesting."""
-    if depth > 50:
-        raise ConfigError("scenario table nested too deeply")
+    """Deep copy of a user table (tuples -> lists) within the nesting limit of files."""
+    if depth >= MAX_DEPTH and isinstance(obj, (Mapping, list, tuple)):
+        raise ConfigError(f"scenario table: nested deeper than {MAX_DEPTH} levels of tables/arrays")
     if isinstance(obj, Mapping):
         return {k: _plain_copy(v, depth + 1) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -327,12 +253,7 @@ def _plain_copy(obj: Any, depth: int = 0) -> Any:
     return copy.copy(obj)
 
 
-def is_code_reference(name: str) -> bool:
-    """True for a controller named as Python code ('file.py:Class', 'package.module:Class')."""
-    return ":" in name
-
-
-def _file_reference(name: str) -> tuple[str, str] | None:
+def file_reference(name: str) -> tuple[str, str] | None:
     """(path, class) of a 'path/to/file.py:Class' reference, None for anything else."""
     where, sep, attr = name.rpartition(":")
     if sep and (where.endswith(".py") or "/" in where or "\\" in where):
@@ -341,12 +262,11 @@ def _file_reference(name: str) -> tuple[str, str] | None:
 
 
 def _rebase_controller(raw: dict, base: Path | None) -> None:
-    """A relative controller file path in `raw` made relative to `base` (the folder of the file that
-    names it); anything else is left for the schema to check."""
+    """A relative controller file path in `raw` made relative to `base` (the naming file's folder)."""
     node = raw.get("controller")
     table = node if isinstance(node, dict) else None
     name = table.get("name") if table is not None else node
-    ref = _file_reference(name.strip()) if isinstance(name, str) and base is not None else None
+    ref = file_reference(name.strip()) if isinstance(name, str) and base is not None else None
     if ref is None or Path(ref[0]).is_absolute():
         return
     new = f"{base / ref[0]}:{ref[1]}"
@@ -359,17 +279,13 @@ def _rebase_controller(raw: dict, base: Path | None) -> None:
 def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterable[str] = (), *,
                   labels: Iterable[str | None] | None = None, allow_code: bool | None = None,
                   code_dir: str | Path | None = None) -> Scenario:
-    """Read (TOML file path or already-parsed table; None = all defaults), apply dotted `key=value`
-    overrides in order, validate everything and return the frozen `Scenario`.  Raises `ConfigError`.
+    """The validated `Scenario` of a TOML file, a parsed table or None (defaults), after the `key=value`
+    overrides in order.  Raises `ConfigError`.
 
-    labels: optional description of each override for error messages (e.g. "--segments 100");
-    by default an error caused by an override says "(from override 'key=value')".
-    allow_code: None = a controller named as Python code is refused when the scenario FILE names it (the
-    overrides and a table are the caller's); True = allowed; False = refused whatever names it (a study
-    file's overrides).  code_dir: the folder relative controller file paths of a table source and of the
-    overrides resolve against (a study file's folder; default: the current folder); a scenario file's own
-    resolve against its folder.
-    """
+    labels: how each override is named in errors (e.g. "--segments 100"; default "override 'k=v'").
+    allow_code: None = a Python controller is refused only when the scenario file names it; True =
+    allowed; False = always refused.  code_dir: where relative controller files of a table or of the
+    overrides resolve (default: the current folder)."""
     raw, label, default_name = _read_source(source)
     origin = "table" if isinstance(source, Mapping) else None
     if label is not None:  # a file
@@ -403,19 +319,17 @@ def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterabl
                 raise e.with_context(f"(from {where})") from None
         raise (e.with_context(label) if label else e) from None
     name = scn.controller.name
-    if is_code_reference(name) and not allow_code and (allow_code is False or origin == "file"):
+    if ":" in name and not allow_code and (allow_code is False or origin == "file"):
         what = f"scenario file {label}" if origin == "file" else "the study"
         raise ConfigError(f"controller.name = {name!r} in {what} is Python code; files run no code unless "
                           "you allow it: add --allow-code (API: allow_code=True) if you trust it, or give "
-                          "the controller on the command line (--controller)", path="controller.name",
-                          value=name)
+                          "the controller on the command line (--controller)", path="controller.name")
     return scn
 
 
 def _prepare(raw: Mapping, default_name: str | None) -> tuple[dict, dict[int, str]]:
-    """The TOML layout -> the schema's: fields in schema order, [controller] given as a name, named
-    [environment.objects.<name>] tables -> a list, [plant.master]/[plant.slave] on top of the nominal
-    [master]/[slave], default sub-task weights per kind.  -> (table, object names)."""
+    """The TOML layout -> the schema's (named objects -> a list, plant models on top of the nominal
+    ones, default sub-task weights) -> (table, {index: object name})."""
     order = [f.name for f in info(Scenario).fields]
     raw = {**{k: raw[k] for k in raw if k not in order}, **{k: raw[k] for k in order if k in raw}}
     if "name" not in raw and default_name:
@@ -455,44 +369,36 @@ def _prepare(raw: Mapping, default_name: str | None) -> tuple[dict, dict[int, st
 
 def _scenario_from_dict(raw: Mapping, default_name: str | None) -> Scenario:
     table, names = _prepare(raw, default_name)
-    scn = decode(table, Scenario, names=names, elsewhere=schema_paths())
+    scn = decode(table, Scenario, names=names)
     if "transient" not in table and scn.duration <= Scenario.transient:
-        # short runs: the default 5 s transient would leave nothing to measure; use a quarter
         scn = dataclasses.replace(scn, transient=scn.duration / 4.0)
-    _field_checks(scn)
     _cross_checks(scn)
     return scn
 
 
-@functools.cache
-def schema_paths() -> tuple[str, ...]:
-    """Every settable dotted key of a scenario file (suggestions, tests)."""
-    return tuple(p for p, _, _ in fields_of(Scenario))
-
-
-def _to_toml_value(v: Any) -> Any:
+def to_toml(v: Any) -> Any:
+    """A TOML-ready copy of `v`: dataclasses -> tables in schema order, None -> "none", tuples -> lists."""
     if v is None:
         return "none"
     if type(v) in (bool, int, float, str):  # exact types: numpy scalars (float subclasses) go to .item()
         return v
     if isinstance(v, EnvironmentConfig):  # named objects: [environment.objects.<name>]
-        return {"objects": {o.name: {k: x for k, x in _to_toml_value(o).items() if k != "name"}
+        return {"objects": {o.name: {k: x for k, x in to_toml(o).items() if k != "name"}
                             for o in v.objects}}
     if dataclasses.is_dataclass(v) and not isinstance(v, type):
-        return {f.name: _to_toml_value(getattr(v, f.name)) for f in info(type(v)).fields}
+        return {f.name: to_toml(getattr(v, f.name)) for f in info(type(v)).fields}
     if isinstance(v, dict):
-        return {k: _to_toml_value(x) for k, x in v.items()}
+        return {k: to_toml(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_to_toml_value(x) for x in v]
+        return [to_toml(x) for x in v]
     if isinstance(v, np.generic):
         return v.item()
     return v
 
 
 def scenario_to_dict(scn: Scenario) -> dict[str, Any]:
-    """The fully resolved scenario as a TOML-ready dict, every schema field in schema order (None ->
-    "none", tuples -> lists)."""
-    return _to_toml_value(scn)
+    """The resolved scenario as a TOML-ready dict, every field in schema order (None -> "none")."""
+    return to_toml(scn)
 
 
 def _toml_lines(table: Mapping[str, Any], name: str = "") -> list[str]:
@@ -509,9 +415,8 @@ def _toml_lines(table: Mapping[str, Any], name: str = "") -> list[str]:
 
 
 def dumps_scenario(scn: Scenario) -> str:
-    """The fully resolved scenario as TOML text (see `dump_scenario`); a relative controller file path
-    (relative to the current folder) is written absolute, so that the file replays from anywhere."""
-    ref = _file_reference(scn.controller.name)
+    """The resolved scenario as TOML text; a relative controller file path is written absolute."""
+    ref = file_reference(scn.controller.name)
     if ref is not None and not Path(ref[0]).is_absolute():
         scn = dataclasses.replace(scn, controller=dataclasses.replace(
             scn.controller, name=f"{os.path.abspath(ref[0])}:{ref[1]}"))
@@ -522,7 +427,7 @@ def dumps_scenario(scn: Scenario) -> str:
         "",
     ]
     text = "\n".join(header + _toml_lines(scenario_to_dict(scn))) + "\n"
-    tomllib.loads(text)  # never write a file we could not read back
+    tomllib.loads(text)  # never write a file that does not read back
     return text
 
 
@@ -532,6 +437,6 @@ def dump_scenario(scn: Scenario, path: str | Path) -> Path:
 
 
 __all__ = [
-    "REACH_MARGIN", "dump_scenario", "dumps_scenario", "is_code_reference", "load_scenario", "parse_override",
-    "scenario_to_dict", "schema_paths", "trajectory_radius_range",
+    "REACH_MARGIN", "dump_scenario", "dumps_scenario", "load_scenario", "parse_override", "scenario_to_dict",
+    "to_toml", "trajectory_radius_range",
 ]

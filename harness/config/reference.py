@@ -15,12 +15,12 @@ KINDS = ("scenario", "bounds", "study")
 
 
 def _schema(kind: str) -> tuple[type, str]:
-    from harness.config.bounds import Bounds
+    from harness.config.bounds import BoundsFile
     from harness.config.scenario import Scenario
     from harness.config.study import StudyFile
 
     return {"scenario": (Scenario, "Scenario file (`teleop run FILE`, `--set key=value`)"),
-            "bounds": (Bounds, "Bounds file (`teleop check --bounds FILE`): keys of its [bounds] table"),
+            "bounds": (BoundsFile, "Bounds file (`teleop check --bounds FILE`)"),
             "study": (StudyFile, "Study file (`teleop sweep FILE`)")}[kind]
 
 
@@ -38,12 +38,12 @@ def _type(t: Any) -> str:
 
 
 def _default(v: Any) -> str:
-    from harness.config.load import _to_toml_value
+    from harness.config.load import to_toml
     from harness.config.textio import toml_literal
 
     if v is NODEFAULT:
         return "required"
-    v = _to_toml_value(v)
+    v = to_toml(v)
     return "" if isinstance(v, dict) and v else f"`{toml_literal(v)}`"
 
 
@@ -52,8 +52,6 @@ def markdown(kind: str) -> str:
     cls, title = _schema(kind)
     lines = [f"## {title}", "", "| field | type | default | allowed | description |", "|---|---|---|---|---|"]
     for path, t, default in fields_of(cls, arrays=True):
-        if kind == "bounds" and path == "description":
-            path = "description (top level)"
         cell = [f"`{path}`", _type(t), _default(default), describe(t), description(t)]
         lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cell) + " |")
     return "\n".join(lines) + "\n"

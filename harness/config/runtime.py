@@ -1,6 +1,5 @@
-"""Process-level settings shared by the `teleop` command and the sweep's pool workers: the runtime options
-(`RuntimeOptions`, from the TELEOP_* environment variables), the garbage collector's thresholds, the fast
-end of a process and the progress bars.  Nothing here knows of plants or runs."""
+"""Process-level settings of the `teleop` command and the sweep's workers: `RuntimeOptions` (TELEOP_*
+environment variables), GC thresholds, the fast end of a process, provenance and progress bars."""
 
 from __future__ import annotations
 
@@ -20,12 +19,9 @@ from typing import NoReturn
 
 @dataclasses.dataclass(frozen=True)
 class RuntimeOptions:
-    """How this process runs the kernels and reports failures (not what it simulates).
-
-    cache_dir: root of the compiled-kernel cache ($TELEOP_CACHE_DIR, else $XDG_CACHE_HOME/octarm-teleop,
-    else ~/.cache/octarm-teleop); jit: compile the kernels with numba (False: TELEOP_NO_JIT=1, the
-    interpreted kernels, same maths, slow); aot: use the ahead-of-time loop modules (False: TELEOP_NO_AOT=1,
-    numba's JIT); debug: print tracebacks of output-writing failures (TELEOP_DEBUG=1)."""
+    """cache_dir: compiled-kernel cache ($TELEOP_CACHE_DIR, else $XDG_CACHE_HOME or ~/.cache
+    /octarm-teleop); jit: numba kernels (TELEOP_NO_JIT=1: interpreted, same maths); aot: ahead-of-time
+    loop modules (TELEOP_NO_AOT=1: numba's JIT); debug: tracebacks of output failures (TELEOP_DEBUG=1)."""
 
     cache_dir: Path
     jit: bool = True
@@ -40,28 +36,25 @@ class RuntimeOptions:
                    aot=env.get("TELEOP_NO_AOT", "0") != "1", debug=bool(env.get("TELEOP_DEBUG")))
 
 
-_OPTIONS: list[RuntimeOptions] = []  # set by `using_options` (the `teleop` command: read once at its start)
+_OPTIONS: list[RuntimeOptions] = []
 
 
 def options() -> RuntimeOptions:
-    """The options in force: those `using_options` set, else read from the environment now."""
+    """The options `using_options` set, else those of the environment now."""
     return _OPTIONS[-1] if _OPTIONS else RuntimeOptions.from_env()
 
 
 @contextlib.contextmanager
 def using_options(opts: RuntimeOptions) -> Iterator[RuntimeOptions]:
-    """Run the block with `opts` as the process' runtime options (`options()`)."""
+    """Run the block with `opts` as `options()`."""
     _OPTIONS.append(opts)
     try:
         yield opts
     finally:
         _OPTIONS.remove(opts)
 
-# Python's garbage collector in a command's or worker's process: a run imports hundreds of thousands
-# of long-lived objects (numba, MuJoCo, Rerun, matplotlib) and each full collection traverses all of
-# them.  With the default thresholds (700, 10, 10) a `teleop run` spent 0.46-0.51 s in 3 full and ~490
-# young collections; with these, 0.13-0.18 s in ~34 young ones.  Reference
-# cycles are still collected, just in larger batches.
+
+# fewer collections of the many long-lived objects numba, MuJoCo, Rerun and matplotlib import
 GC_THRESHOLDS = (10_000, 50, 50)
 
 
@@ -71,10 +64,8 @@ def set_gc_thresholds() -> None:
 
 
 def end_process(rc: int) -> NoReturn:
-    """Flush stdout/stderr and end the process with `os._exit(rc)`, skipping the interpreter's module
-    teardown and final garbage collection: with numba, MuJoCo, Rerun and matplotlib loaded that teardown
-    takes about 1 s and writes nothing.  Callers make sure every file they
-    wrote is complete and closed first."""
+    """Flush stdout/stderr and `os._exit(rc)`, skipping the interpreter's teardown (every file written
+    must be closed first)."""
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(Exception):
             stream.flush()
@@ -84,7 +75,7 @@ def end_process(rc: int) -> NoReturn:
 def fast_exit(rc: int) -> NoReturn:
     """Run the atexit handlers (Rerun's shutdown, multiprocessing, logging), then `end_process(rc)`."""
     try:
-        atexit._run_exitfuncs()  # CPython's own exit step (the module has had it since Python 2)
+        atexit._run_exitfuncs()
     finally:
         end_process(rc)
 
@@ -98,9 +89,7 @@ def _is_terminal(stream) -> bool:
 
 @functools.cache
 def parent_death_signal():
-    """libc's `prctl` on Linux (None elsewhere or without libc).  Looked up once: call it in the parent
-    before starting a child whose `preexec_fn` is `die_with_parent`, so that the child (between fork and
-    exec) imports and loads nothing."""
+    """libc's `prctl` on Linux, else None (look it up in the parent before a `preexec_fn` uses it)."""
     if not sys.platform.startswith("linux"):
         return None
     try:
@@ -112,10 +101,8 @@ def parent_death_signal():
 
 
 def die_with_parent(sig: int = signal.SIGTERM) -> None:
-    """Ask the kernel to send `sig` to this process when the thread that started it ends (Linux
-    `prctl(PR_SET_PDEATHSIG)`, through ctypes), so that a worker or a helper server never outlives a
-    killed parent.  Call it first thing in the child (or as a `preexec_fn`).  Elsewhere, or without
-    libc, it does nothing.  If the parent ends while the request is made, `sig` is sent at once."""
+    """Have the kernel send `sig` to this process when its parent ends (Linux `PR_SET_PDEATHSIG`; a no-op
+    elsewhere); call it first thing in the child."""
     prctl = parent_death_signal()
     if prctl is None:
         return
@@ -130,13 +117,9 @@ DIST_NAME = "octarm-teleop"
 
 @functools.cache
 def provenance() -> dict[str, str]:
-    """What produced an output: {"version": the package's version} plus {"git_revision": the commit checked
-    out} when the code runs from a git checkout (read from the .git folder, no git command needed; absent
-    otherwise).  The version is the checkout's pyproject.toml when running from a checkout, else the
-    installed package's metadata (absent when neither is found).  Never raises; a few milliseconds from a
-    checkout or a wheel (importlib.metadata, the fallback, scans every installed package: 60-80 ms)."""
+    """{"version": ..., "git_revision": ...} of the running code (each absent when unknown; never raises)."""
     out: dict[str, str] = {}
-    root = Path(__file__).resolve().parents[2]  # the checkout, or site-packages for a wheel
+    root = Path(__file__).resolve().parents[2]  # the checkout, or site-packages
     try:
         v = _checkout_version(root) or _wheel_version(root)
         if v is None:
@@ -209,18 +192,12 @@ def _git_revision(root: Path) -> str | None:
 
 @functools.cache
 def progress_bar_class() -> type:
-    """tqdm's bar without its monitor thread.  tqdm starts a daemon thread ("tqdm_monitor") at the first bar
-    of a process, a disabled bar included, and leaves it running.  A process running any thread besides
-    the main one must not fork, so the sweep then starts its workers as fresh interpreters
-    (`harness.studies.executor.start_method`): measured, every sweep after the first in a process, and a
-    sweep after a run, lost the forked start-up.  The monitor only adjusts `miniters` of bars that
-    stall; these bars update every case or chunk.  The bars draw only when their stream (stderr by
-    default) is a terminal: in CI logs and redirected output they are off.  ImportError when tqdm is
-    missing."""
+    """tqdm's bar without its monitor thread (a process with threads must not fork its workers), drawn
+    only on a terminal.  ImportError without tqdm."""
     from tqdm import tqdm
 
     class Bar(tqdm):
-        monitor_interval = 0  # tqdm.__new__ starts the monitor only for a class with an interval
+        monitor_interval = 0
 
         def __init__(self, *args, **kwargs):
             if not _is_terminal(kwargs.get("file") or sys.stderr):

@@ -1,20 +1,13 @@
-"""Typed, frozen scenario configuration (the fully resolved form of a scenario TOML file), declared once:
-each field's type, default, allowed range and description (`harness.config.schema` helpers, read by
-msgspec).  The controller side's parameter dataclasses (`controllers.params`, numpy only) keep their
-names, types and defaults; their ranges and descriptions are given here (`MASTER`, `SLAVE`, `GAINS`,
-`SUBTASK`; a test checks them against the dataclasses).
-
-A scenario = controller side (nominal analytic models, gains, sub-tasks) + plant side (which plant,
-its own parameters, which may differ from the nominal ones: that difference is the *mismatch*) +
-trajectory, timing, noise and initial state.  Defaults reproduce the paper scenario (Sec. VI).
-Loading, overrides, cross-field checks and dumping: `harness.config.load`.
-"""
+"""The scenario schema, declared once: each field's type, default, range and description.  The
+`controllers.params` dataclasses keep their names and defaults; their ranges and descriptions are
+`MASTER`, `SLAVE`, `GAINS`, `SUBTASK` here.  Defaults reproduce the paper scenario (Sec. VI)."""
 
 import math
 from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
 from controllers.params import Gains, MasterParams, SlaveParams, SubtaskSpec
+from harness.config.errors import short_repr
 from harness.config.schema import Meta, checked, doc, integer, num, plain, vec
 
 PLANTS = ("mujoco", "analytic", "cosserat")
@@ -32,6 +25,7 @@ KEY_RE = r"^[A-Za-z_][A-Za-z0-9_-]*$"
 CONTROLLER_RE = r"^(?:[A-Za-z_][A-Za-z0-9_]*|[^\x00-\x1f:][^\x00-\x1f]*:[A-Za-z_][A-Za-z0-9_]*)$"
 CONTROLLER_EXPECT = ("a built-in controller name (see 'teleop controllers'), 'path/to/file.py:ClassName' or "
                      "'package.module:ClassName'")
+TARGETS_EXPECT = "an array of [t, X, Z] triples (s, m, m) with strictly increasing t >= 0"
 POS, NONNEG = {"gt": 0.0}, {"ge": 0.0}
 
 # ranges and descriptions of the controller side's parameter dataclasses (names/defaults: theirs)
@@ -70,8 +64,7 @@ Master, Slave, GainsSpec, Subtask = (checked(c, s) for c, s in ((MasterParams, M
 
 @dataclass(frozen=True)
 class TrajectoryConfig:
-    """Desired master tip trajectory, paper eq. (40):
-    x_d(t) = [cx + ax sin(w t), cz + az cos(w t)] in metres, relative to the master base."""
+    """x_d(t) = [cx + ax sin(w t), cz + az cos(w t)] (m, master base frame), paper eq. (40)."""
 
     center: vec(2, "m; x_d(t) must stay inside the master workspace annulus [|l1 - l2| + 1 mm, "
                 "l1 + l2 - 1 mm] (nominal and plant master)") = (0.0, 1.0)
@@ -92,8 +85,7 @@ class InitialState:
 
 @dataclass(frozen=True)
 class CosseratConfig:
-    """Resolution and numerics of the Cosserat-rod plant (`plant.kind = "cosserat"`): the material comes
-    from [plant.slave] and the viscosities of [plant]."""
+    """Cosserat-rod plant numerics (material: [plant.slave] and the viscosities of [plant])."""
 
     elements_per_section: integer("rod elements per section", ge=2, le=200) = 10
     dt: doc(num("", gt=0.0, le=0.01) | Literal["auto"], 's, rod time step, or "auto" (largest control_dt / m '
@@ -108,8 +100,7 @@ class CosseratConfig:
 
 @dataclass(frozen=True)
 class PlantConfig:
-    """The 'true' plant.  For `kind="mujoco"` the master/slave parameters below are what the MJCF is
-    built from; the controller keeps using `Scenario.master` / `Scenario.slave` (nominal)."""
+    """The 'true' plant; the controller keeps the nominal `Scenario.master` / `Scenario.slave`."""
 
     kind: doc(Literal[PLANTS], '"mujoco" | "analytic" (RK4 on the analytic model) | "cosserat" (rod)') = \
         "mujoco"
@@ -117,15 +108,9 @@ class PlantConfig:
                 "take the nominal [master] value") = None
     slave: doc(Slave | None, '"none" = same as [slave]; or a [plant.slave] table whose missing keys take '
                "the nominal [slave] value") = None
-    actuation: doc(Literal[ACTUATIONS], '"servo" | "torque" | "muscle" (mujoco only).  "servo": position '
-                   "servos, defined per unit length, track the integrated command q2_ref: they hide the "
-                   "slave's inertia and the controller's dynamics model (the stiff inner loop does the "
-                   'work).  "torque": the controller\'s T2 acts on the body as ideal, instantaneous '
-                   'generalized forces: hides actuator dynamics and limits.  "muscle": two one-sided '
-                   "extensor groups per section "
-                   "(force >= 0, lengthening the fibres at +-muscle_radius) with first-order force dynamics "
-                   "(muscle_time_constant) and limits (muscle_max_force): hides none of these; it cannot "
-                   "realize every T2 (commands outside [0, F_max] are clipped) and lags by tau") = "servo"
+    actuation: doc(Literal[ACTUATIONS], '(mujoco only) "servo": position servos track the integrated '
+                   'command; "torque": T2 as ideal generalized forces; "muscle": two one-sided extensor '
+                   "groups per section with force lag and limits (docs/plants.md)") = "servo"
     segments: integer("rigid segments per section N (mujoco only)", ge=1, le=64) = 8
     enforce_cc: doc(bool, "equality constraints holding each section at constant curvature (mujoco "
                     "only)") = False
@@ -136,15 +121,13 @@ class PlantConfig:
     servo_damping_ratio: num("servo damping ratio (section level)", **POS) = 1.0
     servo_feedforward: doc(bool, "add the analytic T2 (mapped to segment joints) in servo mode") = True
     actuation_delay: num("s, pure command delay, a multiple of control_dt", **NONNEG) = 0.0
-    muscle_time_constant: vec(3, "s, tau of the muscle groups' first-order force dynamics per section "
-                              "(assumption: pneumatic muscles with their valves and lines respond in tens of "
-                              "ms)", gt=0.0, le=10.0) = (0.05, 0.05, 0.05)
-    muscle_max_force: vec(3, "N, force limit F_max of one muscle group per section (assumption: supply "
-                          "pressure x bore area of the group)", gt=0.0, le=1e5) = (400.0, 300.0, 200.0)
-    muscle_radius: vec(3, "m, lateral offset r of the two groups from the backbone per section; "
-                       "default: the radius at which two fibres carrying the section's extension stiffness "
-                       "give its bending stiffness, r = sqrt(Kb / (Ke L0)) for the default [slave] "
-                       "(0.163, 0.120, 0.091 m), rounded", gt=0.0, le=0.5) = (0.16, 0.12, 0.09)
+    muscle_time_constant: vec(3, "s, tau of the muscle groups' first-order force dynamics per section",
+                              gt=0.0, le=10.0) = (0.05, 0.05, 0.05)
+    muscle_max_force: vec(3, "N, force limit F_max of one muscle group per section", gt=0.0,
+                          le=1e5) = (400.0, 300.0, 200.0)
+    muscle_radius: vec(3, "m, lateral offset of the two groups from the backbone per section (default: "
+                       "sqrt(Kb / (Ke L0)) of the default [slave], rounded)", gt=0.0,
+                       le=0.5) = (0.16, 0.12, 0.09)
     armature_fraction: num("segment-joint armature as a fraction of the section inertia", **NONNEG) = 0.01
     scene_xml: doc(doc(str, "", expect="the path of an existing MJCF scene file") | None,
                    "alternative scene MJCF file (must include master + octarm base); relative paths "
@@ -163,8 +146,7 @@ class PlantConfig:
 
 @dataclass(frozen=True)
 class FaultConfig:
-    """Deliberate controller faults, for checking that a bounds file catches broken controllers
-    (mutation testing of your CI bounds).  Defaults = no fault."""
+    """Deliberate controller faults (does a bounds file catch them?); defaults: none."""
 
     e2_sign: doc(Literal[-1, 1], "-1 flips the sign of the coordination-error feedback in (18)") = 1
     null_space_scale: num("multiplies phi_N (27): 0 = null-space term dropped, 1 = intact", ge=0.0,
@@ -178,9 +160,7 @@ ParamValue = doc(_LEAF | list[_LEAF | list[_LEAF | list[_LEAF]]], "",
 
 @dataclass(frozen=True)
 class ControllerConfig:
-    """Which controller runs (controllers/interface.py).  The class and its params are checked by
-    harness/config/controller.py when the scenario is loaded through harness.api; the resolved
-    config.toml spells out every parameter."""
+    """Which controller runs (checked by `harness.config.controller.resolve_controller`)."""
 
     name: doc(str, '"paper" (the paper\'s law, compiled), another built-in ("teleop controllers") or '
               '"path/to/file.py:ClassName" / "package.module:ClassName"', pattern=CONTROLLER_RE,
@@ -196,11 +176,7 @@ class ControllerConfig:
 
 @dataclass(frozen=True)
 class EnvObject:
-    """One object of the environment the slave can touch, in the slave's task plane: coordinates
-    [X, Z] in metres relative to the Octarm base.  Contact is frictionless and linear (normal force =
-    stiffness * penetration + damping).  `plane`: infinite wall through `position` with unit `normal`
-    pointing toward the free side; `box`: centre `position`, half sizes `size`, rotated by `angle`
-    about +y; `sphere`: centre `position`, radius size[0]."""
+    """An object the slave can touch ([X, Z] m, Octarm base frame); frictionless linear contact."""
 
     name: doc(str, "object name (the key of its [environment.objects.<name>] table)", pattern=NAME_RE,
               expect=NAME_EXPECT) = "wall"
@@ -212,6 +188,10 @@ class EnvObject:
     stiffness: num("N/m, normal contact stiffness", **POS) = 1.0e4
     damping_ratio: num("critical-damping fraction against the touching body's mass", **NONNEG) = 1.0
 
+    def __post_init__(self) -> None:
+        if self.kind == "plane" and math.hypot(*self.normal) < 1e-9:
+            raise ValueError(f"normal = {list(self.normal)}: must be a non-zero vector")
+
 
 @dataclass(frozen=True)
 class EnvironmentConfig:
@@ -220,12 +200,15 @@ class EnvironmentConfig:
     objects: doc(tuple[EnvObject, ...], "one [environment.objects.<name>] table per object (see "
                  "scenarios/contact.toml)", item="<name>") = ()
 
+    def __post_init__(self) -> None:
+        names = [o.name for o in self.objects]
+        if len(set(names)) != len(names):
+            raise ValueError(f"objects = {names}: object names must be distinct")
+
 
 @dataclass(frozen=True)
 class ForceSensingConfig:
-    """What the controller gets as F = [F1, F2] in the laws (13), (17).  `exact`: the plant's true
-    interaction forces; `sensed`: the same through noise -> first-order low-pass -> pure delay;
-    `ignored`: F = 0 in the laws."""
+    """What the laws (13), (17) get as F = [F1, F2]."""
 
     mode: doc(Literal[FORCE_MODES], '"exact" (true forces) | "sensed" (noise, filter, delay) | "ignored" '
               "(F = 0)") = "exact"
@@ -243,8 +226,8 @@ class SensingConfig:
 
 @dataclass(frozen=True)
 class OperatorConfig:
-    """The operator's hand on the master handle (MuJoCo plant): a point mass coupled to the master tip
-    by a grip spring-damper and pulled toward the scripted target by the arm's spring-damper."""
+    """The operator's hand: a point mass on the master tip (grip spring-damper), pulled toward the
+    scripted targets by the arm's spring-damper (MuJoCo plant)."""
 
     enabled: doc(bool, "simulate the operator's hand") = False
     mass: num("kg, hand mass", **POS) = 0.5
@@ -254,7 +237,13 @@ class OperatorConfig:
     grip_damping: num("N s/m, hand-handle damper", **NONNEG) = 40.0
     targets: doc(tuple[vec(3, ""), ...], "[[t, X, Z], ...] (s, m, master task frame), piecewise linear, "
                  "t >= 0 strictly increasing; [] = hold the initial tip position",
-                 expect="an array of [t, X, Z] triples (s, m, m) with strictly increasing t >= 0") = ()
+                 expect=TARGETS_EXPECT) = ()
+
+    def __post_init__(self) -> None:
+        ts = [r[0] for r in self.targets]
+        if any(t < 0 for t in ts) or any(b <= a for a, b in zip(ts, ts[1:], strict=False)):
+            targets = short_repr([list(r) for r in self.targets])
+            raise ValueError(f"targets = {targets}: must be {TARGETS_EXPECT}")
 
 
 @dataclass(frozen=True)

@@ -1,10 +1,7 @@
-"""The one validator of every input file: typed frozen dataclasses whose fields carry their constraints
-and descriptions as `msgspec.Meta` annotations (`harness.config.scenario`, `.bounds`, `.study`, a
-controller's `Params`), decoded by `msgspec.convert`.  This module adds
-what msgspec does not say: unknown keys with "did you mean" (`suggest`, the only such helper),
-non-finite numbers, and the one-line message ``<dotted field> = <value>: must be <range>`` built from
-the field's declared type (`describe`).  `fields_of` lists every field (dotted name, type, default,
-range, description) for the resolved `config.toml` and the reference pages (`harness.config.reference`).
+"""The one validator of every input file: frozen dataclasses whose fields carry their constraints and
+descriptions as `msgspec.Meta` annotations, decoded by `msgspec.convert` (`decode`), plus what msgspec
+does not say: unknown keys with "did you mean" (`suggest`), non-finite numbers and the one-line message
+``<dotted field> = <value>: must be <range>``.  `fields_of` lists the fields for config.toml and the docs.
 """
 
 from __future__ import annotations
@@ -28,15 +25,13 @@ NONE_WORDS = ("none",)  # TOML has no null: "none" (or false) unsets an optional
 _TOKEN = re.compile(r"\.([^.\[\]]+)|\[(\d+|\.\.\.)\]")
 
 
-# ---------------------------------------------------------------------------------------------
-# declaring fields
-# ---------------------------------------------------------------------------------------------
 def num(desc: str, **rng: float) -> Any:
     """A finite real number (TOML integers accepted) with optional bounds gt/ge/lt/le."""
     return doc(float, desc, **rng)
 
 
 def integer(desc: str, **rng: int) -> Any:
+    """An integer with optional bounds gt/ge/lt/le."""
     return doc(int, desc, **rng)
 
 
@@ -50,17 +45,15 @@ _META = ("gt", "ge", "lt", "le", "multiple_of", "pattern", "min_length", "max_le
 
 
 def doc(tp: Any, desc: str, **meta: Any) -> Any:
-    """`tp` with a description, msgspec constraints (`pattern`, ...) and extra keys: `expect` (what the
-    error message says the value must be; default: from the type), `unit`, ..."""
+    """`tp` with a description, msgspec constraints and extra keys (`expect`: the error's 'must be ...')."""
     extra = {k: v for k, v in meta.items() if k not in _META}
     rules = {k: v for k, v in meta.items() if k in _META}
     return Annotated[tp, Meta(description=desc or None, extra=extra or None, **rules)]
 
 
 def checked(cls: type, spec: Mapping[str, Any]) -> type:
-    """A frozen dataclass subclass of `cls` (a numpy-only parameter dataclass of `controllers/`) whose
-    fields take their names and defaults from `cls` and their constrained types from `spec`; the
-    decoded instances are turned back into `cls` (`plain`).  Every field of `cls` needs a spec entry."""
+    """A frozen subclass of the parameter dataclass `cls` (names, defaults: its own) with the constrained
+    types of `spec` (one entry per field); `plain` turns decoded instances back into `cls`."""
     own = dataclasses.fields(cls)
     if set(spec) != {f.name for f in own}:
         raise TypeError(f"{cls.__name__}: schema fields {sorted(spec)} != dataclass fields")
@@ -78,9 +71,6 @@ def plain(value: Any) -> Any:
     return base(**{f.name: getattr(value, f.name) for f in dataclasses.fields(base)})
 
 
-# ---------------------------------------------------------------------------------------------
-# type information: what a field accepts, in words
-# ---------------------------------------------------------------------------------------------
 @functools.cache
 def info(tp: Any) -> Any:
     return mi.type_info(tp)
@@ -188,7 +178,9 @@ def unknown_keys(prefix: str, bad: Mapping, allowed: Iterable[str],
         close = [prefix + c for c in suggest(k, allowed)]
         other = [e for e in elsewhere if e.rsplit(".", 1)[-1] == k and e != prefix + k and e not in close]
         text = did_you_mean(close + other, k if len(bad) > 1 else "")
-        hints.append(text + (f"({k!r} belongs under [{other[0].rsplit('.', 1)[0]}]) " if other else ""))
+        where = other[0].rpartition(".")[0] if other else ""
+        hints.append(text + (f"({k!r} belongs {f'under [{where}]' if where else 'at the top level'}) "
+                             if other else ""))
     if len(bad) == 1:
         (k, v), = bad.items()
         head, path = f"{prefix}{k} = {short_repr(v, 40)}: unknown key", prefix + str(k)
@@ -199,9 +191,6 @@ def unknown_keys(prefix: str, bad: Mapping, allowed: Iterable[str],
     return ConfigError(f"{head}; {''.join(hints)}allowed keys here: {allowed_text}", path=path)
 
 
-# ---------------------------------------------------------------------------------------------
-# the schema as a list of fields
-# ---------------------------------------------------------------------------------------------
 def _dataclass_of(t: Any) -> Any:
     """The dataclass type info inside `t` (through Annotated and Optional), else None."""
     t = bare(t)
@@ -229,29 +218,33 @@ def fields_of(cls: type, prefix: str = "", arrays: bool = False) -> Iterator[tup
             yield from fields_of(sub.cls, path + ".", arrays)
 
 
-# ---------------------------------------------------------------------------------------------
-# decoding
-# ---------------------------------------------------------------------------------------------
-def _check_keys(raw: Any, t: Any, path: str, elsewhere: tuple[str, ...], names: dict | None = None) -> None:
-    t = _dataclass_of(t)
-    if t is None or not isinstance(raw, Mapping):
-        return
-    fields = {f.name: f for f in t.fields}
-    for k in raw:
-        if not isinstance(k, str):
-            raise ConfigError(f"{path or 'file'}: key {short_repr(k)} is not a string", path=path)
-    bad = {k: v for k, v in raw.items() if k not in fields}
-    if bad:
-        raise unknown_keys(f"{path}." if path else "", bad, fields, elsewhere)
-    for k, v in raw.items():
-        p = f"{path}.{k}" if path else k
-        ft = bare(fields[k].type)
-        if isinstance(ft, (mi.VarTupleType, mi.ListType)) and isinstance(v, (list, tuple)):
-            for i, item in enumerate(v):
-                where = f"{p}.{names[i]}" if names and i in names else f"{p}[{i}]"
-                _check_keys(item, ft.item_type, where, elsewhere, names)
-        else:
-            _check_keys(v, fields[k].type, p, elsewhere, names)
+@functools.cache
+def paths(cls: type, prefix: str = "") -> tuple[str, ...]:
+    """Every dotted key of a `cls` table (for "did you mean" of keys put in the wrong table)."""
+    return tuple(prefix + p for p, _, _ in fields_of(cls))
+
+
+def _normalize(raw: Any, t: Any, path: str, elsewhere: tuple[str, ...], names: dict | None) -> Any:
+    """A copy of `raw` with "none" (or false) as None where `t` allows None; unknown keys raise."""
+    t0 = bare(t)
+    if isinstance(t0, mi.UnionType) and any(isinstance(u, mi.NoneType) for u in t0.types) and (
+            raw is False or (isinstance(raw, str) and raw.strip().lower() in NONE_WORDS)):
+        return None
+    dc = _dataclass_of(t)
+    if dc is not None and isinstance(raw, Mapping):
+        fields = {f.name: f.type for f in dc.fields}
+        for k in raw:
+            if not isinstance(k, str):
+                raise ConfigError(f"{path or 'file'}: key {short_repr(k)} is not a string", path=path)
+        bad = {k: v for k, v in raw.items() if k not in fields}
+        if bad:
+            raise unknown_keys(f"{path}." if path else "", bad, fields, elsewhere)
+        return {k: _normalize(v, fields[k], f"{path}.{k}" if path else k, elsewhere, names)
+                for k, v in raw.items()}
+    if isinstance(t0, (mi.VarTupleType, mi.ListType)) and isinstance(raw, (list, tuple)):
+        return [_normalize(v, t0.item_type, f"{path}.{names[i]}" if names and i in names else f"{path}[{i}]",
+                           elsewhere, names) for i, v in enumerate(raw)]
+    return raw
 
 
 def _non_finite(raw: Any, tokens: list) -> list | None:
@@ -308,8 +301,14 @@ def field_error(cls: type, raw: Any, tokens: list, why: str = "", names: dict[in
                 prefix: str = "") -> ConfigError:
     """The one-line error for the field at `tokens` of `raw` (decoded as `cls`)."""
     path, value, ftype, rest = _locate(cls, raw, tokens, names)
-    path = prefix + path if path else prefix.rstrip(".") or "file"
     t = bare(ftype)
+    required = re.fullmatch(r"Object missing required field `(\w+)`", why)
+    if required and isinstance(t, mi.DataclassType):
+        key = prefix + (f"{path}.{required.group(1)}" if path else required.group(1))
+        kind = next(f.type for f in t.fields if f.name == required.group(1))
+        what = f"[{key}] table" if _dataclass_of(kind) else f"key {key} ({describe(kind)})"
+        return ConfigError(f"missing {what}", path=key)
+    path = prefix + path if path else prefix.rstrip(".") or "file"
     expected = describe(ftype)
     got = ""
     if rest:
@@ -326,7 +325,11 @@ def field_error(cls: type, raw: Any, tokens: list, why: str = "", names: dict[in
     if isinstance(t, mi.DictType) and why.startswith("Expected `str`"):
         return ConfigError.field(path, value, "keys must be names (letters, digits, _ and -)")
     if isinstance(t, (mi.DataclassType, mi.DictType)) and not why.startswith("Expected"):
-        owner = why.split(" ", 1)[0].split(".", 1)[0]  # a dataclass' own check names its field
+        # a dataclass' own check (__post_init__) names its field: "field = ..." or "<table>.field = ..."
+        name = why.split(" = ", 1)[0]
+        if isinstance(t, mi.DataclassType) and name in {f.name for f in t.fields}:
+            return ConfigError(f"{path}.{why}", path=f"{path}.{name}")
+        owner = why.split(" ", 1)[0].split(".", 1)[0]
         if owner and path.endswith(owner) and why.startswith(owner + "."):
             return ConfigError(path[: len(path) - len(owner)] + why, path=path)
         return ConfigError(f"{path}: {why}", path=path)
@@ -352,15 +355,12 @@ def _bad_key(table: Mapping, tp: Any) -> str | None:
     return None
 
 
-def decode(raw: Any, cls: type, *, prefix: str = "", names: dict[int, str] | None = None,
-           elsewhere: tuple[str, ...] = ()) -> Any:
-    """`raw` (a parsed TOML table) as a `cls` instance, or a one-line ConfigError ("none" or false
-    unset an optional field).  `prefix` is put
-    before every field path; `names` names the tables of an array in messages (index -> name)."""
+def decode(raw: Any, cls: type, *, prefix: str = "", names: dict[int, str] | None = None) -> Any:
+    """`raw` (a parsed TOML table) as a `cls` instance, or a one-line ConfigError ("none" or false unset
+    an optional field).  `prefix`: before every field path; `names`: {index: name} of array tables."""
     if not isinstance(raw, Mapping):
         raise ConfigError.field(prefix.rstrip(".") or "file", raw, f"must be a table (got {type_name(raw)})")
-    _check_keys(raw, info(cls), prefix.rstrip("."), elsewhere, names)
-    raw = none_words(raw, info(cls))
+    raw = _normalize(raw, info(cls), prefix.rstrip("."), paths(cls, prefix), names)
     bad = _non_finite(raw, [])
     if bad is not None:
         raise field_error(cls, raw, bad, "finite", names, prefix)
@@ -374,41 +374,7 @@ def decode(raw: Any, cls: type, *, prefix: str = "", names: dict[int, str] | Non
         raise ConfigError(f"{prefix.rstrip('.') or 'file'}: {' '.join(str(e).split())}") from None
 
 
-def none_words(raw: Any, t: Any) -> Any:
-    """A copy of `raw` with "none" (and false) replaced by None where the schema allows None."""
-    t0 = bare(t)
-    if isinstance(t0, mi.UnionType) and any(isinstance(u, mi.NoneType) for u in t0.types) and (
-            raw is False or (isinstance(raw, str) and raw.strip().lower() in NONE_WORDS)):
-        return None
-    dc = _dataclass_of(t)
-    if dc is not None and isinstance(raw, Mapping):
-        fs = {f.name: f.type for f in dc.fields}
-        return {k: none_words(v, fs[k]) if k in fs else v for k, v in raw.items()}
-    if isinstance(t0, (mi.VarTupleType, mi.ListType)) and isinstance(raw, list):
-        return [none_words(v, t0.item_type) for v in raw]
-    return raw
-
-
 __all__ = ["ConfigError", "Meta", "checked", "decode", "describe", "did_you_mean", "doc", "field_error",
-           "parse_params",
-           "fields_of", "info", "integer", "none_words", "num", "plain", "suggest", "type_name",
+           "fields_of", "info", "integer", "num", "paths", "plain", "suggest", "type_name",
            "unknown_keys", "vec"]
 
-
-def parse_params(cls: type, raw: Mapping | None) -> Any:
-    """The validated `Params` of a controller class (controllers/interface.py) from its
-    [controller.params] table: missing keys take the defaults, each error one line naming
-    ``controller.params.<key>`` (ConfigError; the class' own ``check()`` may raise ParamsError)."""
-    params, raw = getattr(cls, "Params", None), dict(raw or {})
-    if params is None:
-        if raw:
-            key = sorted(raw)[0]
-            raise ConfigError.field(f"controller.params.{key}", raw[key],
-                                    f"unknown key; controller {getattr(cls, 'name', cls.__name__)!r} takes "
-                                    "no parameters")
-        return None
-    p = decode(raw, params, prefix="controller.params.")
-    check = getattr(p, "check", None)
-    if callable(check):
-        check()
-    return p

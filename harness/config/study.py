@@ -7,14 +7,15 @@ from typing import Any, Literal
 
 from harness.config.schema import doc, integer
 
-# Keys of harness.loop.metrics.compute_metrics kept in a row's "metrics" (status/message are row fields).
-METRIC_NAMES = (
-    "e1_rms", "e1_max", "e2_rms", "e2_max", "e2_plant_rms", "e2_plant_max", "deN_rms", "beta_min",
-    "ya_max", "e1_final", "e2_final", "range_violation", "mujoco_warnings", "sim_time_reached",
-    "wall_time", "realtime_factor",
-    "contact_force_peak", "contact_force_rms", "penetration_max", "contact_time", "body_contact_time",
-    "force_tracking_rms",
-)
+# unit of every metric of harness.loop.metrics.compute_metrics kept in a row (status/message are row fields)
+METRIC_UNITS = {
+    "e1_rms": "m", "e1_max": "m", "e2_rms": "m", "e2_max": "m", "e2_plant_rms": "m", "e2_plant_max": "m",
+    "deN_rms": "mixed: m/s, 1/(m s)", "beta_min": "-", "ya_max": "-", "e1_final": "m", "e2_final": "m",
+    "range_violation": "m or rad", "mujoco_warnings": "count", "sim_time_reached": "s", "wall_time": "s",
+    "realtime_factor": "x real time", "contact_force_peak": "N", "contact_force_rms": "N",
+    "penetration_max": "m", "contact_time": "s", "body_contact_time": "s", "force_tracking_rms": "N",
+}
+METRIC_NAMES = tuple(METRIC_UNITS)
 DISTRIBUTIONS = {
     "uniform": ("low", "high"), "loguniform": ("low", "high"), "normal": ("mean", "std"),
     "integers": ("low", "high"),

@@ -1,11 +1,5 @@
-"""Small shared readers/writers for the harness' files (TOML in, TOML/JSON out) and the one way every
-output is written: `atomic_path` / `write_atomic` (a temporary name in the same folder, renamed into
-place only when complete, so that a final name never holds a partial file).
-
-Input limits (every loader: scenario, bounds, study files and `--set` values): documents larger than
-`MAX_DOCUMENT_BYTES` or nested deeper than `MAX_DEPTH`, and files that are not regular files (named
-pipes, devices, sockets), are refused with a one-line ConfigError.
-"""
+"""TOML in (within `MAX_DOCUMENT_BYTES` and `MAX_DEPTH`, regular files only), TOML/JSON values out, and
+the one way every output is written: `atomic_path` (renamed into place only when complete)."""
 
 from __future__ import annotations
 
@@ -24,44 +18,32 @@ import tomli_w
 
 from .errors import ConfigError
 
-MAX_DOCUMENT_BYTES = 1 << 20  # 1 MiB: a scenario, bounds or study file (the shipped ones are < 4 KiB)
-MAX_DEPTH = 32  # nesting of tables and arrays (the scenario schema needs 4)
+MAX_DOCUMENT_BYTES = 1 << 20  # a scenario, bounds or study file
+MAX_DEPTH = 32  # nesting of tables and arrays
 TMP_MARK = ".tmp-"  # temporary names: .<final name>.tmp-<pid>-<n>
 
 
-def check_document(doc: Any, what: str) -> Any:
-    """Raise a one-line ConfigError if the parsed `doc` nests tables/arrays deeper than MAX_DEPTH."""
-    stack = [(doc, 1)]
-    while stack:  # iterative: a deep document must not overflow the Python stack here either
-        node, depth = stack.pop()
-        if isinstance(node, dict):
-            children = list(node.values())
-        elif isinstance(node, (list, tuple)):
-            children = list(node)
-        else:
-            continue
-        if depth > MAX_DEPTH:
-            raise ConfigError(f"{what}: nested deeper than {MAX_DEPTH} levels of tables/arrays")
-        stack += [(c, depth + 1) for c in children]
-    return doc
-
-
 def loads_toml(text: str, what: str) -> dict:
-    """`tomllib.loads` within the size and depth limits (RecursionError and oversize are ConfigError;
-    a TOMLDecodeError is left to the caller)."""
+    """`tomllib.loads` within the size and depth limits (TOMLDecodeError is left to the caller)."""
     if len(text) > MAX_DOCUMENT_BYTES:
         raise ConfigError(f"{what}: {len(text)} characters, more than the limit of {MAX_DOCUMENT_BYTES}")
+    deep = ConfigError(f"{what}: nested deeper than {MAX_DEPTH} levels of tables/arrays")
     try:
         doc = tomllib.loads(text)
     except RecursionError:
-        raise ConfigError(f"{what}: nested deeper than {MAX_DEPTH} levels of tables/arrays") from None
-    return check_document(doc, what)
+        raise deep from None
+    stack = [(doc, 1)]
+    while stack:  # iterative: no recursion limit
+        node, depth = stack.pop()
+        if isinstance(node, (dict, list)):
+            if depth > MAX_DEPTH:
+                raise deep
+            stack += [(c, depth + 1) for c in (node.values() if isinstance(node, dict) else node)]
+    return doc
 
 
 def _open_regular(path: Path, what: str):
-    """Open `path` for reading only if it is a regular file (after symlinks): a named pipe, device or
-    socket is refused with a one-line ConfigError instead of blocking or reading without end.  Opened
-    non-blocking and checked on the open descriptor, so the check and the read see the same file."""
+    """`path` opened for reading if it is a regular file (checked on the descriptor), else ConfigError."""
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     except OSError as e:
@@ -85,8 +67,7 @@ def _open_regular(path: Path, what: str):
 
 
 def read_toml(path: str | Path, what: str) -> dict:
-    """Parse a TOML file; every failure is a one-line ConfigError naming `what` ("scenario file"...).
-    Files over MAX_DOCUMENT_BYTES or nested deeper than MAX_DEPTH are refused."""
+    """A parsed TOML file; every failure is a one-line ConfigError naming `what` ("scenario file"...)."""
     path = Path(path)
     try:
         with _open_regular(path, what) as fh:
@@ -123,12 +104,12 @@ def jsonable(v: Any) -> Any:
 
 
 def toml_literal(v: Any) -> str:
-    """One TOML value on one line (arrays inline), e.g. for `--set key=value` overrides."""
+    """One TOML value on one line (arrays and tables inline)."""
     if isinstance(v, np.generic):
         v = v.item()
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(toml_literal(x) for x in v) + "]"
-    if isinstance(v, dict):  # inline table (e.g. controller={name = "dls_ik"})
+    if isinstance(v, dict):
         return "{" + ", ".join(f"{k} = {toml_literal(x)}" for k, x in v.items()) + "}"
     try:
         return tomli_w.dumps({"v": v})[len("v = "):].rstrip("\n")
@@ -156,12 +137,8 @@ def prepare_out_dir(path: Path, option: str = "--out") -> Path:
     return path
 
 
-# ---------------------------------------------------------------------------------------------
-# atomic outputs
-# ---------------------------------------------------------------------------------------------
 class OutputError(ConfigError):
-    """An output file could not be written: one line naming the file and the cause (CLI exit 2 when
-    it happens before a run; a run lists it in its failures instead)."""
+    """An output file could not be written (one line naming the file and the cause)."""
 
 
 def describe_os_error(e: BaseException) -> str:
@@ -173,18 +150,12 @@ def describe_os_error(e: BaseException) -> str:
 _counter = iter(range(1 << 62))
 
 
-def temp_name(path: Path) -> Path:
-    """A temporary name next to `path` (same folder, so the final rename is atomic)."""
-    return path.with_name(f".{path.name}{TMP_MARK}{os.getpid()}-{next(_counter)}")
-
-
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
-    """Yield a temporary path in `path`'s folder; when the block ends without an exception the file
-    is fsynced and renamed to `path` (atomic on POSIX), else the temporary file is removed.  Any
-    OSError becomes a one-line `OutputError` naming `path` and the cause."""
+    """A temporary path next to `path`, fsynced and renamed to `path` when the block succeeds, removed
+    otherwise; an OSError is an `OutputError`."""
     path = Path(path)
-    tmp = temp_name(path)
+    tmp = path.with_name(f".{path.name}{TMP_MARK}{os.getpid()}-{next(_counter)}")
     try:
         yield tmp
         if not tmp.exists():
@@ -211,8 +182,7 @@ def write_atomic(path: str | Path, data: bytes | str | Callable[[Path], Any]) ->
 
 
 def remove_outputs(folder: Path, names: list[str], patterns: tuple[str, ...] = ()) -> None:
-    """Remove the previous run's outputs (`names` and files matching `patterns`) and leftover
-    temporary files from `folder` (only these: other files are left alone)."""
+    """Remove the previous run's outputs (`names`, `patterns`) and temporary files from `folder`."""
     victims = {folder / n for n in names}
     for pat in patterns:
         victims.update(folder.glob(pat))

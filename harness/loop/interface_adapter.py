@@ -32,7 +32,6 @@ from controllers.interface import (
     ControllerDiverged,
     NominalModels,
     Observation,
-    ParamsError,
 )
 from controllers.status import Status
 from harness.config.controller import (
@@ -44,7 +43,6 @@ from harness.config.controller import (
     parse_params,
     plant_actuation,
 )
-from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
 from harness.loop.common import STOP, RunModel, compile_model
 from harness.loop.fast import K
@@ -245,10 +243,7 @@ def make_controller(scn: Scenario, model: RunModel | None = None, construct: boo
     model: the scenario's `RunModel` (default: compiled here); construct=False: (the class, context)."""
     cfg = scn.controller
     cls = load_class(cfg.name)
-    try:
-        params = parse_params(cls, cfg.params, cfg.name)
-    except ParamsError as e:
-        raise ConfigError(str(e), path=f"controller.params.{e.key}") from None
+    params = parse_params(cls, cfg.params, cfg.name)
     a = model if model is not None else compile_model(scn)
     ctx = ControllerContext(
         dt=scn.control_dt, n_steps=scn.n_steps, actuation=plant_actuation(scn), plant=scn.plant.kind,

@@ -39,8 +39,6 @@ deterministic: the same files give the same numbers.
 
 from __future__ import annotations
 
-import difflib
-import importlib.util
 import math
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -48,24 +46,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from harness.config.assets import asset_dir
 from harness.config.bounds import Bounds, Violation, bounds_from_dict, check_bounds
 from harness.config.errors import ConfigError
+from harness.config.schema import unknown_keys
 from harness.config.textio import read_toml
 from harness.studies.finding_measures import MEASURE_UNITS, MEASURES
-
-_CHECKOUT = Path(__file__).resolve().parents[2]
 
 
 def findings_dir() -> Path:
     """Folder of the shipped finding files (package data, else the checkout's `findings/`)."""
-    try:
-        spec = importlib.util.find_spec("harness._data.findings")
-    except ModuleNotFoundError:
-        spec = None
-    for loc in (spec.submodule_search_locations or []) if spec is not None else []:
-        if Path(loc).is_dir():
-            return Path(loc)
-    return _CHECKOUT / "findings"
+    return asset_dir("findings")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -104,12 +95,9 @@ def _str_list(v: Any, path: str) -> tuple[str, ...]:
 
 
 def _check_keys(table: Mapping, allowed: Sequence[str], where: str) -> None:
-    for k in table:
-        if k not in allowed:
-            close = difflib.get_close_matches(str(k), list(allowed), n=1)
-            hint = f"did you mean {close[0]!r}? " if close else ""
-            raise ConfigError(f"unknown key {where + '.' if where else ''}{k}; {hint}allowed: "
-                              f"{', '.join(allowed)}", path=f"{where}.{k}" if where else str(k))
+    bad = {k: v for k, v in table.items() if k not in allowed}
+    if bad:
+        raise unknown_keys(f"{where}." if where else "", bad, allowed)
 
 
 def finding_from_dict(raw: Mapping, name: str, path: Path | None = None) -> Finding:

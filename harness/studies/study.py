@@ -1,74 +1,6 @@
-"""Mismatch studies: vary the *plant* (and sensing) of a scenario, run every case in parallel, resume.
-
-A mismatch study keeps the controller's nominal analytic model (`Scenario.master`, `Scenario.slave`,
-`Scenario.gains`) and varies what the controller does not know: the plant (`plant.master`,
-`plant.slave`, `plant.segments`, `plant.physics_dt`, `plant.actuation`, `plant.servo_frequency`,
-`plant.servo_damping_ratio`, `plant.actuation_delay`, `plant.enforce_cc`, ...) and the sensing
-(`snr_db`, `control_dt`).  Each case is one fully resolved `Scenario`; cases run through a
-`concurrent.futures` executor (a process pool, or Dask distributed with `scheduler=ADDRESS`).
-
-Study file (TOML)
------------------
-::
-
-    [study]
-    name = "mass_stiffness"            # output folder name; default: the file's stem
-    description = "..."                # optional, free text
-    scenario = "../scenarios/x.toml"   # base scenario, relative to the study file; default: built-in paper
-    set = ["duration=5.0", "plant.kind='mujoco'"]   # scenario overrides applied to every case
-    metrics = ["e2_rms", "e2_max", "beta_min"]      # metrics kept per case; default: all (METRIC_NAMES)
-    record = {worst = 2, by = "e2_rms"}  # optional: .rrd recordings of the worst k cases by a metric;
-                                         # order = "max" | "min" (default "min" for beta_min, else "max")
-
-    [[factor]]
-    name = "slave_mass"                # label in tables and plots; default: param
-    param = "plant.slave.masses"       # dotted Scenario path; `plant.slave.masses[0]` = one section
-    scale = [0.5, 0.75, 1.0, 1.25, 1.5]   # multiplicative factors (see below) ...
-    # values = [4, 8, 16]                 # ... or absolute values (exactly one of scale / values)
-
-    [[factor]]
-    name = "bending"
-    param = "plant.slave.bending_stiffness"
-    scale = {random = "uniform", low = 0.5, high = 1.5}   # seeded random draws instead of a list
-
-    [sampling]
-    mode = "grid"      # "grid" (default) | "random"
-    n = 20             # number of random draws (see below)
-    seed = 0           # seed of the draws (default 0)
-    max_cases = 10000  # refuse larger studies before expanding them (default 10000; --max-cases)
-
-    [scenario]         # optional inline base scenario (instead of study.scenario); same keys as a
-    duration = 5.0     # scenario file.  The `study.toml` written to the output folder uses it.
-
-Factors
-  * `param` is any field path of `Scenario` (`plant.slave.masses`, `plant.segments`, `snr_db`,
-    `control_dt`, `plant.actuation`, `seed`, ...), optionally indexed (`plant.slave.masses[0]`,
-    `plant.master.lengths[1]`).  The controller's model (`master.*`, `slave.*`) is rejected:
-    a mismatch study varies `plant.master.*` / `plant.slave.*`.
-  * `scale = s` multiplies the NOMINAL value: for `plant.master.*` / `plant.slave.*` that is the
-    controller's model (`Scenario.master` / `Scenario.slave`), so s = 1 means "no mismatch"; for
-    any other field it is the base scenario's value (after `set`).  Vector fields are scaled
-    element-wise; integer fields must stay integers.
-  * `param = "controller"` with `values = ["paper", "dls_ik", "file.py:Class", ...]` compares
-    controllers (each level replaces the whole [controller] table: its params start from the class
-    defaults); `controller.params.<key>` varies one parameter (values, or scale of the base's value).
-    The summary plots draw one line per controller.
-  * `values = [...]` are absolute values, passed to the scenario loader as given (a scalar given
-    for a vector field is used for every entry).  The loader validates them.
-  * Each case is the base scenario + `set` + one `key=value` override per varied field (an indexed
-    factor writes the whole vector).  Untouched fields of `plant.slave` / `plant.master` keep the
-    base plant's values, i.e. the nominal model when the base has none (`harness.config.load` rule).
-  * Random draws (`{random = ...}` for `scale` or `values`): `uniform` / `loguniform` (`low`,
-    `high`), `normal` (`mean`, `std`), `integers` (`low`, `high`, inclusive).  Each factor draws
-    from its own generator seeded by (seed, factor name), so adding a factor leaves the others'
-    draws unchanged.  Deterministic for a given seed (and numpy version).
-
-Sampling
-  * `grid`: cartesian product of the list factors.  If some factors are random, each grid point
-    is combined with the same `n` draws of the random factors (common random numbers).
-  * `random`: `n` cases; random factors are drawn, list factors are picked uniformly at random.
-
-Running, results and summaries: `harness.studies.sweep`.
+"""Study files (`teleop sweep`): `load_study` checks the file (schema: `harness.config.study`) and returns
+the resolved `Study`; the format and its semantics are in docs/reference/study.md.  Running, results and
+summaries: `harness.studies.sweep`.
 """
 
 from __future__ import annotations
@@ -86,11 +18,12 @@ from typing import Any
 from harness.config.assets import shipped
 from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
-from harness.config.schema import decode, did_you_mean, fields_of, suggest, unknown_keys
+from harness.config.schema import decode, did_you_mean, suggest, unknown_keys
 from harness.config.study import (  # noqa: F401 - DEFAULT_MAX_CASES, METRIC_NAMES re-exported
     DEFAULT_MAX_CASES,
     DISTRIBUTIONS,
     METRIC_NAMES,
+    METRIC_UNITS,
     PARAM_RE,
     FactorTable,
     StudyFile,
@@ -101,25 +34,13 @@ log = logging.getLogger(__name__)
 
 
 LOWER_IS_WORSE = frozenset({"beta_min"})
-# axis labels of the summary plots (units as in harness.loop.metrics)
-METRIC_LABELS = {
-    "e1_rms": "e1_rms [m]", "e1_max": "e1_max [m]", "e2_rms": "e2_rms [m]", "e2_max": "e2_max [m]",
-    "e2_plant_rms": "e2_plant_rms [m]", "e2_plant_max": "e2_plant_max [m]",
-    "deN_rms": "deN_rms [mixed: m/s, 1/(m s)]", "beta_min": "beta_min [-] (41)", "ya_max": "ya_max [-] (29)",
-    "e1_final": "e1_final [m]", "e2_final": "e2_final [m]", "range_violation": "range_violation [m or rad]",
-    "mujoco_warnings": "mujoco_warnings [count]", "sim_time_reached": "sim_time_reached [s]",
-    "wall_time": "wall_time [s]", "realtime_factor": "realtime_factor [x real time]",
-    "contact_force_peak": "contact_force_peak [N]", "contact_force_rms": "contact_force_rms [N]",
-    "penetration_max": "penetration_max [m]", "contact_time": "contact_time [s]",
-    "body_contact_time": "body_contact_time [s]", "force_tracking_rms": "force_tracking_rms [N]",
-}
+METRIC_LABELS = {k: f"{k} [{u}]" for k, u in METRIC_UNITS.items()} | {
+    "beta_min": "beta_min [-] (41)", "ya_max": "ya_max [-] (29)"}
 DEFAULT_OUT_ROOT = Path("runs") / "sweeps"
 
 
-# --- study file -------------------------------------------------------------------------------------
 def check_study_name(name: Any) -> str:
-    """A study name is a folder name inside the output root: letters, digits, '_', '-', '.', not only
-    dots ('.' or '..' would leave the folder); else a one-line ConfigError."""
+    """`name` if it is a folder name inside the output root (not only dots), else ConfigError."""
     if not isinstance(name, str) or not re.fullmatch(r"[\w.-]+", name) or not name.strip("."):
         raise ConfigError(f"[study] name = {name!r}: required; letters, digits, '_', '-', '.' only, and not "
                           "only dots (the name is a folder inside the output folder)")
@@ -238,21 +159,18 @@ def _parse_factor(t: FactorTable) -> Factor:
 
 def load_study(source: str | os.PathLike | dict, base_dir: str | os.PathLike | None = None, *,
                max_cases: int | None = None, allow_code: bool | None = None) -> Study:
-    """Parse and check a study (TOML file or the equivalent dict).  Structural errors raise
-    `ConfigError` naming the table/factor; values are checked by `expand_cases`.
-    `base_dir` resolves a relative `study.scenario` and relative controller files (default: the study
-    file's folder, or cwd).  `max_cases` replaces [sampling] max_cases (the case count is checked here,
-    before expansion).  allow_code: whether the study (its scenario, `set`, factors) may name Python
-    controllers; default: yes for a dict (the caller's own), no for a file (`--allow-code`)."""
+    """The checked `Study` of a TOML file or table (values: `expand_cases`).  Raises ConfigError.
+    base_dir: where relative paths resolve (default: the file's folder, or cwd); max_cases: replaces
+    [sampling] max_cases; allow_code: may it name Python controllers (default: only a table may)."""
     if isinstance(source, dict):
         doc_, stem, label = source, None, None
         base = Path(base_dir) if base_dir is not None else Path.cwd()
     else:
-        path = shipped(source, "studies")  # a shipped name (segments) works from any folder
+        path = shipped(source, "studies")
         doc_, stem, label = read_toml(path, "study file"), path.stem, f"study file {source}"
         base = Path(base_dir) if base_dir is not None else path.resolve().parent
     try:
-        f = decode(doc_, StudyFile, elsewhere=tuple(p for p, _, _ in fields_of(StudyFile)))
+        f = decode(doc_, StudyFile)
     except ConfigError as e:
         raise (e.with_context(label) if label else e) from None
     if not f.factor:
@@ -296,20 +214,14 @@ def check_max_cases(v: Any, where: str) -> int:
     return v
 
 
-def case_count(study: Study) -> int:
-    """Number of cases before duplicates are removed, computed without expanding the study."""
-    if study.mode == "random":
-        return int(study.n)
-    count = math.prod(len(f.levels) for f in study.factors if not f.is_random)
-    return count * (study.n if any(f.is_random for f in study.factors) else 1)
-
-
 def check_case_count(study: Study) -> None:
-    """ConfigError (with the count) if the study has more than `study.max_cases` cases."""
-    count = case_count(study)
+    """ConfigError if the study has more than `study.max_cases` cases (counted without expanding it)."""
+    if study.mode == "random":
+        count = int(study.n)
+    else:
+        count = math.prod(len(f.levels) for f in study.factors if not f.is_random)
+        count *= study.n if any(f.is_random for f in study.factors) else 1
     if count > study.max_cases:
         raise ConfigError(f"study {study.name!r}: {count} cases, more than the limit of {study.max_cases} "
                           "([sampling] max_cases or --max-cases raise it)", path="[sampling] max_cases")
 
-
-# --- worker -----------------------------------------------------------------------------------------
