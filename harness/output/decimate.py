@@ -1,11 +1,6 @@
-"""Display-resolution decimation of time series (numpy only; used by `plots`).
-
-A line plot of n >> width samples draws many samples into each pixel column; what the eye sees in a
-column is the vertical extent [min, max] of the samples in it and the joins to the neighbouring
-columns.  `envelope` keeps exactly those samples: per column of equal time width, the first, the
-minimum, the maximum and the last sample (in time order), plus every non-finite sample (a NaN
-breaks a matplotlib line, so the gaps stay where they were).  Every extremum of the full series is
-kept: the global min/max, and each column's min/max, are samples of the output.
+"""Display-resolution decimation of time series (numpy only): per column of equal time width, the first,
+minimum, maximum and last sample, plus every non-finite one (a NaN breaks a line): what the eye sees of
+a column, and every extremum of the series.
 """
 
 from __future__ import annotations
@@ -14,12 +9,8 @@ import numpy as np
 
 
 def envelope_indices(t: np.ndarray, y: np.ndarray, n_columns: int) -> np.ndarray:
-    """Sorted indices of the samples of (t, y) that `envelope` keeps.
-
-    t: (n,) non-decreasing sample times (any unit); y: (n,) values; n_columns >= 1: number of equal
-    time bins over [t[0], t[-1]] (use at least the plot's width in pixels).  Returns (m,) int64
-    indices, m <= 4 n_columns + (number of non-finite y), all of range(n) when n <= 4 n_columns.
-    """
+    """Sorted indices (m,) of the samples of (t (n,) non-decreasing, y (n,)) kept at n_columns >= 1
+    equal time bins; m <= 4 n_columns + the non-finite y; all of range(n) when n <= 4 n_columns."""
     t = np.asarray(t, dtype=float).reshape(-1)
     y = np.asarray(y, dtype=float).reshape(-1)
     n, n_columns = t.shape[0], int(n_columns)
@@ -61,10 +52,7 @@ def _first_per_column(mask: np.ndarray, col: np.ndarray) -> np.ndarray:
 
 
 def envelope(t: np.ndarray, y: np.ndarray, n_columns: int) -> tuple[np.ndarray, np.ndarray]:
-    """Min/max envelope of the series (t, y) at `n_columns` columns: (t_kept (m,), y_kept (m,)), the
-    samples of `envelope_indices` in time order (see the module docstring)."""
+    """(t_kept (m,), y_kept (m,)): the samples of `envelope_indices`, in time order."""
     idx = envelope_indices(t, y, n_columns)
     return np.asarray(t).reshape(-1)[idx], np.asarray(y).reshape(-1)[idx]
 
-
-__all__ = ["envelope", "envelope_indices"]

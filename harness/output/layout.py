@@ -1,14 +1,7 @@
-"""Fixed figure layout: margins from measured text, without matplotlib's tight-bbox pass.
-
-`layout="constrained"` runs a tight-bbox pass over every axes (tick creation, formatting and text
-extents) on each savefig, which was ~40 % of the figure time of a run.  `fix_layout` gets the same
-result for the grid figures drawn here (`fig.subplots(nrows, ncols)`, optionally with colorbars and
-legends outside the axes) from a few cheap measurements: the tick labels are formatted from the
-axis' locator and formatter (no Tick objects) and measured with one text-metrics call each; titles,
-axis labels, offset texts ("1e-3"), legends outside the axes and the suptitle are measured as they
-are.  Margins and the gaps between rows/columns are then set (in inches, converted to figure
-fractions) with `fig.subplots_adjust`, so that no text leaves the figure or runs into its neighbour.
-Three passes: the ticks chosen depend on the axes' size, which depends on the margins.
+"""Figure layout without matplotlib's tight-bbox pass (which cost ~40 % of a run's figure time): the
+margins and gaps of a grid of axes (with colorbars and legends outside) from a few text measurements,
+the tick labels formatted from each axis' locator and formatter.  Three passes: the ticks depend on the
+axes' size, which depends on the margins.
 """
 
 from __future__ import annotations
@@ -24,8 +17,8 @@ _SLACK = 1.0 / 72  # inches added to every measured extent (hinting, rounding at
 
 
 class _Measure:
-    """Text sizes in inches, measured with a 1x1-pixel Agg renderer at the figure's DPI (one renderer
-    and one cache of sizes per DPI, shared by all figures: the same tick labels recur)."""
+    """Text sizes in inches from a 1x1-pixel Agg renderer at the figure's DPI (renderer and sizes cached
+    per DPI across figures: the same tick labels recur)."""
 
     _renderers: dict[float, RendererAgg] = {}
     _sizes: dict[tuple, tuple[float, float]] = {}
@@ -70,8 +63,8 @@ def _tick_kw(axis, key: str, rc_key: str):
 
 
 def _tick_labels(axis) -> tuple[np.ndarray, list[str], str]:
-    """(positions in [0, 1] along the axis, labels, offset text) of the major ticks in view, formatted
-    as the axis will draw them (the locator and formatter calls of `Axis._update_ticks`)."""
+    """(positions in [0, 1] along the axis, labels, offset text) of the major ticks in view, as
+    `Axis._update_ticks` formats them."""
     lo, hi = sorted(axis.get_view_interval())
     locs = np.asarray(axis.get_major_locator()(), dtype=float)
     labels = axis.get_major_formatter().format_ticks(locs)
@@ -150,9 +143,8 @@ def _cell(ax):
 
 
 def fix_layout(fig: Figure, passes: int = 3) -> None:
-    """Place the axes of `fig` (all on one top-level GridSpec) so that every text fits: sets the
-    GridSpec's left/right/bottom/top/wspace/hspace.  Call after everything is drawn into the figure
-    and before saving; the figure must not use a layout engine."""
+    """Place the axes of `fig` (one top-level GridSpec, no layout engine) so that every text fits
+    (`subplots_adjust`); call after drawing, before saving."""
     m = _Measure(fig)
     W, H = fig.get_size_inches()
     axes = [ax for ax in fig.axes if ax.get_visible() and _cell(ax) is not None]
@@ -198,5 +190,3 @@ def fix_layout(fig: Figure, passes: int = 3) -> None:
             break  # converged: the same ticks as in the previous pass
         fig.subplots_adjust(**params)
 
-
-__all__ = ["PAD", "fix_layout"]
