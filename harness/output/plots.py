@@ -19,16 +19,11 @@ from matplotlib.figure import Figure
 
 from harness.config.textio import write_atomic
 from harness.loop.trajectory import Trajectory
-from harness.output.decimate import envelope
 from harness.output.geometry import cc_backbone, has_interaction, master_points, world_base
 from harness.output.names import FIGURES  # what write_figures writes (forces.png only with interaction)
 from harness.output.obstacles import obstacle_outline
 
 DPI = 130
-# time series are drawn from their min/max envelope at this many columns per inch (2 per pixel; every
-# extremum kept, `harness.output.decimate`)
-COLUMNS_PER_INCH = 2 * DPI
-FULL_RESOLUTION = False  # True: draw every sample (reference for comparisons)
 _SEC_COLORS = ("tab:green", "tab:purple", "tab:brown")
 OBSTACLE_FACE, OBSTACLE_EDGE = (0.6, 0.63, 0.72, 0.35), (0.35, 0.38, 0.5, 1.0)
 
@@ -47,11 +42,8 @@ def _figure(nrows: int = 1, figsize=(7.0, 3.6)):
 
 
 def _plot_series(ax, t, y, *args, **kwargs):
-    """ax.plot of one time series, decimated to its min/max envelope at display resolution."""
-    t = np.asarray(t, dtype=float).reshape(-1)
-    y = np.asarray(y, dtype=float).reshape(-1)
-    if not FULL_RESOLUTION:
-        t, y = envelope(t, y, int(COLUMNS_PER_INCH * ax.figure.get_figwidth()))
+    """ax.plot of one time series (every sample)."""
+    t, y = np.asarray(t, dtype=float).reshape(-1), np.asarray(y, dtype=float).reshape(-1)
     return ax.plot(t, y, *args, **kwargs)
 
 
