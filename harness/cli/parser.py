@@ -97,21 +97,17 @@ def _scenario_options(p: argparse.ArgumentParser, *, sim: bool = True) -> None:
                "or 'cosserat' (PyElastica Cosserat rod); --set plant.kind=... Default: from the scenario "
                "(paper: mujoco).")
     a("--actuation", choices=ACTUATIONS, default=None,
-      help="MuJoCo slave actuation, per unit length of a section: 'servo' (position servos tracking the "
-           "integrated command; hides the slave's inertia and the controller's dynamics model), 'torque' "
-           "(the controller's T2 as ideal generalized forces; hides actuator dynamics and limits) or "
-           "'muscle' (two one-sided extensor groups per section: pushes only, clips commands outside "
-           "[0, F_max], lags by tau; plant.muscle_* fields); --set plant.actuation=... "
-           "Default: from the scenario (paper: servo).")
+      help="MuJoCo slave actuation per unit section length: 'servo' (position servos on the integrated "
+           "command; hide the slave's inertia), 'torque' (T2 as ideal generalized forces) or 'muscle' (one-"
+           "sided extensors: push only, clip to [0, F_max], lag tau; plant.muscle_*); --set "
+           "plant.actuation=... Default: from the scenario (paper: servo).")
     a("--segments", metavar="N", default=None,
       help="rigid segments per slave section of the MuJoCo model, integer in [1, 64]; --set "
            "plant.segments=N. Default: from the scenario (paper: 8).")
     if sim:
         a("--duration", metavar="S", default=None,
-          help="simulated time in s, in (0, 3600]; must exceed the transient after which metrics are taken "
-               "(scenario key 'transient', paper: 5 s; unset, runs of 5 s or less use duration / 4; a file "
-               "that sets it needs --set transient=... for shorter runs). Default: from the scenario "
-               "(paper: 20).")
+          help="simulated time in s, in (0, 3600]; must exceed the metrics' 'transient' (paper: 5 s; unset: "
+               "duration / 4 for runs of 5 s or less). Default: from the scenario (paper: 20).")
         a("--controller", metavar="NAME|FILE.py:CLASS", default=None,
           help="a built-in controller ('teleop controllers'; 'paper' = the paper's law, compiled), "
                "'path/to/file.py:ClassName' or 'package.module:ClassName' (controllers/interface.py); --set "
@@ -231,18 +227,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     sweep = command(
         "sweep", "run a parameter sweep (study file)",
-        "Run every case of a study file (harness.studies.sweep) in local workers or on a Dask cluster. Each "
-        "finished case is appended to results.jsonl; re-running the same command resumes (finished cases "
-        "are skipped). Also written: summary.csv, metric plots (lines for 1-D factors, heatmaps for 2-D "
-        "grids), study.toml (resolved) and optional recordings of the worst cases.",
-        "study file (TOML; see studies/*.toml and the docs' study file reference): [study] name, scenario "
-        "(base scenario file), set (overrides for every case), metrics, record = {worst = k, by = METRIC}; "
-        "[[factor]] param = any scenario key (e.g. plant.slave.masses[0]) with scale = [...] (x nominal), "
-        "values = [...] or scale/values = {random = 'uniform', low, high}; [sampling] mode = 'grid' | "
-        "'random', n, seed. exit status: 0 every case has a row (diverged cases are rows too); 1 cases "
-        "unfinished, the executor failed, or an output (recordings, summary) could not be written after the "
-        "cases ran (the rest is written); 2 invalid study, option or output folder; 130 interrupted (re-run "
-        "to resume).")
+        "Run every case of a study file in local workers or on a Dask cluster; each finished case is "
+        "appended to results.jsonl and a re-run resumes. Also written: summary.csv, metric plots, study.toml "
+        "(resolved) and optional recordings of the worst cases.",
+        "study file: see studies/*.toml and the docs' study file reference. exit status: 0 every case has a "
+        "row (diverged cases too); 1 cases unfinished, the executor failed, or an output could not be "
+        "written after the cases ran; 2 invalid study, option or output folder; 130 interrupted (re-run to "
+        "resume).")
     sweep.add_argument("study", metavar="STUDY.toml", type=_path, help="study file describing the sweep.")
     _out(sweep, None, "output folder (created; must be writable; an existing sweep folder is resumed). "
                       "Default: runs/sweeps/<study name>.")
@@ -304,12 +295,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     stab = command(
         "stability", "linear stability of the closed loop at a time point",
-        "Run the scenario (paper law, sensing without noise) to time --at and linearize the sampled-data "
-        "closed loop over one control period (plant state, servo reference, actuation-delay ring; "
-        "zero-order hold) by central finite differences of the one-period map (harness.studies.stability). "
-        "Prints the verdict (stable / marginal: slower than e-fold per second / unstable), the spectral "
-        "radius and the least stable modes with their frequency and dominant joints or sections; writes "
-        "spectrum.csv, stability.json and stability.png (spectrum and mode shapes on the arm).",
+        "Run the scenario (paper law, no sensing noise) to time --at and linearize the sampled-data closed "
+        "loop over one control period by central finite differences (harness.studies.stability). Prints "
+        "the verdict (stable / marginal / unstable), the spectral radius and the least stable modes; writes "
+        "spectrum.csv, stability.json and stability.png.",
         "exit status: 0 stable or marginal; 1 unstable, or the run stopped before --at; 2 invalid input.")
     _scenario_options(stab)
     stab.add_argument("--at", metavar="T[,T...]|START:STOP:STEP", type=_times, default=(1.0,),
@@ -325,13 +314,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     mar = command(
         "margin", "robustness margins of a scenario against a bounds file",
-        "For each mismatch parameter, the largest deviation from the scenario in each direction for which "
-        "it still passes the bounds file: the pass/fail edge bracketed (x2 steps) and bisected to --rtol, "
-        "plus --probes points inside each margin to detect a non-monotone edge (harness.studies.margin). "
-        "Runs go through the sweep executor; each finished run is appended to OUT/results.jsonl and a "
-        "re-run resumes. Writes margins.md (parameter, lower and upper margin, first bound to fail, metric "
-        "at the edge), margins.json, margins.png and, with --pair, edge.json / edge.png. A margin on a servo "
-        "plant over a dynamics parameter (masses) measures little: the servos hide the slave's inertia.",
+        "For each mismatch parameter, the largest deviation each way for which the scenario still passes "
+        "the bounds: the edge bracketed and bisected to --rtol, --probes points inside to detect a "
+        "non-monotone edge (harness.studies.margin). Runs are journaled in OUT/results.jsonl (a re-run "
+        "resumes). Writes margins.md, margins.json, margins.png and, with --pair, edge.json / edge.png. On "
+        "a servo plant, a dynamics parameter (masses) measures little: the servos hide the inertia.",
         "parameters: slave_mass, bending_stiffness, extension_stiffness, master_mass (scale factors in "
         "[0.05, 20]), material_damping (scale of plant.bending_viscosity and extension_viscosity, "
         "[0.01, 100]; chain and rod), control_rate (scale, [0.1, 10]), segments (1-64, chain), delay (s, "
@@ -360,12 +347,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     fid = command(
         "fidelity", "plant-fidelity study over MuJoCo segment counts",
-        "Compare the generated MuJoCo Octarm with N rigid segments per section against the analytic "
-        "constant-curvature model (tip position, Jacobian, inertia, gravity, elastic forces at seeded random "
-        "configurations; plus the master) for several N, with the observed convergence order, and the chain "
-        "with and without the constant-curvature constraints (shape under gravity, mj_step cost, closed "
-        "loop) (harness.studies.fidelity). Writes fidelity.md, fidelity.csv, fidelity.png, fidelity_cc.md "
-        "and fidelity_cc.csv.")
+        "Compare the MuJoCo chain with N segments per section against the analytic constant-curvature model "
+        "(tip, Jacobian, inertia, gravity, elastic forces at random configurations; convergence order) and "
+        "with / without the CC constraints (harness.studies.fidelity). Writes fidelity.md, fidelity.csv, "
+        "fidelity.png, fidelity_cc.md and fidelity_cc.csv.")
     fid.add_argument("--segments", metavar="N,N,...", type=_segment_list, default="4,8,16,32",
                      help="comma-separated segment counts per section, each an integer in [1, 64]. "
                           "Default: 4,8,16,32.")
