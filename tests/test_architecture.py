@@ -174,7 +174,6 @@ def test_modules_stay_small():
 DYNAMIC_ALLOWED = {
     "harness.config.controller": "the user-controller loader (file.py:Class, module:Class)",
     "harness.loop.aot": "loads its compiled extension modules from the kernel cache (not project code)",
-    "harness.cli": "its lazy `_import(name)`; every call passes a literal, counted as an import above",
     "harness.studies.executor": "imports WARM_MODULES (a literal tuple of harness modules, checked below)",
 }
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import importlib
 import json
 import os
 import sys
@@ -40,20 +39,6 @@ def _err(msg: Any) -> None:
 
 def _warn(msg: Any) -> None:
     print(f"warning: {_one_line(msg)}", file=sys.stderr)
-
-
-class _Unavailable(RuntimeError):
-    """A lazily imported back end (simulation, plotting, ...) is missing."""
-
-
-def _import(name: str):
-    """Import a harness back end lazily; a missing module is one line (exit 1)."""
-    try:
-        return importlib.import_module(name)
-    except ModuleNotFoundError as e:
-        if e.name and (name == e.name or name.startswith(e.name + ".")):
-            raise _Unavailable(f"{name} is not available ({e})") from None
-        raise
 
 
 def _code(rc) -> int:
@@ -124,9 +109,10 @@ def _print_summary(scn, traj, metrics: dict | None, out: Path | None, written: l
 def _simulate_and_write(args: argparse.Namespace, scn, out: Path | None, live=None):
     """`harness.api.run_scenario` (live: a `LiveView` fed chunk by chunk), the summary, a warning per
     output that could not be written and the hint of a known failure.  Returns the `RunResult`."""
-    res = _import("harness.api").run_scenario(scn, out, not args.no_progress, handle_signals=True,
-                                               record_rate=args.record_rate,
-                                               on_chunk=live.on_chunk if live is not None else None)
+    from harness.api import run_scenario
+
+    res = run_scenario(scn, out, not args.no_progress, handle_signals=True, record_rate=args.record_rate,
+                       on_chunk=live.on_chunk if live is not None else None)
     if live is not None:
         live.finish(res.traj)
     _print_summary(scn, res.traj, res.metrics, out, res.written)
@@ -182,7 +168,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = prepare_out_dir(args.out if args.out is not None else Path("runs") / scn.name)
     live = None
     if args.view:
-        viewer = _import("harness.output.viewer")
+        from harness.output import viewer
+
         try:
             live = viewer.LiveView.open(args.view, scn, host=args.view_host, web_port=args.web_port,
                                         grpc_port=args.grpc_port)
@@ -247,7 +234,9 @@ def cmd_models(args: argparse.Namespace) -> int:
     if path.is_dir():
         raise ConfigError(f"--out = '{path}': is a directory, expected a file name", path="--out")
     prepare_out_dir(path.parent if str(path.parent) else Path("."))
-    result = _import("harness.plant.mujoco_model").export_mjcf(scn.plant_master, scn.plant_slave, p, path)
+    from harness.plant.mujoco_model import export_mjcf
+
+    result = export_mjcf(scn.plant_master, scn.plant_slave, p, path)
     print(f"wrote {result if isinstance(result, (str, Path)) else path} "
           f"({p.segments} segments/section, {p.actuation} actuation, enforce_cc={str(p.enforce_cc).lower()})")
     return EXIT_OK
@@ -255,6 +244,7 @@ def cmd_models(args: argparse.Namespace) -> int:
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     from harness.config.assets import shipped
+    from harness.studies import sweep
 
     study: Path = shipped(args.study, "studies")
     if not study.exists():
@@ -262,7 +252,6 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if not study.is_file():
         raise ConfigError(f"study file {study}: not a regular file (a folder, named pipe, device or socket "
                           "is not read)", path=str(study))
-    sweep = _import("harness.studies.sweep")
     if args.view is not None:
         return _view_case(sweep, study, args.out, args.view)
     # validates the study, then creates and checks the output folder
@@ -279,7 +268,8 @@ def _view_case(sweep, study: Path, out: Path | None, case_id: str) -> int:
         have = ", ".join(sorted(p.stem for p in (out / "recordings").glob("*.rrd"))) or "none"
         raise ConfigError(f"--view {case_id}: no recording {path} (recorded cases: {have}; re-run the case "
                           "with 'teleop run --view')", path="--view")
-    viewer = _import("harness.output.viewer")
+    from harness.output import viewer
+
     try:
         cmd = viewer.spawn_recording_viewer(path)
     except viewer.ViewerUnavailable as e:
@@ -290,7 +280,9 @@ def _view_case(sweep, study: Path, out: Path | None, case_id: str) -> int:
 
 
 def cmd_controllers(args: argparse.Namespace) -> int:  # noqa: ARG001
-    items = _import("harness.config.controller").describe_builtins()
+    from harness.config.controller import describe_builtins
+
+    items = describe_builtins()
     width = max(len(n) for n, _, _ in items)
     for name, desc, acts in items:
         print(f"{name:<{width}}  [{'/'.join(acts):<12}]  {desc}")
@@ -300,8 +292,10 @@ def cmd_controllers(args: argparse.Namespace) -> int:  # noqa: ARG001
 
 
 def cmd_cache(args: argparse.Namespace) -> int:
-    admin = _import("harness.loop.cache_admin")
-    root = _import("harness.loop.fast").cache_root()
+    from harness.loop import cache_admin as admin
+    from harness.loop.fast import cache_root
+
+    root = cache_root()
     items = admin.folders(root)
     if args.prune or args.clear:
         gone = [f for f in items if args.clear or not f.current]
@@ -325,15 +319,16 @@ def cmd_cache(args: argparse.Namespace) -> int:
 
 def cmd_fidelity(args: argparse.Namespace) -> int:
     out = prepare_out_dir(args.out)
+    from harness.studies import fidelity, fidelity_report
+
     if args.reference == "cosserat":
-        return _code(_import("harness.studies.fidelity_report").main_reference(
-            args.segments, out, not args.no_progress, args.seed))
-    return _code(_import("harness.studies.fidelity").main_fidelity(
-        args.segments, out, not args.no_progress, args.samples, args.seed))
+        return _code(fidelity_report.main_reference(args.segments, out, not args.no_progress, args.seed))
+    return _code(fidelity.main_fidelity(args.segments, out, not args.no_progress, args.samples, args.seed))
 
 
 def cmd_findings(args: argparse.Namespace) -> int:
-    findings = _import("harness.studies.findings")
+    from harness.studies import findings
+
     if args.list:
         for name in findings.available():
             print(f"{name:32s} {findings.load_finding(name).title}")
@@ -352,16 +347,18 @@ def cmd_findings(args: argparse.Namespace) -> int:
 
 
 def cmd_stability_map(args: argparse.Namespace) -> int:
-    out = prepare_out_dir(args.out)
-    return int(_import("harness.studies.stability_map").main(out, args.duration))
+    from harness.studies import stability_map
+
+    return int(stability_map.main(prepare_out_dir(args.out), args.duration))
 
 
 def cmd_stability(args: argparse.Namespace) -> int:
     from harness.api import stability
+    from harness.studies import stability as stab
+    from harness.studies import stability_report as report
 
     scn = load_from_args(args)
     out = prepare_out_dir(args.out if args.out is not None else Path("runs") / "stability" / scn.name)
-    stab, report = _import("harness.studies.stability"), _import("harness.studies.stability_report")
     try:
         if len(args.at) > 1:  # one run, linearized at each time; the least stable one's files
             res = report.least_stable_along(scn, args.at, args.fd_step, out)
@@ -379,6 +376,8 @@ def cmd_stability(args: argparse.Namespace) -> int:
 def cmd_margin(args: argparse.Namespace) -> int:
     from harness.api import margins
     from harness.config.bounds import load_bounds
+    from harness.studies.margin import servo_note
+    from harness.studies.margin_report import margins_markdown
 
     scn = load_from_args(args)
     bounds = load_bounds(args.bounds)
@@ -388,14 +387,14 @@ def cmd_margin(args: argparse.Namespace) -> int:
         if len(pair) != 2 or not all(pair):
             raise ConfigError(f"--pair = {args.pair!r}: expected two parameter names, P1,P2", path="--pair")
     out = prepare_out_dir(args.out if args.out is not None else Path("runs") / "margin" / scn.name)
-    note = _import("harness.studies.margin").servo_note(scn, args.params or ["slave_mass"])
+    note = servo_note(scn, args.params or ["slave_mass"])
     if note:
         _warn(note)
     rows, edge = margins(scn, bounds=bounds, params=args.params, rtol=args.rtol, probes=args.probes, out=out,
                          workers=args.workers, scheduler=args.scheduler, executor=args.executor, pair=pair,
                          say=(lambda s: None) if args.no_progress else (lambda s: print(s, file=sys.stderr)))
     if rows:
-        print(_import("harness.studies.margin_report").margins_markdown(rows))
+        print(margins_markdown(rows))
     for r in edge or ():
         print(f"edge {r['angle_deg']:5.0f} deg: {pair[0]} x{r['p1']:.4g}, {pair[1]} x{r['p2']:.4g}"
               f" ({r['first_bound'] or 'range end'})")
@@ -424,9 +423,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         _err("interrupted")
         return EXIT_INTERRUPTED
-    except _Unavailable as e:
-        _err(e)
-        return EXIT_FAIL
     except OSError as e:  # a file that could not be read or written (bad path, full disk): one line
         where = f"{e.filename}: " if e.filename else ""
         _err(f"{where}{e.strerror or e}")
