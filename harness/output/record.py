@@ -23,14 +23,12 @@ from __future__ import annotations
 
 import warnings
 from datetime import timedelta
-from functools import cache
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 import rerun as rr
 from rerun.chunk import RrdReader
-from rerun.encodings import Vec3DBatch
 
 from harness.config.textio import OutputError, atomic_path
 from harness.loop.trajectory import Trajectory
@@ -229,75 +227,38 @@ def _screen(x: np.ndarray) -> np.ndarray:
     return out
 
 
-class _Arrow:
-    """A ready pyarrow array as a Rerun `ComponentBatchLike` (and `TimeColumnLike` with a timeline)."""
-
-    __slots__ = ("array", "timeline")
-
-    def __init__(self, array: pa.Array, timeline: str = "") -> None:
-        self.array = array
-        self.timeline = timeline
-
-    def as_arrow_array(self) -> pa.Array:
-        return self.array
-
-    def timeline_name(self) -> str:
-        return self.timeline
-
-
-def _column(descriptor: rr.ComponentDescriptor, batch_cls, data, per_row: int) -> tuple:
-    """(descriptor, arrow values of all rows, items per row) of one per-step component, converted once by
-    its Rerun batch class; `_send` slices it per chunk."""
-    return descriptor, batch_cls(data).as_arrow_array(), per_row
-
-
 def _f32(a: np.ndarray) -> np.ndarray:
     """float32, C-contiguous (what Rerun stores; the same rounding as Rerun's own conversion)."""
     return np.ascontiguousarray(a, dtype=np.float32)
 
 
-def _send(rec: rr.RecordingStream, entity: str, t: np.ndarray, block: int, *columns: tuple) -> None:
-    """send_columns of `_column`s in blocks of `block` rows."""
-    times = rr.TimeColumn(TIMELINE, duration=_ns(t)).as_arrow_array()
-    offsets: dict[tuple[int, int], np.ndarray] = {}
+def _send(rec: rr.RecordingStream, entity: str, t: np.ndarray, block: int, columns, per_row: int = 1) -> None:
+    """send_columns in blocks of `block` rows; columns(sl) -> the archetype columns of the rows `sl`, with
+    `per_row` instances a row."""
     for start in range(0, len(t), block):
-        rows = min(len(t), start + block) - start
-        cols = []
-        for desc, values, k in columns:
-            off = offsets.get((rows, k))
-            if off is None:
-                off = offsets[(rows, k)] = np.arange(0, (rows + 1) * k, k, dtype=np.int32)
-            cols.append(rr.ComponentColumn(desc, _Arrow(values.slice(start * k, rows * k)), offsets=off))
-        rr.send_columns(entity, indexes=[_Arrow(times.slice(start, rows), TIMELINE)], columns=cols,
+        sl = slice(start, min(len(t), start + block))
+        cols = columns(sl)
+        if per_row != 1:
+            cols = cols.partition(np.full(sl.stop - start, per_row))
+        rr.send_columns(entity, indexes=[rr.TimeColumn(TIMELINE, duration=_ns(t[sl]))], columns=cols,
                         recording=rec)
 
 
 def _send_points(rec, entity: str, t: np.ndarray, block: int, pos: np.ndarray) -> None:
     """Points3D of (rows, k, 3) positions, k points per row."""
-    _send(rec, entity, t, block, _column(rr.Points3D.descriptor_positions(), rr.components.Position3DBatch,
-                                         _f32(pos).reshape(-1, 3), pos.shape[1]))
+    _send(rec, entity, t, block, lambda sl: rr.Points3D.columns(positions=_f32(pos[sl]).reshape(-1, 3)),
+          pos.shape[1])
 
 
 def _send_strips(rec: rr.RecordingStream, entity: str, t: np.ndarray, block: int, strips: np.ndarray) -> None:
-    """One line strip per row, strips (rows, P, 3), built vectorized (Rerun's numpy path loops over the
-    rows); chunks capped at STRIP_POINTS_PER_CHUNK points."""
-    rows, P = strips.shape[:2]
-    inner = Vec3DBatch(_f32(strips).reshape(-1, 3)).as_arrow_array()
-    arrow = pa.ListArray.from_arrays(pa.array(np.arange(0, (rows + 1) * P, P, dtype=np.int32)), inner,
-                                     type=_strip_type())
-    _send(rec, entity, t, max(1, min(block, STRIP_POINTS_PER_CHUNK // max(1, P))),
-          _column(rr.LineStrips3D.descriptor_strips(), rr.components.LineStrip3DBatch, arrow, 1))
-
-
-@cache
-def _strip_type() -> pa.DataType:
-    return rr.components.LineStrip3DBatch(np.zeros((1, 2, 3))).as_arrow_array().type
+    """One line strip per row, strips (rows, P, 3); chunks capped at STRIP_POINTS_PER_CHUNK points."""
+    _send(rec, entity, t, max(1, min(block, STRIP_POINTS_PER_CHUNK // max(1, strips.shape[1]))),
+          lambda sl: rr.LineStrips3D.columns(strips=_f32(strips[sl])))
 
 
 def log_series(rec: rr.RecordingStream, traj: Trajectory, block: int) -> None:
     for entity, values, _, _ in _series(traj):
-        _send(rec, entity, traj.t, block, _column(rr.Scalars.descriptor_scalars(), rr.components.ScalarBatch,
-                                                  np.ascontiguousarray(values).reshape(-1), values.shape[1]))
+        _send(rec, entity, traj.t, block, lambda sl, v=values: rr.Scalars.columns(scalars=v[sl]))
 
 
 def log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, every: int) -> None:
@@ -322,24 +283,28 @@ def log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, ever
                  geo.task_to_world(np.asarray(x2, dtype=float)[idx], slave_base)[:, None, :])
     _, x1_task, x2_task = sc.trace_points(traj)
     for entity, x in (("traces/master", x1_task), ("traces/slave", x2_task)):
-        _send(rec, entity, t, block, _column(rr.Points2D.descriptor_positions(),
-                                             rr.components.Position2DBatch, _f32(_screen(x[idx])), 1))
+        pos = _f32(_screen(x[idx]))
+        _send(rec, entity, t, block, lambda sl, pos=pos: rr.Points2D.columns(positions=pos[sl]))
     if traj.body_pos is not None and np.asarray(traj.body_pos).shape[1]:
         # plant bodies: oriented boxes (they tile the chain), size static, poses per step
-        B, C = rr.Boxes3D, rr.components
+        B = rr.Boxes3D
         bpos = np.asarray(traj.body_pos, dtype=float)[idx]
         nb = bpos.shape[1]
         half = sc.box_half_size(bpos, meta).astype(np.float32)
         rec.log("world/slave/segments", B.from_fields(half_sizes=half, colors=sc.C_SLAVE, radii=0.002),
                 static=True)
-        boxes = [_column(B.descriptor_centers(), C.Translation3DBatch, _f32(bpos).reshape(-1, 3), nb)]
+        centers, quat = _f32(bpos), None
         if traj.body_quat is not None:
             wxyz = np.asarray(traj.body_quat, dtype=float)[idx]
             quat = np.empty(wxyz.shape, dtype=np.float32)  # wxyz -> xyzw (Rerun stores float32)
             quat[..., :3] = wxyz[..., 1:]
             quat[..., 3] = wxyz[..., 0]
-            boxes.append(_column(B.descriptor_quaternions(), C.RotationQuatBatch, quat.reshape(-1, 4), nb))
-        _send(rec, "world/slave/segments", t, block, *boxes)
+
+        def boxes(sl):
+            q = None if quat is None else quat[sl].reshape(-1, 4)
+            return B.columns(centers=centers[sl].reshape(-1, 3), quaternions=q)
+
+        _send(rec, "world/slave/segments", t, block, boxes, nb)
     geometry = meta.get("geometry", {})  # Cosserat plant: rod centreline and section boundaries (world)
     if "centreline" in geometry:
         _send_strips(rec, "world/slave/rod", t, block, np.asarray(geometry["centreline"], dtype=float)[idx])
