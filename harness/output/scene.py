@@ -44,23 +44,6 @@ def _finite(points: np.ndarray, dim: int) -> np.ndarray:
     return p[np.isfinite(p).all(axis=1)]
 
 
-def _finite_extent(points, dim: int) -> tuple[np.ndarray, np.ndarray] | None:
-    """(lo (dim,), hi (dim,)) of the points whose coordinates are all finite, None if there is none
-    (`_finite(points).min/max` without the copy when all are finite, the usual case)."""
-    p = np.asarray(points, dtype=float).reshape(-1, dim)
-    if not len(p):
-        return None
-    # per column: 10x faster than p.min(axis=0) on an (n, 3) array (numpy reduces 3-wide rows slowly)
-    lo = np.array([p[:, i].min() for i in range(dim)])
-    hi = np.array([p[:, i].max() for i in range(dim)])
-    if not (np.isfinite(lo).all() and np.isfinite(hi).all()):  # a NaN or inf somewhere: drop those rows
-        p = _finite(p, dim)
-        if not len(p):
-            return None
-        lo, hi = p.min(axis=0), p.max(axis=0)
-    return lo, hi
-
-
 def scene_bounds(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     """World bounding box (lo (3,), hi (3,)) of both arms over the whole run: bases, master base-elbow-tip,
     slave bodies (padded by their box half-size), backbone, tips and the desired paths."""
@@ -82,9 +65,9 @@ def scene_bounds(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
             parts.append(traj.body_pos)
             pad = max(pad, float(np.max(box_half_size(np.asarray(traj.body_pos), meta))))
         parts.append(geo.backbone_points_world(traj, sb))
-    ext = [e for e in (_finite_extent(p, 3) for p in parts) if e is not None]
-    lo = np.min([e[0] for e in ext], axis=0)
-    hi = np.max([e[1] for e in ext], axis=0)
+    pts = [p for p in (_finite(q, 3) for q in parts) if len(p)]
+    lo = np.min([p.min(axis=0) for p in pts], axis=0)
+    hi = np.max([p.max(axis=0) for p in pts], axis=0)
     return lo - pad, hi + pad
 
 
