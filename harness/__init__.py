@@ -1,12 +1,6 @@
-"""MuJoCo-backed validation harness for teleoperating a redundant continuum arm (Octarm) with a
-non-redundant rigid master.  Public API (see the docs, "Python API"):
-
-    from harness import load_scenario, run, run_sweep, Trajectory
-
-Subpackages, whose names are the architecture: `config` (typed scenario, TOML, bounds), `plant`
-(MuJoCo and analytic plants), `loop` (the closed loop and its compiled kernels), `output` (Rerun
-recordings, figures), `studies` (mismatch sweeps, fidelity).  Imports are lazy, so that
-`import harness` stays cheap.
+"""MuJoCo-backed validation harness for teleoperating a redundant continuum arm (Octarm) with a rigid
+master.  Public API (docs, "Python API"): ``from harness import load_scenario, run, run_sweep, Trajectory``.
+Subpackages, in layers: `config` < `plant` < `loop` < `output` < `studies` < `api`/`cli`; imports are lazy.
 """
 
 from __future__ import annotations

@@ -5,10 +5,6 @@
     scn = load_scenario("scenarios/paper.toml", ["duration=5", "plant.slave.masses=[1.2,0.84,0.48]"])
     traj = run(scn)                       # in-memory Trajectory; traj.meta["metrics"] has the metrics
     traj = run(scn, out="runs/mine")      # ... and writes run.rrd, figures, metrics.json, config.toml
-
-`load_scenario` validates everything, including the plant (scene MJCF, model compilation) and the
-controller (`[controller]`: class, actuation, params; harness.config.controller), before anything runs.
-`run` takes a path, a table, a `Scenario` or None (the paper scenario).
 """
 
 from __future__ import annotations
@@ -16,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
+import math
 import os
 import signal
 import sys
@@ -30,18 +27,19 @@ from harness.config import load as _load
 from harness.config.errors import ConfigError
 from harness.config.runtime import options
 from harness.config.scenario import Scenario
-from harness.config.textio import jsonable
+from harness.config.textio import jsonable, prepare_out_dir, write_atomic
+
+Source = Scenario | str | os.PathLike | Mapping | None
 
 
 def load_scenario(source: str | os.PathLike | Mapping | None = None, overrides: Iterable[str] = (), *,
                   labels: Iterable[str | None] | None = None, allow_code: bool | None = None,
                   controller: bool = True) -> Scenario:
     """Read and validate a scenario (TOML path, parsed table or None = the paper scenario), apply the
-    dotted `key=value` overrides, and check that its plant can be built.  Raises `ConfigError`.
-    The plant built for the check is kept for the next `run_scenario` of the returned scenario (built once
-    per run).  allow_code=True: a scenario FILE may name a Python controller ('file.py:Class'; refused
-    otherwise, `harness.config.load`); the overrides are the caller's.  controller=False: the controller is
-    not loaded (no code is imported; `teleop models`)."""
+    dotted `key=value` overrides and check that its plant can be built (kept for the next `run_scenario`
+    of the returned scenario).  Raises `ConfigError`.  allow_code=True: a scenario FILE may name a Python
+    controller ('file.py:Class'); the overrides are the caller's.  controller=False: the controller is
+    not loaded (no code is imported)."""
     from harness.config.controller import resolve_controller
     from harness.plant import build_plant
 
@@ -54,15 +52,21 @@ def load_scenario(source: str | os.PathLike | Mapping | None = None, overrides: 
     return scn
 
 
-# (scenario, plant): the plant `load_scenario` built for its check, used once by `run_scenario` of that very
-# scenario object (the controller's parameters, which resolve_controller may fill in, do not enter a plant)
+# the plant `load_scenario` built for its check, used once by `run_scenario` of that very scenario object
 _BUILT: list[tuple[Scenario, Any]] = []
 
 
-def _plant_built_for(scn: Scenario) -> Any:
-    if _BUILT and _BUILT[0][0] is scn:
-        return _BUILT.pop()[1]
-    return None
+def _scenario_of(scenario: Source, overrides: Iterable[str], allow_code: bool | None = None) -> Scenario:
+    """A validated scenario with its controller resolved, from a `Scenario` or what `load_scenario` takes."""
+    if not isinstance(scenario, Scenario):
+        return load_scenario(scenario, overrides, allow_code=allow_code)
+    if overrides:
+        raise TypeError("overrides apply to a scenario file or table, not to a Scenario object")
+    from harness.config.controller import resolve_controller
+    from harness.plant import validate_plant
+
+    validate_plant(scenario)
+    return resolve_controller(scenario)
 
 
 @dataclass
@@ -80,15 +84,13 @@ class RunResult:
 
 @contextlib.contextmanager
 def stop_on_signals(stop: threading.Event | None) -> Iterator[list[int]]:
-    """While active, SIGINT/SIGTERM set `stop` (the simulation then returns status "interrupted");
-    a second signal, or the first while a Python controller's code runs, raises `HarnessInterrupt` (a
-    KeyboardInterrupt the controller adapter tells apart from one a controller raises).  Yields the list
-    of received signal numbers."""
+    """While active, SIGINT/SIGTERM set `stop` (the simulation then returns status "interrupted"); a
+    second signal, or the first while a Python controller's code runs, raises `HarnessInterrupt`.
+    Yields the list of received signal numbers."""
     received: list[int] = []
     if stop is None or threading.current_thread() is not threading.main_thread():
         yield received
         return
-
     from harness.config.controller import USER_CODE, HarnessInterrupt
 
     def handler(signum, frame):  # noqa: ARG001
@@ -114,18 +116,14 @@ def stop_on_signals(stop: threading.Event | None) -> Iterator[list[int]]:
 
 
 def tool_info() -> dict[str, str]:
-    """metrics.json's "tool": the package name, its version and the git revision of the checkout the code
-    runs from (each absent when unknown; `harness.config.runtime.provenance`)."""
+    """metrics.json's "tool": package name, version and git revision (each absent when unknown)."""
     from harness.config.runtime import DIST_NAME, provenance
 
     return {"name": DIST_NAME, **provenance()}
 
 
 def write_config(scn: Scenario, path: Path) -> Path:
-    """config.toml: the fully resolved scenario (`load_scenario(path) == scn`) under a comment naming the
-    tool's version and git revision (when known)."""
-    from harness.config.textio import write_atomic
-
+    """config.toml: the resolved scenario (`load_scenario(path) == scn`) under a comment naming the tool."""
     info = tool_info()
     what = " ".join([info["name"], *([info["version"]] if "version" in info else []),
                      *([f"(git {info['git_revision']})"] if "git_revision" in info else [])])
@@ -133,11 +131,14 @@ def write_config(scn: Scenario, path: Path) -> Path:
 
 
 RUN_OUTPUTS = ("config.toml", "run.rrd", "metrics.json")  # + the figures (harness.output.names.FIGURES)
+# drawn by a forked child while this process draws the rest and a third one writes run.rrd (about half
+# the drawing each, measured by benchmarks/bench_core.py)
+FIGURES_IN_CHILD = ("fig2_e1.png", "fig3_e2.png", "fig4_beta.png", "forces.png")
 
 
 def clear_run_outputs(out: Path) -> None:
-    """Remove a previous run's outputs from a reused folder (its fixed names, the files listed in its
-    metrics.json, leftover temporary files); other files are left alone.  Raises OutputError."""
+    """Remove a previous run's outputs from a reused folder (its fixed names, the files its metrics.json
+    lists, leftover temporary files); other files are left alone.  Raises OutputError."""
     from harness.config.textio import remove_outputs
     from harness.output.names import FIGURES
 
@@ -151,24 +152,19 @@ def clear_run_outputs(out: Path) -> None:
 def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False, *, plant: Any = None,
                  handle_signals: bool = False, on_chunk: Callable | None = None,
                  record_rate: float | None = None) -> RunResult:
-    """Build the plant, simulate, compute metrics and (if `out`) write every output that can be written.
+    """Simulate, compute metrics and (if `out`) write every output that can be written.
 
-    Output folder protocol (README, "What a run guarantees about its output folder"): the previous
-    run's outputs are removed first; config.toml is written before simulating; then run.rrd (in a
-    child process that is killed on Ctrl-C or when it stalls), the figures and LAST metrics.json,
-    which lists the files written ("outputs") and those that could not be ("outputs_failed",
-    "output_errors").  Every file is written under a temporary name and renamed into place when
-    complete.  A failing output is listed in `failures` and the others are still written.
-    Raises OutputError if the folder cannot be cleared or config.toml cannot be written (nothing ran).
-    handle_signals: SIGINT/SIGTERM stop the simulation cleanly; on_chunk: passed to
-    `harness.loop.simulate` (live viewing); record_rate: Hz of the 3-D geometry in run.rrd (None =
-    record.DEFAULT_GEOMETRY_RATE, math.inf = every control step); the time series are always written
-    at the control rate."""
+    The output folder protocol is the docs' "Outputs and their guarantees": previous outputs removed,
+    config.toml before simulating, then run.rrd and the figures, metrics.json last (listing what was
+    written and what failed); each file renamed into place when complete.  Raises OutputError if the
+    folder cannot be cleared or config.toml cannot be written (nothing ran).  handle_signals:
+    SIGINT/SIGTERM stop the simulation cleanly; on_chunk: `harness.loop.simulate`'s (live viewing);
+    record_rate: Hz of the 3-D geometry in run.rrd (None = record.DEFAULT_GEOMETRY_RATE, math.inf =
+    every step)."""
     from harness import loop
     from harness.loop import common
     from harness.plant import build_plant
 
-    written: list[Path] = []
     failures: list[str] = []
     failed: list[str] = []
 
@@ -184,13 +180,11 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
         return None
 
     if plant is None:
-        plant = _plant_built_for(scn)
-    if plant is None:
-        plant = build_plant(scn)
+        plant = _BUILT.pop()[1] if _BUILT and _BUILT[0][0] is scn else build_plant(scn)
+    written: list[Path] = []
     if out is not None:  # first, so the configuration is on disk whatever happens next
         clear_run_outputs(out)
-        write_config(scn, out / "config.toml")
-        written.append(out / "config.toml")
+        written.append(write_config(scn, out / "config.toml"))
     with stop_on_signals(common.STOP if handle_signals else None) as received:
         traj = loop.simulate(scn, plant=plant, progress=progress, on_chunk=on_chunk)
     interrupted = bool(received) or traj.status == "interrupted"
@@ -199,28 +193,24 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
     def metrics_of():
         from harness.loop.metrics import compute_metrics
 
-        return compute_metrics(traj, scn)
+        return dict(compute_metrics(traj, scn))
 
     metrics = attempt("metrics", metrics_of)
     failed.clear()  # metrics are not a file
     if metrics is not None:
-        metrics = dict(metrics)
         metrics.setdefault("status", traj.status)
         metrics.setdefault("message", traj.message)
         traj.meta["metrics"] = metrics
     if out is not None:
         doc = metrics if metrics is not None else {"status": traj.status, "message": traj.message,
                                                     "metrics_error": failures[-1] if failures else ""}
-
         written += _write_outputs(traj, out, record_rate, attempt)
 
         def write_metrics() -> Path:
-            from harness.config.textio import write_atomic
-
             final = dict(doc, tool=tool_info(), outputs=[p.name for p in written] + ["metrics.json"],
                          outputs_failed=list(dict.fromkeys(failed)), output_errors=list(failures))
-            text = json.dumps(jsonable(final), indent=2, allow_nan=False) + "\n"
-            return write_atomic(out / "metrics.json", text)
+            return write_atomic(out / "metrics.json", json.dumps(jsonable(final), indent=2, allow_nan=False)
+                                + "\n")
 
         res = attempt("metrics.json", write_metrics)
         if res is not None:
@@ -229,104 +219,56 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
 
 
 def _write_outputs(traj: Any, out: Path, record_rate: float | None, attempt: Callable) -> list[Path]:
-    """run.rrd and the figures, written at the same time: the recording in a forked child, the figures
-    split between a second forked child and this process (`harness.output.guarded.start_in_child`;
-    without fork, one after the other here).  Each failure is reported through `attempt` ("run.rrd",
-    "figures") and the other outputs are still written.  Returns the paths written, in the order
-    run.rrd, then the figures in `plots.FIGURES` order.  Ctrl-C kills the children."""
+    """run.rrd and the figures at the same time: the recording in a forked child, FIGURES_IN_CHILD in a
+    second one, the other figures here (`harness.output.guarded.start_in_child`).  Each failure goes
+    through `attempt`; returns the paths written (run.rrd, then the figures in FIGURES order)."""
+    from harness.output import plots, record
     from harness.output.guarded import start_in_child
+    from harness.output.names import FIGURES
 
     def start_recording():
-        from harness.output import record
+        rate = record.DEFAULT_GEOMETRY_RATE if record_rate is None else float(record_rate)
+        traj.meta["geometry_rate"] = rate
+        return start_in_child(lambda: record.write_recording(traj, out / "run.rrd"), out / "run.rrd")
 
-        traj.meta["geometry_rate"] = (record.DEFAULT_GEOMETRY_RATE if record_rate is None
-                                      else float(record_rate))
-        path = out / "run.rrd"
-        return start_in_child(lambda: record.write_recording(traj, path), path)
-
-    def start_figures(group: list[str]):
-        from harness.output.plots import write_figures
-
-        paths = [out / n for n in group]
-        return start_in_child(lambda: write_figures(traj, out, names=group), paths[0], stall_timeout=None,
-                              others=paths[1:])
-
-    def draw_figures(group: list[str]) -> list[Path]:
-        from harness.output.plots import write_figures
-
-        return write_figures(traj, out, names=group)
-
-    def figure_names() -> list[str]:
-        from harness.output.plots import figure_names
-
-        return figure_names(traj)
-
+    names = attempt("figures", lambda: plots.figure_names(traj)) or []
+    theirs = [n for n in names if n in FIGURES_IN_CHILD]
+    mine = [n for n in names if n not in theirs]
     children = []
     written: dict[str, Path] = {}
     try:
         rec = attempt("run.rrd", start_recording)
-        if rec is not None:
-            children.append(rec)
-        mine, theirs = _split_figures(attempt("figures", figure_names) or [])
-        fig = attempt("figures", lambda: start_figures(theirs)) if theirs else None
-        if fig is not None:
-            children.append(fig)
+        fig = None
+        if theirs:
+            fig = attempt("figures", lambda: start_in_child(
+                lambda: plots.write_figures(traj, out, names=theirs), out / theirs[0], stall_timeout=None,
+                others=[out / n for n in theirs[1:]]))
+        children = [c for c in (rec, fig) if c is not None]
         # what each drawer wrote, even if it then failed: complete files only (atomic renames)
         if mine:
-            attempt("figures", lambda: draw_figures(mine))
-            written.update((n, out / n) for n in mine if (out / n).is_file())
+            attempt("figures", lambda: plots.write_figures(traj, out, names=mine))
         if fig is not None:
             attempt("figures", fig.wait)
-            written.update((n, out / n) for n in theirs if (out / n).is_file())
-        if rec is not None:
-            res = attempt("run.rrd", rec.wait)
-            if res is not None:
-                written["run.rrd"] = Path(res)
+        written.update((n, out / n) for n in names if (out / n).is_file())
+        if rec is not None and attempt("run.rrd", rec.wait) is not None:
+            written["run.rrd"] = out / "run.rrd"
     finally:
         for child in children:
             child.kill()
-    from harness.output.names import FIGURES
-
     return [written[n] for n in ("run.rrd", *FIGURES) if n in written]
 
 
-def _split_figures(names: list[str]) -> tuple[list[str], list[str]]:
-    """The figures this process draws and those a second process draws, about half the drawing each
-    (the measured costs: `benchmarks/bench_core.py`)."""
-    theirs = [n for n in names if n in FIGURES_IN_CHILD]
-    return [n for n in names if n not in theirs], theirs
-
-
-# drawn by the forked child while this process draws the rest (and a third process writes run.rrd)
-FIGURES_IN_CHILD = ("fig2_e1.png", "fig3_e2.png", "fig4_beta.png", "forces.png")
-
-
-def run(scenario: Scenario | str | os.PathLike | Mapping | None = None, overrides: Iterable[str] = (), *,
-        out: str | os.PathLike | None = None, progress: bool = False, allow_code: bool | None = None):
+def run(scenario: Source = None, overrides: Iterable[str] = (), *, out: str | os.PathLike | None = None,
+        progress: bool = False, allow_code: bool | None = None):
     """Run a scenario and return its `Trajectory` (metrics in `traj.meta["metrics"]`).
 
     scenario: a `Scenario`, a TOML path, a parsed table, or None (the paper scenario on MuJoCo);
     overrides: dotted `key=value` strings (not with a `Scenario`).  out: folder for run.rrd, figures,
     metrics.json and config.toml (None = write nothing).  allow_code=True: a scenario file may name a
-    Python controller (`load_scenario`).  Raises `ConfigError` for bad input and
-    `RuntimeError` if an output could not be written (the trajectory is then in the exception's
-    `traj` attribute)."""
-    if isinstance(scenario, Scenario):
-        if overrides:
-            raise TypeError("overrides apply to a scenario file or table, not to a Scenario object")
-        from harness.config.controller import resolve_controller
-        from harness.plant import validate_plant
-
-        validate_plant(scenario)
-        scn = resolve_controller(scenario)
-    else:
-        scn = load_scenario(scenario, overrides, allow_code=allow_code)
-    out_dir = None
-    if out is not None:
-        from harness.config.textio import prepare_out_dir
-
-        out_dir = prepare_out_dir(out)
-    res = run_scenario(scn, out_dir, progress)
+    Python controller (`load_scenario`).  Raises `ConfigError` for bad input and `RuntimeError` if an
+    output could not be written (the trajectory is then in the exception's `traj` attribute)."""
+    scn = _scenario_of(scenario, overrides, allow_code)
+    res = run_scenario(scn, prepare_out_dir(out) if out is not None else None, progress)
     if res.failures:
         err = RuntimeError("could not produce: " + "; ".join(res.failures))
         err.traj = res.traj  # type: ignore[attr-defined]
@@ -335,33 +277,20 @@ def run(scenario: Scenario | str | os.PathLike | Mapping | None = None, override
 
 
 def run_sweep(study, out=None, **kwargs):
-    """Run a mismatch study (see `harness.studies.sweep.run_sweep`; allow_code=True lets a study file
-    name Python controllers)."""
+    """Run a mismatch study (`harness.studies.sweep.run_sweep`; allow_code=True lets a study file name
+    Python controllers)."""
     from harness.studies.sweep import run_sweep as _run_sweep
 
     return _run_sweep(study, out, **kwargs)
 
 
-def _scenario_of(scenario, overrides: Iterable[str]) -> Scenario:
-    if isinstance(scenario, Scenario):
-        if overrides:
-            raise TypeError("overrides apply to a scenario file or table, not to a Scenario object")
-        from harness.config.controller import resolve_controller
-
-        return resolve_controller(scenario)
-    return load_scenario(scenario, overrides)
-
-
-def stability(scenario: Scenario | str | os.PathLike | Mapping | None = None,
-              overrides: Iterable[str] = (), *, t: float = 1.0, h: float | None = None,
-              out: str | os.PathLike | None = None):
-    """Linear stability of the sampled-data closed loop at time t (s) of a scenario (paper law, sensing
-    without noise): the one-control-period Jacobian by central finite differences, its eigenvalues,
-    spectral radius, least stable mode and verdict (`harness.studies.stability.Stability`; `.verdict()`).
-    out: folder for spectrum.csv, stability.json and stability.png.  Raises `ConfigError` for bad input
-    and `harness.studies.stability.LinearizationError` when the run stops before t."""
-    import math
-
+def stability(scenario: Source = None, overrides: Iterable[str] = (), *, t: float = 1.0,
+              h: float | None = None, out: str | os.PathLike | None = None):
+    """Linear stability of the sampled-data closed loop at time t (s) (paper law, sensing without noise):
+    the one-period Jacobian by central finite differences (relative step h), its eigenvalues, spectral
+    radius, least stable mode and verdict (`harness.studies.stability.Stability`).  out: folder for
+    spectrum.csv, stability.json and stability.png.  Raises `ConfigError` for bad input and
+    `harness.studies.stability.LinearizationError` when the run stops before t."""
     from harness.studies.stability import linearize
     from harness.studies.stability_report import write_stability
 
@@ -371,28 +300,24 @@ def stability(scenario: Scenario | str | os.PathLike | Mapping | None = None,
         raise ConfigError.field("h", h, "expected a finite-difference step in (0, 0.01)")
     res = linearize(_scenario_of(scenario, overrides), float(t), h)
     if out is not None:
-        from harness.config.textio import prepare_out_dir
-
         write_stability(res, prepare_out_dir(out))
     return res
 
 
-def margins(scenario: Scenario | str | os.PathLike | Mapping | None = None,
-            overrides: Iterable[str] = (), *, bounds, params: Iterable[str] | None = None,
-            rtol: float = 0.05, probes: int = 2,
+def margins(scenario: Source = None, overrides: Iterable[str] = (), *, bounds,
+            params: Iterable[str] | None = None, rtol: float = 0.05, probes: int = 2,
             out: str | os.PathLike | None = None, workers: int | None = None, scheduler: str | None = None,
             executor: str = "processes", pair: tuple[str, str] | None = None, n_rays: int = 8,
             say: Callable[[str], None] = lambda s: None):
-    """Robustness margins of a scenario against a bounds file (path, table or `Bounds`): for each mismatch
-    parameter (default `harness.studies.margin.DEFAULT_PARAMS`), the largest deviation in each direction
-    that still passes, by bracketing and bisection to `rtol` (scale factors; values: 1/100 of the range,
-    delays and integers exact), with `probes` extra points per side to detect a non-monotone edge
-    (`harness.studies.margin`).  Runs go through the sweep executor; with `out`, every run is journaled in
-    out/results.jsonl (a repeated call resumes) and margins.md / margins.json / margins.png are written.
-    pair: also trace the 2-D edge of two scale parameters along n_rays rays (edge.json, edge.png).
-    Returns (rows, edge rows or None).  Raises `ConfigError` for bad input or a nominal scenario that
-    fails the bounds."""
+    """Robustness margins of a scenario against a bounds file (path, table or `Bounds`): per mismatch
+    parameter (default `harness.studies.margin.DEFAULT_PARAMS`), the largest deviation each way that still
+    passes, bracketed and bisected to `rtol`, with `probes` points per side to detect a non-monotone edge.
+    Runs go through the sweep executor; with `out`, journaled in out/results.jsonl (a repeated call
+    resumes) and written to margins.md / .json / .png.  pair: also the 2-D edge of two scale parameters
+    along n_rays rays (edge.json, edge.png).  Returns (rows, edge rows or None).  Raises `ConfigError`
+    for bad input or a nominal scenario that fails the bounds."""
     from harness.config.bounds import Bounds, load_bounds
+    from harness.config.load import scenario_to_dict
     from harness.studies import margin as mg
     from harness.studies import margin_report as mr
 
@@ -400,14 +325,9 @@ def margins(scenario: Scenario | str | os.PathLike | Mapping | None = None,
     b = bounds if isinstance(bounds, Bounds) else load_bounds(bounds)
     if not (isinstance(probes, int) and 0 <= probes <= 10):
         raise ConfigError.field("probes", probes, "expected an integer in [0, 10]")
-    out_dir = None
-    if out is not None:
-        from harness.config.textio import prepare_out_dir
-
-        out_dir = prepare_out_dir(out)
-    if isinstance(scenario, Scenario):  # the cases: this scenario + one override per parameter
-        from harness.config.load import scenario_to_dict
-
+    out_dir = prepare_out_dir(out) if out is not None else None
+    # the cases: this scenario + one override per parameter
+    if isinstance(scenario, Scenario):
         source, base = scenario_to_dict(scenario), []
     else:
         source, base = scenario, list(overrides)
@@ -415,19 +335,15 @@ def margins(scenario: Scenario | str | os.PathLike | Mapping | None = None,
               scheduler=scheduler, executor=executor, say=say)
     names = list(params) if params is not None else list(mg.DEFAULT_PARAMS)
     rows = mg.margins(scn, b, names, **kw) if names else []
-    tol = (f"tolerance: scale factors to {rtol:g} relative (fail / pass - 1), values to 1/100 of the "
-           f"range, delay to one control period, integers exactly; {probes} probe(s) per side")
-    if note := mg.servo_note(scn, names):
-        tol += f"\n\nwarning: {note}"
-    edge = None
-    if pair is not None:
-        edge = mg.edge_trace(scn, b, tuple(pair), n_rays, **kw)
+    edge = mg.edge_trace(scn, b, tuple(pair), n_rays, **kw) if pair is not None else None
     if out_dir is not None:
         if rows:
+            tol = (f"tolerance: scale factors to {rtol:g} relative (fail / pass - 1), values to 1/100 of the "
+                   f"range, delay to one control period, integers exactly; {probes} probe(s) per side")
+            if note := mg.servo_note(scn, names):
+                tol += f"\n\nwarning: {note}"
             mr.write_margins(rows, out_dir, tol)
         if edge is not None:
-            from harness.config.textio import jsonable
-
             (out_dir / "edge.json").write_text(json.dumps(jsonable(edge), indent=2) + "\n", encoding="utf-8")
             mr.plot_edge(edge, tuple(pair), out_dir / "edge.png")
     return rows, edge

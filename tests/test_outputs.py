@@ -27,7 +27,7 @@ from harness.api import load_scenario, run_scenario
 from harness.cli import main
 from harness.config.errors import ConfigError
 from harness.config.textio import MAX_DEPTH, TMP_MARK, OutputError, write_atomic
-from harness.output.guarded import start_in_child, write_in_child
+from harness.output.guarded import start_in_child
 
 ROOT = Path(__file__).resolve().parents[1]
 TELEOP = [sys.executable, "-m", "harness.cli"]
@@ -155,7 +155,7 @@ def test_full_disk_is_reported_not_hung(tmp_path):
 def test_stalled_writer_is_killed_and_reported(tmp_path):
     t0 = time.monotonic()
     with pytest.raises(OutputError, match="no progress for 1 s"):
-        write_in_child(lambda: time.sleep(60), tmp_path / "x.rrd", stall_timeout=1.0)
+        start_in_child(lambda: time.sleep(60), tmp_path / "x.rrd", stall_timeout=1.0).wait()
     assert time.monotonic() - t0 < 10
     assert not (tmp_path / "x.rrd").exists()
 
@@ -165,7 +165,7 @@ def test_failing_child_writer_is_one_line(tmp_path):
         raise OSError(27, "File too large")
 
     with pytest.raises(OutputError, match=r"cannot write .*x\.rrd: File too large"):
-        write_in_child(fail, tmp_path / "x.rrd")
+        start_in_child(fail, tmp_path / "x.rrd").wait()
 
 
 @pytest.fixture
@@ -196,7 +196,7 @@ def test_ctrl_c_ends_a_blocked_writer(tmp_path, python_sigint):
 
     threading.Thread(target=interrupt, daemon=True).start()
     with pytest.raises(KeyboardInterrupt):
-        write_in_child(blocked, tmp_path / "x.rrd", stall_timeout=600)
+        start_in_child(blocked, tmp_path / "x.rrd", stall_timeout=600).wait()
     child = int(pid_file.read_text())
     assert not _alive(child), Path(f"/proc/{child}/status").read_text()  # killed
 

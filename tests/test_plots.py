@@ -90,7 +90,7 @@ def test_names_draws_only_the_named_figures(tmp_path, synthetic_trajectory):
     assert not (tmp_path / "bad").exists()  # checked before anything is drawn
 
 
-# --- nothing clipped or overlapping (the fixed layout of harness.output.layout) -----------------------
+# --- nothing clipped or overlapping ----------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def contact_traj():
     from harness.api import load_scenario

@@ -1,8 +1,6 @@
 """The faster outputs carry the same information (issue: speed end to end).
 
-- figures are drawn from min/max envelopes per display column: every extremum of the full series is
-  kept (property test against a plain per-column loop), and the figure data of a real run contain
-  the global min/max of every plotted series;
+- the figures of a real run draw every sample of every plotted series;
 - the 3-D geometry of run.rrd is logged at a display rate while the time series stay at the control
   rate and read back bit-identical to the Trajectory's arrays.
 No timings here: speed is measured in benchmarks/bench_core.py.
@@ -14,123 +12,6 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
-from hypothesis.extra.numpy import arrays
-
-from harness.output.decimate import envelope, envelope_indices
-
-
-# ---------------------------------------------------------------------------------------------
-# envelope: pure function
-# ---------------------------------------------------------------------------------------------
-def _reference_columns(t: np.ndarray, n_columns: int) -> list[np.ndarray]:
-    """Sample indices of each column, by a plain loop (the documented binning: column of a sample =
-    floor((t - t0) n_columns / (t_end - t0)), the last sample in the last column)."""
-    span = t[-1] - t[0]
-    cols: dict[int, list[int]] = {}
-    for i, ti in enumerate(t):
-        c = 0 if span <= 0 else min(int(math.floor((ti - t[0]) / span * n_columns)), n_columns - 1)
-        cols.setdefault(c, []).append(i)
-    return [np.array(v) for _, v in sorted(cols.items())]
-
-
-values = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False, width=64)
-
-
-@st.composite
-def series(draw):
-    n = draw(st.integers(1, 600))
-    y = draw(arrays(np.float64, n, elements=values))
-    if draw(st.booleans()):  # irregular but non-decreasing times (repeated times allowed)
-        t = np.cumsum(draw(arrays(np.float64, n, elements=st.floats(0.0, 3.0))))
-    else:
-        t = np.arange(n) * 1e-3
-    if n > 3 and draw(st.booleans()):  # a NaN tail, as in a diverged run
-        y[-draw(st.integers(1, 3)):] = np.nan
-    return t, y, draw(st.integers(1, 200))
-
-
-@pytest.mark.slow
-@settings(max_examples=300, deadline=None)
-@given(series())
-def test_envelope_keeps_every_column_extremum(case):
-    t, y, n_columns = case
-    idx = envelope_indices(t, y, n_columns)
-    assert np.all(np.diff(idx) > 0), "indices in time order, no duplicates"
-    assert idx.size and idx[0] >= 0 and idx[-1] < len(t)
-    kept = set(idx.tolist())
-    if len(t) <= 4 * n_columns:
-        assert kept == set(range(len(t)))
-    assert len(idx) <= 4 * n_columns + int(np.sum(~np.isfinite(y)))
-    for col in _reference_columns(t, n_columns):
-        assert col[0] in kept and col[-1] in kept  # the joins to the neighbouring columns
-        yc = y[col]
-        fin = np.isfinite(yc)
-        if fin.any():
-            kept_vals = y[[i for i in col if i in kept]]
-            assert np.nanmin(kept_vals) == yc[fin].min()
-            assert np.nanmax(kept_vals) == yc[fin].max()
-        assert all(i in kept for i in col[~fin])  # NaN gaps stay where they were
-    tk, yk = envelope(t, y, n_columns)
-    np.testing.assert_array_equal(tk, t[idx])
-    np.testing.assert_array_equal(yk, y[idx])
-    if np.isfinite(y).any():
-        assert np.nanmax(yk) == np.nanmax(y) and np.nanmin(yk) == np.nanmin(y)
-
-
-def _documented_envelope_indices(t, y, n_columns):
-    """The samples `envelope_indices` documents, by a plain per-column loop over `_reference_columns`:
-    every sample when n <= 4 n_columns; otherwise, per column, its first and last sample and the earliest
-    sample holding its finite minimum and its finite maximum, plus every non-finite sample."""
-    n = len(t)
-    if n <= 4 * n_columns:
-        return np.arange(n)
-    keep = set(np.flatnonzero(~np.isfinite(y)).tolist())
-    for col in _reference_columns(t, n_columns):
-        keep |= {int(col[0]), int(col[-1])}
-        fin = col[np.isfinite(y[col])]
-        if fin.size:
-            lo, hi = y[fin].min(), y[fin].max()
-            keep |= {int(fin[y[fin] == lo][0]), int(fin[y[fin] == hi][0])}
-    return np.array(sorted(keep))
-
-
-@pytest.mark.slow
-@settings(max_examples=300, deadline=None)
-@given(series(), st.booleans())
-def test_envelope_indices_are_the_documented_samples(case, ties):
-    t, y, n_columns = case
-    if ties:  # few distinct values: ties for the min and the max in most columns, and signed zeros
-        y = np.where(np.isfinite(y), np.where(y < 0, -0.0, np.minimum(np.round(y), 2.0)), y)  # -0.0, 0, 1, 2
-    np.testing.assert_array_equal(envelope_indices(t, y, n_columns),
-                                  _documented_envelope_indices(t, y, n_columns))
-
-
-@pytest.mark.slow
-def test_envelope_indices_are_the_documented_samples_on_long_runs():
-    rng = np.random.default_rng(7)
-    t = np.arange(20_000) * 1e-3
-    for y in (np.sin(t * 7.0) + 0.01 * rng.normal(size=t.size), np.round(rng.normal(size=t.size)),
-              np.r_[rng.normal(size=15_000), np.full(5_000, np.nan)],
-              np.r_[np.inf, -np.inf, rng.normal(size=19_998)]):
-        for cols in (1, 7, 910, 1820, 4999):
-            np.testing.assert_array_equal(envelope_indices(t, y, cols),
-                                          _documented_envelope_indices(t, y, cols))
-
-
-def test_envelope_reduces_a_long_series():
-    t = np.arange(20_000) * 1e-3
-    y = np.sin(t * 7.0) + 0.01 * np.random.default_rng(0).normal(size=t.size)
-    idx = envelope_indices(t, y, 1000)
-    assert len(idx) <= 4000
-    assert y[idx].max() == y.max() and y[idx].min() == y.min()
-
-
-@pytest.mark.parametrize("bad", [0, -3])
-def test_envelope_rejects_bad_columns(bad):
-    with pytest.raises(ValueError, match="n_columns"):
-        envelope_indices(np.arange(10.0), np.arange(10.0), bad)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -146,10 +27,9 @@ def real_traj():
     return traj
 
 
-def test_figure_data_keep_global_extrema_of_a_real_run(tmp_path, monkeypatch, real_traj):
+def test_figure_data_are_every_sample_of_a_real_run(tmp_path, monkeypatch, real_traj):
     from harness.output import plots
 
-    monkeypatch.setattr(plots, "COLUMNS_PER_INCH", 20)  # ~140 columns: the 1000-step run is decimated
     figures = {}
 
     def capture(fig, path):
@@ -171,10 +51,8 @@ def test_figure_data_keep_global_extrema_of_a_real_run(tmp_path, monkeypatch, re
         lines = [ln for ln in lines if ln.get_linestyle() == "-" or name == "fig3_e2.png"]
         assert len(lines) == len(want), name
         for ln, y in zip(lines, want, strict=True):
-            ly = np.asarray(ln.get_ydata(), dtype=float)
-            assert len(ly) < len(y), f"{name}: not decimated, the test would prove nothing"
-            assert np.nanmax(ly) == np.nanmax(y) and np.nanmin(ly) == np.nanmin(y), (name, ln.get_label())
-            assert set(np.asarray(ln.get_xdata())) <= set(tr.t)  # samples of the run, not interpolations
+            np.testing.assert_array_equal(np.asarray(ln.get_ydata(), dtype=float), y, err_msg=name)
+            np.testing.assert_array_equal(np.asarray(ln.get_xdata(), dtype=float), tr.t, err_msg=name)
 
 
 def test_rrd_scalars_bit_exact_with_geometry_at_display_rate(tmp_path, real_traj):
@@ -242,18 +120,6 @@ def test_cli_rejects_bad_record_rate(bad, capsys):
     assert main(["run", "--record-rate", bad, "--no-progress"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--record-rate" in err[0] and bad in err[0]
-
-
-def test_envelope_with_a_subnormal_time_span():
-    """Regression (found by hypothesis): n_columns / span overflowed for a subnormal span, and the
-    column of every sample became garbage; the binning divides by the span first."""
-    from harness.output.decimate import envelope_indices
-
-    t = np.linspace(0.0, 1e-308, 100)
-    y = np.sin(np.arange(100.0))
-    idx = envelope_indices(t, y, 2)
-    assert idx.min() >= 0 and idx.max() <= 99 and len(idx) <= 8
-    assert np.argmin(y) in idx and np.argmax(y) in idx
 
 
 # ---------------------------------------------------------------------------------------------

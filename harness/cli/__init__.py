@@ -1,27 +1,13 @@
-"""`teleop` command-line interface.
+"""`teleop` command-line interface: each command's function (the options: `harness.cli.parser`).
 
-    teleop run [SCENARIO.toml] [options]                    simulate one scenario, write outputs
-    teleop check [SCENARIO.toml] --bounds BOUNDS.toml ...    simulate and check acceptance bounds
-    teleop models [SCENARIO.toml] [--segments N] ...         export the generated MuJoCo model (MJCF)
-    teleop sweep STUDY.toml [--out DIR] [--workers N] ...    parameter sweep (local or Dask cluster)
-    teleop controllers                                       list the built-in controllers
-    teleop fidelity [--segments 4,8,16,32] [--samples N] [--reference analytic|cosserat]   plant fidelity
-    teleop cache [--prune | --clear]                         the compiled-kernel cache: list, prune
-    teleop findings [NAME ...]                               rerun the findings, check their claims
-
-Exit status: 0 success; 1 the run failed (diverged, an output could not be written), a bound was
-violated or the viewer of `--view` could not be opened; 2 invalid input (scenario, bounds, option,
-output folder; a file that cannot be written before anything ran); 130 interrupted (SIGINT/SIGTERM).
-Invalid input is reported as a single ``error: ...`` line on stderr, never a traceback.
-
-The simulation back ends are imported lazily so that ``--help`` and input validation are fast.
+Invalid input is one ``error: ...`` line on stderr and exit 2, never a traceback (exit statuses:
+`teleop --help`).  Back ends are imported lazily, so that ``--help`` and input validation are fast.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
-import importlib
 import json
 import os
 import sys
@@ -37,23 +23,14 @@ from harness.config.errors import ConfigError
 from harness.config.runtime import RuntimeOptions, fast_exit, set_gc_thresholds, using_options
 from harness.config.textio import jsonable, prepare_out_dir
 
-# (module, attribute) of exception types that mean "invalid input" (exit 2).  Looked up in
-# sys.modules only: if the module was never imported, its exception cannot have been raised.
-_USER_ERRORS = (
-    ("harness.plant.mujoco_model", "PlantModelError"),
-    ("harness.loop.common", "SimulationError"),
-)
+# (module, class) of the back ends' "invalid input" errors (exit 2); looked up in sys.modules only: a
+# module never imported cannot have raised its exception
+_USER_ERRORS = (("harness.plant.mujoco_model", "PlantModelError"), ("harness.loop.common", "SimulationError"))
 
 
 def _user_error_types() -> tuple[type[BaseException], ...]:
-    out: list[type[BaseException]] = [ConfigError, ParameterError]
-    for mod_name, attr in _USER_ERRORS:
-        cls = getattr(sys.modules.get(mod_name), attr, None)
-        if isinstance(cls, type) and issubclass(cls, BaseException):
-            out.append(cls)
-    return tuple(out)
-
-
+    found = (getattr(sys.modules.get(mod), cls, None) for mod, cls in _USER_ERRORS)
+    return (ConfigError, ParameterError, *(c for c in found if isinstance(c, type)))
 
 
 def _err(msg: Any) -> None:
@@ -64,12 +41,11 @@ def _warn(msg: Any) -> None:
     print(f"warning: {_one_line(msg)}", file=sys.stderr)
 
 
-# ---------------------------------------------------------------------------------------------
-# argument parsing
-# ---------------------------------------------------------------------------------------------
-# ---------------------------------------------------------------------------------------------
-# helpers
-# ---------------------------------------------------------------------------------------------
+def _code(rc) -> int:
+    """A study's return value as an exit status (anything but an int: success)."""
+    return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
+
+
 _SHORTCUTS = (  # (attribute, option, dotted key)
     ("plant", "--plant", "plant.kind"),
     ("actuation", "--actuation", "plant.actuation"),
@@ -83,54 +59,28 @@ _SHORTCUTS = (  # (attribute, option, dotted key)
 
 def load_from_args(args: argparse.Namespace, extra: Sequence[tuple[str, str]] = (), controller: bool = True):
     """Scenario from the positional file, the shortcut options, `extra` (key=value, label) and --set.
-    The command line is the user's say-so for a Python controller; a file naming one needs --allow-code.
+    A controller named on the command line runs; one named in a file needs --allow-code.
     controller=False: the controller is not loaded (no user code is imported)."""
     from harness.api import load_scenario
 
-    overrides: list[str] = []
-    labels: list[str | None] = []
+    pairs: list[tuple[str, str]] = []
     for attr, option, key in _SHORTCUTS:
         value = getattr(args, attr, None)
         if value is not None:
             text = str(value).strip()
             if key in ("plant.kind", "plant.actuation", "controller.name"):
                 text = json.dumps(text)  # always a TOML string
-            overrides.append(f"{key}={text}")
-            labels.append(f"{option} {value}")
-    for text, label in extra:
-        overrides.append(text)
-        labels.append(label)
-    for text in args.overrides:
-        overrides.append(text)
-        labels.append(f"--set {text if len(text) <= 80 else text[:77] + '...'}")
-    return load_scenario(args.scenario, overrides, labels=labels, controller=controller,
-                         allow_code=bool(getattr(args, "allow_code", False)) or None)
-
-
-def _import(name: str):
-    """Import a harness back end lazily; a missing module is reported as one line (exit 1)."""
-    try:
-        return importlib.import_module(name)
-    except ModuleNotFoundError as e:
-        if e.name and (name == e.name or name.startswith(e.name + ".")):
-            raise _Unavailable(f"{name} is not available ({e})") from None
-        raise
-
-
-class _Unavailable(RuntimeError):
-    """A lazily imported back end (simulation, plotting, ...) is missing."""
-
-
-class _ViewerUnavailable(RuntimeError):
-    """`--view` could not open its viewer (one line)."""
+            pairs.append((f"{key}={text}", f"{option} {value}"))
+    pairs += extra
+    pairs += [(t, f"--set {t if len(t) <= 80 else t[:77] + '...'}") for t in args.overrides]
+    return load_scenario(args.scenario, [t for t, _ in pairs], labels=[label for _, label in pairs],
+                         controller=controller, allow_code=bool(getattr(args, "allow_code", False)) or None)
 
 
 def _fmt_value(v: Any) -> str:
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        return str(v)
-    if isinstance(v, int):
-        return str(v)
-    return f"{v:.4g}" if v == 0 or 1e-3 <= abs(v) < 1e4 else f"{v:.3e}"
+    if isinstance(v, float):
+        return f"{v:.4g}" if v == 0 or 1e-3 <= abs(v) < 1e4 else f"{v:.3e}"
+    return str(v)
 
 
 _SUMMARY_KEYS = (("e1_rms", "m"), ("e1_max", "m"), ("e2_rms", "m"), ("e2_max", "m"),
@@ -138,12 +88,11 @@ _SUMMARY_KEYS = (("e1_rms", "m"), ("e1_max", "m"), ("e2_rms", "m"), ("e2_max", "
 
 
 def _print_summary(scn, traj, metrics: dict | None, out: Path | None, written: list[Path]) -> None:
-    n = len(traj)
-    t_end = float(traj.t[-1]) if n else 0.0
     plant = scn.plant.kind
     if plant == "mujoco":
         plant += f", {scn.plant.segments} segments/section, {scn.plant.actuation}"
-    print(f"run '{scn.name}': status {traj.status} - {n} of {scn.n_steps} steps, t = {t_end:.3f} s "
+    t_end = float(traj.t[-1]) if len(traj) else 0.0
+    print(f"run '{scn.name}': status {traj.status} - {len(traj)} of {scn.n_steps} steps, t = {t_end:.3f} s "
           f"(plant {plant})")
     if traj.message:
         print(f"  message: {_one_line(traj.message)}")
@@ -157,24 +106,26 @@ def _print_summary(scn, traj, metrics: dict | None, out: Path | None, written: l
         print(f"  outputs in {out}/: {names or '(none)'}")
 
 
-def _simulate_and_write(scn, out: Path | None, progress: bool, live=None, record_rate: float | None = None):
-    """Simulate, compute metrics and (if out) write every output (`harness.api.run_scenario`), then print
-    the summary.  live: optional harness.output.viewer.LiveView that receives the run chunk by chunk
-    while it is simulated.  Returns (traj, metrics or None, output-writing failures, interrupted flag)."""
-    api = _import("harness.api")
-    res = api.run_scenario(scn, out, progress, handle_signals=True, record_rate=record_rate,
-                           on_chunk=live.on_chunk if live is not None else None)
+def _simulate_and_write(args: argparse.Namespace, scn, out: Path | None, live=None):
+    """`harness.api.run_scenario` (live: a `LiveView` fed chunk by chunk), the summary, a warning per
+    output that could not be written and the hint of a known failure.  Returns the `RunResult`."""
+    from harness.api import run_scenario
+
+    res = run_scenario(scn, out, not args.no_progress, handle_signals=True, record_rate=args.record_rate,
+                       on_chunk=live.on_chunk if live is not None else None)
     if live is not None:
         live.finish(res.traj)
     _print_summary(scn, res.traj, res.metrics, out, res.written)
     for f in res.failures:
         _warn(f"could not produce {f}")
-    return res.traj, res.metrics, res.failures, res.interrupted
+    hint = failure_hint(scn, res.traj)
+    if hint:
+        print(hint, file=sys.stderr)
+    return res
 
 
-# Settings that run the paper scenario in torque actuation on the MuJoCo plant (each checked for 5 s by
-# tests/test_controller_safety.py::test_every_setting_the_torque_hint_suggests_runs): (applies to this
-# scenario, option, what it is)
+# Settings that run the paper scenario in torque actuation on the MuJoCo plant (each checked by
+# tests/test_controller_safety.py): (applies to this scenario, option, what it is)
 _TORQUE_FIXES = (
     (lambda s: not s.plant.enforce_cc, "--set plant.enforce_cc=true", "the CC chain"),
     (lambda s: max(s.plant.bending_viscosity) < 1.0, "--set plant.bending_viscosity=[1.0,1.0,1.0]",
@@ -184,8 +135,8 @@ _TORQUE_FIXES = (
 
 
 def failure_hint(scn, traj) -> str | None:
-    """One line saying what to change when a run failed for a known reason, else None.  Known: torque
-    actuation on the MuJoCo free chain diverges with the paper's gains (README, stability map)."""
+    """One line saying what to change when a run failed for a known reason (torque actuation on the
+    MuJoCo free chain diverges with the paper's gains), else None."""
     p = scn.plant
     if traj.status != "diverged" or p.kind != "mujoco" or p.actuation != "torque" or p.enforce_cc:
         return None
@@ -196,14 +147,9 @@ def failure_hint(scn, traj) -> str | None:
             f"junction{runs}")
 
 
-def _print_hint(scn, traj) -> None:
-    hint = failure_hint(scn, traj)
-    if hint:
-        print(hint, file=sys.stderr)
-
-
-def _run_exit_code(traj, failures: list[str], interrupted: bool, wrote: bool = True) -> int:
-    if interrupted:
+def _run_exit_code(res, wrote: bool = True) -> int:
+    traj = res.traj
+    if res.interrupted:
         t_end = float(traj.t[-1]) if len(traj) else 0.0
         note = "; outputs written for the completed part" if wrote else ""
         _err(f"run interrupted at t = {t_end:.3f} s{note}")
@@ -211,54 +157,40 @@ def _run_exit_code(traj, failures: list[str], interrupted: bool, wrote: bool = T
     if traj.status != "ok":
         _err(f"run {traj.status}: {traj.message or 'no message'}")
         return EXIT_FAIL
-    if failures:
-        _err(f"{len(failures)} output(s) could not be produced (see warnings above)")
+    if res.failures:
+        _err(f"{len(res.failures)} output(s) could not be produced (see warnings above)")
         return EXIT_FAIL
     return EXIT_OK
-
-
-# ---------------------------------------------------------------------------------------------
-# commands
-# ---------------------------------------------------------------------------------------------
-def _open_live_view(args: argparse.Namespace, scn):
-    """The live view of `teleop run --view` (None without --view); ViewerUnavailable before anything runs."""
-    if not args.view:
-        return None
-    viewer = _import("harness.output.viewer")
-    try:
-        live = viewer.LiveView.open(args.view, scn, host=args.view_host, web_port=args.web_port,
-                                    grpc_port=args.grpc_port)
-    except viewer.ViewerUnavailable as e:
-        raise _ViewerUnavailable(str(e)) from None
-    if args.view == "web" and not viewer.is_loopback(args.view_host):
-        _warn(f"--view-host {args.view_host}: the web viewer and the run's data are served to every machine "
-              f"that can reach this address, without authentication")
-    if live.url:
-        print(f"web viewer: {live.url} (listening on {live.listen})", file=sys.stderr)
-    return live
 
 
 def cmd_run(args: argparse.Namespace) -> int:
     scn = load_from_args(args)
     out = prepare_out_dir(args.out if args.out is not None else Path("runs") / scn.name)
+    live = None
+    if args.view:
+        from harness.output import viewer
+
+        try:
+            live = viewer.LiveView.open(args.view, scn, host=args.view_host, web_port=args.web_port,
+                                        grpc_port=args.grpc_port)
+        except viewer.ViewerUnavailable as e:
+            _err(f"{e} (nothing was run, no outputs written)")
+            return EXIT_FAIL
+        if args.view == "web" and not viewer.is_loopback(args.view_host):
+            _warn(f"--view-host {args.view_host}: the web viewer and the run's data are served to every "
+                  f"machine that can reach this address, without authentication")
+        if live.url:
+            print(f"web viewer: {live.url} (listening on {live.listen})", file=sys.stderr)
     try:
-        live = _open_live_view(args, scn)
-    except _ViewerUnavailable as e:
-        _err(f"{e} (nothing was run, no outputs written)")
-        return EXIT_FAIL
-    try:
-        traj, _, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress,
-                                                             live=live, record_rate=args.record_rate)
-        rc = _run_exit_code(traj, failures, interrupted)
-        _print_hint(scn, traj)
-        if live is not None:
-            if live.failed:
-                _warn(f"live view: {live.failed}")
-            if live.url and not interrupted:
-                print(f"serving the web viewer at {live.url} - Ctrl-C to stop", file=sys.stderr)
-                with contextlib.suppress(KeyboardInterrupt):
-                    while not threading.Event().wait(0.5):  # short waits: Ctrl-C is handled promptly
-                        pass
+        res = _simulate_and_write(args, scn, out, live)
+        rc = _run_exit_code(res)
+        if live is not None and live.failed:
+            _warn(f"live view: {live.failed}")
+        if live is not None and live.url and not res.interrupted:
+            print(f"serving the web viewer at {live.url} - Ctrl-C to stop", file=sys.stderr)
+            with contextlib.suppress(KeyboardInterrupt):
+                while not threading.Event().wait(0.5):  # short waits: Ctrl-C is handled promptly
+                    pass
     finally:
         if live is not None:
             live.close()
@@ -271,23 +203,21 @@ def cmd_check(args: argparse.Namespace) -> int:
     scn = load_from_args(args)
     bounds = load_bounds(args.bounds)
     out = prepare_out_dir(args.out) if args.out is not None else None
-    traj, metrics, failures, interrupted = _simulate_and_write(scn, out, progress=not args.no_progress,
-                                                               record_rate=args.record_rate)
-    _print_hint(scn, traj)
-    if interrupted or traj.status == "error":  # an error is no measurement, whatever the bounds allow
-        return _run_exit_code(traj, failures, interrupted, wrote=out is not None)
-    if metrics is None:
-        _err(f"no metrics could be computed, bounds not checked ({failures[0] if failures else 'unknown'})")
+    res = _simulate_and_write(args, scn, out)
+    if res.interrupted or res.traj.status == "error":  # an error is no measurement, whatever the bounds
+        return _run_exit_code(res, wrote=out is not None)
+    if res.metrics is None:
+        _err(f"no metrics could be computed, bounds not checked ({(res.failures or ['unknown'])[0]})")
         return EXIT_FAIL
-    violations = check_bounds(metrics, bounds)
+    violations = check_bounds(res.metrics, bounds)
     if violations:
         print(f"check against {args.bounds}: {len(violations)} bound(s) violated")
         for v in violations:
             print(f"  FAIL {v}")
         return EXIT_FAIL
     print(f"check against {args.bounds}: all bounds satisfied")
-    if out is not None and failures:
-        _err(f"{len(failures)} output(s) could not be produced (see warnings above)")
+    if out is not None and res.failures:
+        _err(f"{len(res.failures)} output(s) could not be produced (see warnings above)")
         return EXIT_FAIL
     return EXIT_OK
 
@@ -295,8 +225,8 @@ def cmd_check(args: argparse.Namespace) -> int:
 def cmd_models(args: argparse.Namespace) -> int:
     extra = []
     if args.enforce_cc is not None:
-        flag = "true" if args.enforce_cc else "false"
-        extra.append((f"plant.enforce_cc={flag}", "--enforce-cc" if args.enforce_cc else "--no-enforce-cc"))
+        extra.append((f"plant.enforce_cc={str(args.enforce_cc).lower()}",
+                      "--enforce-cc" if args.enforce_cc else "--no-enforce-cc"))
     scn = load_from_args(args, extra, controller=False)  # a model export never imports a controller
     p = scn.plant
     path = args.out if args.out is not None else Path(
@@ -304,8 +234,9 @@ def cmd_models(args: argparse.Namespace) -> int:
     if path.is_dir():
         raise ConfigError(f"--out = '{path}': is a directory, expected a file name", path="--out")
     prepare_out_dir(path.parent if str(path.parent) else Path("."))
-    plant_model = _import("harness.plant.mujoco_model")
-    result = plant_model.export_mjcf(scn.plant_master, scn.plant_slave, p, path)
+    from harness.plant.mujoco_model import export_mjcf
+
+    result = export_mjcf(scn.plant_master, scn.plant_slave, p, path)
     print(f"wrote {result if isinstance(result, (str, Path)) else path} "
           f"({p.segments} segments/section, {p.actuation} actuation, enforce_cc={str(p.enforce_cc).lower()})")
     return EXIT_OK
@@ -313,6 +244,7 @@ def cmd_models(args: argparse.Namespace) -> int:
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     from harness.config.assets import shipped
+    from harness.studies import sweep
 
     study: Path = shipped(args.study, "studies")
     if not study.exists():
@@ -321,17 +253,36 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         raise ConfigError(f"study file {study}: not a regular file (a folder, named pipe, device or socket "
                           "is not read)", path=str(study))
     if args.view is not None:
-        return _view_case(study, args.out, args.view)
-    sweep = _import("harness.studies.sweep")  # validates the study, then creates and checks the output folder
-    rc = sweep.main_sweep(study, args.out, args.workers, args.scheduler, not args.no_progress,
-                          max_cases=args.max_cases, executor=args.executor, overrides=args.overrides,
-                          case_timeout=args.case_timeout, allow_code=args.allow_code)
-    return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
+        return _view_case(sweep, study, args.out, args.view)
+    # validates the study, then creates and checks the output folder
+    return _code(sweep.main_sweep(study, args.out, args.workers, args.scheduler, not args.no_progress,
+                                  max_cases=args.max_cases, executor=args.executor, overrides=args.overrides,
+                                  case_timeout=args.case_timeout, allow_code=args.allow_code))
+
+
+def _view_case(sweep, study: Path, out: Path | None, case_id: str) -> int:
+    """`teleop sweep STUDY --view CASE_ID`: open a case's recording in a spawned Rerun viewer."""
+    out = out if out is not None else Path("runs") / "sweeps" / sweep.load_study(study).name
+    path = out / "recordings" / f"{case_id}.rrd"
+    if not path.is_file():
+        have = ", ".join(sorted(p.stem for p in (out / "recordings").glob("*.rrd"))) or "none"
+        raise ConfigError(f"--view {case_id}: no recording {path} (recorded cases: {have}; re-run the case "
+                          "with 'teleop run --view')", path="--view")
+    from harness.output import viewer
+
+    try:
+        cmd = viewer.spawn_recording_viewer(path)
+    except viewer.ViewerUnavailable as e:
+        _err(f"--view {case_id}: {e}")
+        return EXIT_FAIL
+    print(f"opened {path} ({' '.join(cmd)})")
+    return EXIT_OK
 
 
 def cmd_controllers(args: argparse.Namespace) -> int:  # noqa: ARG001
-    registry = _import("harness.config.controller")
-    items = registry.describe_builtins()
+    from harness.config.controller import describe_builtins
+
+    items = describe_builtins()
     width = max(len(n) for n, _, _ in items)
     for name, desc, acts in items:
         print(f"{name:<{width}}  [{'/'.join(acts):<12}]  {desc}")
@@ -341,8 +292,10 @@ def cmd_controllers(args: argparse.Namespace) -> int:  # noqa: ARG001
 
 
 def cmd_cache(args: argparse.Namespace) -> int:
-    admin = _import("harness.loop.cache_admin")
-    root = _import("harness.loop.fast").cache_root()
+    from harness.loop import cache_admin as admin
+    from harness.loop.fast import cache_root
+
+    root = cache_root()
     items = admin.folders(root)
     if args.prune or args.clear:
         gone = [f for f in items if args.clear or not f.current]
@@ -364,56 +317,18 @@ def cmd_cache(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _view_case(study: Path, out: Path | None, case_id: str) -> int:
-    """`teleop sweep STUDY --view CASE_ID`: open a case's recording in a spawned Rerun viewer."""
-    if out is None:
-        out = Path("runs") / "sweeps" / _import("harness.studies.sweep").load_study(study).name
-    path = out / "recordings" / f"{case_id}.rrd"
-    if not path.is_file():
-        have = sorted(p.stem for p in (out / "recordings").glob("*.rrd"))
-        raise ConfigError(f"--view {case_id}: no recording {path} (recorded cases: "
-                          f"{', '.join(have) or 'none'}; re-run the case with 'teleop run --view')",
-                          path="--view")
-    viewer = _import("harness.output.viewer")
-    try:
-        cmd = viewer.spawn_recording_viewer(path)
-    except viewer.ViewerUnavailable as e:
-        _err(f"--view {case_id}: {e}")
-        return EXIT_FAIL
-    print(f"opened {path} ({' '.join(cmd)})")
-    return EXIT_OK
-
-
-def parse_segment_list(text: str) -> list[int]:
-    """'4,8,16,32' -> [4, 8, 16, 32]; each an integer in [1, 64], no duplicates."""
-    items = [s.strip() for s in str(text).split(",")]
-    out: list[int] = []
-    for s in items:
-        try:
-            v = int(s)
-        except ValueError:
-            v = None
-        if v is None or not 1 <= v <= 64 or v in out:
-            raise ConfigError(f"--segments = {text!r}: must be distinct integers in [1, 64] separated by "
-                              f"commas, e.g. 4,8,16,32 (bad entry {s!r})", path="--segments")
-        out.append(v)
-    return out
-
-
 def cmd_fidelity(args: argparse.Namespace) -> int:
-    segments = parse_segment_list(args.segments)
     out = prepare_out_dir(args.out)
+    from harness.studies import fidelity, fidelity_reference
+
     if args.reference == "cosserat":
-        report = _import("harness.studies.fidelity_reference")
-        rc = report.main_reference(segments, out, not args.no_progress, args.seed)
-    else:
-        fidelity = _import("harness.studies.fidelity")
-        rc = fidelity.main_fidelity(segments, out, not args.no_progress, args.samples, args.seed)
-    return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
+        return _code(fidelity_reference.main_reference(args.segments, out, not args.no_progress, args.seed))
+    return _code(fidelity.main_fidelity(args.segments, out, not args.no_progress, args.samples, args.seed))
 
 
 def cmd_findings(args: argparse.Namespace) -> int:
-    findings = _import("harness.studies.findings")
+    from harness.studies import findings
+
     if args.list:
         for name in findings.available():
             print(f"{name:32s} {findings.load_finding(name).title}")
@@ -422,10 +337,9 @@ def cmd_findings(args: argparse.Namespace) -> int:
                                     on_result=lambda r: print(findings.report_text(r), flush=True))
     if not args.no_write:
         base = Path("docs") if Path("mkdocs.yml").is_file() else Path("runs/findings")
-        table = args.table or base / "findings-table.md"
-        figures = args.figures or base / "figures"
         # the table of all findings only when all of them ran; one table per finding always
-        for path in findings.write_outputs(results, table, figures, combined=not args.names):
+        for path in findings.write_outputs(results, args.table or base / "findings-table.md",
+                                           args.figures or base / "figures", combined=not args.names):
             print(f"wrote {path}")
     held = sum(r.holds for r in results)
     print(f"{held} of {len(results)} findings hold")
@@ -433,17 +347,18 @@ def cmd_findings(args: argparse.Namespace) -> int:
 
 
 def cmd_stability_map(args: argparse.Namespace) -> int:
-    out = prepare_out_dir(args.out)
-    smap = _import("harness.studies.stability_map")
-    return int(smap.main(out, args.duration))
+    from harness.studies import stability_map
+
+    return int(stability_map.main(prepare_out_dir(args.out), args.duration))
 
 
 def cmd_stability(args: argparse.Namespace) -> int:
     from harness.api import stability
+    from harness.studies import stability as stab
+    from harness.studies import stability_report as report
 
     scn = load_from_args(args)
     out = prepare_out_dir(args.out if args.out is not None else Path("runs") / "stability" / scn.name)
-    stab, report = _import("harness.studies.stability"), _import("harness.studies.stability_report")
     try:
         if len(args.at) > 1:  # one run, linearized at each time; the least stable one's files
             res = report.least_stable_along(scn, args.at, args.fd_step, out)
@@ -461,37 +376,38 @@ def cmd_stability(args: argparse.Namespace) -> int:
 def cmd_margin(args: argparse.Namespace) -> int:
     from harness.api import margins
     from harness.config.bounds import load_bounds
+    from harness.studies.margin import servo_note
+    from harness.studies.margin_report import margins_markdown
 
     scn = load_from_args(args)
     bounds = load_bounds(args.bounds)
-    if not 0 < args.rtol < 1:
-        raise ConfigError(f"--rtol = {args.rtol}: expected a relative tolerance in (0, 1)", path="--rtol")
-    if args.probes > 10:
-        raise ConfigError(f"--probes = {args.probes}: expected an integer in [0, 10]", path="--probes")
     pair = None
     if args.pair is not None:
         pair = tuple(x.strip() for x in args.pair.split(","))
         if len(pair) != 2 or not all(pair):
             raise ConfigError(f"--pair = {args.pair!r}: expected two parameter names, P1,P2", path="--pair")
     out = prepare_out_dir(args.out if args.out is not None else Path("runs") / "margin" / scn.name)
-    say = (lambda s: None) if args.no_progress else (lambda s: print(s, file=sys.stderr))  # noqa: E731
-    note = _import("harness.studies.margin").servo_note(scn, args.params or ["slave_mass"])
+    note = servo_note(scn, args.params or ["slave_mass"])
     if note:
         _warn(note)
     rows, edge = margins(scn, bounds=bounds, params=args.params, rtol=args.rtol, probes=args.probes, out=out,
                          workers=args.workers, scheduler=args.scheduler, executor=args.executor, pair=pair,
-                         say=say)
+                         say=(lambda s: None) if args.no_progress else (lambda s: print(s, file=sys.stderr)))
     if rows:
-        print(_import("harness.studies.margin_report").margins_markdown(rows))
-    if edge is not None:
-        for r in edge:
-            print(f"edge {r['angle_deg']:5.0f} deg: {pair[0]} x{r['p1']:.4g}, {pair[1]} x{r['p2']:.4g}"
-                  f" ({r['first_bound'] or 'range end'})")
+        print(margins_markdown(rows))
+    for r in edge or ():
+        print(f"edge {r['angle_deg']:5.0f} deg: {pair[0]} x{r['p1']:.4g}, {pair[1]} x{r['p2']:.4g}"
+              f" ({r['first_bound'] or 'range end'})")
     print(f"wrote {out}")
     return EXIT_OK
 
 
-# ---------------------------------------------------------------------------------------------
+COMMANDS = {"run": cmd_run, "check": cmd_check, "models": cmd_models, "sweep": cmd_sweep,
+            "controllers": cmd_controllers, "fidelity": cmd_fidelity, "cache": cmd_cache,
+            "findings": cmd_findings, "stability-map": cmd_stability_map, "stability": cmd_stability,
+            "margin": cmd_margin}
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     try:
@@ -507,9 +423,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         _err("interrupted")
         return EXIT_INTERRUPTED
-    except _Unavailable as e:
-        _err(e)
-        return EXIT_FAIL
     except OSError as e:  # a file that could not be read or written (bad path, full disk): one line
         where = f"{e.filename}: " if e.filename else ""
         _err(f"{where}{e.strerror or e}")
@@ -521,22 +434,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise
 
 
-COMMANDS = {"run": cmd_run, "check": cmd_check, "models": cmd_models, "sweep": cmd_sweep,
-            "controllers": cmd_controllers, "fidelity": cmd_fidelity, "cache": cmd_cache,
-            "findings": cmd_findings, "stability-map": cmd_stability_map, "stability": cmd_stability,
-            "margin": cmd_margin}
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
-
-
 def prepare_process() -> None:
-    """What the `teleop` command sets up before `main()` (also used by benchmarks/bench_core.py, so that
-    it measures the command as users run it): the collector thresholds
-    `harness.config.runtime.GC_THRESHOLDS`, and MuJoCo's OpenGL rendering off unless MUJOCO_GL says
-    otherwise (the harness draws with Rerun and matplotlib; `import mujoco` then skips looking for
-    GLFW, ~0.1 s).  Call it before MuJoCo is imported; sweep workers inherit the environment."""
+    """What `teleop` sets up before `main()` (benchmarks/bench_core.py too): the collector thresholds
+    (`harness.config.runtime.GC_THRESHOLDS`) and MuJoCo's OpenGL off unless MUJOCO_GL says otherwise (the
+    harness draws with Rerun and matplotlib; `import mujoco` then skips GLFW).  Call before MuJoCo loads."""
     os.environ.setdefault("MUJOCO_GL", "disable")
     set_gc_thresholds()
 
@@ -546,3 +447,7 @@ def entry() -> NoReturn:
     then `fast_exit` (atexit handlers, no teardown)."""
     prepare_process()
     fast_exit(main())
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,7 +1,5 @@
-"""World geometry of both arms from a `Trajectory` (numpy only, vectorized over steps; no Rerun or
-matplotlib): bases, task space -> world, master link points, the analytic constant-curvature backbone.
-Task-space [X, Z] of a robot with base b maps to world (b_x + X, b_y, b_z + Z); world is right-handed,
-Z up, like MuJoCo.
+"""World geometry of both arms from a `Trajectory` (numpy, vectorized over steps).  Task [X, Z] of an arm
+with base b is world (b_x + X, b_y, b_z + Z); world is MuJoCo's (right-handed, Z up).
 """
 
 from __future__ import annotations
@@ -37,11 +35,8 @@ def task_to_world(x: np.ndarray, base: np.ndarray) -> np.ndarray:
 
 
 def master_points(q1: np.ndarray, lengths, base: np.ndarray) -> np.ndarray:
-    """World positions of master base, elbow, tip, (n, 3, 3), from joint angles q1 (n, 2).
-
-    Angles from +Z towards +X (controllers.params.MasterParams):
-    x1 = [l1 sin qa + l2 sin(qa + qb), l1 cos qa + l2 cos(qa + qb)].
-    """
+    """World positions (n, 3, 3) of master base, elbow, tip from q1 (n, 2) rad, angles from +Z towards +X:
+    x1 = [l1 sin qa + l2 sin(qa + qb), l1 cos qa + l2 cos(qa + qb)] (controllers.params.MasterParams)."""
     q1 = np.asarray(q1, dtype=float).reshape(-1, 2)
     l1, l2 = (float(v) for v in np.asarray(lengths, dtype=float).reshape(2))
     a, ab = q1[:, 0], q1[:, 0] + q1[:, 1]
@@ -52,9 +47,8 @@ def master_points(q1: np.ndarray, lengths, base: np.ndarray) -> np.ndarray:
 
 
 def cc_backbone(q2: np.ndarray, points_per_section: int = BACKBONE_POINTS_PER_SECTION) -> np.ndarray:
-    """Planar constant-curvature backbone of q2 = [d1, d2, d3, k1, k2, k3], task space (n, 3 P + 1, 2):
-    P evenly spaced material points per section after the base (`controllers.cc.backbone_points`,
-    compiled)."""
+    """Constant-curvature backbone (n, 3 P + 1, 2) task space of q2 (n, 6) = [d (m), k (1/m)]: P points per
+    section after the base (`controllers.cc.backbone_points`, compiled)."""
     from harness.loop.fast import K
 
     q2 = np.ascontiguousarray(q2, dtype=float).reshape(-1, 6)

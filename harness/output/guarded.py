@@ -1,25 +1,9 @@
-"""Run an output writer in a child process that the parent can always stop.
-
-Why: the Rerun file sink writes from a thread of its own; when a write fails (full disk, `ulimit -f`)
-the failure only shows when the stream is flushed, and a writer blocked inside native code cannot be
-interrupted by Ctrl-C (Python delivers KeyboardInterrupt only between bytecodes of the main thread).
-`write_in_child` forks a child that runs the writer (which writes to a temporary name and renames it
-into place only when complete, see `harness.config.textio.atomic_path`); the parent waits in short
-polls, so that
-
-* an error in the child comes back as one line (`OutputError` naming the file and the cause); the
-  child's stderr comes to the parent, and a write error logged by Rerun's file sink there
-  ("Failed to write: File too large (os error 27)") stops the child at once: the sink's writer thread
-  has died, and a flush could otherwise wait for it;
-* a child that stops making progress (its temporary file has not grown for `stall_timeout` s) is
-  killed and reported, never a hang;
-* Ctrl-C (KeyboardInterrupt in the parent) kills the child, removes its temporary file and
-  re-raises, so a run always ends.
-
-`start_in_child` returns at once (a `ChildWriter` to `wait()` on later), so that several writers (the
-recording, groups of figures) run at the same time on a multi-core machine.
-
-Platforms without `fork` run the writer in-process (same atomic rename, no stall detection).
+"""Run an output writer in a forked child that the parent can always stop (docs: Outputs and their
+guarantees).  A writer blocked in native code (Rerun's file sink on a full disk) cannot be interrupted
+by Ctrl-C, and a sink's write error shows only at the flush; so the parent polls the child: an error
+comes back as one `OutputError` line, a write error Rerun logs on the child's stderr stops it at once,
+a child whose temporary file stops growing for `stall_timeout` s is killed, and Ctrl-C kills it and
+removes its temporary file.  Without `fork` the writer runs in-process (same atomic rename).
 """
 
 from __future__ import annotations
@@ -32,6 +16,7 @@ import signal
 import threading
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -86,19 +71,9 @@ def _size(paths: list[Path]) -> int:
     return total
 
 
-def write_in_child(fn: Callable[[], Any], path: str | Path, *,
-                   stall_timeout: float | None = STALL_TIMEOUT) -> Path:
-    """Run `fn()` (which writes `path` through `atomic_path`) in a forked child and wait for it.
-
-    Returns `path`.  Raises `OutputError` (one line naming `path`) if the child fails, dies or stalls
-    for `stall_timeout` s; KeyboardInterrupt kills the child first.  Never leaves a temporary file."""
-    return start_in_child(fn, path, stall_timeout=stall_timeout).wait()
-
-
 class ChildWriter:
-    """A writer running in a forked child (`start_in_child`); `wait()` returns its path or raises
-    `OutputError`.  Until `wait()` returns the parent is free to do other work (the child runs on
-    another core if there is one).  `kill()` stops it (idempotent)."""
+    """A writer running in a forked child (`start_in_child`): `wait()` returns its path or raises
+    `OutputError` (one line naming the file); `kill()` stops it (idempotent)."""
 
     def __init__(self, fn: Callable[[], Any], path: Path, stall_timeout: float | None,
                  others: tuple[Path, ...] = ()):
@@ -188,11 +163,11 @@ class ChildWriter:
                     tmp.unlink()
 
 
+@dataclass
 class _InProcess:
     """`start_in_child` where fork does not exist (Windows): the writer has already run."""
 
-    def __init__(self, path: Path):
-        self.path = path
+    path: Path
 
     def wait(self) -> Path:
         return self.path
@@ -203,11 +178,9 @@ class _InProcess:
 
 def start_in_child(fn: Callable[[], Any], path: str | Path, *, stall_timeout: float | None = STALL_TIMEOUT,
                    others: Sequence[str | Path] = ()) -> ChildWriter | _InProcess:
-    """Start `fn()` (which writes `path` through `atomic_path`) in a forked child and return at once;
-    `.wait()` on the result returns `path` or raises `OutputError` (see `write_in_child`).
-    stall_timeout None: no progress check (for writers that compute long before writing, e.g. figures).
-    others: further files the writer writes atomically (their temporary files are removed too if it
-    fails).  Without fork, `fn` runs here and now."""
+    """Start `fn()` (which writes `path` through `atomic_path`) in a forked child and return at once.
+    stall_timeout None: no progress check (writers that compute long before writing, e.g. figures).
+    others: further files the writer writes atomically (their temporary files are removed if it fails)."""
     path = Path(path)
     try:
         multiprocessing.get_context("fork")
@@ -216,5 +189,3 @@ def start_in_child(fn: Callable[[], Any], path: str | Path, *, stall_timeout: fl
         return _InProcess(path)
     return ChildWriter(fn, path, stall_timeout, tuple(Path(o) for o in others))
 
-
-__all__ = ["STALL_TIMEOUT", "ChildWriter", "start_in_child", "write_in_child"]

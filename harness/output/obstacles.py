@@ -1,7 +1,6 @@
-"""Obstacles of the environment as the views and figures draw them (numpy only): each object of
-`traj.meta["environment"]` (`dataclasses.asdict` of a harness.config.scenario.EnvObject: name, kind,
-position [X, Z] and normal in the slave's task frame, size, angle) as a solid for the 3-D view and as a
-closed outline in the task plane for the 2-D view and the figures.
+"""The environment's objects as drawn (numpy only): each of `traj.meta["environment"]` (`asdict` of a
+`harness.config.scenario.EnvObject`; position [X, Z], normal in the slave's task frame) as a solid for the
+3-D view and an outline in the task plane for the 2-D view and the figures.
 """
 
 from __future__ import annotations

@@ -1,15 +1,9 @@
-"""Static PNG figures of one run, equivalent to the paper's Figs. 2-4 plus q2 and arm shapes.
+"""PNG figures of one run (matplotlib `Figure` on an Agg canvas, no pyplot: safe in workers and headless).
 
-Uses `matplotlib.figure.Figure` with the Agg canvas directly (no pyplot, no global backend state),
-so it is safe in worker processes and headless machines.
-
-    fig2_e1.png    master tracking error e1 = x_d - x1 (eq. 11), X and Z vs time      (paper Fig. 2)
-    fig3_e2.png    coordination error e2 = x1 - x2 (eq. 16) (+ plant tip, dashed)    (paper Fig. 3)
-    fig4_beta.png  manipulability beta = sqrt(det J2 J2^T) (eq. 41)                  (paper Fig. 4)
+    fig2_e1.png, fig3_e2.png, fig4_beta.png   e1 (11), e2 (16) (+ plant tip, dashed), beta (41): Figs. 2-4
     q2.png         section lengths d_i (m) and curvatures k_i (1/m) with allowed ranges
     shapes.png     master links and slave backbone at ~5 instants, world X-Z plane
-    forces.png     interaction forces, true vs what the laws got (F2 slave tip, F1 master handle), and
-                   the arm's penetration into the environment (only for runs with interaction forces)
+    forces.png     interaction forces, true vs what the laws got, and penetration (runs with interaction)
 """
 
 from __future__ import annotations
@@ -25,26 +19,18 @@ from matplotlib.figure import Figure
 
 from harness.config.textio import write_atomic
 from harness.loop.trajectory import Trajectory
-from harness.output.decimate import envelope
-from harness.output.geometry import has_interaction
-from harness.output.layout import fix_layout
+from harness.output.geometry import cc_backbone, has_interaction, master_points, world_base
 from harness.output.names import FIGURES  # what write_figures writes (forces.png only with interaction)
 from harness.output.obstacles import obstacle_outline
 
 DPI = 130
-# Time-series lines are drawn from their min/max envelope at this many columns per inch of figure
-# width (2 per pixel at DPI): every extremum is kept and the PNG is the same to the eye (compare
-# with FULL_RESOLUTION = True), 5-7x fewer points to draw.
-COLUMNS_PER_INCH = 2 * DPI
-FULL_RESOLUTION = False  # True: draw every sample (reference for comparisons)
 _SEC_COLORS = ("tab:green", "tab:purple", "tab:brown")
 OBSTACLE_FACE, OBSTACLE_EDGE = (0.6, 0.63, 0.72, 0.35), (0.35, 0.38, 0.5, 1.0)
 
 
 def _new_figure(figsize) -> Figure:
-    """A Figure on an Agg canvas at the save DPI, without a layout engine: `_save` places the axes
-    with `layout.fix_layout` (margins from measured texts; no tight-bbox pass at save time)."""
-    fig = Figure(figsize=figsize, dpi=DPI)
+    """A Figure on an Agg canvas at the save DPI, laid out by matplotlib's constrained layout."""
+    fig = Figure(figsize=figsize, dpi=DPI, layout="constrained")
     FigureCanvasAgg(fig)
     return fig
 
@@ -56,11 +42,8 @@ def _figure(nrows: int = 1, figsize=(7.0, 3.6)):
 
 
 def _plot_series(ax, t, y, *args, **kwargs):
-    """ax.plot of one time series, decimated to its min/max envelope at display resolution."""
-    t = np.asarray(t, dtype=float).reshape(-1)
-    y = np.asarray(y, dtype=float).reshape(-1)
-    if not FULL_RESOLUTION:
-        t, y = envelope(t, y, int(COLUMNS_PER_INCH * ax.figure.get_figwidth()))
+    """ax.plot of one time series (every sample)."""
+    t, y = np.asarray(t, dtype=float).reshape(-1), np.asarray(y, dtype=float).reshape(-1)
     return ax.plot(t, y, *args, **kwargs)
 
 
@@ -80,9 +63,7 @@ def _finish_time_axis(ax, traj: Trajectory) -> None:
 
 
 def _save(fig: Figure, path: Path) -> Path:
-    """Lay out (`layout.fix_layout`) and save under a temporary name, renamed into place when complete
-    (harness.config.textio).  zlib level 1: the same pixels, ~10 % larger files, ~10 % less figure time."""
-    fix_layout(fig)
+    """Save under a temporary name, renamed into place when complete (zlib level 1: the same pixels)."""
     return write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=DPI, format=Path(path).suffix[1:] or "png",
                                                       pil_kwargs={"compress_level": 1}))
 
@@ -91,68 +72,46 @@ def _marker(traj: Trajectory) -> str | None:
     return "." if len(traj) <= 2 else None  # a single sample is invisible as a line
 
 
-def fig_e1(traj: Trajectory, path: Path) -> Path:
+def _time_figure(traj: Trajectory, path: Path, title: str, ylabel: str, lines, extra=None) -> Path:
+    """One time-series figure: lines = [(values (n,), plot args, plot kwargs)]; extra(ax) draws more."""
     fig, (ax,) = _figure()
-    e1 = np.asarray(traj.e1, dtype=float).reshape(len(traj), 2)
-    m = _marker(traj)
-    _plot_series(ax, traj.t, e1[:, 0], color="tab:blue", marker=m, label="e1 X")
-    _plot_series(ax, traj.t, e1[:, 1], color="tab:orange", marker=m, label="e1 Z")
-    ax.set_title("Master tracking error e1 = x_d - x1 (eq. 11)")
-    ax.set_ylabel("e1 [m]")
+    for y, args, kw in lines:
+        _plot_series(ax, traj.t, y, *args, marker=_marker(traj), **kw)
+    if extra is not None:
+        extra(ax)
+    ax.set_title(title)
+    ax.set_ylabel(ylabel)
     _finish_time_axis(ax, traj)
     _status_note(fig, traj)
     return _save(fig, path)
+
+
+def _xz_lines(values, label: str, colors=("tab:blue", "tab:orange"), style=()) -> list:
+    v = np.asarray(values, dtype=float).reshape(-1, 2)
+    return [(v[:, j], style, dict(color=colors[j], label=label.format("XZ"[j]))) for j in range(2)]
+
+
+def fig_e1(traj: Trajectory, path: Path) -> Path:
+    return _time_figure(traj, path, "Master tracking error e1 = x_d - x1 (eq. 11)", "e1 [m]",
+                        _xz_lines(traj.e1, "e1 {}"))
 
 
 def fig_e2(traj: Trajectory, path: Path) -> Path:
-    fig, (ax,) = _figure()
-    e2 = np.asarray(traj.e2, dtype=float).reshape(len(traj), 2)
-    m = _marker(traj)
-    _plot_series(ax, traj.t, e2[:, 0], color="tab:blue", marker=m, label="e2 X (analytic x2 of sensed q2)")
-    _plot_series(ax, traj.t, e2[:, 1], color="tab:orange", marker=m, label="e2 Z (analytic x2 of sensed q2)")
+    lines = _xz_lines(traj.e2, "e2 {} (analytic x2 of sensed q2)")
     if traj.x2_plant is not None:
-        ep = np.asarray(traj.e2_plant, dtype=float).reshape(len(traj), 2)
         tipname = "rod tip" if (traj.meta or {}).get("plant") == "cosserat" else "MuJoCo tip"
-        _plot_series(ax, traj.t, ep[:, 0], "--", color="tab:cyan", marker=m,
-                     label=f"X, x1 - x2_plant ({tipname})")
-        _plot_series(ax, traj.t, ep[:, 1], "--", color="tab:red", marker=m,
-                     label=f"Z, x1 - x2_plant ({tipname})")
-    ax.set_title("Master-slave coordination error e2 = x1 - x2 (eq. 16)")
-    ax.set_ylabel("e2 [m]")
-    _finish_time_axis(ax, traj)
-    _status_note(fig, traj)
-    return _save(fig, path)
+        lines += _xz_lines(traj.e2_plant, f"{{}}, x1 - x2_plant ({tipname})", ("tab:cyan", "tab:red"),
+                           ("--",))
+    return _time_figure(traj, path, "Master-slave coordination error e2 = x1 - x2 (eq. 16)", "e2 [m]", lines)
 
 
 def fig_beta(traj: Trajectory, path: Path) -> Path:
-    fig, (ax,) = _figure()
-    _plot_series(ax, traj.t, np.asarray(traj.beta, dtype=float).reshape(-1), color="tab:green",
-            marker=_marker(traj), label="beta(q2)")
-    ax.axhline(0.0, color="k", lw=0.8)
-    ax.set_title("Slave manipulability beta = sqrt(det(J2 J2^T)) (eq. 41)")
     # J2 has dimensionless d-columns and m^2 k-columns, so beta carries no single physical unit
-    ax.set_ylabel("beta [mixed units]")
-    _finish_time_axis(ax, traj)
-    _status_note(fig, traj)
-    return _save(fig, path)
-
-
-def _length_range(meta: dict) -> tuple[np.ndarray, np.ndarray] | None:
-    lr = meta.get("length_range")
-    if lr is None:
-        return None
-    try:
-        a = np.asarray([np.broadcast_to(np.asarray(v, dtype=float), (3,)) for v in lr]) if len(lr) == 2 \
-            else np.asarray(lr, dtype=float)
-        if a.shape == (3, 2):
-            a = a.T
-        if a.shape != (2, 3):
-            raise ValueError(f"shape {a.shape}")
-    except (TypeError, ValueError) as exc:
-        warnings.warn(f"ignoring traj.meta['length_range'] ({exc}); expected (lo, hi) of 3 values each",
-                      stacklevel=3)
-        return None
-    return a[0], a[1]
+    return _time_figure(traj, path, "Slave manipulability beta = sqrt(det(J2 J2^T)) (eq. 41)",
+                        "beta [mixed units]",
+                        [(np.asarray(traj.beta, dtype=float).reshape(-1), (), dict(color="tab:green",
+                                                                                   label="beta(q2)"))],
+                        extra=lambda ax: ax.axhline(0.0, color="k", lw=0.8))
 
 
 def fig_q2(traj: Trajectory, path: Path) -> Path:
@@ -160,7 +119,8 @@ def fig_q2(traj: Trajectory, path: Path) -> Path:
     q2 = np.asarray(traj.q2, dtype=float).reshape(len(traj), 6)
     meta = traj.meta or {}
     m = _marker(traj)
-    lr = _length_range(meta)
+    lr = meta.get("length_range")  # (lo (3,), hi (3,)) m
+    lr = None if lr is None else np.asarray(lr, dtype=float).reshape(2, 3)
     max_bend = meta.get("max_bend")
     for i, c in enumerate(_SEC_COLORS):
         _plot_series(ax_d, traj.t, q2[:, i], color=c, marker=m, label=f"d{i + 1}")
@@ -205,17 +165,6 @@ def fig_q2(traj: Trajectory, path: Path) -> Path:
     return _save(fig, path)
 
 
-def _master_xz(traj: Trajectory, i: int, lengths, base: np.ndarray) -> np.ndarray:
-    """(3, 2) world X-Z of master base, elbow, tip at step i."""
-    if traj.master_pos is not None:
-        return np.asarray(traj.master_pos[i], dtype=float)[:, [0, 2]]
-    qa, qb = (float(v) for v in np.asarray(traj.q1[i]).reshape(2))
-    l1, l2 = (float(v) for v in np.asarray(lengths, dtype=float).reshape(2))
-    elbow = np.array([l1 * np.sin(qa), l1 * np.cos(qa)])
-    tip = elbow + l2 * np.array([np.sin(qa + qb), np.cos(qa + qb)])
-    return np.stack([np.zeros(2), elbow, tip]) + base[[0, 2]]
-
-
 def _slave_xz(traj: Trajectory, i: int, fn: Callable | None, base: np.ndarray) -> np.ndarray | None:
     """(P, 2) world X-Z of the slave backbone at step i (backbone_fn, else analytic CC of q2)."""
     q2 = np.asarray(traj.q2[i], dtype=float)
@@ -229,14 +178,7 @@ def _slave_xz(traj: Trajectory, i: int, fn: Callable | None, base: np.ndarray) -
             warnings.warn(f"backbone_fn returned shape {pts.shape}, expected (P, 2)", stacklevel=3)
         except Exception as exc:  # plotting must not kill a run's post-processing
             warnings.warn(f"backbone_fn failed ({exc!r}); using the analytic backbone", stacklevel=3)
-    from harness.output.geometry import cc_backbone
-
     return cc_backbone(q2[None])[0] + base[[0, 2]]
-
-
-def _base_xz(meta: dict, key: str) -> np.ndarray:
-    b = meta.get(key)
-    return np.zeros(3) if b is None else np.asarray(b, dtype=float).reshape(3)
 
 
 def _draw_obstacles(ax, obstacles, slave_base: np.ndarray) -> None:
@@ -253,7 +195,7 @@ def _draw_obstacles(ax, obstacles, slave_base: np.ndarray) -> None:
 def fig_shapes(traj: Trajectory, path: Path, lengths=(0.6, 0.6), instants: int = 5) -> Path:
     meta = traj.meta or {}
     lengths = meta.get("master_lengths", lengths)
-    mb, sb = _base_xz(meta, "master_base"), _base_xz(meta, "slave_base")
+    mb, sb = world_base(meta, "master_base"), world_base(meta, "slave_base")
     fn = meta.get("backbone_fn")
     fn = fn if callable(fn) else None
     fig = _new_figure((7.5, 5.0))
@@ -267,7 +209,10 @@ def fig_shapes(traj: Trajectory, path: Path, lengths=(0.6, 0.6), instants: int =
     for j, i in enumerate(idx):
         c = cmap(j / max(1, len(idx) - 1))
         lab = f"t = {traj.t[i]:.3g} s"
-        mxz = _master_xz(traj, i, lengths, mb)
+        if traj.master_pos is not None:  # world X-Z of master base, elbow, tip
+            mxz = np.asarray(traj.master_pos[i], dtype=float)[:, [0, 2]]
+        else:
+            mxz = master_points(traj.q1[i], lengths, mb)[0][:, [0, 2]]
         ax.plot(mxz[:, 0], mxz[:, 1], "-o", color=c, lw=2.5, ms=4, label=lab)
         sxz = _slave_xz(traj, i, fn, sb)
         if sxz is not None:
@@ -327,26 +272,20 @@ def fig_forces(traj: Trajectory, path: Path) -> Path:
 
 
 def figure_names(traj: Trajectory) -> list[str]:
-    """The file names `write_figures(traj, ...)` writes by default, in order: FIGURES, without
-    forces.png unless the run has interaction forces."""
+    """The files `write_figures(traj, ...)` writes by default: FIGURES (forces.png only with interaction)."""
     return [n for n in FIGURES if n != "forces.png" or has_interaction(traj)]
 
 
 def write_figures(traj: Trajectory, outdir: str | Path, *, lengths=(0.6, 0.6),
                   names: Iterable[str] | None = None) -> list[Path]:
-    """Write the PNG figures of `traj` into `outdir` (created) and return their paths (FIGURES order).
-
-    lengths: master link lengths (m) used for the shapes figure when neither traj.master_pos nor
-    traj.meta["master_lengths"] is available.
-    names: file names from FIGURES to draw (e.g. to draw the figures in two processes); None: all of
-    `figure_names(traj)`.  A name that does not apply to this run (forces.png without interaction) is
-    skipped; a name not in FIGURES raises ValueError.
-    """
+    """Write the PNG figures of `traj` into `outdir` (created); returns their paths (FIGURES order).
+    lengths: master link lengths (m) for shapes.png without traj.master_pos or meta["master_lengths"].
+    names: the FIGURES to draw (None: `figure_names(traj)`; one that does not apply to this run is
+    skipped; one not in FIGURES raises ValueError)."""
     applicable = figure_names(traj)
     if names is not None:
-        names = [names] if isinstance(names, str) else list(names)
-        unknown = [n for n in names if n not in FIGURES]
-        if unknown:
+        names = list(names)
+        if unknown := [n for n in names if n not in FIGURES]:
             raise ValueError(f"names = {unknown!r}: unknown figure name(s); allowed: {', '.join(FIGURES)}")
         applicable = [n for n in applicable if n in names]
     outdir = Path(outdir)
@@ -354,7 +293,3 @@ def write_figures(traj: Trajectory, outdir: str | Path, *, lengths=(0.6, 0.6),
     draw = {"fig2_e1.png": fig_e1, "fig3_e2.png": fig_e2, "fig4_beta.png": fig_beta, "q2.png": fig_q2,
             "shapes.png": lambda tr, path: fig_shapes(tr, path, lengths=lengths), "forces.png": fig_forces}
     return [draw[n](traj, outdir / n) for n in applicable]
-
-
-__all__ = ["FIGURES", "fig_beta", "fig_e1", "fig_e2", "fig_forces", "fig_q2", "fig_shapes", "figure_names",
-           "has_interaction", "write_figures"]

@@ -1,9 +1,7 @@
-"""Contact and interaction-force content of the Rerun recording : force time series (true vs
-what the laws got) under ``plots/forces/*`` and, in the 3-D view, the contact points and the contact
-forces ON the arm as arrows (``world/contact/*``, every `CONTACT_EVERY`-th control step, only the
-contacts present at that step; scaled so that the run's largest force is `ARROW_LENGTH` long, drawn
-`ARROW_FRONT` in front of the arm), plus the operator's hand.  Called by `harness.output.record` only for
-runs with interaction (`harness.output.geometry.has_interaction`)."""
+"""Contact content of the recording (runs with interaction): force series under ``plots/forces/*``; the
+contact points and forces ON the arm as arrows under ``world/contact/*`` every `CONTACT_EVERY` steps
+(the run's largest force `ARROW_LENGTH` long, `ARROW_FRONT` in front of the arm); the operator's hand.
+"""
 
 from __future__ import annotations
 
@@ -15,9 +13,7 @@ from harness.loop.trajectory import Trajectory
 CONTACT_EVERY = 10  # control steps between logged contact arrows
 ARROW_LENGTH = 0.2  # m: the largest contact force of the run is drawn this long (a sixth of the arm)
 ARROW_RADIUS = 0.006  # m, shaft radius of the force arrows
-# m towards the viewer's eye (world -Y): a force along the arm (a push on the tip) would otherwise be drawn
-# inside the arm's segment boxes and hidden by them
-ARROW_FRONT = 0.06
+ARROW_FRONT = 0.06  # m towards the eye (world -Y): a push along the arm is not hidden in its boxes
 _C_TRUE, _C_SENSED, _C_CONTACT = (200, 40, 40), (60, 120, 220), (230, 60, 30)
 
 

@@ -1,8 +1,6 @@
-"""The 3-D scene of a run as the recording shows it: colours, world geometry of both arms (numpy,
-vectorized over steps), and the default blueprint with its views framed for the run's content
-(`frame_eye`, `frame_traces`): the 3-D view looks along +Y at the X-Z plane the arms move in, from far
-enough to show both arms whole over the run's range of motion; the 2-D "Tip traces" view shows the
-desired path and both tip traces with a margin.  Used by `harness.output.record` and the live viewer.
+"""The scene of a run as the recording shows it: colours, framing and the default blueprint (3-D view
+looking along +Y at the X-Z plane the arms move in, far enough to show both arms over the run; 2-D tip
+traces with a margin).  Used by `harness.output.record` and the live viewer.
 """
 
 from __future__ import annotations
@@ -12,26 +10,19 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from harness.loop.trajectory import Trajectory
-from harness.output.geometry import (
-    DEFAULT_MASTER_LENGTHS,
-    backbone_points_world,
-    has_interaction,
-    master_points,
-    task_to_world,
-    world_base,
-)
+from harness.output import geometry as geo
+from harness.output.geometry import task_to_world, world_base
 from harness.output.obstacles import OBSTACLE_HALF_DEPTH
 
 TIMELINE = "sim_time"  # the duration timeline of every recording
 
-# RGB colours: X blue / Z orange as in most plotting defaults, master red-ish, slave green-ish.
+# RGB colours (X blue, Z orange, master red-ish, slave green-ish); view backgrounds distinct from each
+# other and from the viewer's panels (tests locate the views on screenshots by them)
 C_X, C_Z = (31, 119, 180), (255, 127, 14)
 C_X2, C_Z2 = (23, 190, 207), (214, 39, 40)
 C_SECTIONS = ((44, 160, 44), (148, 103, 189), (140, 86, 75))
 C_MASTER, C_SLAVE, C_BACKBONE = (220, 60, 60), (40, 160, 80), (250, 200, 40)
 C_DESIRED = (120, 120, 120)
-# view backgrounds (solid, distinct from each other and from the viewer's panels; tests locate the views
-# on screenshots by them)
 BG_3D, BG_2D = (22, 27, 38), (30, 24, 38)
 
 # framing of the default views (`frame_eye`, `frame_traces`)
@@ -39,40 +30,18 @@ VIEWER_FOV_Y = np.radians(55.0)  # vertical field of view of the viewer's 3-D ey
 FRAME_MIN_ASPECT = 0.75  # the eye distance fits the content in 3-D views down to this width / height
 FRAME_MARGIN = 0.12  # fraction of the content extent added on each side
 TRACE_POINT_RADIUS = rr.Radius.ui_points(2.5)  # on-screen size: the traces stay visible at any zoom
-# obstacles of the environment (traj.meta["environment"]: `dataclasses.asdict` of each
-# harness.config.scenario.EnvObject, set by whoever runs the scenario and writes outputs)
-C_OBSTACLE = (150, 160, 190, 150)  # RGBA: translucent, the arm stays visible behind it
+C_OBSTACLE = (150, 160, 190, 150)  # RGBA of the environment's objects: the arm stays visible behind them
+
+
 def display_offset(meta: dict, key: str) -> np.ndarray:
-    """World translation that moves an arm's base (meta[key]) into the plane Y = 0 in the 3-D view, so that
-    both arms (whose bases MuJoCo places at different Y) are drawn in one plane: with the perspective eye,
-    the slave's tip then shows where the master's is whenever their task-space positions agree."""
+    """World translation (3,) that moves an arm's base (meta[key]) into the plane Y = 0: both arms drawn in
+    one plane, the slave's tip shows where the master's is whenever their task-space positions agree."""
     return np.array([0.0, -float(world_base(meta, key)[1]), 0.0])
 
 
-# ---------------------------------------------------------------------------------------------
-# geometry helpers (numpy, vectorized over steps)
-# ---------------------------------------------------------------------------------------------
 def _finite(points: np.ndarray, dim: int) -> np.ndarray:
     p = np.asarray(points, dtype=float).reshape(-1, dim)
     return p[np.isfinite(p).all(axis=1)]
-
-
-def _finite_extent(points, dim: int) -> tuple[np.ndarray, np.ndarray] | None:
-    """(lo (dim,), hi (dim,)) of the points whose coordinates are all finite, None if there is none.
-    Same numbers as `_finite(points).min/max`, without copying the points when all are finite (the
-    usual case: the 20-s paper run has 1.5 M body positions and as many backbone points)."""
-    p = np.asarray(points, dtype=float).reshape(-1, dim)
-    if not len(p):
-        return None
-    # per column: 10x faster than p.min(axis=0) on an (n, 3) array (numpy reduces 3-wide rows slowly)
-    lo = np.array([p[:, i].min() for i in range(dim)])
-    hi = np.array([p[:, i].max() for i in range(dim)])
-    if not (np.isfinite(lo).all() and np.isfinite(hi).all()):  # a NaN or inf somewhere: drop those rows
-        p = _finite(p, dim)
-        if not len(p):
-            return None
-        lo, hi = p.min(axis=0), p.max(axis=0)
-    return lo, hi
 
 
 def scene_bounds(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
@@ -86,7 +55,8 @@ def scene_bounds(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
         if traj.master_pos is not None:
             parts.append(traj.master_pos)
         else:
-            parts.append(master_points(traj.q1, meta.get("master_lengths", DEFAULT_MASTER_LENGTHS), mb))
+            lengths = meta.get("master_lengths", geo.DEFAULT_MASTER_LENGTHS)
+            parts.append(geo.master_points(traj.q1, lengths, mb))
         x2 = traj.x2_plant if traj.x2_plant is not None else traj.x2
         parts.append(task_to_world(np.asarray(x2, dtype=float), sb))
         for base in (mb, sb):
@@ -94,10 +64,10 @@ def scene_bounds(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
         if traj.body_pos is not None and np.asarray(traj.body_pos).size:
             parts.append(traj.body_pos)
             pad = max(pad, float(np.max(box_half_size(np.asarray(traj.body_pos), meta))))
-        parts.append(backbone_points_world(traj, sb))
-    ext = [e for e in (_finite_extent(p, 3) for p in parts) if e is not None]
-    lo = np.min([e[0] for e in ext], axis=0)
-    hi = np.max([e[1] for e in ext], axis=0)
+        parts.append(geo.backbone_points_world(traj, sb))
+    pts = [p for p in (_finite(q, 3) for q in parts) if len(p)]
+    lo = np.min([p.min(axis=0) for p in pts], axis=0)
+    hi = np.max([p.max(axis=0) for p in pts], axis=0)
     return lo - pad, hi + pad
 
 
@@ -167,8 +137,8 @@ def build_blueprint(traj: Trajectory) -> rrb.Blueprint:
                 ts(origin="plots/q2", name="q2: d (m), k (1/m)"),
                 rrb.Vertical(ts(origin="plots/T1", name="T1 [N m]"),
                              ts(origin="plots/T2", name="T2 [N, N m^2]"), name="Torques"),
-                *([ts(origin="plots/forces", name="Forces [N]: true vs to the law")] if has_interaction(traj)
-                  else []),
+                *([ts(origin="plots/forces", name="Forces [N]: true vs to the law")]
+                  if geo.has_interaction(traj) else []),
                 rrb.TextDocumentView(origin="status", name="Run status"),
             ),
             column_shares=[1, 1],
@@ -195,7 +165,3 @@ def box_half_size(bpos: np.ndarray, meta: dict) -> np.ndarray:
         s = 0.04
     return np.tile(np.array([0.3, 0.15, 0.45]) * s, (nb, 1))
 
-
-# ---------------------------------------------------------------------------------------------
-# reading back
-# ---------------------------------------------------------------------------------------------

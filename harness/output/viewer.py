@@ -1,20 +1,13 @@
 """Live viewing of a run in Rerun, and opening recordings.
 
-`LiveView` streams a run to a Rerun viewer while it is simulated: the simulation loop hands over each
-finished chunk of control steps (`harness.loop.simulate(..., on_chunk=view.on_chunk)`, 1000 steps per
-chunk on the MuJoCo plant, 250 on the analytic one) and the view logs them with the same entities,
-colours and blueprint as the `.rrd` file (`harness.output.record`).  The file itself is still written
-after the run by `harness.output.record.write_recording` (unchanged, byte-stable); the live stream is a
-separate recording of the same application id.
+`LiveView` streams each finished chunk of control steps (`harness.loop.simulate(..., on_chunk=)`) with the
+entities, colours and blueprint of the `.rrd` file (`harness.output.record`, still written after the run):
 
-    native  the Rerun viewer spawned as a separate process on a local port (it stays open after the run);
-            needs a display, else `ViewerUnavailable` names `--view web`
-    web     the Rerun viewer binary serving the web viewer over HTTP and the data over gRPC, bound to
-            127.0.0.1 unless another host is asked for; it lives as long as this process (`teleop run
-            --view web` waits for Ctrl-C after the run) and receives the parent-death signal
+    native  the Rerun viewer spawned on a local port (it stays open after the run); needs a display
+    web     the viewer binary serving the web viewer (HTTP) and the data (gRPC), bound to 127.0.0.1 unless
+            another host is asked for; it lives as long as this process (parent-death signal)
 
-The blueprint of the live stream frames the views from the first chunk and the scenario's whole desired
-path (the run's full range of motion is known only at the end; the file's blueprint uses it).
+The live blueprint frames the views from the first chunk and the scenario's desired path.
 """
 
 from __future__ import annotations
@@ -61,16 +54,13 @@ class ViewerUnavailable(RuntimeError):
 
 
 def has_display() -> bool:
-    """Whether a native viewer window can be shown: on Linux and other X11/Wayland systems, DISPLAY or
-    WAYLAND_DISPLAY is set; macOS and Windows always have one."""
-    if sys.platform in ("darwin", "win32"):
-        return True
-    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    """Whether a native viewer window can be shown (macOS, Windows, or DISPLAY / WAYLAND_DISPLAY set)."""
+    env = os.environ
+    return sys.platform in ("darwin", "win32") or bool(env.get("DISPLAY") or env.get("WAYLAND_DISPLAY"))
 
 
 def rerun_executable() -> str | None:
-    """The Rerun viewer binary shipped in the rerun-sdk wheel (package `rerun_cli`), else the `rerun`
-    command next to this Python (the venv's), else on PATH."""
+    """The viewer binary of the rerun-sdk wheel (`rerun_cli`), else `rerun` beside this Python or on PATH."""
     spec = importlib.util.find_spec("rerun_cli")
     if spec is not None and spec.origin:
         folder = Path(spec.origin).parent
@@ -123,15 +113,11 @@ def _wait_listening(proc: subprocess.Popen, host: str, port: int, log, what: str
 
 
 def _exit_reason(proc: subprocess.Popen, log, what: str) -> ViewerUnavailable:
+    """The last line of the process' output, without terminal colour codes."""
     log.seek(0)
     lines = [ln.strip() for ln in log.read().decode("utf-8", "replace").splitlines() if ln.strip()]
-    return ViewerUnavailable(f"{what} exited with status {proc.returncode} before it could be used"
-                             f"{': ' + _plain(lines[-1]) if lines else ''}")
-
-
-def _plain(text: str) -> str:
-    """A log line without terminal colour codes."""
-    return re.sub(r"\x1b\[[0-9;]*m", "", text)
+    last = ": " + re.sub(r"\x1b\[[0-9;]*m", "", lines[-1]) if lines else ""
+    return ViewerUnavailable(f"{what} exited with status {proc.returncode} before it could be used{last}")
 
 
 def _wait_alive(proc: subprocess.Popen, seconds: float, log, what: str) -> None:
@@ -144,16 +130,14 @@ def _wait_alive(proc: subprocess.Popen, seconds: float, log, what: str) -> None:
 
 
 def _start(cmd: list[str], *, detach: bool) -> tuple[subprocess.Popen, Any]:
-    """Start the viewer binary with its output in a temporary file.  detach: it outlives this process
-    (the native window stays open after the run); else it gets the parent-death signal (Linux), so a
-    killed `teleop` does not leave a server behind."""
+    """Start the viewer binary, its output in a temporary file.  detach: it outlives this process; else
+    it gets the parent-death signal (Linux), so a killed `teleop` leaves no server behind."""
     log = tempfile.TemporaryFile()
     parent_death_signal()  # looked up here, not in the forked child
     env = {**os.environ, "RERUN_ANALYTICS": os.environ.get("RERUN_ANALYTICS", "0")}
-    posix = os.name == "posix"
     proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, env=env,
                             start_new_session=True,
-                            preexec_fn=die_with_parent if posix and not detach else None)
+                            preexec_fn=die_with_parent if os.name == "posix" and not detach else None)
     return proc, log
 
 
@@ -183,25 +167,20 @@ class LiveView:
     def __init__(self, rec: rr.RecordingStream, scn=None) -> None:
         self.rec = rec
         self.scn = scn
-        self.url: str | None = None  # web viewer address (mode "web")
-        self.listen: str | None = None  # where the web viewer server listens (mode "web")
-        self.server: subprocess.Popen | None = None  # the web viewer server (mode "web")
+        self.url: str | None = None  # mode "web": the viewer's address, where it listens, its server
+        self.listen: str | None = None
+        self.server: subprocess.Popen | None = None
         self.chunks = 0
         self.failed: str | None = None
         self._first: Trajectory | None = None
         self._fmax = 0.0  # N, the largest contact force streamed so far
 
-    # -- construction ----------------------------------------------------------------------------
     @classmethod
     def open(cls, mode: str, scn=None, *, host: str = LOCALHOST, web_port: int = WEB_PORT,
              grpc_port: int = GRPC_PORT, open_browser: bool = True) -> LiveView:
-        """A live view on a spawned native viewer (mode "native") or a served web viewer ("web").
-
-        native: needs a display (`has_display`); the viewer binary is started on a free local port and
-        stays open after the run.  web: the viewer binary serves the web viewer on host:web_port and the
-        data on host:grpc_port (port 0: a free one); `url` is the address to open; the server stops with
-        `close()` (and with this process).  Raises ViewerUnavailable (one line) when it cannot be opened,
-        before anything is simulated."""
+        """A live view on a spawned native viewer (mode "native", free local port) or a web viewer served
+        on host:web_port with the data on host:grpc_port (port 0: a free one; `url` to open, stopped by
+        `close()`).  Raises ViewerUnavailable (one line) when it cannot be opened."""
         if mode not in VIEW_MODES:
             raise ValueError(f"view mode {mode!r}: expected one of {VIEW_MODES}")
         exe = rerun_executable()
@@ -255,7 +234,6 @@ class LiveView:
         rec.save(path)
         return cls(rec, scn)
 
-    # -- streaming -------------------------------------------------------------------------------
     def on_chunk(self, part: Trajectory) -> None:
         """Log one chunk of steps (a `Trajectory` of those steps with the plant's meta)."""
         if self.failed or not len(part):
@@ -287,8 +265,8 @@ class LiveView:
                                                media_type=rr.MediaType.MARKDOWN), static=True)
 
     def _with_desired_path(self, part: Trajectory) -> Trajectory:
-        """`part` extended by the scenario's desired path over the whole run (for framing and the static
-        desired path), the other rows repeating the last state."""
+        """`part` extended by the scenario's desired path over the run (framing, static desired path),
+        the other rows repeating the last state."""
         if self.scn is None:
             return part
         from harness.loop.common import desired_at
@@ -297,13 +275,10 @@ class LiveView:
         t = np.linspace(0.0, min(float(self.scn.duration), period), DESIRED_PATH_POINTS)
         xd = np.array([desired_at(self.scn, ti)[0] for ti in t])
         idx = np.concatenate([np.arange(len(part)), np.full(len(t), len(part) - 1)])
-        fields = {k: getattr(part, k)[idx] for k in ("t", "q1", "dq1", "q2", "dq2", "x1", "x2", "e1", "e2",
-                                                     "de1", "de2", "beta", "ya", "deN", "T1", "T2", "u2")}
+        fields = {f.name: None if getattr(part, f.name) is None else getattr(part, f.name)[idx]
+                  for f in dataclasses.fields(Trajectory) if f.name not in ("status", "message", "meta")}
         fields["xd"] = np.concatenate([part.xd, xd])
-        extra = {k: (None if getattr(part, k) is None else getattr(part, k)[idx])
-                 for k in ("x2_plant", "body_pos", "body_quat", "master_pos", "F_true", "F_sensed", "contact",
-                           "hand", "contact_points")}
-        return Trajectory(**fields, **extra, status="running", message="", meta=dict(part.meta))
+        return Trajectory(**fields, status="running", message="", meta=dict(part.meta))
 
     def finish(self, traj: Trajectory) -> None:
         """After the run: final status text and desired path (static), and flush to the viewer."""
@@ -334,8 +309,7 @@ def open_recording(path: str | Path, mode: str = "native") -> list[str]:
 
 def spawn_recording_viewer(path: str | Path, settle: float = 2.0) -> list[str]:
     """Open a recording in a native viewer that outlives this process; returns its command.
-    ViewerUnavailable (one line) without a display, without the binary, or if the viewer exits within
-    `settle` seconds."""
+    ViewerUnavailable (one line) without a display or binary, or if the viewer exits within `settle` s."""
     if not has_display():
         raise ViewerUnavailable(f"no display to open the Rerun viewer in (DISPLAY and WAYLAND_DISPLAY are "
                                 f"unset); view it in a browser with: {' '.join(open_recording(path, 'web'))}")

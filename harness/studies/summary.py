@@ -70,8 +70,6 @@ def _groups(rows: Sequence[dict], names: Sequence[str]) -> dict[str, list[dict]]
 def _plots(study: Study, rows: Sequence[dict], out: Path) -> list[Path]:
     from matplotlib.figure import Figure
 
-    from harness.output.layout import fix_layout
-
     metrics = [m for m in study.metrics if np.isfinite(_metric_array(rows, m)).any()]
     if not rows or not metrics:
         return []
@@ -79,14 +77,13 @@ def _plots(study: Study, rows: Sequence[dict], out: Path) -> list[Path]:
     nrow = math.ceil(len(metrics) / ncol)
     paths = []
 
-    def figure():  # no layout engine: fix_layout places the axes once, without a tight-bbox pass
-        fig = Figure(figsize=(4.6 * ncol, 3.4 * nrow), dpi=_DPI)
+    def figure():
+        fig = Figure(figsize=(4.6 * ncol, 3.4 * nrow), dpi=_DPI, layout="constrained")
         return fig, fig.subplots(nrow, ncol, squeeze=False).ravel()
 
     def finish(fig, axes, name):
         for ax in axes[len(metrics):]:
             ax.set_visible(False)
-        fix_layout(fig)
         paths.append(save_figure(fig, out / name, _DPI))
 
     sampled = study.mode == "random"
