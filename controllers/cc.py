@@ -1,27 +1,15 @@
 """Planar constant-curvature (CC) kinematics with exact derivatives up to third order.
 
-Representation.  A point of the plane is the complex number c = Z + i X (Z up, X right).  The
-backbone tangent at arc angle phi is exp(i phi): phi = 0 is +Z, phi > 0 turns toward +X, so a
-positive curvature bends toward +X.
-
-Section j (0, 1, 2) has length d_j, curvature k_j and total bending angle Theta_j = k_j d_j.  The
-point at material coordinate u in [0, 1] of section s is
+A point is c = Z + i X (Z up, X right); the tangent at arc angle phi is exp(i phi) (k > 0 bends toward
++X).  Section j has length d_j, curvature k_j, bend Theta_j = k_j d_j; the point at material coordinate
+u in [0, 1] of section s is
 
     c_s(u) = sum_{j<s} T_j(1) + T_s(u),     T_j(u) = exp(i phi_{j-1}) u d_j E_0(u Theta_j),
 
-with phi_{j-1} = sum_{l<j} Theta_l and E_n(t) = int_0^1 v^n exp(i t v) dv, an entire function
-(E_0(t) = sinc(t) + i versinc(t), E_0(0) = 1), evaluated by its power series near 0 and by the
-stable upward recursion E_n = (e^{it} - n E_{n-1}) / (i t) elsewhere, so every quantity and every
-derivative is finite and smooth across k = 0 (no sin(kd)/k).
-
-The per-section bases b_n = f u^(1+n) E_n(u Theta) (`term_bases`) carry every derivative of a point in
-y = [d_0, d_1, d_2, Theta_0, Theta_1, Theta_2] (d^n/dTheta^n E_0(t) = i^n E_n(t)); the slave dynamics
-(`controllers.slave`) and the tip (`controllers.tip`) are built on them.  `backbone_points` is the one CC
-backbone of the project (controllers, plants and outputs).
-
-All functions in this module are written in the numba-compatible subset of numpy (loops, no
-Python objects): `harness.loop.fast` compiles them unchanged.  They allocate nothing they return;
-callers pass output arrays.
+phi_{j-1} = sum_{l<j} Theta_l, E_n(t) = int_0^1 v^n exp(i t v) dv (entire: series near 0, upward
+recursion elsewhere; smooth across k = 0).  The bases b_n = f u^(1+n) E_n(u Theta) (`term_bases`) carry
+every derivative in y = [d, Theta].  `backbone_points` is the project's one CC backbone.  Kernels:
+numba-compatible loops that write into the arrays the caller passes.
 """
 
 from __future__ import annotations
@@ -33,10 +21,7 @@ INV = 1.0 / np.arange(1.0, 33.0)  # INV[k] = 1 / (k + 1)
 
 
 def en_tuple(t):
-    """(E_0, E_1, E_2, E_3)(t), E_n(t) = int_0^1 v^n exp(i t v) dv, as a tuple of complex.
-
-    Real arithmetic, no allocation: the series term (i t)^m / m! is i^m a_m with a_m = t^m / m!
-    real (divisions replaced by the reciprocal table INV), and dividing by i t is a swap and a sign."""
+    """(E_0, E_1, E_2, E_3)(t), E_n(t) = int_0^1 v^n exp(i t v) dv (complex), in real arithmetic."""
     if abs(t) < SERIES_RADIUS:
         r0 = 0.0
         r1 = 0.0
@@ -92,9 +77,7 @@ def en_tuple(t):
 
 
 def term_bases(u, thj, f):
-    """b_n = f u^(1+n) E_n(u Theta_j), n = 0..3, f = exp(i phi_prev) (phi_prev: angle at the start of
-    section j): every derivative of T_j(u) is i^(npre+nt) b_nt, times d_j if it is not
-    differentiated in d_j."""
+    """b_n = f u^(1+n) E_n(u Theta_j), n = 0..3, f = exp(i phi) at the start of section j."""
     e0, e1, e2, e3 = en_tuple(u * thj)
     u2 = u * u
     u3 = u2 * u
@@ -135,8 +118,7 @@ def y_of_q(q, d, th, ydot, dq):
 
 
 def backbone_points(q, n_per_section, out):
-    """Backbone points [X, Z] at n_per_section + 1 evenly spaced material points per section
-    (shared section ends counted once): out (3 n + 1, 2), m."""
+    """Backbone points [X, Z] (m), out (3 n + 1, 2): base, then n evenly spaced points per section."""
     base = 0.0j
     phi = 0.0
     out[0, 0] = 0.0

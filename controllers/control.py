@@ -1,19 +1,11 @@
-"""The paper's control laws on the analytic models.
+"""The paper's control laws on the analytic models (numba-compatible kernels).
 
 Master (12)-(13):  T1 = M1 u1 + N1 - J1^T F1,  u1 = J1^-1 (ddx_d + k1 de1 + k2 e1 - dJ1 dq1).
 Slave (17)-(18):   T2 = M2 u2 + N2 - J2^T F2,
                    u2 = J2^+ (ddx_d + k1 de1 + k2 e1 + k3 de2 + k4 e2 - dJ2 dq2) + phi_N,
-with e1 = x_d - x1 (11), e2 = x1 - x2 (16), J2^+ = J2^T (J2 J2^T)^-1 (7) and the null-space terms
-de_N = P (g - dq2) (23), J_phi = dJ2^+ J2 + J2^+ dJ2 J2^+ J2 (26),
-phi_N = P (dg + kn de_N) - J_phi (g - dq2) (27), P = I - J2^+ J2, g and dg from the sub-task (33).
-
-Note on eq. (28): substituting (27) into (25) gives dde_N = -kn P de_N - J2^+ dJ2 de_N (the paper
-prints +kn, a sign typo: with +kn the null-space error would grow).
-
-dJ2^+ is exact: d/dt [J^T A^-1] = dJ^T A^-1 - J^T A^-1 dA A^-1, A = J J^T, dA = dJ J^T + J dJ^T.
-
-Kernels are numba-compatible (compiled by `harness.loop.fast`); `slave_control` is a readable pure-numpy
-entry point returning a dictionary.
+e1 = x_d - x1 (11), e2 = x1 - x2 (16), J2^+ = J2^T (J2 J2^T)^-1 (7), de_N = P (g - dq2) (23),
+J_phi = dJ2^+ J2 + J2^+ dJ2 J2^+ J2 (26), phi_N = P (dg + kn de_N) - J_phi (g - dq2) (27),
+P = I - J2^+ J2, g and dg from the sub-task (33); dJ2^+ exact.  (The paper's (28) prints +kn: a sign typo.)
 """
 
 from __future__ import annotations
@@ -39,9 +31,8 @@ DET_MIN = 1e-14  # det(J2 J2^T) below this is reported as a singular configurati
 
 
 def master_control_kernel(pk, gains, q, dq, xd, dxd, ddxd, F1, T1, info):
-    """Master feedback linearization (12)-(13).  Writes T1 (2,) and info (MASTER_INFO,):
-    x1, e1, de1, a1 = ddx_d + k1 de1 + k2 e1 (the commanded task acceleration), dx1.
-    Returns det(J1) (0 means singular: T1 is then not written)."""
+    """Master law (12)-(13): writes T1 (2,) and info (MASTER_INFO,) = x1, e1, de1, a1 = ddx_d + k1 de1 +
+    k2 e1, dx1.  Returns det(J1) (0: singular, T1 not written)."""
     x = scratch(2)
     J = scratch((2, 2))
     Jd = scratch((2, 2))
@@ -100,16 +91,12 @@ def pinv_terms(J, Jd, Jp, Jpd):
 
 
 def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2, T2, u2, deN, info):
-    """Slave feedback linearization (17)-(18) with the null-space terms (23)-(33).
+    """Slave law (17)-(18) with the null-space terms (23)-(33).
 
-    pk: packed SlaveParams; gains: [k1, k2, k3, k4, ky, ks, kn] (optionally followed by two fault
-    factors [e2_sign, null_space_scale] used to test bounds files); spec: packed sub-task;
-    q, dq (6,) sensed slave state; x1, dx1 (2,) sensed master tip and velocity; a1 (2,) the master's
-    commanded task acceleration ddx_d + k1 de1 + k2 e1; F2 (2,) interaction force.
-    Writes T2 (6,), u2 (6,), deN (6,) and info (SLAVE_INFO,): x2, e2, de2, beta, y_a, det, beta_m,
-    beta_l.  Returns det(J2 J2^T); if it is <= DET_MIN the configuration is singular and T2/u2 are
-    set to zero (the caller reports it).
-    """
+    pk: packed SlaveParams; gains: [k1, k2, k3, k4, ky, ks, kn] (+ optional fault factors [e2_sign,
+    null_space_scale]); spec: packed sub-task; q, dq (6,) sensed; x1, dx1 (2,) master tip and velocity;
+    a1 (2,) master's commanded task acceleration; F2 (2,).  Writes T2, u2, deN (6,) and info (SLAVE_INFO,):
+    x2, e2, de2, beta, y_a, det, beta_m, beta_l.  Returns det(J2 J2^T); <= DET_MIN: singular, T2 = u2 = 0."""
     k3 = gains[2]
     k4 = gains[3]
     ky = gains[4]
@@ -235,10 +222,9 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
 
 def control_laws(mpk, spk, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F, T1, T2, u2, deN,
                  minfo, sinfo):
-    """The paper's law: master (12)-(13) and slave (17)-(18) with the null-space terms (23)-(33) on a sensed
-    state (16,) = [q1, dq1, q2, dq2], desired tip xd, dxd, ddxd (2,) (40) and tip forces F (4,) N.  Writes
-    T1 (2,), T2 (6,), u2 (6,), deN (6,), minfo (MASTER_INFO,), sinfo (SLAVE_INFO,).  Returns a status code
-    (`controllers.status`: ST_OK, ST_MASTER_SINGULAR, ST_SLAVE_SINGULAR)."""
+    """The paper's whole law on sensed (16,) = [q1, dq1, q2, dq2], x_d, dx_d, ddx_d (2,) (40) and forces
+    F (4,) N: writes T1 (2,), T2, u2, deN (6,), minfo, sinfo.  Returns ST_OK, ST_MASTER_SINGULAR or
+    ST_SLAVE_SINGULAR."""
     q1 = sensed[0:2]
     dq1 = sensed[2:4]
     q2 = sensed[4:10]
@@ -256,11 +242,10 @@ def control_laws(mpk, spk, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F
 KERNELS = ("master_control_kernel", "pinv_terms", "slave_control_kernel", "control_laws")
 
 
-# --------------------------------------------------------------------------------------------- API
 def slave_control(p: SlaveParams, gains: Gains, spec: SubtaskSpec, q2, dq2, x1, dx1, a1,
                   F2=(0.0, 0.0)) -> dict:
-    """Slave law (17)-(18) with null-space terms.  Returns dict with T2, u2, deN (6,), x2, e2, de2
-    (2,), beta, ya, det."""
+    """Slave law (17)-(18) with null-space terms: dict of T2, u2, deN (6,), x2, e2, de2 (2,), beta, ya,
+    det, beta_limits.  Raises FloatingPointError when J2 J2^T is singular."""
     nodes, weights = gauss_legendre01(p.n_quad)
     T2, u2, deN, info = np.zeros(6), np.zeros(6), np.zeros(6), np.empty(SLAVE_INFO)
     f = [np.ascontiguousarray(v, dtype=float) for v in (q2, dq2, x1, dx1, a1, F2)]

@@ -1,23 +1,12 @@
 """Null-space sub-tasks, paper Sec. V, eqs. (29)-(33) and (41).
 
-A sub-task is a non-negative function beta(q2) that the null-space motion tries to *increase*:
-y_a = exp(-ky beta) (29), J_s = dy_a/dq2 (31), g = -ks J_s^T y_a (33), i.e. g = ks ky y_a^2 grad beta.
-
-Shipped sub-tasks (combined as beta = sum_j w_j beta_j):
-
-* ``manipulability`` (41): beta_m = sqrt(det(J2 J2^T)).
-* ``limits``: keeps section lengths and bending angles inside their ranges,
-  beta_l = sum_j (1 - s_j^(2p)) with normalised coordinates s_j in [-1, 1] on the allowed range:
-  s = (d_i - c_i)/h_i for lengths (range [L0, e L0], centre c, half-width h) and s = k_i d_i / bmax
-  for bending angles.  beta_l is largest at the centre of the box and its gradient grows like
-  2p s^(2p-1)/h toward the limits, where it dominates the manipulability gradient (which alone
-  drives the base section far past its range and shrinks the tip section).
-
-For the exact time derivative of g (needed by phi_N, eq. 27) every sub-task returns beta, its
-gradient and the time derivative of its gradient along dq2; all closed form (the manipulability
-terms use the exact tip Hessian and its time derivative from `controllers.cc`).
-
-Sub-task selection is packed for the kernels as `spec = [w_manip, w_limits, p, e, bmax, L0_1..3]`.
+A sub-task beta(q2) >= 0 is increased by the null-space motion: y_a = exp(-ky beta) (29), J_s = dy_a/dq2
+(31), g = -ks J_s^T y_a = ks ky y_a^2 grad beta (33); beta = sum_j w_j beta_j of
+* ``manipulability`` (41): beta_m = sqrt(det(J2 J2^T));
+* ``limits``: beta_l = sum_j (1 - s_j^(2p)), s_j in [-1, 1] the normalised section lengths (range [L0,
+  e L0]) and bend angles k d / bmax; its gradient grows steeply toward the limits.
+Each returns beta, grad beta and d/dt grad beta (closed form).  Packed spec = [w_manip, w_limits, p,
+e, bmax, L0 (3)].
 """
 
 from __future__ import annotations
@@ -40,10 +29,8 @@ def pack_subtask(spec: SubtaskSpec, slave: SlaveParams) -> np.ndarray:
 
 
 def manipulability_kernel(J, H, Jd, Hd, grad, graddot):
-    """beta_m = sqrt(det A), A = J J^T, with grad (6,) and d/dt grad (6,) (outputs overwritten).
-
-    J (2,6), H (2,6,6) = dJ/dq, Jd (2,6) = dJ/dt, Hd (2,6,6) = dH/dt.  Returns (beta, det A).
-    """
+    """beta_m = sqrt(det A), A = J J^T; writes grad, graddot (6,).  J, Jd (2,6) = dJ/dt, H, Hd (2,6,6) =
+    dJ/dq and its rate.  Returns (beta, det A)."""
     gt = scratch(6)
     gram_terms(J, Jd, gt)
     A00, A01, A11, Ad00, Ad01, Ad11 = gt[0], gt[1], gt[2], gt[3], gt[4], gt[5]
@@ -84,8 +71,7 @@ def manipulability_kernel(J, H, Jd, Hd, grad, graddot):
 
 
 def limit_powers(s, p2):
-    """(s^(p2-2), s^(p2-1), s^p2); an integer p2 >= 2 (the usual case) by multiplications
-    (binary powering, exact to rounding) instead of three pow() calls."""
+    """(s^(p2-2), s^(p2-1), s^p2); an integer p2 >= 2 by binary powering."""
     n = int(p2)
     if n == p2 and n >= 2:
         a = 1.0
@@ -162,7 +148,6 @@ def subtask_kernel(spec, J, H, Jd, Hd, q, dq, grad, graddot, parts):
 KERNELS = ("manipulability_kernel", "limit_powers", "limits_kernel", "subtask_kernel")
 
 
-# --------------------------------------------------------------------------------------------- API
 def beta(spec: SubtaskSpec, slave: SlaveParams, q, dq=None) -> tuple[float, np.ndarray, np.ndarray]:
     """(beta, grad beta (6,), d/dt grad beta (6,)) of the combined sub-task at q2, dq2."""
     q = np.ascontiguousarray(q, dtype=float)

@@ -9,7 +9,7 @@ holds the model's addresses and constant maps, with allocating wrappers for inte
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import mujoco
 import numpy as np
@@ -366,6 +366,13 @@ class ChainMap:
     servo_kp: np.ndarray
     servo_kv: np.ndarray
     tip_mass: float
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            if f.type == "np.ndarray":
+                integer = f.name.endswith(("_adr", "_ids")) or f.name in ("section", "is_hinge", "segment")
+                dtype = np.int64 if integer else np.float64
+                object.__setattr__(self, f.name, _ro(getattr(self, f.name), dtype))
 
     @property
     def n_chain(self) -> int:

@@ -1,84 +1,26 @@
-"""MuJoCo "true plant": master + discretized Octarm built from the MJCF in ``mjcf/`` by editing an MjSpec.
+"""MuJoCo plant: the master and a discretized Octarm, built from the MJCF in ``mjcf/`` by editing an
+MjSpec (the model: docs/plants.md; the joint <-> q2 maps: `harness.plant.chain_map`).
 
-Frames and units
-----------------
-SI units (m, kg, s, rad).  Both robots move in planes parallel to the world x-z plane; hinges turn about
-+y (a positive angle takes +z toward +x).  Each robot's task space [X, Z] is relative to its own base:
-``master_base`` at world (0, -0.3, 0) and ``octarm_base`` at world (0, +0.3, 0).
+SI units.  Both robots move in planes parallel to world x-z; hinges turn about +y (+z toward +x); task
+space [X, Z] is relative to each base (``master_base``, ``octarm_base``).
 
-Octarm discretization ("hinges at segment midpoints", second order)
---------------------------------------------------------------------
-Section i (0..2) with current arc length d_i, curvature k_i, bend Theta_i = k_i d_i and rest length L0_i is
-split into N segments of current length l_i = d_i / N (rest l0_i = L0_i / N).  Body
-``octarm_s{i}_seg{j}_body`` sits at the MIDPOINT of segment j; its joints are, in order,
+Section i (length d_i, curvature k_i, Theta_i = k_i d_i, rest L0_i) is N segments: body
+``octarm_s{i}_seg{j}_body`` at the segment MIDPOINT has a slide ``..._slide`` along the parent's
+tangent, then a hinge ``..._hinge`` about +y; ``octarm_tip_body`` (slide ``octarm_tip_slide``, site
+``octarm_tip_site``) ends the chain.  Body offsets are the rest rod lengths.  On the CC manifold, with
+e_i = d_i - L0_i: hinge(i, j) = Theta_i / N, slide(i, j >= 1) = e_i / N, slide(i, 0) = (e_{i-1} + e_i)
+/ (2N), tip slide = e_2 / (2N), i.e. joints = C [e, Theta]; n_chain = 6N + 1 in MuJoCo order (per
+segment slide, hinge; tip slide last).  Node positions are O(1/N^2) from the arc's.
 
-* slide ``octarm_s{i}_seg{j}_slide`` along the parent's tangent (the body z before the hinge): the
-  extension of the rod from the previous node (midpoint, or the base) to this one;
-* hinge ``octarm_s{i}_seg{j}_hinge`` about +y: the bend Theta_i / N of one segment.
-
-Body positions relative to the parent are the rest rod lengths: l0_0 / 2 for the very first body,
-(l0_{i-1} + l0_i) / 2 for j = 0 and i >= 1, l0_i otherwise.  After the last segment, ``octarm_tip_body``
-at l0_2 / 2 with one slide ``octarm_tip_slide`` carries ``octarm_tip_site``.
-
-On the constant-curvature (CC) manifold, with e_i = d_i - L0_i, the chain joints are
-  hinge(i, j) = Theta_i / N,     slide(i, j >= 1) = e_i / N,
-  slide(i, 0) = (e_{i-1} + e_i) / (2N)  (drop e_{-1}),     tip slide = e_2 / (2N),
-i.e. joints = C u with u = [e_0, e_1, e_2, Theta_0, Theta_1, Theta_2] and a constant C (n_chain, 6).
-The rod from node j-1 to node j points along the tangent at the arc point halfway between the two
-midpoints (midpoint rule on the tangent; one-sided half rods at the base, section boundaries and tip):
-node positions approximate the arc midpoints to O(1/N^2) and the final orientation is exact.
-
-Chain joint order (``ChainMap.chain_*`` arrays, "qpos_chain"): the MuJoCo order, i.e. for each section,
-for each segment, slide then hinge; the tip slide last.  n_chain = 6 N + 1.
-
-Mass: segment (i, j) is a point-like mass m_i / N at its body origin (the segment midpoint) with rod
-inertia about y (m_i / N) l0_i^2 / 12 plus the slice inertia (see ``chain_params.segment_inertias``:
-trapezoidal split over the two rod orientations bounding the segment, which keeps the slice term second order;
-putting all of it on the segment's own body would be first order, because the body frame carries the
-tangent at the segment END).  The tip body needs a mass for MuJoCo: ``TIP_MASS_FRACTION * m_2 / N``,
-taken from the last segment so that the total mass is exact (a modelled mismatch of O(1e-3 / N^2)).
-
-Elasticity: MuJoCo joint springs (hinge N Kb_i / L0_i; slide N Ke_i inside a section, series
-combinations for the half/boundary rods) plus ``chain_elastic_correction`` (applied by the harness
-through qfrc_applied at every physics step) give -grad of the exact discrete energy, equal to the
-analytic elastic force on the CC manifold.  Without the correction the springs alone are exact only
-at rest length with equal neighbouring extensions.  Viscous damping of SlaveParams (on q2 rates) plus
-the rod's material damping (``plant.bending_viscosity`` eta_b -> hinge eta_b / h,
-``plant.extension_viscosity`` eta_a -> slide eta_a / h, h the segment length) is MuJoCo joint damping
-(``chain_params.joint_damping``, integrated implicitly; exact at rest length on the manifold).
-
-Actuation, each defined per unit length of the section (so the chain has a continuum limit in N):
-``servo``: a position actuator per chain joint (force kp (ctrl - q) - kv qdot, ctrl = the joint target,
-e.g. ``joints_from_q2``; fold (kv / kp) qdot_ref into it for velocity tracking), gains from
-``chain_params.servo_gains``: each section's CC coordinate (e_i, Theta_i), moved alone, is a servo of
-``servo_frequency`` and ``servo_damping_ratio`` against its inertia diag(C^T M C) at the straight rest
-configuration, spread over the joints like the springs.  ``torque``: a motor per chain joint (gear 1),
-driven by the virtual-work map ``chain_force_from_T2``.  ``muscle``: per section two one-sided groups of
-extensor muscles at lateral offsets s = +r, -r (``plant.muscle_radius``), each a fixed tendon
-``octarm_s{i}_muscle_{pos,neg}_tendon`` of length sum(section slides) - s sum(section hinges), the
-chain's CC fibre length d_i - s Theta_i (``chain_params.muscle_tendon_coefs``), driven by a ``general``
-actuator ``octarm_s{i}_muscle_{pos,neg}``: filterexact dynamics (tau = ``plant.muscle_time_constant``),
-gain 1, no bias, ctrlrange [0, F_max] (``plant.muscle_max_force``): a force >= 0 lengthening its fibre.
-Extensors: the OctArm's McKibben muscles lengthen under pressure, and sections in [L0, max_extension
-L0] need a net extending force (pulling-only groups could hold only d <= L0).  Commands:
-``chain_map.muscle_commands``.
-Master: two motors.  Armature: ``armature_fraction`` times the section inertia scale on every chain
-joint, plus one segment mass on the tip slide (see ``chain_params.joint_armature``), a modelled mismatch of
-relative size ~ fraction / (6 N) in M2.
-
-``enforce_cc``: joint equalities (hinges of a section equal; interior slides equal; first slide = half
-the next; tip slide = half the last interior slide) and fixed-tendon equalities (boundary slide = mean
-of its neighbours; for N = 1 one tendon s00 - s10 + s20 - tip = 0), solref/solimp ``CC_SOLREF``/
-``CC_SOLIMP``: 3N - 3 hinge and 3N - 2 slide constraints leave exactly the 6 CC coordinates.
-
-Stability (measured, default SlaveParams, 1 ms, implicitfast, loaded, correction every step): the
-joint springs are integrated explicitly and the discrete chain gets stiffer with N (h w_max = 0.82,
-1.19, 1.69, 2.39 at N = 8, 16, 32, 64; ``stiffness_courant_number``).  N <= 32 steps stably; N = 48
-diverges in torque mode (use a smaller physics_dt, enforce_cc, or the ``discrete`` integrator, which
-treats joint stiffness implicitly and was stable up to N = 64 at 1 ms).
-
-The joint <-> q2 maps (sensing, actuation, elastic correction) and ``ChainMap`` live in
-``harness.plant.chain_map``.
+Masses m_i / N at the midpoints (the tip body's TIP_MASS_FRACTION of one taken from the last segment);
+springs, damping, armature and servo gains per unit length of the section (`chain_params`); the
+elastic correction (`chain_map.chain_elastic_correction`, through qfrc_applied every physics step)
+makes the elastic force exact on the manifold.  Actuation ``servo``: a position actuator per chain
+joint; ``torque``: a motor per chain joint; ``muscle``: per section two extensor groups at offsets
++-r, fixed tendons ``octarm_s{i}_muscle_{pos,neg}_tendon`` driving ``general`` actuators (filterexact,
+ctrlrange [0, F_max]); the master: two motors.  ``enforce_cc``: joint and tendon equalities
+(CC_SOLREF, CC_SOLIMP) leaving the 6 CC coordinates.  The joint springs are explicit and the chain
+stiffens with N (`stiffness_courant_number`); N <= 32 steps stably at 1 ms.
 """
 
 from __future__ import annotations
@@ -95,7 +37,7 @@ from controllers.params import MasterParams, SlaveParams
 from harness.config.assets import asset_dir
 from harness.config.scenario import ACTUATIONS, PlantConfig, Scenario
 from harness.config.textio import atomic_path
-from harness.plant.chain_map import ChainMap, _ro, chain_layout
+from harness.plant.chain_map import ChainMap, chain_layout
 from harness.plant.chain_params import (
     MUSCLE_SIDES,
     TIP_MASS_FRACTION,
@@ -112,9 +54,8 @@ from harness.plant.initial import InitialStateError, initial_state
 MJCF_DIR = asset_dir("mjcf")  # the shipped MJCF (package data when installed; harness.config.assets)
 SCENE_XML = MJCF_DIR / "scene.xml"
 
-N_SECTIONS = 3
 MAX_SEGMENTS = 64
-# Equality constraints holding the sections at constant curvature (api-notes: tight values).
+# equality constraints holding the sections at constant curvature (api-notes: tight values)
 CC_SOLREF = (0.002, 1.0)
 CC_SOLIMP = (0.99, 0.999, 0.001, 0.5, 2.0)
 
@@ -123,17 +64,13 @@ _INTEGRATORS = {
     "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
     "euler": mujoco.mjtIntegrator.mjINT_EULER,
     "rk4": mujoco.mjtIntegrator.mjINT_RK4,
-    "discrete": mujoco.mjtIntegrator.mjINT_DISCRETE,  # not in harness.config.INTEGRATORS (yet)
+    "discrete": mujoco.mjtIntegrator.mjINT_DISCRETE,  # not in harness.config.INTEGRATORS
 }
 
 
 class PlantModelError(ValueError):
     """The plant model cannot be built: bad MJCF file (named, with MuJoCo's message) or bad option."""
 
-
-# ================================================================================================
-# Spec construction
-# ================================================================================================
 
 def _check_segments(n) -> int:
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not (1 <= int(n) <= MAX_SEGMENTS):
@@ -209,8 +146,16 @@ def _add_octarm(spec: mujoco.MjSpec, slave: SlaveParams, plant: PlantConfig, N: 
     arm = joint_armature(slave, N, layout, plant.armature_fraction)
     damp = joint_damping(slave, N, layout, plant.bending_viscosity, plant.extension_viscosity)
     joint_names = []
+
+    def add_joint(body, dflt, name):
+        c = len(joint_names)
+        jn = body.add_joint(dflt, name=name)
+        jn.stiffness[0] = float(stiff[c])
+        jn.damping[0] = float(damp[c])
+        jn.armature = float(arm[c])
+        joint_names.append(name)
+
     parent = base
-    c = 0
     for i in range(3):
         for j in range(N):
             if j >= 1:
@@ -226,13 +171,8 @@ def _add_octarm(spec: mujoco.MjSpec, slave: SlaveParams, plant: PlantConfig, N: 
             # rod: about x = about y; about the rod axis a tiny but valid value
             body.inertia = [float(iyy[i, j]), float(iyy[i, j]), float(1e-3 * iyy[i, j])]
             body.explicitinertial = True
-            for kind, dflt in (("slide", d_slide), ("hinge", d_hinge)):
-                jn = body.add_joint(dflt, name=f"{name}_{kind}")
-                jn.stiffness[0] = float(stiff[c])
-                jn.damping[0] = float(damp[c])
-                jn.armature = float(arm[c])
-                joint_names.append(jn.name)
-                c += 1
+            add_joint(body, d_slide, f"{name}_slide")
+            add_joint(body, d_hinge, f"{name}_hinge")
             body.add_geom(d_geom, name=f"{name}_geom",
                           fromto=[0.0, 0.0, -0.5 * l0[i], 0.0, 0.0, 0.5 * l0[i]])
             parent = body
@@ -242,18 +182,14 @@ def _add_octarm(spec: mujoco.MjSpec, slave: SlaveParams, plant: PlantConfig, N: 
     it = float(tip_mass * (0.1 * l0[2]) ** 2)
     tip.inertia = [it, it, it]
     tip.explicitinertial = True
-    jn = tip.add_joint(d_slide, name="octarm_tip_slide")
-    jn.stiffness[0] = float(stiff[c])
-    jn.damping[0] = float(damp[c])
-    jn.armature = float(arm[c])
-    joint_names.append(jn.name)
+    add_joint(tip, d_slide, "octarm_tip_slide")
     tip.add_site(name="octarm_tip_site")
     return joint_names, stiff, arm, tip_mass
 
 
 def _add_muscles(spec: mujoco.MjSpec, joint_names: list[str], plant: PlantConfig, layout: dict,
                  N: int) -> list[str]:
-    """Two one-sided muscle groups per section on fixed tendons (see the module docstring, Actuation)."""
+    """Two one-sided extensor groups per section on fixed tendons (module docstring)."""
     slide, hinge = muscle_tendon_coefs(N, layout)
     names = []
     for i in range(3):
@@ -278,20 +214,19 @@ def _add_muscles(spec: mujoco.MjSpec, joint_names: list[str], plant: PlantConfig
 
 
 def _add_actuators(spec: mujoco.MjSpec, joint_names: list[str], actuation: str) -> list[str]:
-    names = []
+    """A servo (gains set in `_build`) or a motor per chain joint."""
+    kind = "servo" if actuation == "servo" else "motor"
     for jn in joint_names:
-        if actuation == "servo":
-            a = spec.add_actuator(name=f"{jn}_servo", target=jn, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-            a.set_to_position(kp=1.0, kv=0.0)  # gains set from the inertia in build_spec
+        a = spec.add_actuator(name=f"{jn}_{kind}", target=jn, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        if kind == "servo":
+            a.set_to_position(kp=1.0, kv=0.0)
         else:
-            a = spec.add_actuator(name=f"{jn}_motor", target=jn, trntype=mujoco.mjtTrn.mjTRN_JOINT)
             a.set_to_motor()
-        names.append(a.name)
-    return names
+    return [f"{jn}_{kind}" for jn in joint_names]
 
 
 def _add_cc_equalities(spec: mujoco.MjSpec, N: int) -> None:
-    """Equality constraints keeping each section at constant curvature (see module docstring)."""
+    """Joint and tendon equalities holding each section at constant curvature."""
 
     def joint_eq(name, j1, j2, a1):
         eq = spec.add_equality(name=name, type=mujoco.mjtEq.mjEQ_JOINT, name1=j1, name2=j2,
@@ -391,75 +326,46 @@ def _build(master: MasterParams, slave: SlaveParams, plant: PlantConfig, scene=N
 
 def build_spec(master: MasterParams, slave: SlaveParams, plant: PlantConfig, *,
                scene_xml: str | os.PathLike | None = None) -> mujoco.MjSpec:
-    """The plant as an editable ``mujoco.MjSpec`` (scene.xml + master from ``master`` + generated Octarm).
-
-    master/slave: the *plant's* parameters (may differ from the controller's nominal ones).
-    plant: segments N (int in [1, 64]), actuation, enforce_cc, physics_dt, integrator, servo tuning,
-    armature_fraction.  scene_xml: alternative scene file (default ``mjcf/scene.xml``); it must define
-    the named master elements, ``octarm_base`` and the ``octarm_*`` default classes.
-    Raises PlantModelError on bad input or MJCF.
-    """
+    """The plant as an editable ``mujoco.MjSpec``: scene.xml (or scene_xml, which must define the named
+    master elements, ``octarm_base`` and the ``octarm_*`` default classes), the master from ``master``
+    and the generated Octarm.  master/slave: the plant's parameters (may differ from the controller's);
+    plant: segments N in [1, 64], actuation, enforce_cc, physics_dt, integrator, servo tuning,
+    armature_fraction.  Raises PlantModelError on bad input or MJCF."""
     return _build(master, slave, plant, scene_xml)[0]
 
 
 def build_model(master: MasterParams, slave: SlaveParams, plant: PlantConfig, *,
                 scene_xml: str | os.PathLike | None = None,
                 environment=None) -> tuple[mujoco.MjModel, ChainMap]:
-    """Compiled plant model and its ``ChainMap`` (addresses + constant maps); see ``build_spec``.
-    environment: an `EnvironmentConfig` whose objects are added (`harness.plant.environment`)."""
+    """Compiled plant model and its ``ChainMap`` (see ``build_spec``); environment: an
+    `EnvironmentConfig` whose objects are added (`harness.plant.environment`)."""
     spec, N, layout, joint_names, act_names, stiff, arm, tip_mass, kp, kv = _build(master, slave, plant,
                                                                                    scene_xml, environment)
     m = _compile(spec, "the plant model")
     act_ids = [m.actuator(n).id for n in act_names]
     muscle = plant.actuation == "muscle"
-    Ke = np.asarray(slave.extension_stiffness)
-    shape_w = np.where(layout["is_hinge"] == 0, stiff, 0.0)
-
-    def jid(name):
-        return m.joint(name).id
-
-    master_j = [jid("master_shoulder_joint"), jid("master_elbow_joint")]
-    chain_j = [jid(n) for n in joint_names]
+    master_j = [m.joint("master_shoulder_joint").id, m.joint("master_elbow_joint").id]
+    chain_j = [m.joint(n).id for n in joint_names]
     cmap = ChainMap(
-        n_segments=N,
-        actuation=plant.actuation,
-        enforce_cc=bool(plant.enforce_cc),
-        master_qpos_adr=_ro(m.jnt_qposadr[master_j], np.int64),
-        master_dof_adr=_ro(m.jnt_dofadr[master_j], np.int64),
-        master_actuator_ids=_ro([m.actuator(n).id for n in ("master_shoulder_motor", "master_elbow_motor")],
-                                np.int64),
-        chain_qpos_adr=_ro(m.jnt_qposadr[chain_j], np.int64),
-        chain_dof_adr=_ro(m.jnt_dofadr[chain_j], np.int64),
-        chain_actuator_ids=_ro([] if muscle else act_ids, np.int64),
-        muscle_actuator_ids=_ro(act_ids if muscle else [], np.int64),
-        muscle_radius=_ro(plant.muscle_radius),
-        muscle_max_force=_ro(plant.muscle_max_force),
-        master_site_id=int(m.site("master_tip_site").id),
-        tip_site_id=int(m.site("octarm_tip_site").id),
-        master_base_pos=_ro(m.body("master_base").pos),
-        octarm_base_pos=_ro(m.body("octarm_base").pos),
-        C=_ro(layout["C"]),
-        R=_ro(layout["R"]),
-        L0=_ro(slave.rest_lengths),
-        section=_ro(layout["section"], np.int64),
-        is_hinge=_ro(layout["is_hinge"], np.int64),
-        segment=_ro(layout["segment"], np.int64),
-        joint_stiffness=_ro(stiff),
-        shape_stiffness=_ro(shape_w),
-        seg_kb=_ro(N * np.asarray(slave.bending_stiffness)),
-        ke=_ro(Ke),
-        armature=_ro(arm),
-        servo_kp=_ro(kp),
-        servo_kv=_ro(kv),
-        tip_mass=float(tip_mass),
-    )
+        n_segments=N, actuation=plant.actuation, enforce_cc=bool(plant.enforce_cc),
+        master_qpos_adr=m.jnt_qposadr[master_j], master_dof_adr=m.jnt_dofadr[master_j],
+        master_actuator_ids=[m.actuator(n).id for n in ("master_shoulder_motor", "master_elbow_motor")],
+        chain_qpos_adr=m.jnt_qposadr[chain_j], chain_dof_adr=m.jnt_dofadr[chain_j],
+        chain_actuator_ids=[] if muscle else act_ids, muscle_actuator_ids=act_ids if muscle else [],
+        muscle_radius=plant.muscle_radius, muscle_max_force=plant.muscle_max_force,
+        master_site_id=int(m.site("master_tip_site").id), tip_site_id=int(m.site("octarm_tip_site").id),
+        master_base_pos=m.body("master_base").pos, octarm_base_pos=m.body("octarm_base").pos,
+        C=layout["C"], R=layout["R"], L0=slave.rest_lengths, section=layout["section"],
+        is_hinge=layout["is_hinge"], segment=layout["segment"], joint_stiffness=stiff,
+        shape_stiffness=np.where(layout["is_hinge"] == 0, stiff, 0.0),
+        seg_kb=N * np.asarray(slave.bending_stiffness), ke=slave.extension_stiffness, armature=arm,
+        servo_kp=kp, servo_kv=kv, tip_mass=float(tip_mass))
     return m, cmap
 
 
 @dataclass(frozen=True, eq=False)
 class MujocoPlant:
-    """A built MuJoCo plant: the compiled model (plant parameters, segments, actuation) and its ChainMap.
-    `harness.loop.simulate` takes it; one plant can serve several runs of the same scenario plant."""
+    """A built MuJoCo plant: the compiled model and its ChainMap (one plant serves several runs)."""
 
     model: mujoco.MjModel
     cmap: ChainMap
@@ -468,8 +374,8 @@ class MujocoPlant:
 
     @classmethod
     def build(cls, scn: Scenario) -> MujocoPlant:
-        """Build from the scenario's plant side (raises PlantModelError on bad MJCF or options, and
-        when an environment object intersects the arm at the initial state)."""
+        """Build from the scenario's plant side.  Raises PlantModelError on bad MJCF or options, or when
+        an environment object intersects the arm at the initial state."""
         m, cmap = build_model(scn.plant_master, scn.plant_slave, scn.plant, environment=scn.environment)
         if not scn.environment.objects:
             return cls(m, cmap)
@@ -498,12 +404,8 @@ def _check_clearance(m: mujoco.MjModel, cmap: ChainMap, cm: ContactMap, scn: Sce
 
 
 def stiffness_courant_number(m: mujoco.MjModel, cm: ChainMap) -> float:
-    """h * w_max of the chain's joint springs (and servo kp) against its inertia at qpos0 (dimensionless).
-
-    w_max^2 is the largest generalized eigenvalue of K = diag(joint stiffness + kp) and the chain block of
-    M (armature included).  Semi-implicit integration of undamped springs needs h w_max < 2; servo
-    damping (implicit under implicitfast) and equality constraints relax this in practice.
-    """
+    """h w_max of the chain's joint springs (and servo kp) against its inertia at qpos0: w_max^2 the largest
+    generalized eigenvalue of diag(stiffness + kp) and the chain block of M; explicit springs need < 2."""
     d = mujoco.MjData(m)
     mujoco.mj_forward(m, d)
     M = np.zeros((m.nv, m.nv))
@@ -511,7 +413,6 @@ def stiffness_courant_number(m: mujoco.MjModel, cm: ChainMap) -> float:
     idx = np.asarray(cm.chain_dof_adr)
     Mc = M[np.ix_(idx, idx)]
     k = np.asarray(cm.joint_stiffness) + np.asarray(cm.servo_kp)
-    # eigenvalues of L^-1 K L^-T with M = L L^T
     L = np.linalg.cholesky(Mc)
     Li = np.linalg.inv(L)
     w2 = np.linalg.eigvalsh(Li @ (k[:, None] * Li.T))
@@ -519,17 +420,13 @@ def stiffness_courant_number(m: mujoco.MjModel, cm: ChainMap) -> float:
 
 
 def export_mjcf(master: MasterParams, slave: SlaveParams, plant: PlantConfig, path) -> Path:
-    """Write the generated plant MJCF (``spec.to_xml()``) to ``path`` and check it re-loads.
-
-    The file is self-contained (includes resolved) and opens in MuJoCo's viewer for any N.  MuJoCo
-    writes numbers with about 6 significant digits, so simulate with ``build_model`` (full precision);
-    the export is for viewing and sharing.
-    """
+    """Write the generated plant MJCF (``spec.to_xml()``, self-contained, ~6 significant digits: for viewing;
+    simulate with ``build_model``) to ``path``, atomically, once it re-loads."""
     spec = build_spec(master, slave, plant)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     xml = spec.to_xml()
-    with atomic_path(path) as tmp:  # renamed into place only once written and re-loaded
+    with atomic_path(path) as tmp:
         tmp.write_text(xml, encoding="utf-8")
         try:
             mujoco.MjModel.from_xml_string(xml)
