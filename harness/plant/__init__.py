@@ -1,14 +1,7 @@
-"""Plants: the "true" systems the controllers drive, one module per plant family.
-
-* `harness.plant.mujoco_model`: the MuJoCo model (MJCF + MjSpec-generated Octarm chain) and
-  `harness.plant.chain_map`: the chain <-> q2 maps (sensing, actuation, elastic correction);
-* `harness.plant.analytic`: the paper's analytic models themselves as the plant (RK4);
-* `harness.plant.cosserat`: a Cosserat rod (PyElastica) slave + the rigid master, stepped from
-  Python (protocol `harness.plant.stepped.SteppedPlant`).
-
-`build_plant(scn)` builds the plant a scenario asks for; a plant validates its own inputs (scene
-MJCF, compile errors) and reports them as `ConfigError` naming the scenario field, so that
-`harness.config` never needs to import a plant.  The loop (`harness.loop.simulate`) takes the plant.
+"""Plants: the "true" systems the controllers drive: the MuJoCo chain (`mujoco_model`, maps in
+`chain_map`), the analytic models themselves (`analytic`) and the Cosserat rod (`cosserat`).
+`build_plant(scn)` builds the one a scenario asks for and reports plant errors as `ConfigError` naming
+the scenario field (so `harness.config` never imports a plant).
 """
 
 from __future__ import annotations

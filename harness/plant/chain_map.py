@@ -215,7 +215,7 @@ class ChainMap:
     for muscles); muscle_actuator_ids (6,): ``muscle_commands`` order (else empty); muscle_radius,
     muscle_max_force (3,) m, N; *_base_pos (3,): world positions of the bases; C, R, L0 as
     ``chain_layout``; joint_stiffness: MuJoCo's; shape_stiffness, seg_kb, ke: ``chain_elastic_correction``;
-    servo_kp, servo_kv (zeros unless servo); tip_mass kg."""
+    servo_kp, servo_kv (zeros unless servo)."""
 
     n_segments: int
     actuation: str
@@ -243,10 +243,8 @@ class ChainMap:
     shape_stiffness: np.ndarray
     seg_kb: np.ndarray
     ke: np.ndarray
-    armature: np.ndarray
     servo_kp: np.ndarray
     servo_kv: np.ndarray
-    tip_mass: float
 
     def __post_init__(self) -> None:
         for f in fields(self):

@@ -72,12 +72,6 @@ class PlantModelError(ValueError):
     """The plant model cannot be built: bad MJCF file (named, with MuJoCo's message) or bad option."""
 
 
-def _check_segments(n) -> int:
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not (1 <= int(n) <= MAX_SEGMENTS):
-        raise PlantModelError(f"plant.segments = {n!r}: must be an integer in [1, {MAX_SEGMENTS}]")
-    return int(n)
-
-
 def _load_spec(path: Path) -> mujoco.MjSpec:
     path = Path(path)
     if not path.is_file():
@@ -184,7 +178,7 @@ def _add_octarm(spec: mujoco.MjSpec, slave: SlaveParams, plant: PlantConfig, N: 
     tip.explicitinertial = True
     add_joint(tip, d_slide, "octarm_tip_slide")
     tip.add_site(name="octarm_tip_site")
-    return joint_names, stiff, arm, tip_mass
+    return joint_names, stiff
 
 
 def _add_muscles(spec: mujoco.MjSpec, joint_names: list[str], plant: PlantConfig, layout: dict,
@@ -265,7 +259,10 @@ def _add_cc_equalities(spec: mujoco.MjSpec, N: int) -> None:
 
 
 def _validate_plant(plant: PlantConfig) -> int:
-    N = _check_segments(plant.segments)
+    """N, the segments per section, once every plant option is valid (else PlantModelError)."""
+    n = plant.segments
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not (1 <= int(n) <= MAX_SEGMENTS):
+        raise PlantModelError(f"plant.segments = {n!r}: must be an integer in [1, {MAX_SEGMENTS}]")
     if plant.actuation not in ACTUATIONS:
         raise PlantModelError(f"plant.actuation = {plant.actuation!r}: must be one of {ACTUATIONS}")
     if plant.integrator not in _INTEGRATORS:
@@ -280,7 +277,7 @@ def _validate_plant(plant: PlantConfig) -> int:
             raise PlantModelError(f"plant.{f} = {v!r}: must be 3 finite numbers > 0")
     if not (np.isfinite(plant.armature_fraction) and plant.armature_fraction >= 0):
         raise PlantModelError(f"plant.armature_fraction = {plant.armature_fraction!r}: must be >= 0")
-    return N
+    return int(n)
 
 
 def _build(master: MasterParams, slave: SlaveParams, plant: PlantConfig, scene=None, environment=None):
@@ -295,7 +292,7 @@ def _build(master: MasterParams, slave: SlaveParams, plant: PlantConfig, scene=N
     spec.option.gravity = _gravity(master, slave)
     _set_master(spec, master, scene)
     layout = chain_layout(N)
-    joint_names, stiff, arm, tip_mass = _add_octarm(spec, slave, plant, N, layout, scene)
+    joint_names, stiff = _add_octarm(spec, slave, plant, N, layout, scene)
     muscle = plant.actuation == "muscle"
     act_names = (_add_muscles(spec, joint_names, plant, layout, N) if muscle
                  else _add_actuators(spec, joint_names, plant.actuation))
@@ -307,21 +304,25 @@ def _build(master: MasterParams, slave: SlaveParams, plant: PlantConfig, scene=N
         arm_geoms = [(f"octarm_s{i}_seg{j}_geom", f"octarm_s{i}_seg{j}_body")
                      for i in range(3) for j in range(N)]
         add_environment(spec, environment, invw, arm_geoms)
-    kp = np.zeros(len(joint_names))
-    kv = np.zeros(len(joint_names))
+    kp = kv = np.zeros(len(joint_names))
     if plant.actuation == "servo":
         m = _compile(spec, "the plant model")
-        d = mujoco.MjData(m)
-        mujoco.mj_forward(m, d)  # qpos0 = straight, rest length
-        M = np.zeros((m.nv, m.nv))
-        mujoco.mj_fullM(m, d, M)
         dof = np.array([m.jnt_dofadr[m.joint(n).id] for n in joint_names])
         C = layout["C"]
-        mass_u = np.einsum("ra,rs,sa->a", C, M[np.ix_(dof, dof)], C)  # diag(C^T M C)
+        mass_u = np.einsum("ra,rs,sa->a", C, _mass_matrix0(m)[np.ix_(dof, dof)], C)  # diag(C^T M C)
         kp, kv = servo_gains(mass_u, N, layout, plant.servo_frequency, plant.servo_damping_ratio)
         for a_name, p, v in zip(act_names, kp, kv, strict=True):
             spec.actuator(a_name).set_to_position(kp=float(p), kv=float(v))
-    return spec, N, layout, joint_names, act_names, stiff, arm, tip_mass, kp, kv
+    return spec, N, layout, joint_names, act_names, stiff, kp, kv
+
+
+def _mass_matrix0(m: mujoco.MjModel) -> np.ndarray:
+    """The joint-space inertia (nv, nv) at qpos0 (straight, rest length), armature included."""
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    M = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, M)
+    return M
 
 
 def build_spec(master: MasterParams, slave: SlaveParams, plant: PlantConfig, *,
@@ -339,8 +340,8 @@ def build_model(master: MasterParams, slave: SlaveParams, plant: PlantConfig, *,
                 environment=None) -> tuple[mujoco.MjModel, ChainMap]:
     """Compiled plant model and its ``ChainMap`` (see ``build_spec``); environment: an
     `EnvironmentConfig` whose objects are added (`harness.plant.environment`)."""
-    spec, N, layout, joint_names, act_names, stiff, arm, tip_mass, kp, kv = _build(master, slave, plant,
-                                                                                   scene_xml, environment)
+    spec, N, layout, joint_names, act_names, stiff, kp, kv = _build(master, slave, plant, scene_xml,
+                                                                    environment)
     m = _compile(spec, "the plant model")
     act_ids = [m.actuator(n).id for n in act_names]
     muscle = plant.actuation == "muscle"
@@ -358,8 +359,8 @@ def build_model(master: MasterParams, slave: SlaveParams, plant: PlantConfig, *,
         C=layout["C"], R=layout["R"], L0=slave.rest_lengths, section=layout["section"],
         is_hinge=layout["is_hinge"], segment=layout["segment"], joint_stiffness=stiff,
         shape_stiffness=np.where(layout["is_hinge"] == 0, stiff, 0.0),
-        seg_kb=N * np.asarray(slave.bending_stiffness), ke=slave.extension_stiffness, armature=arm,
-        servo_kp=kp, servo_kv=kv, tip_mass=float(tip_mass))
+        seg_kb=N * np.asarray(slave.bending_stiffness), ke=slave.extension_stiffness, servo_kp=kp,
+        servo_kv=kv)
     return m, cmap
 
 
@@ -406,10 +407,7 @@ def _check_clearance(m: mujoco.MjModel, cmap: ChainMap, cm: ContactMap, scn: Sce
 def stiffness_courant_number(m: mujoco.MjModel, cm: ChainMap) -> float:
     """h w_max of the chain's joint springs (and servo kp) against its inertia at qpos0: w_max^2 the largest
     generalized eigenvalue of diag(stiffness + kp) and the chain block of M; explicit springs need < 2."""
-    d = mujoco.MjData(m)
-    mujoco.mj_forward(m, d)
-    M = np.zeros((m.nv, m.nv))
-    mujoco.mj_fullM(m, d, M)
+    M = _mass_matrix0(m)
     idx = np.asarray(cm.chain_dof_adr)
     Mc = M[np.ix_(idx, idx)]
     k = np.asarray(cm.joint_stiffness) + np.asarray(cm.servo_kp)
