@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .scratch import scratch_zeros
+
 SERIES_RADIUS = 2.0  # |t| below which E_n uses the power series (24 terms: error < 1e-16)
 INV = 1.0 / np.arange(1.0, 33.0)  # INV[k] = 1 / (k + 1)
 
@@ -23,45 +25,21 @@ INV = 1.0 / np.arange(1.0, 33.0)  # INV[k] = 1 / (k + 1)
 def en_tuple(t):
     """(E_0, E_1, E_2, E_3)(t), E_n(t) = int_0^1 v^n exp(i t v) dv (complex), in real arithmetic."""
     if abs(t) < SERIES_RADIUS:
-        r0 = 0.0
-        r1 = 0.0
-        r2 = 0.0
-        r3 = 0.0
-        i0 = 0.0
-        i1 = 0.0
-        i2 = 0.0
-        i3 = 0.0
+        re = scratch_zeros(4)
+        im = scratch_zeros(4)
         a = 1.0  # t^m / m!
         for m in range(26):
-            v0 = a * INV[m]
-            v1 = a * INV[m + 1]
-            v2 = a * INV[m + 2]
-            v3 = a * INV[m + 3]
-            q = m & 3
-            if q == 0:
-                r0 += v0
-                r1 += v1
-                r2 += v2
-                r3 += v3
-            elif q == 1:
-                i0 += v0
-                i1 += v1
-                i2 += v2
-                i3 += v3
-            elif q == 2:
-                r0 -= v0
-                r1 -= v1
-                r2 -= v2
-                r3 -= v3
+            sa = a if m & 2 == 0 else -a  # i^m a: its sign, and whether it is real (m even)
+            if m & 1 == 0:
+                for n in range(4):
+                    re[n] += sa * INV[m + n]
             else:
-                i0 -= v0
-                i1 -= v1
-                i2 -= v2
-                i3 -= v3
+                for n in range(4):
+                    im[n] += sa * INV[m + n]
             a = a * t * INV[m]
             if abs(a) < 1e-18:
                 break
-        return complex(r0, i0), complex(r1, i1), complex(r2, i2), complex(r3, i3)
+        return complex(re[0], im[0]), complex(re[1], im[1]), complex(re[2], im[2]), complex(re[3], im[3])
     c = np.cos(t)
     s = np.sin(t)
     # E_0 = (e - 1) / (i t);  E_n = (e - n E_{n-1}) / (i t);  z / (i t) = (Im z - i Re z) / t

@@ -70,12 +70,8 @@ class Action:
     __slots__ = ("T1", "T2", "u2", "deN", "q2_ref", "dq2_ref", "use_ref")
 
     def __init__(self) -> None:
-        self.T1 = np.zeros(2)
-        self.T2 = np.zeros(6)
-        self.u2 = np.zeros(6)
-        self.deN = np.zeros(6)
-        self.q2_ref = np.zeros(6)
-        self.dq2_ref = np.zeros(6)
+        self.T1, self.T2, self.u2, self.deN = np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6)
+        self.q2_ref, self.dq2_ref = np.zeros(6), np.zeros(6)
         self.use_ref = False
 
 

@@ -17,6 +17,8 @@ from math import factorial
 
 import numpy as np
 
+from .scratch import scratch, scratch_zeros
+
 MOMENT_RADIUS = 1.5  # rad, |Theta| up to which the series is used
 P_MAX = 36  # powers of Theta tabulated (the term at p = 36 is < 1.5^36 / 36! ~ 5e-36 at the radius)
 N_RULES = 32  # Gauss-Legendre rules tabulated: n = 2..32 points (slave.n_quad's range)
@@ -73,54 +75,27 @@ def section_moments(th, f, nodes, Q):
     n = nodes.shape[0]
     if abs(th) > MOMENT_RADIUS or n < 2 or n > N_RULES or nodes[0] != NODE0[n]:
         return False
-    r0 = COEF[n, 0, 0]
-    r1 = COEF[n, 1, 0]
-    r2 = COEF[n, 2, 0]
-    r3 = COEF[n, 3, 0]
-    r4 = COEF[n, 4, 0]
-    r5 = COEF[n, 5, 0]
-    r6 = COEF[n, 6, 0]
-    r7 = COEF[n, 7, 0]
-    i0 = 0.0
-    i1 = 0.0
-    i2 = 0.0
-    i3 = 0.0
-    i4 = 0.0
-    i5 = 0.0
-    i6 = 0.0
-    i7 = 0.0
+    re = scratch(8)
+    im = scratch_zeros(8)
+    for q in range(8):
+        re[q] = COEF[n, q, 0]
     a = abs(th)
     t = 1.0  # th^p
     for p in range(1, P_MAX, 2):
         t *= th  # odd power p: the imaginary parts
-        i0 += t * COEF[n, 0, p]
-        i1 += t * COEF[n, 1, p]
-        i2 += t * COEF[n, 2, p]
-        i3 += t * COEF[n, 3, p]
-        i4 += t * COEF[n, 4, p]
-        i5 += t * COEF[n, 5, p]
-        i6 += t * COEF[n, 6, p]
-        i7 += t * COEF[n, 7, p]
+        for q in range(8):
+            im[q] += t * COEF[n, q, p]
         t *= th  # even power p + 1: the real parts
-        r0 += t * COEF[n, 0, p + 1]
-        r1 += t * COEF[n, 1, p + 1]
-        r2 += t * COEF[n, 2, p + 1]
-        r3 += t * COEF[n, 3, p + 1]
-        r4 += t * COEF[n, 4, p + 1]
-        r5 += t * COEF[n, 5, p + 1]
-        r6 += t * COEF[n, 6, p + 1]
-        r7 += t * COEF[n, 7, p + 1]
+        for q in range(8):
+            re[q] += t * COEF[n, q, p + 1]
         if abs(t) * a * CTAIL[p + 2] < TAIL:  # the terms from p + 2 on (|th| < 1.5 < p: they shrink)
             break
     Q[0, 0] = MU[n, 0]
-    Q[0, 1] = f * complex(r0, i0)
-    Q[0, 2] = f * complex(r1, i1)
-    Q[0, 3] = f * complex(r2, i2)
-    Q[1, 1] = complex(r3, i3)
-    Q[1, 2] = complex(r4, i4)
-    Q[1, 3] = complex(r5, i5)
-    Q[2, 2] = complex(r6, i6)
-    Q[2, 3] = complex(r7, i7)
+    for m in range(3):
+        Q[0, 1 + m] = f * complex(re[m], im[m])
+        Q[1, 1 + m] = complex(re[3 + m], im[3 + m])
+    Q[2, 2] = complex(re[6], im[6])
+    Q[2, 3] = complex(re[7], im[7])
     return True
 
 

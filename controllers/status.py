@@ -1,9 +1,6 @@
-"""Named status codes of a run's step: what the loop's kernels, the plants' `advance` / `true_state` and
-`harness.loop.common.set_outcome` exchange.  0 is a step that went well; every other code ends the run
-as "diverged" with `Status(code).text` in its message.
-
-The compiled kernels use the `ST_*` integer constants below (numba reads module-level integers as
-constants); Python code uses `Status` members (an IntEnum: equal to those integers)."""
+"""Named status codes of a run's step (kernels, plants' `advance` / `true_state`, the loop): 0 is a step
+that went well; any other code ends the run as "diverged" with `Status(code).text` in its message.
+Compiled kernels use the ST_* integers (numba reads module-level integers as constants)."""
 
 from __future__ import annotations
 
@@ -39,12 +36,5 @@ _TEXT = {
 }
 
 # the same codes as plain integers, for the compiled kernels
-ST_OK = int(Status.OK)
-ST_NONFINITE = int(Status.NONFINITE)
-ST_MASTER_SINGULAR = int(Status.MASTER_SINGULAR)
-ST_SLAVE_SINGULAR = int(Status.SLAVE_SINGULAR)
-ST_RUNAWAY = int(Status.RUNAWAY)
-ST_SECTION_LENGTH = int(Status.SECTION_LENGTH)
-ST_MUJOCO_STATE = int(Status.MUJOCO_STATE)
-ST_MUJOCO_WARNING = int(Status.MUJOCO_WARNING)
-ST_PLANT_STATE = int(Status.PLANT_STATE)
+(ST_OK, ST_NONFINITE, ST_MASTER_SINGULAR, ST_SLAVE_SINGULAR, ST_RUNAWAY, ST_SECTION_LENGTH, ST_MUJOCO_STATE,
+ ST_MUJOCO_WARNING, ST_PLANT_STATE) = (int(s) for s in Status)
