@@ -25,8 +25,7 @@ INV = 1.0 / np.arange(1.0, 33.0)  # INV[k] = 1 / (k + 1)
 def en_tuple(t):
     """(E_0, E_1, E_2, E_3)(t), E_n(t) = int_0^1 v^n exp(i t v) dv (complex), in real arithmetic."""
     if abs(t) < SERIES_RADIUS:
-        re = scratch_zeros(4)
-        im = scratch_zeros(4)
+        re, im = scratch_zeros(4), scratch_zeros(4)
         a = 1.0  # t^m / m!
         for m in range(26):
             sa = a if m & 2 == 0 else -a  # i^m a: its sign, and whether it is real (m even)
@@ -99,8 +98,7 @@ def backbone_points(q, n_per_section, out):
     """Backbone points [X, Z] (m), out (3 n + 1, 2): base, then n evenly spaced points per section."""
     base = 0.0j
     phi = 0.0
-    out[0, 0] = 0.0
-    out[0, 1] = 0.0
+    out[0, 0] = out[0, 1] = 0.0
     r = 1
     for s in range(3):
         ds = q[s]

@@ -33,14 +33,9 @@ DET_MIN = 1e-14  # det(J2 J2^T) below this is reported as a singular configurati
 def master_control_kernel(pk, gains, q, dq, xd, dxd, ddxd, F1, T1, info):
     """Master law (12)-(13): writes T1 (2,) and info (MASTER_INFO,) = x1, e1, de1, a1 = ddx_d + k1 de1 +
     k2 e1, dx1.  Returns det(J1) (0: singular, T1 not written)."""
-    x = scratch(2)
-    J = scratch((2, 2))
-    Jd = scratch((2, 2))
-    M = scratch((2, 2))
-    N = scratch(2)
+    x, J, Jd, M, N = scratch(2), scratch((2, 2)), scratch((2, 2)), scratch((2, 2)), scratch(2)
     master_kernel(pk, q, dq, x, J, Jd, M, N)
-    k1 = gains[0]
-    k2 = gains[1]
+    k1, k2 = gains[0], gains[1]
     v = scratch(2)
     for i in range(2):
         dx = J[i, 0] * dq[0] + J[i, 1] * dq[1]
@@ -97,20 +92,13 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
     null_space_scale]); spec: packed sub-task; q, dq (6,) sensed; x1, dx1 (2,) master tip and velocity;
     a1 (2,) master's commanded task acceleration; F2 (2,).  Writes T2, u2, deN (6,) and info (SLAVE_INFO,):
     x2, e2, de2, beta, y_a, det, beta_m, beta_l.  Returns det(J2 J2^T); <= DET_MIN: singular, T2 = u2 = 0."""
-    k3 = gains[2]
-    k4 = gains[3]
-    ky = gains[4]
-    ks = gains[5]
-    kn = gains[6]
-    sgn = 1.0
+    k3, k4, ky, ks, kn = gains[2], gains[3], gains[4], gains[5], gains[6]
+    sgn = 1.0  # fault factors: e2 sign and null-space scale
     nss = 1.0
     if gains.shape[0] > 8:
         sgn = gains[7]
         nss = gains[8]
-    x = scratch(2)
-    J = scratch((2, 6))
-    H = scratch((2, 6, 6))
-    Hd = scratch((2, 6, 6))
+    x, J, H, Hd = scratch(2), scratch((2, 6)), scratch((2, 6, 6)), scratch((2, 6, 6))
     tip_kinematics(q, dq, 3, x, J, H, Hd)
     Jd = scratch_zeros((2, 6))
     for i in range(2):
@@ -119,8 +107,7 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
             for b in range(6):
                 acc += H[i, a, b] * dq[b]
             Jd[i, a] = acc
-    Jp = scratch_zeros((6, 2))
-    Jpd = scratch_zeros((6, 2))
+    Jp, Jpd = scratch_zeros((6, 2)), scratch_zeros((6, 2))
     det = pinv_terms(J, Jd, Jp, Jpd)
     # task-space errors (16)
     v = scratch(2)
@@ -139,26 +126,19 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
     info[SI_DET] = det
     if det <= DET_MIN:
         for a in range(6):
-            T2[a] = 0.0
-            u2[a] = 0.0
-            deN[a] = 0.0
-        info[SI_BETA] = 0.0
+            T2[a] = u2[a] = deN[a] = 0.0
+        info[SI_BETA] = info[SI_BM] = info[SI_BL] = 0.0
         info[SI_YA] = 1.0
-        info[SI_BM] = 0.0
-        info[SI_BL] = 0.0
         return det
     # sub-task (29)-(33): g = ks ky y^2 grad beta, dg exact
-    grad = scratch(6)
-    graddot = scratch(6)
-    parts = scratch(3)
+    grad, graddot, parts = scratch(6), scratch(6), scratch(3)
     beta = subtask_kernel(spec, J, H, Jd, Hd, q, dq, grad, graddot, parts)
     ya = np.exp(-ky * beta)
     betad = 0.0
     for a in range(6):
         betad += grad[a] * dq[a]
     yad = -ky * ya * betad
-    g = scratch(6)
-    gd = scratch(6)
+    g, gd = scratch(6), scratch(6)
     for a in range(6):
         g[a] = ks * ky * ya * ya * grad[a]
         gd[a] = ks * ky * (2.0 * ya * yad * grad[a] + ya * ya * graddot[a])
@@ -167,8 +147,7 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
     info[SI_BM] = parts[0]
     info[SI_BL] = parts[1]
     # projector P = I - J^+ J, J_phi (26)
-    P = scratch((6, 6))
-    JpJ = scratch((6, 6))
+    P, JpJ = scratch((6, 6)), scratch((6, 6))
     for a in range(6):
         for b in range(6):
             s = Jp[a, 0] * J[0, b] + Jp[a, 1] * J[1, b]
@@ -191,10 +170,7 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
             acc += P[a, b] * r[b]
         deN[a] = acc
     # J_phi r = dJ^+ (J r) + J^+ (dJ J^+ J r)
-    Jr0 = 0.0
-    Jr1 = 0.0
-    Kr0 = 0.0
-    Kr1 = 0.0
+    Jr0 = Jr1 = Kr0 = Kr1 = 0.0
     for b in range(6):
         Jr0 += J[0, b] * r[b]
         Jr1 += J[1, b] * r[b]
@@ -209,8 +185,7 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
     for a in range(6):
         u2[a] = Jp[a, 0] * v[0] + Jp[a, 1] * v[1] + nss * phi[a]
     # T2 = M u2 + N2 - J^T F2 (17)
-    M = scratch((6, 6))
-    N = scratch(6)
+    M, N = scratch((6, 6)), scratch(6)
     mass_nle_kernel(pk, q, dq, nodes, weights, M, N)
     for a in range(6):
         acc = N[a] - (J[0, a] * F2[0] + J[1, a] * F2[1])

@@ -46,13 +46,10 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
     Coriolis in Lagrange form: C dq = sum_s int m_s J_p^T (d^2p/dt^2 at ddq = 0) du (+ slice rotation).
     Along section s, J_p(u) = V0 + b0(u) V1 + b1(u) V2 and d^2p/dt^2 is affine in (1, b0, b1, b2)
     (`cc.term_bases`, `cc.term_ydd`), so the quadrature only needs the moments Q (`moments`)."""
-    d = scratch(3)
-    th = scratch(3)
-    ydot = scratch(6)
+    d, th, ydot = scratch(3), scratch(3), scratch(6)
     y_of_q(q, d, th, ydot, dq)
     # prefix sums over the completed sections: y-gradient and ydot^T H_y ydot of their end terms
-    PJ = scratch_cz((3, 6))
-    Pcor = scratch_cz(3)
+    PJ, Pcor = scratch_cz((3, 6)), scratch_cz(3)
     fs = scratch_c(3)  # exp(i phi) at the start of each section
     fs[0] = 1.0
     phi = 0.0
@@ -73,9 +70,7 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
     cen = scratch(3)  # 2 dk_i dd_i
     for i in range(3):
         cen[i] = 2.0 * dq[3 + i] * dq[i]
-    Y = scratch_c((3, 6))  # y-space V0, V1, V2
-    V = scratch_c((3, 6))  # q-space (B^T Y)
-    Z = scratch_c((3, 6))
+    Y, V, Z = scratch_c((3, 6)), scratch_c((3, 6)), scratch_c((3, 6))  # V0, V1, V2 in y-space; V = B^T Y
     Q = scratch_c((3, 4))  # Q[k, m] = sum_g w conj(phi_k) psi_m
     A = scratch_c(4)  # d^2p/dt^2 = sum_m A_m psi_m, psi = (1, b0, b1, b2)
     alpha = scratch(6)
@@ -87,8 +82,7 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
         # J_p(u) = V0 + b0 V1 + b1 V2 in y-space (as term_grad_add)
         for a in range(6):
             Y[0, a] = PJ[s, a]
-            Y[1, a] = 0.0
-            Y[2, a] = 0.0
+            Y[1, a] = Y[2, a] = 0.0
         for ll in range(s):
             Y[1, 3 + ll] = ids
         Y[1, s] = 1.0

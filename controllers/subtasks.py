@@ -37,20 +37,14 @@ def manipulability_kernel(J, H, Jd, Hd, grad, graddot):
     det = A00 * A11 - A01 * A01
     if det <= 0.0:
         for c in range(6):
-            grad[c] = 0.0
-            graddot[c] = 0.0
+            grad[c] = graddot[c] = 0.0
         return 0.0, det
     beta = np.sqrt(det)
     detd = Ad00 * A11 + A00 * Ad11 - 2.0 * A01 * Ad01
     betad = detd / (2.0 * beta)
     for c in range(6):
         # dA/dq_c = H_c J^T + J H_c^T and its time derivative
-        dA00 = 0.0
-        dA01 = 0.0
-        dA11 = 0.0
-        dAd00 = 0.0
-        dAd01 = 0.0
-        dAd11 = 0.0
+        dA00 = dA01 = dA11 = dAd00 = dAd01 = dAd11 = 0.0
         for a in range(6):
             h0 = H[0, a, c]
             h1 = H[1, a, c]
@@ -94,8 +88,7 @@ def limits_kernel(spec, q, dq, grad, graddot):
     bmax = spec[4]
     beta = 0.0
     for c in range(6):
-        grad[c] = 0.0
-        graddot[c] = 0.0
+        grad[c] = graddot[c] = 0.0
     for i in range(3):
         L0 = spec[5 + i]
         cen = 0.5 * L0 * (1.0 + ext)
@@ -125,8 +118,7 @@ def limits_kernel(spec, q, dq, grad, graddot):
 def subtask_kernel(spec, J, H, Jd, Hd, q, dq, grad, graddot, parts):
     """Combined beta = w_m beta_m + w_l beta_l with grad and d/dt grad (6,) (overwritten).
     parts (3,) receives [beta_m, beta_l, det(J J^T)].  Returns beta."""
-    g1 = scratch(6)
-    gd1 = scratch(6)
+    g1, gd1 = scratch(6), scratch(6)
     beta_m, det = manipulability_kernel(J, H, Jd, Hd, g1, gd1)
     parts[0] = beta_m
     parts[2] = det

@@ -64,8 +64,7 @@ def tip_kinematics(q, dq, order, x, J, H, Hd):
         H[d_i, d_j] = k_j XdT[i, j] + k_i XdT[j, i] + k_i k_j XTT[i, j]
         H[d_i, k_j] = d_j (XdT[i, j] + k_i XTT[i, j]) + [i = j] G[i]
         H[k_i, k_j] = d_i d_j XTT[i, j]."""
-    b = scratch_c((3, 4))
-    R = scratch_c(4)
+    b, R = scratch_c((3, 4)), scratch_c(4)
     tip_bases(q, b, R)
     x[0] = R[0].imag
     x[1] = R[0].real
@@ -83,19 +82,14 @@ def tip_kinematics(q, dq, order, x, J, H, Hd):
         J[1, 3 + i] = jk.real
     if order < 2:
         return
-    XdT = scratch_c((3, 3))
-    XTT = scratch_c((3, 3))
-    diag = scratch_c(3)
+    XdT, XTT, diag = scratch_c((3, 3)), scratch_c((3, 3)), scratch_c(3)
     for i in range(3):
         diag[i] = -(R[i + 1] + q[i] * b[i, 2])
     tip_y_blocks(b, G, diag, XdT, XTT)
     if order >= 3:
         # rates: Thetadot, phidot, db/dt (n = 0..2), the tails' rates Rd, and Gd = dG/dt
-        bd = scratch_c((3, 3))
-        Rd = scratch_c(4)
-        Gd = scratch_c(3)
-        YdT = scratch_c((3, 3))
-        YTT = scratch_c((3, 3))
+        bd, Rd, Gd = scratch_c((3, 3)), scratch_c(4), scratch_c(3)
+        YdT, YTT = scratch_c((3, 3)), scratch_c((3, 3))
         phid = 0.0
         for j in range(3):
             thd = q[3 + j] * dq[j] + q[j] * dq[3 + j]  # dTheta_j/dt
