@@ -29,18 +29,8 @@ def chain_joints_from_q2(q2, C, L0, out):
         out[r] = acc
 
 
-def chain_joints_jacobian(q2, C, out):
-    """A(q2) = d qpos_chain / d q2, out (n_chain, 6): A[:, i] = C[:, i] + k_i C[:, 3+i],
-    A[:, 3+i] = d_i C[:, 3+i]."""
-    n = C.shape[0]
-    for r in range(n):
-        for i in range(3):
-            out[r, i] = C[r, i] + q2[3 + i] * C[r, 3 + i]
-            out[r, 3 + i] = q2[i] * C[r, 3 + i]
-
-
 def chain_joints_rate_add(q2, dq2, C, scale, out):
-    """out (n_chain,) += scale (n_chain,) * A(q2) dq2 (the joint rates of a CC motion), without forming A."""
+    """out (n_chain,) += scale (n_chain,) * A(q2) dq2 (joint rates of a CC motion; A: `ChainMap.jacobian`)."""
     n = C.shape[0]
     for r in range(n):
         v = 0.0
@@ -201,12 +191,6 @@ def chain_layout(n_segments: int) -> dict[str, np.ndarray]:
             "slide_index": slide_index, "segment": segment}
 
 
-def _ro(a, dtype=np.float64) -> np.ndarray:
-    a = np.ascontiguousarray(np.array(a, dtype=dtype))
-    a.setflags(write=False)
-    return a
-
-
 @dataclass(frozen=True, eq=False)
 class ChainMap:
     """Addresses and constant arrays tying a MuJoCo model to q2 (read-only, C-contiguous float64/int64).
@@ -250,8 +234,9 @@ class ChainMap:
         for f in fields(self):
             if f.type == "np.ndarray":
                 integer = f.name.endswith(("_adr", "_ids")) or f.name in ("section", "is_hinge", "segment")
-                dtype = np.int64 if integer else np.float64
-                object.__setattr__(self, f.name, _ro(getattr(self, f.name), dtype))
+                a = np.array(getattr(self, f.name), dtype=np.int64 if integer else np.float64, order="C")
+                a.setflags(write=False)
+                object.__setattr__(self, f.name, a)
 
     @property
     def n_chain(self) -> int:
@@ -263,7 +248,6 @@ class ChainMap:
         return (self.R, self.C, self.L0, self.section, self.is_hinge, self.seg_kb, self.ke,
                 self.joint_stiffness, self.shape_stiffness)
 
-    # --- allocating convenience wrappers ----------------------------------------------------------
     def joints_from_q2(self, q2) -> np.ndarray:
         """(n_chain,) chain joint positions on the CC manifold for q2 (6,)."""
         out = np.empty(self.n_chain)
@@ -271,10 +255,9 @@ class ChainMap:
         return out
 
     def jacobian(self, q2) -> np.ndarray:
-        """A(q2) = d joints / d q2, (n_chain, 6)."""
-        out = np.empty((self.n_chain, 6))
-        chain_joints_jacobian(np.asarray(q2, dtype=float), self.C, out)
-        return out
+        """A(q2) = d joints / d q2 (n_chain, 6): columns C[:, i] + k_i C[:, 3+i] and d_i C[:, 3+i]."""
+        q2 = np.asarray(q2, dtype=float)
+        return np.hstack([self.C[:, :3] + q2[3:] * self.C[:, 3:], q2[:3] * self.C[:, 3:]])
 
     def q2_from_joints(self, qpos_chain) -> np.ndarray:
         """Sensed q2 (6,) from chain joint positions (n_chain,)."""
@@ -294,8 +277,7 @@ class ChainMap:
         return out
 
     def muscle_commands(self, q2, T2) -> tuple[np.ndarray, int]:
-        """Muscle group commands (6,) for T2 at q2 and the number of saturated groups
-        (``muscle_commands``)."""
+        """Muscle group commands (6,) for T2 at q2 and the number of saturated groups."""
         out = np.empty(6)
         n_sat = muscle_commands(np.asarray(q2, dtype=float), np.asarray(T2, dtype=float),
                                 self.muscle_radius, self.muscle_max_force, out)
@@ -307,12 +289,8 @@ class ChainMap:
         chain_elastic_correction(np.asarray(qpos_chain, dtype=float), *self.elastic_args, out)
         return out
 
-    # --- MjData helpers ---------------------------------------------------------------------------
     def chain_qpos(self, d: mujoco.MjData) -> np.ndarray:
         return d.qpos[self.chain_qpos_adr].copy()
-
-    def chain_qvel(self, d: mujoco.MjData) -> np.ndarray:
-        return d.qvel[self.chain_dof_adr].copy()
 
     def set_q2(self, d: mujoco.MjData, q2, dq2=None) -> None:
         """Put the chain on the CC manifold at q2 (and velocity A dq2; zero if None)."""
@@ -321,7 +299,7 @@ class ChainMap:
 
     def sense(self, d: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
         """(q2, dq2) sensed from the chain joints of d."""
-        return self.sense_joints(self.chain_qpos(d), self.chain_qvel(d))
+        return self.sense_joints(self.chain_qpos(d), d.qvel[self.chain_dof_adr])
 
     def master_tip(self, m: mujoco.MjModel, d: mujoco.MjData) -> np.ndarray:
         """[X, Z] of master_tip_site relative to master_base (needs up-to-date kinematics)."""
@@ -335,5 +313,5 @@ class ChainMap:
 
 
 # kernels compiled by harness.loop.fast (numba) together with controllers/
-KERNELS = ("chain_joints_from_q2", "chain_joints_jacobian", "chain_joints_rate_add", "chain_sense",
+KERNELS = ("chain_joints_from_q2", "chain_joints_rate_add", "chain_sense",
            "chain_force_from_T2", "muscle_commands", "chain_elastic_correction")

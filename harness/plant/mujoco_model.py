@@ -159,23 +159,18 @@ def _add_octarm(spec: mujoco.MjSpec, slave: SlaveParams, plant: PlantConfig, N: 
             else:
                 z = 0.5 * l0[0]
             name = f"octarm_s{i}_seg{j}"
-            body = parent.add_body(name=f"{name}_body", pos=[0.0, 0.0, z])
-            body.mass = float(mass[i, j])
-            body.ipos = [0.0, 0.0, 0.0]
             # rod: about x = about y; about the rod axis a tiny but valid value
-            body.inertia = [float(iyy[i, j]), float(iyy[i, j]), float(1e-3 * iyy[i, j])]
-            body.explicitinertial = True
+            body = parent.add_body(name=f"{name}_body", pos=[0.0, 0.0, z], mass=float(mass[i, j]),
+                                   ipos=[0.0, 0.0, 0.0], explicitinertial=True,
+                                   inertia=[float(iyy[i, j]), float(iyy[i, j]), float(1e-3 * iyy[i, j])])
             add_joint(body, d_slide, f"{name}_slide")
             add_joint(body, d_hinge, f"{name}_hinge")
             body.add_geom(d_geom, name=f"{name}_geom",
                           fromto=[0.0, 0.0, -0.5 * l0[i], 0.0, 0.0, 0.5 * l0[i]])
             parent = body
-    tip = parent.add_body(name="octarm_tip_body", pos=[0.0, 0.0, 0.5 * l0[2]])
-    tip.mass = float(tip_mass)
-    tip.ipos = [0.0, 0.0, 0.0]
     it = float(tip_mass * (0.1 * l0[2]) ** 2)
-    tip.inertia = [it, it, it]
-    tip.explicitinertial = True
+    tip = parent.add_body(name="octarm_tip_body", pos=[0.0, 0.0, 0.5 * l0[2]], mass=float(tip_mass),
+                          ipos=[0.0, 0.0, 0.0], inertia=[it, it, it], explicitinertial=True)
     add_joint(tip, d_slide, "octarm_tip_slide")
     tip.add_site(name="octarm_tip_site")
     return joint_names, stiff
@@ -195,14 +190,12 @@ def _add_muscles(spec: mujoco.MjSpec, joint_names: list[str], plant: PlantConfig
                 if cf != 0.0:
                     t.wrap_joint(jn, float(cf))
             a = spec.add_actuator(name=f"octarm_s{i}_muscle_{tag}", target=t.name,
-                                  trntype=mujoco.mjtTrn.mjTRN_TENDON)
-            a.dyntype = mujoco.mjtDyn.mjDYN_FILTEREXACT
+                                  trntype=mujoco.mjtTrn.mjTRN_TENDON, dyntype=mujoco.mjtDyn.mjDYN_FILTEREXACT,
+                                  gaintype=mujoco.mjtGain.mjGAIN_FIXED, biastype=mujoco.mjtBias.mjBIAS_NONE,
+                                  ctrllimited=mujoco.mjtLimited.mjLIMITED_TRUE,
+                                  ctrlrange=[0.0, float(plant.muscle_max_force[i])])
             a.dynprm[0] = float(plant.muscle_time_constant[i])
-            a.gaintype = mujoco.mjtGain.mjGAIN_FIXED
             a.gainprm[0] = 1.0
-            a.biastype = mujoco.mjtBias.mjBIAS_NONE
-            a.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-            a.ctrlrange = [0.0, float(plant.muscle_max_force[i])]
             names.append(a.name)
     return names
 
