@@ -1,15 +1,13 @@
 """Planar constant-curvature (CC) kinematics with exact derivatives up to third order.
 
-A point is c = Z + i X (Z up, X right); the tangent at arc angle phi is exp(i phi) (k > 0 bends toward
-+X).  Section j has length d_j, curvature k_j, bend Theta_j = k_j d_j; the point at material coordinate
-u in [0, 1] of section s is
+A point is c = Z + i X; the tangent at arc angle phi is exp(i phi) (k > 0 bends toward +X).  Section j
+(length d_j, bend Theta_j = k_j d_j) at material coordinate u in [0, 1]:
 
     c_s(u) = sum_{j<s} T_j(1) + T_s(u),     T_j(u) = exp(i phi_{j-1}) u d_j E_0(u Theta_j),
 
-phi_{j-1} = sum_{l<j} Theta_l, E_n(t) = int_0^1 v^n exp(i t v) dv (entire: series near 0, upward
-recursion elsewhere; smooth across k = 0).  The bases b_n = f u^(1+n) E_n(u Theta) (`term_bases`) carry
-every derivative in y = [d, Theta].  `backbone_points` is the project's one CC backbone.  Kernels:
-numba-compatible loops that write into the arrays the caller passes.
+phi_{j-1} = sum_{l<j} Theta_l, E_n(t) = int_0^1 v^n exp(i t v) dv (entire, smooth across k = 0).  The
+bases b_n = f u^(1+n) E_n(u Theta) (`term_bases`) carry every derivative in y = [d, Theta].  Kernels:
+numba-compatible loops writing into the arrays the caller passes.
 """
 
 from __future__ import annotations

@@ -8,32 +8,24 @@ from enum import IntEnum
 
 
 class Status(IntEnum):
-    OK = 0
-    NONFINITE = 1
-    MASTER_SINGULAR = 2
-    SLAVE_SINGULAR = 3
-    RUNAWAY = 4
-    SECTION_LENGTH = 5
-    MUJOCO_STATE = 6
-    MUJOCO_WARNING = 7
-    PLANT_STATE = 8
+    """A status code and its one-line `text`."""
 
-    @property
-    def text(self) -> str:
-        return _TEXT[self]
+    OK = 0, "ok"
+    NONFINITE = 1, "non-finite state or command"
+    MASTER_SINGULAR = 2, "master Jacobian J1 singular"
+    SLAVE_SINGULAR = 3, "slave J2 J2^T singular"
+    RUNAWAY = 4, "runaway tracking error (|e| > 1 m)"
+    SECTION_LENGTH = 5, "slave section length <= 0"
+    MUJOCO_STATE = 6, "non-finite or exploding MuJoCo state (|x| > 1e6)"
+    MUJOCO_WARNING = 7, "MuJoCo warning"
+    PLANT_STATE = 8, "non-finite or exploding plant state (|x| > 1e6)"
 
+    def __new__(cls, value: int, text: str) -> Status:
+        member = int.__new__(cls, value)
+        member._value_ = value
+        member.text = text
+        return member
 
-_TEXT = {
-    Status.OK: "ok",
-    Status.NONFINITE: "non-finite state or command",
-    Status.MASTER_SINGULAR: "master Jacobian J1 singular",
-    Status.SLAVE_SINGULAR: "slave J2 J2^T singular",
-    Status.RUNAWAY: "runaway tracking error (|e| > 1 m)",
-    Status.SECTION_LENGTH: "slave section length <= 0",
-    Status.MUJOCO_STATE: "non-finite or exploding MuJoCo state (|x| > 1e6)",
-    Status.MUJOCO_WARNING: "MuJoCo warning",
-    Status.PLANT_STATE: "non-finite or exploding plant state (|x| > 1e6)",
-}
 
 # the same codes as plain integers, for the compiled kernels
 (ST_OK, ST_NONFINITE, ST_MASTER_SINGULAR, ST_SLAVE_SINGULAR, ST_RUNAWAY, ST_SECTION_LENGTH, ST_MUJOCO_STATE,

@@ -1,16 +1,10 @@
 """Environment objects the Octarm can touch, contact sensing and the t = 0 clearance check (MuJoCo plant;
-docs/guide/contact.md).
+docs/guide/contact.md).  Objects are world geoms in the slave's plane (world = octarm_base + [X, 0, Z]);
+every segment capsule and a tip sphere touch them through explicit frictionless pairs with
 
-Each `EnvObject` is a world geom in the slave's plane (world = octarm_base + [X, 0, Z]): `plane` (local +z
-= `normal`), `box` (y half size BOX_DEPTH) or `sphere`.  Every segment capsule and a tip sphere
-(TIP_RADIUS_FACTOR x the capsule radius) collide with the objects through explicit frictionless pairs.
-In static equilibrium MuJoCo's soft contact gives f = k_ref r d / ((1 - d) A) (r penetration, d the
-impedance, A = body_invweight0 of the arm body), so per pair
+    solref = (-k (1 - d) A_b, -c (1 - d) A_b),  solimp = (d, d, 0.001, 0.5, 2)  =>  f = k r + c dr/dt
 
-    solref = (-k (1 - d) A_b, -c (1 - d) A_b),  solimp = (d, d, 0.001, 0.5, 2)  =>  f = k r + c dr/dt,
-
-c = 2 zeta sqrt(k / A_b).  Contact sensors (`ContactMap`): tip and whole-arm net force (world frame),
-whole-arm minimum distance and the N_POINTS largest contacts.
+in static equilibrium (r penetration, d the impedance, A_b = body_invweight0, c = 2 zeta sqrt(k / A_b)).
 """
 
 from __future__ import annotations

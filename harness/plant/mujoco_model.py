@@ -1,26 +1,13 @@
-"""MuJoCo plant: the master and a discretized Octarm, built from the MJCF in ``mjcf/`` by editing an
-MjSpec (the model: docs/plants.md; the joint <-> q2 maps: `harness.plant.chain_map`).
+"""MuJoCo plant: the master and a discretized Octarm, built from ``mjcf/`` by editing an MjSpec (the model
+and its actuations: docs/plants.md; the joint <-> q2 maps: `harness.plant.chain_map`; per-joint
+parameters: `harness.plant.chain_params`).  SI units; both robots move in planes parallel to world x-z,
+hinges turn about +y (+z toward +x); task space [X, Z] is relative to each base.
 
-SI units.  Both robots move in planes parallel to world x-z; hinges turn about +y (+z toward +x); task
-space [X, Z] is relative to each base (``master_base``, ``octarm_base``).
-
-Section i (length d_i, curvature k_i, Theta_i = k_i d_i, rest L0_i) is N segments: body
-``octarm_s{i}_seg{j}_body`` at the segment MIDPOINT has a slide ``..._slide`` along the parent's
-tangent, then a hinge ``..._hinge`` about +y; ``octarm_tip_body`` (slide ``octarm_tip_slide``, site
-``octarm_tip_site``) ends the chain.  Body offsets are the rest rod lengths.  On the CC manifold, with
+Section i (d_i, k_i, Theta_i = k_i d_i, rest L0_i) is N segments: body ``octarm_s{i}_seg{j}_body`` at the
+segment midpoint has a slide ``..._slide`` along the parent's tangent, then a hinge ``..._hinge``;
+``octarm_tip_body`` (``octarm_tip_slide``, ``octarm_tip_site``) ends the chain.  On the CC manifold, with
 e_i = d_i - L0_i: hinge(i, j) = Theta_i / N, slide(i, j >= 1) = e_i / N, slide(i, 0) = (e_{i-1} + e_i)
-/ (2N), tip slide = e_2 / (2N), i.e. joints = C [e, Theta]; n_chain = 6N + 1 in MuJoCo order (per
-segment slide, hinge; tip slide last).  Node positions are O(1/N^2) from the arc's.
-
-Masses m_i / N at the midpoints (the tip body's TIP_MASS_FRACTION of one taken from the last segment);
-springs, damping, armature and servo gains per unit length of the section (`chain_params`); the
-elastic correction (`chain_map.chain_elastic_correction`, through qfrc_applied every physics step)
-makes the elastic force exact on the manifold.  Actuation ``servo``: a position actuator per chain
-joint; ``torque``: a motor per chain joint; ``muscle``: per section two extensor groups at offsets
-+-r, fixed tendons ``octarm_s{i}_muscle_{pos,neg}_tendon`` driving ``general`` actuators (filterexact,
-ctrlrange [0, F_max]); the master: two motors.  ``enforce_cc``: joint and tendon equalities
-(CC_SOLREF, CC_SOLIMP) leaving the 6 CC coordinates.  The joint springs are explicit and the chain
-stiffens with N (`stiffness_courant_number`); N <= 32 steps stably at 1 ms.
+/ (2N), tip slide = e_2 / (2N), i.e. joints = C [e, Theta] (n_chain = 6N + 1, MuJoCo order).
 """
 
 from __future__ import annotations
@@ -399,7 +386,8 @@ def _check_clearance(m: mujoco.MjModel, cmap: ChainMap, cm: ContactMap, scn: Sce
 
 def stiffness_courant_number(m: mujoco.MjModel, cm: ChainMap) -> float:
     """h w_max of the chain's joint springs (and servo kp) against its inertia at qpos0: w_max^2 the largest
-    generalized eigenvalue of diag(stiffness + kp) and the chain block of M; explicit springs need < 2."""
+    generalized eigenvalue of diag(stiffness + kp) and the chain block of M; explicit springs need < 2
+    (it grows with N: N <= 32 steps stably at 1 ms)."""
     M = _mass_matrix0(m)
     idx = np.asarray(cm.chain_dof_adr)
     Mc = M[np.ix_(idx, idx)]
