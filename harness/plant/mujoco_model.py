@@ -56,7 +56,12 @@ _INTEGRATORS = {
 
 
 class PlantModelError(ValueError):
-    """The plant model cannot be built: bad MJCF file (named, with MuJoCo's message) or bad option."""
+    """The plant model cannot be built: bad MJCF file (named, with MuJoCo's message) or bad option;
+    `path`: the scenario field at fault, when known."""
+
+    def __init__(self, message: str, path: str | None = None) -> None:
+        super().__init__(message)
+        self.path = path
 
 
 def _load_spec(path: Path) -> mujoco.MjSpec:
@@ -103,11 +108,12 @@ def _set_master(spec: mujoco.MjSpec, master: MasterParams, src: Path) -> None:
 
 
 def _gravity(master: MasterParams, slave: SlaveParams) -> list[float]:
-    gx, gz = slave.gravity
-    if not np.allclose([gx, gz], [0.0, -master.gravity], rtol=1e-12, atol=1e-12):
+    gm, (gx, gz) = float(master.gravity), slave.gravity
+    if not np.allclose([gx, gz], [0.0, -gm], rtol=1e-12, atol=1e-12):
         raise PlantModelError(
-            f"master.gravity = {master.gravity} (along -Z) and slave.gravity = {slave.gravity} differ: "
-            "both robots share one MuJoCo world")
+            f"plant.master.gravity = {gm:g} and plant.slave.gravity = [{gx:g}, {gz:g}] differ: the MuJoCo "
+            f"plant has one world for both robots, so plant.slave.gravity must be [0, {-gm:g}] (set both, or "
+            "neither)", "plant.slave.gravity")
     return [gx, 0.0, gz]
 
 
@@ -381,7 +387,7 @@ def _check_clearance(m: mujoco.MjModel, cmap: ChainMap, cm: ContactMap, scn: Sce
         name = m.geom(g_obj).name[len("env_"):-len("_geom")]
         raise PlantModelError(
             f"environment.objects.{name}: intersects the slave at t = 0 ({m.geom(g_arm).name} penetrates "
-            f"{-dist:.4g} m); move the object or the initial state")
+            f"{-dist:.4g} m); move the object or the initial state", f"environment.objects.{name}")
 
 
 def stiffness_courant_number(m: mujoco.MjModel, cm: ChainMap) -> float:
