@@ -24,14 +24,10 @@ def segment_inertias(slave: SlaveParams, N: int) -> tuple[np.ndarray, np.ndarray
     Is = np.asarray(slave.slice_inertia)
     mass = np.repeat((m / N)[:, None], N, axis=1)
     iyy = mass * (L0[:, None] / N) ** 2 / 12.0
-    for i in range(3):
-        for j in range(N):
-            iyy[i, j] += 0.5 * Is[i] / N  # end half of own segment
-            # start half of the next segment (same orientation as this body)
-            if j + 1 < N:
-                iyy[i, j] += 0.5 * Is[i] / N
-            elif i + 1 < 3:
-                iyy[i, j] += 0.5 * Is[i + 1] / N
+    half = (0.5 * Is / N)[:, None]
+    iyy += half  # the end half of the segment's own slice inertia
+    iyy[:, :-1] += half  # the start half of the next segment (same orientation as this body)
+    iyy[:2, -1] += half[1:, 0]
     tip_mass = TIP_MASS_FRACTION * m[2] / N
     mass[2, N - 1] -= tip_mass
     return mass, iyy, tip_mass
