@@ -102,8 +102,7 @@ class DampedLeastSquaresIK(Controller):
         super().reset(ctx)
         self.qr = ctx.q0[4:10].copy()
         self.dqr = np.zeros(6)
-        lo, hi = ctx.slave.length_range
-        self.lo, self.hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+        self.lo, self.hi = ctx.slave.length_range
         self.eye = np.eye(2)
         self.action.use_ref = True
 
