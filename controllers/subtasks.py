@@ -16,6 +16,7 @@ import numpy as np
 from .cc import gram_terms
 from .params import SlaveParams, SubtaskSpec
 from .scratch import scratch
+from .slave import jacobian
 from .tip import tip_kinematics
 
 SPEC_SIZE = 8
@@ -154,6 +155,5 @@ def beta(spec: SubtaskSpec, slave: SlaveParams, q, dq=None) -> tuple[float, np.n
 
 def manipulability(slave: SlaveParams, q) -> float:
     """Paper eq. (41): sqrt(det(J2 J2^T))."""
-    x, J, H, Hd = np.empty(2), np.empty((2, 6)), np.empty((2, 6, 6)), np.empty((2, 6, 6))
-    tip_kinematics(np.ascontiguousarray(q, dtype=float), np.zeros(6), 1, x, J, H, Hd)
+    J = jacobian(slave, q)
     return float(np.sqrt(max(np.linalg.det(J @ J.T), 0.0)))

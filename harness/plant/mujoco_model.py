@@ -394,11 +394,9 @@ def stiffness_courant_number(m: mujoco.MjModel, cm: ChainMap) -> float:
     """h w_max of the chain's joint springs (and servo kp) against its inertia at qpos0: w_max^2 the largest
     generalized eigenvalue of diag(stiffness + kp) and the chain block of M; explicit springs need < 2
     (it grows with N: N <= 32 steps stably at 1 ms)."""
-    M = _mass_matrix0(m)
     idx = np.asarray(cm.chain_dof_adr)
-    Mc = M[np.ix_(idx, idx)]
     k = np.asarray(cm.joint_stiffness) + np.asarray(cm.servo_kp)
-    L = np.linalg.cholesky(Mc)
+    L = np.linalg.cholesky(_mass_matrix0(m)[np.ix_(idx, idx)])
     Li = np.linalg.inv(L)
     w2 = np.linalg.eigvalsh(Li @ (k[:, None] * Li.T))
     return float(m.opt.timestep * np.sqrt(max(w2[-1], 0.0)))
@@ -420,8 +418,5 @@ def export_mjcf(master: MasterParams, slave: SlaveParams, plant: PlantConfig, pa
     return path
 
 
-__all__ = [
-    "CC_SOLIMP", "CC_SOLREF", "MJCF_DIR", "SCENE_XML", "TIP_MASS_FRACTION", "ChainMap", "MujocoPlant",
-    "PlantModelError",
-    "build_model", "build_spec", "export_mjcf", "stiffness_courant_number",
-]
+__all__ = ["CC_SOLIMP", "CC_SOLREF", "MJCF_DIR", "SCENE_XML", "TIP_MASS_FRACTION", "ChainMap", "MujocoPlant",
+           "PlantModelError", "build_model", "build_spec", "export_mjcf", "stiffness_courant_number"]
