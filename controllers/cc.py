@@ -37,17 +37,12 @@ def en_tuple(t):
             if abs(a) < 1e-18:
                 break
         return complex(re[0], im[0]), complex(re[1], im[1]), complex(re[2], im[2]), complex(re[3], im[3])
-    c = np.cos(t)
-    s = np.sin(t)
+    c, s = np.cos(t), np.sin(t)
     # E_0 = (e - 1) / (i t);  E_n = (e - n E_{n-1}) / (i t);  z / (i t) = (Im z - i Re z) / t
-    r0 = s / t
-    i0 = -(c - 1.0) / t
-    r1 = (s - i0) / t
-    i1 = -(c - r0) / t
-    r2 = (s - 2.0 * i1) / t
-    i2 = -(c - 2.0 * r1) / t
-    r3 = (s - 3.0 * i2) / t
-    i3 = -(c - 3.0 * r2) / t
+    r0, i0 = s / t, -(c - 1.0) / t
+    r1, i1 = (s - i0) / t, -(c - r0) / t
+    r2, i2 = (s - 2.0 * i1) / t, -(c - 2.0 * r1) / t
+    r3, i3 = (s - 3.0 * i2) / t, -(c - 3.0 * r2) / t
     return complex(r0, i0), complex(r1, i1), complex(r2, i2), complex(r3, i3)
 
 
@@ -75,10 +70,8 @@ def term_ydd(j, dj, ydot, b0, b1, b2):
     P = 0.0
     for ll in range(j):
         P += ydot[3 + ll]
-    D = ydot[j]
-    W = ydot[3 + j]
-    ib0 = complex(-b0.imag, b0.real)
-    ib1 = complex(-b1.imag, b1.real)
+    D, W = ydot[j], ydot[3 + j]
+    ib0, ib1 = complex(-b0.imag, b0.real), complex(-b1.imag, b1.real)
     return -(P * P * dj) * b0 + (2.0 * P * D) * ib0 - (2.0 * P * W * dj) * b1 + (2.0 * D * W) * ib1 \
         - (W * W * dj) * b2
 
@@ -94,8 +87,7 @@ def y_of_q(q, d, th, ydot, dq):
 
 def backbone_points(q, n_per_section, out):
     """Backbone points [X, Z] (m), out (3 n + 1, 2): base, then n evenly spaced points per section."""
-    base = 0.0j
-    phi = 0.0
+    base, phi = 0.0j, 0.0
     out[0, 0] = out[0, 1] = 0.0
     r = 1
     for s in range(3):
@@ -105,8 +97,7 @@ def backbone_points(q, n_per_section, out):
         for m in range(1, n_per_section + 1):
             u = m / n_per_section
             p = base + f * u * ds * en_tuple(u * ths)[0]
-            out[r, 0] = p.imag
-            out[r, 1] = p.real
+            out[r, 0], out[r, 1] = p.imag, p.real
             r += 1
         base = base + f * ds * en_tuple(ths)[0]
         phi += ths

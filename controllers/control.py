@@ -66,9 +66,7 @@ def pinv_terms(J, Jd, Jp, Jpd):
     det = A00 * A11 - A01 * A01
     if det <= DET_MIN:
         return det
-    i00 = A11 / det
-    i01 = -A01 / det
-    i11 = A00 / det
+    i00, i01, i11 = A11 / det, -A01 / det, A00 / det  # A^-1
     # W = A^-1 dA A^-1 (symmetric)
     t00 = D00 * i00 + D01 * i01
     t01 = D00 * i01 + D01 * i11
@@ -112,8 +110,7 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
     # task-space errors (16)
     v = scratch(2)
     for i in range(2):
-        dx2 = 0.0
-        jdq = 0.0
+        dx2 = jdq = 0.0
         for a in range(6):
             dx2 += J[i, a] * dq[a]
             jdq += Jd[i, a] * dq[a]

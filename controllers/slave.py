@@ -31,8 +31,7 @@ PACK_G = SLAVE_PACK["g"]
 def elastic_kernel(pk, q, out):
     """dV_elastic/dq (6,): V = sum Kb d k^2 / 2 + Ke (d - L0)^2 / 2."""
     for i in range(3):
-        d = q[i]
-        k = q[3 + i]
+        d, k = q[i], q[3 + i]
         out[i] = 0.5 * pk[PACK_KB + i] * k * k + pk[PACK_KE + i] * (d - pk[PACK_L0 + i])
         out[3 + i] = pk[PACK_KB + i] * d * k
 
@@ -72,18 +71,15 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
     A = scratch_c(4)  # d^2p/dt^2 = sum_m A_m psi_m, psi = (1, b0, b1, b2)
     alpha = scratch(6)
     for s in range(3):
-        ms = pk[PACK_M + s]
-        Is = pk[PACK_IS + s]
-        ds = d[s]
-        ids = complex(0.0, ds)
+        ms, Is = pk[PACK_M + s], pk[PACK_IS + s]
+        ds, ids = d[s], complex(0.0, d[s])
         # J_p(u) = V0 + b0 V1 + b1 V2 in y-space (as term_grad_add)
         for a in range(6):
             Y[0, a] = PJ[s, a]
             Y[1, a] = Y[2, a] = 0.0
         for ll in range(s):
             Y[1, 3 + ll] = ids
-        Y[1, s] = 1.0
-        Y[2, 3 + s] = ids
+        Y[1, s], Y[2, 3 + s] = 1.0, ids
         for k in range(3):
             for i in range(3):
                 V[k, i] = Y[k, i] + Y[k, 3 + i] * q[3 + i]
@@ -92,8 +88,7 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
         P = 0.0
         for ll in range(s):
             P += ydot[3 + ll]
-        D = ydot[s]
-        W = ydot[3 + s]
+        D, W = ydot[s], ydot[3 + s]
         A[0] = Pcor[s]
         A[1] = complex(-(P * P * ds), 2.0 * P * D)
         A[2] = complex(-(2.0 * P * W * ds), 2.0 * D * W)
@@ -110,8 +105,7 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
             for g in range(nodes.shape[0]):
                 w = weights[g]
                 b0, b1, b2, b3 = term_bases(nodes[g], th[s], fs[s])
-                wb0 = w * b0.conjugate()
-                wb1 = w * b1.conjugate()
+                wb0, wb1 = w * b0.conjugate(), w * b1.conjugate()
                 Q[0, 0] += w
                 Q[0, 1] += w * b0
                 Q[0, 2] += w * b1

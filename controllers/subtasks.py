@@ -47,10 +47,8 @@ def manipulability_kernel(J, H, Jd, Hd, grad, graddot):
         # dA/dq_c = H_c J^T + J H_c^T and its time derivative
         dA00 = dA01 = dA11 = dAd00 = dAd01 = dAd11 = 0.0
         for a in range(6):
-            h0 = H[0, a, c]
-            h1 = H[1, a, c]
-            hd0 = Hd[0, a, c]
-            hd1 = Hd[1, a, c]
+            h0, h1 = H[0, a, c], H[1, a, c]
+            hd0, hd1 = Hd[0, a, c], Hd[1, a, c]
             dA00 += 2.0 * h0 * J[0, a]
             dA01 += h0 * J[1, a] + J[0, a] * h1
             dA11 += 2.0 * h1 * J[1, a]
@@ -69,9 +67,7 @@ def limit_powers(s, p2):
     """(s^(p2-2), s^(p2-1), s^p2); an integer p2 >= 2 by binary powering."""
     n = int(p2)
     if n == p2 and n >= 2:
-        a = 1.0
-        b = s
-        e = n - 2
+        a, b, e = 1.0, s, n - 2
         while e > 0:
             if e & 1:
                 a *= b
@@ -84,19 +80,15 @@ def limit_powers(s, p2):
 
 def limits_kernel(spec, q, dq, grad, graddot):
     """beta_l = sum (1 - s^(2p)) over 3 lengths and 3 bending angles; grad and d/dt grad (6,)."""
-    p2 = 2.0 * spec[2]
-    ext = spec[3]
-    bmax = spec[4]
+    p2, ext, bmax = 2.0 * spec[2], spec[3], spec[4]
     beta = 0.0
     for c in range(6):
         grad[c] = graddot[c] = 0.0
     for i in range(3):
         L0 = spec[5 + i]
-        cen = 0.5 * L0 * (1.0 + ext)
-        hw = 0.5 * L0 * (ext - 1.0)
+        cen, hw = 0.5 * L0 * (1.0 + ext), 0.5 * L0 * (ext - 1.0)
         # length coordinate
-        s = (q[i] - cen) / hw
-        sd = dq[i] / hw
+        s, sd = (q[i] - cen) / hw, dq[i] / hw
         sm2, sm1, sp = limit_powers(s, p2)
         beta += 1.0 - sp
         grad[i] += -p2 * sm1 / hw
@@ -121,8 +113,7 @@ def subtask_kernel(spec, J, H, Jd, Hd, q, dq, grad, graddot, parts):
     parts (3,) receives [beta_m, beta_l, det(J J^T)].  Returns beta."""
     g1, gd1 = scratch(6), scratch(6)
     beta_m, det = manipulability_kernel(J, H, Jd, Hd, g1, gd1)
-    parts[0] = beta_m
-    parts[2] = det
+    parts[0], parts[2] = beta_m, det
     beta = spec[0] * beta_m
     for c in range(6):
         grad[c] = spec[0] * g1[c]

@@ -50,10 +50,8 @@ def tip_y_blocks(c, G, diag, XdT, XTT):
 
 def put_sym(X, a, b, v):
     """X[:, a, b] = X[:, b, a] = [Im v, Re v] (X (2,6,6): [X, Z] rows of a symmetric q-derivative)."""
-    X[0, a, b] = v.imag
-    X[1, a, b] = v.real
-    X[0, b, a] = v.imag
-    X[1, b, a] = v.real
+    X[0, a, b], X[1, a, b] = v.imag, v.real
+    X[0, b, a], X[1, b, a] = v.imag, v.real
 
 
 def tip_kinematics(q, dq, order, x, J, H, Hd):
@@ -66,8 +64,7 @@ def tip_kinematics(q, dq, order, x, J, H, Hd):
         H[k_i, k_j] = d_i d_j XTT[i, j]."""
     b, R = scratch_c((3, 4)), scratch_c(4)
     tip_bases(q, b, R)
-    x[0] = R[0].imag
-    x[1] = R[0].real
+    x[0], x[1] = R[0].imag, R[0].real
     if order < 1:
         return
     G = scratch_c(3)
@@ -76,10 +73,8 @@ def tip_kinematics(q, dq, order, x, J, H, Hd):
         G[i] = complex(-v.imag, v.real)  # dc/dTheta_i (dc/dd_i = b[i, 0])
         jd = b[i, 0] + q[3 + i] * G[i]
         jk = q[i] * G[i]
-        J[0, i] = jd.imag
-        J[1, i] = jd.real
-        J[0, 3 + i] = jk.imag
-        J[1, 3 + i] = jk.real
+        J[0, i], J[1, i] = jd.imag, jd.real
+        J[0, 3 + i], J[1, 3 + i] = jk.imag, jk.real
     if order < 2:
         return
     XdT, XTT, diag = scratch_c((3, 3)), scratch_c((3, 3)), scratch_c(3)
@@ -107,11 +102,9 @@ def tip_kinematics(q, dq, order, x, J, H, Hd):
             diagd[i] = -(Rd[i + 1] + dq[i] * b[i, 2] + q[i] * bd[i, 2])
         tip_y_blocks(bd, Gd, diagd, YdT, YTT)
     for i in range(3):
-        di = q[i]
-        ki = q[3 + i]
+        di, ki = q[i], q[3 + i]
         for j in range(3):
-            dj = q[j]
-            kj = q[3 + j]
+            dj, kj = q[j], q[3 + j]
             xt = XTT[i, j]
             hdk = dj * (XdT[i, j] + ki * xt)
             if i == j:
@@ -124,10 +117,8 @@ def tip_kinematics(q, dq, order, x, J, H, Hd):
                 put_sym(H, 3 + i, 3 + j, hkk)
             if order < 3:
                 continue
-            ddi = dq[i]
-            kdi = dq[3 + i]
-            ddj = dq[j]
-            kdj = dq[3 + j]
+            ddi, kdi = dq[i], dq[3 + i]
+            ddj, kdj = dq[j], dq[3 + j]
             yt = YTT[i, j]
             gdk = (ddj * (XdT[i, j] + ki * xt)
                    + dj * (YdT[i, j] + kdi * xt + ki * yt))

@@ -45,10 +45,7 @@ def chain_sense(qpos_chain, qvel_chain, R, L0, q2, dq2):
     d_i; exact on the manifold), dd_i = (R qvel)_i, dk_i = ((R qvel)_{3+i} - k_i dd_i) / d_i."""
     n = R.shape[1]
     for i in range(3):
-        e = 0.0
-        th = 0.0
-        de = 0.0
-        dth = 0.0
+        e = th = de = dth = 0.0
         for c in range(n):
             e += R[i, c] * qpos_chain[c]
             th += R[3 + i, c] * qpos_chain[c]
@@ -56,10 +53,8 @@ def chain_sense(qpos_chain, qvel_chain, R, L0, q2, dq2):
             dth += R[3 + i, c] * qvel_chain[c]
         d = L0[i] + e
         k = th / d
-        q2[i] = d
-        q2[3 + i] = k
-        dq2[i] = de
-        dq2[3 + i] = (dth - k * de) / d
+        q2[i], q2[3 + i] = d, k
+        dq2[i], dq2[3 + i] = de, (dth - k * de) / d
 
 
 def chain_force_from_T2(q2, T2, R, out):
@@ -69,10 +64,8 @@ def chain_force_from_T2(q2, T2, R, out):
     n = R.shape[1]
     w = scratch(6)
     for i in range(3):
-        d = q2[i]
-        mk = T2[3 + i] / d
-        w[3 + i] = mk
-        w[i] = T2[i] - q2[3 + i] * mk
+        mk = T2[3 + i] / q2[i]
+        w[i], w[3 + i] = T2[i] - q2[3 + i] * mk, mk
     for c in range(n):
         acc = 0.0
         for r in range(6):
@@ -87,14 +80,11 @@ def muscle_commands(q2, T2, radius, max_force, out):
     realizes [F_d, M_k] by p+ = F_d/2 - (1 + r k) M_k / (2 r d), p- = F_d/2 + (1 - r k) M_k / (2 r d)."""
     n_sat = 0
     for i in range(3):
-        d = q2[i]
-        k = q2[3 + i]
-        r = radius[i]
+        d, k, r = q2[i], q2[3 + i], radius[i]
         m = T2[3 + i] / (2.0 * r * d)
         pp = 0.5 * T2[i] - (1.0 + r * k) * m
         pm = 0.5 * T2[i] + (1.0 - r * k) * m
-        out[2 * i] = pp
-        out[2 * i + 1] = pm
+        out[2 * i], out[2 * i + 1] = pp, pm
         if pp < 0.0 or pp > max_force[i]:
             n_sat += 1
         if pm < 0.0 or pm > max_force[i]:
@@ -114,16 +104,14 @@ def chain_elastic_correction(qpos_chain, R, C, L0, section, is_hinge, seg_kb, ke
     force: recompute it every physics step.  R (6, n), C (n, 6), L0, seg_kb = N Kb, ke (3,); section,
     is_hinge (n,) int64; k_joint (n,) MuJoCo joint stiffness; k_shape (n,) (0 on hinges)."""
     n = R.shape[1]
-    e = scratch_zeros(3)
-    sq = scratch_zeros(3)
+    e, sq = scratch_zeros(3), scratch_zeros(3)
     for c in range(n):
         q = qpos_chain[c]
         for i in range(3):
             e[i] += R[i, c] * q
         if is_hinge[c] == 1:
             sq[section[c]] += q * q
-    dEdd = scratch(3)
-    dinv = scratch(3)
+    dEdd, dinv = scratch(3), scratch(3)
     for i in range(3):
         d = L0[i] + e[i]
         dinv[i] = 1.0 / d
