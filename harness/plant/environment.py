@@ -50,24 +50,17 @@ def _quat_y(theta: float) -> list[float]:
 
 
 def _add_object(spec: mujoco.MjSpec, obj: EnvObject, base: np.ndarray) -> str:
-    pos = [base[0] + obj.position[0], base[1], base[2] + obj.position[1]]
     name = f"env_{obj.name}_geom"
-    g = spec.worldbody.add_geom(name=name, pos=pos, contype=0, conaffinity=0, condim=1, density=0.0)
     if obj.kind == "plane":
-        nx, nz = obj.normal
-        g.type = mujoco.mjtGeom.mjGEOM_PLANE
-        g.size = [0.4, BOX_DEPTH, 0.02]
-        g.quat = _quat_y(math.atan2(nx, nz))
-        g.rgba = [0.55, 0.55, 0.6, 0.5]
+        kw = dict(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0.4, BOX_DEPTH, 0.02],
+                  quat=_quat_y(math.atan2(*obj.normal)), rgba=[0.55, 0.55, 0.6, 0.5])
     elif obj.kind == "box":
-        g.type = mujoco.mjtGeom.mjGEOM_BOX
-        g.size = [obj.size[0], BOX_DEPTH, obj.size[1]]
-        g.quat = _quat_y(obj.angle)
-        g.rgba = [0.3, 0.6, 0.4, 0.6]
+        kw = dict(type=mujoco.mjtGeom.mjGEOM_BOX, size=[obj.size[0], BOX_DEPTH, obj.size[1]],
+                  quat=_quat_y(obj.angle), rgba=[0.3, 0.6, 0.4, 0.6])
     else:
-        g.type = mujoco.mjtGeom.mjGEOM_SPHERE
-        g.size = [obj.size[0], 0.0, 0.0]
-        g.rgba = [0.3, 0.6, 0.4, 0.6]
+        kw = dict(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[obj.size[0], 0.0, 0.0], rgba=[0.3, 0.6, 0.4, 0.6])
+    spec.worldbody.add_geom(name=name, pos=[base[0] + obj.position[0], base[1], base[2] + obj.position[1]],
+                            contype=0, conaffinity=0, condim=1, density=0.0, **kw)
     return name
 
 
