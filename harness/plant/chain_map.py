@@ -146,28 +146,21 @@ def chain_layout(n_segments: int) -> dict[str, np.ndarray]:
     (segment N for the tip slide), ``slide_index`` (n_slides,)."""
     N = int(n_segments)
     n = 6 * N + 1
+    section = np.r_[np.repeat(np.arange(3), 2 * N), 2].astype(np.int64)
+    segment = np.r_[np.tile(np.repeat(np.arange(N), 2), 3), N].astype(np.int64)
+    is_hinge = np.r_[np.tile([0, 1], 3 * N), 0].astype(np.int64)
     C = np.zeros((n, 6))
-    section = np.zeros(n, dtype=np.int64)
-    is_hinge = np.zeros(n, dtype=np.int64)
-    segment = np.zeros(n, dtype=np.int64)
-    c = 0
-    for i in range(3):
-        for j in range(N):
-            # slide (i, j)
-            if j == 0:
-                C[c, i] = 0.5 / N
-                if i > 0:
-                    C[c, i - 1] = 0.5 / N
-            else:
-                C[c, i] = 1.0 / N
-            section[c], segment[c] = i, j
-            c += 1
-            # hinge (i, j)
+    for c in range(n - 1):
+        i, j = section[c], segment[c]
+        if is_hinge[c]:
             C[c, 3 + i] = 1.0 / N
-            section[c], segment[c], is_hinge[c] = i, j, 1
-            c += 1
-    C[c, 2] = 0.5 / N  # tip slide
-    section[c], segment[c] = 2, N
+        elif j == 0:  # the rod from the previous section's last midpoint (or the base)
+            C[c, i] = 0.5 / N
+            if i > 0:
+                C[c, i - 1] = 0.5 / N
+        else:
+            C[c, i] = 1.0 / N
+    C[n - 1, 2] = 0.5 / N  # tip slide
     slide_index = np.flatnonzero(is_hinge == 0)
     S = C[slide_index, :3].copy()
     P = np.linalg.pinv(S)  # (3, n_slides), P S = I
