@@ -1,20 +1,8 @@
-"""Built-in baseline controllers (numpy only), implementations of `controllers.interface.Controller`.
+"""Built-in controllers (`controllers.interface.Controller`) and their registry `BUILTINS`.
 
-All of them keep the paper's master law (12)-(13) (the master stands for the operator-driven arm
-tracking x_d); they differ in how the redundant slave (2 task coordinates, 6 joints) follows the
-master tip x1:
-
-* `PaperNoNullSpace`   -- the paper's slave law (17)-(18) with the null-space term dropped:
-                          u2 = J2^+ (ddx_d + k1 de1 + k2 e1 + k3 de2 + k4 e2 - dJ2 dq2), phi_N = 0
-                          (no sub-task (29)-(33), no de_N (23)); torque and servo plants.
-* `PaperController`    -- the paper's whole law (12)-(13), (17)-(18), (23)-(33); the harness runs it under
-                          the name "paper" in its compiled fast path (same numbers).
-* `DampedLeastSquaresIK` -- closed-loop resolved-rate inverse kinematics with a damped
-                          least-squares inverse (Wampler 1986; Nakamura & Hanafusa 1986) on the servo
-                          reference; servo plants only.
-
-A Jacobian-transpose PD with gravity compensation is the worked user example
-(examples/controllers/jacobian_transpose.py).
+All keep the paper's master law (12)-(13) and differ in how the redundant slave follows the master tip:
+`PaperController` (the whole law, "paper"), `PaperNoNullSpace` (phi_N = 0) and `DampedLeastSquaresIK`
+(resolved rate on the servo reference).  The worked user example is examples/controllers/.
 """
 
 from __future__ import annotations
@@ -23,11 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .control import MASTER_INFO, SLAVE_INFO
+from .control import DET_MIN, MASTER_INFO, SLAVE_INFO
 from .interface import Action, Controller, ControllerContext, ControllerDiverged, Observation, check_range
 from .status import Status
-
-DET_MIN = 1e-14  # det(J J^T) at or below this: singular (as controllers.control.DET_MIN)
 
 
 def paper_master_law(models, gains, obs: Observation, T1: np.ndarray) -> tuple:
@@ -46,10 +32,8 @@ def paper_master_law(models, gains, obs: Observation, T1: np.ndarray) -> tuple:
 
 
 class PaperController(Controller):
-    """The paper's law (12)-(13), (17)-(18) with the null-space terms (23)-(33), on the nominal models
-    (`NominalModels.paper_law`: the kernel the harness' compiled loops call, so a run through this
-    interface gives their numbers bit for bit).  The harness recognises it under the name "paper" and
-    runs it in its compiled fast path; "paper_interface" runs this class step by step."""
+    """The paper's law (12)-(13), (17)-(18), (23)-(33) through `NominalModels.paper_law` (the compiled
+    loops' kernel: the same numbers).  "paper" runs compiled; "paper_interface" steps this class."""
 
     name = "paper"
     description = "the paper's law (12)-(13), (17)-(18) with null-space terms (23)-(33)"
@@ -70,14 +54,9 @@ class PaperController(Controller):
 
 
 class PaperNoNullSpace(Controller):
-    """The paper's controller without its null-space terms.
-
-    Master: (12)-(13).  Slave: (17)-(18) with phi_N = 0,
-        u2 = J2^+ (ddx_d + k1 de1 + k2 e1 + k3 de2 + k4 e2 - dJ2 dq2),   J2^+ = J2^T (J2 J2^T)^-1  (7),
-        T2 = M2 u2 + N2 - J2^T F2,
-    e1 = x_d - x1 (11), e2 = x1 - x2 (16), gains (39) from the scenario.  The self-motion of the
-    redundant slave is left uncontrolled (the paper's sub-task (29)-(33) keeps it away from singular
-    configurations).  Supports torque and servo plants (T2 and u2)."""
+    """The paper's law without its null-space terms: (12)-(13) and (17)-(18) with phi_N = 0,
+    u2 = J2^+ (ddx_d + k1 de1 + k2 e1 + k3 de2 + k4 e2 - dJ2 dq2), T2 = M2 u2 + N2 - J2^T F2 (the
+    slave's self-motion is left uncontrolled)."""
 
     name = "paper_no_null"
     description = "paper's law (12)-(13), (17)-(18) without the null-space terms (phi_N = 0)"
@@ -101,17 +80,10 @@ class PaperNoNullSpace(Controller):
 
 
 class DampedLeastSquaresIK(Controller):
-    """Closed-loop resolved-rate IK with a damped least-squares inverse, driving the section servos.
-
-    The slave reference q_r follows the master tip x1 (sensed) with
-        dq_r = J^T (J J^T + lambda^2 I)^-1 (dx1 + K (x1 - f(q_r))),   J = J2(q_r),
-    (damped least squares: Wampler 1986, Nakamura & Hanafusa 1986; closed-loop IK on the reference:
-    Sciavicco & Siciliano 1988), integrated q_r <- q_r + dt dq_r, section lengths clamped to the
-    nominal [L0, max_extension L0].  The servo gets (q_r, dq_r) and the static feed-forward
-    T2 = G2(q_r) + K2(q_r) (gravity and elasticity of the nominal model).  u2 records
-    (dq_r - dq_r_prev) / dt.  The master runs the paper's law (12)-(13).  Servo plants only.
-
-    Params: gain K (1/s), damping lambda (m)."""
+    """Closed-loop resolved-rate IK with a damped least-squares inverse (Wampler 1986) on the servo
+    reference: dq_r = J^T (J J^T + lambda^2 I)^-1 (dx1 + K (x1 - f(q_r))), J = J2(q_r), q_r += dt dq_r
+    (lengths clamped to [L0, max_extension L0]); T2 = G2(q_r) + K2(q_r) feed-forward; u2 records
+    (dq_r - dq_r_prev) / dt.  Servo plants only.  Params: gain K (1/s), damping lambda (m)."""
 
     name = "dls_ik"
     description = "resolved-rate IK, damped least-squares J^T (J J^T + lambda^2 I)^-1, on the servo reference"
@@ -130,8 +102,7 @@ class DampedLeastSquaresIK(Controller):
         super().reset(ctx)
         self.qr = ctx.q0[4:10].copy()
         self.dqr = np.zeros(6)
-        lo, hi = ctx.slave.length_range
-        self.lo, self.hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+        self.lo, self.hi = ctx.slave.length_range
         self.eye = np.eye(2)
         self.action.use_ref = True
 
@@ -152,8 +123,7 @@ class DampedLeastSquaresIK(Controller):
         return a
 
 
-# The registry of built-in controllers: name -> class.  "paper" runs in the harness' compiled fast path;
-# "paper_interface" is the same class stepped through the interface (for comparison and debugging).
+# name -> class; "paper" runs in the compiled fast path, "paper_interface" is the same class stepped
 BUILTINS: dict[str, type[Controller]] = {
     "paper": PaperController,
     "paper_interface": PaperController,

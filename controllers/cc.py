@@ -1,100 +1,53 @@
 """Planar constant-curvature (CC) kinematics with exact derivatives up to third order.
 
-Representation.  A point of the plane is the complex number c = Z + i X (Z up, X right).  The
-backbone tangent at arc angle phi is exp(i phi): phi = 0 is +Z, phi > 0 turns toward +X, so a
-positive curvature bends toward +X.
-
-Section j (0, 1, 2) has length d_j, curvature k_j and total bending angle Theta_j = k_j d_j.  The
-point at material coordinate u in [0, 1] of section s is
+A point is c = Z + i X; the tangent at arc angle phi is exp(i phi) (k > 0 bends toward +X).  Section j
+(length d_j, bend Theta_j = k_j d_j) at material coordinate u in [0, 1]:
 
     c_s(u) = sum_{j<s} T_j(1) + T_s(u),     T_j(u) = exp(i phi_{j-1}) u d_j E_0(u Theta_j),
 
-with phi_{j-1} = sum_{l<j} Theta_l and E_n(t) = int_0^1 v^n exp(i t v) dv, an entire function
-(E_0(t) = sinc(t) + i versinc(t), E_0(0) = 1), evaluated by its power series near 0 and by the
-stable upward recursion E_n = (e^{it} - n E_{n-1}) / (i t) elsewhere, so every quantity and every
-derivative is finite and smooth across k = 0 (no sin(kd)/k).
-
-The per-section bases b_n = f u^(1+n) E_n(u Theta) (`term_bases`) carry every derivative of a point in
-y = [d_0, d_1, d_2, Theta_0, Theta_1, Theta_2] (d^n/dTheta^n E_0(t) = i^n E_n(t)); the slave dynamics
-(`controllers.slave`) and the tip (`controllers.tip`) are built on them.  `backbone_points` is the one CC
-backbone of the project (controllers, plants and outputs).
-
-All functions in this module are written in the numba-compatible subset of numpy (loops, no
-Python objects): `harness.loop.fast` compiles them unchanged.  They allocate nothing they return;
-callers pass output arrays.
+phi_{j-1} = sum_{l<j} Theta_l, E_n(t) = int_0^1 v^n exp(i t v) dv (entire, smooth across k = 0).  The
+bases b_n = f u^(1+n) E_n(u Theta) (`term_bases`) carry every derivative in y = [d, Theta].  Kernels:
+numba-compatible loops writing into the arrays the caller passes.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from .scratch import scratch_zeros
+
 SERIES_RADIUS = 2.0  # |t| below which E_n uses the power series (24 terms: error < 1e-16)
 INV = 1.0 / np.arange(1.0, 33.0)  # INV[k] = 1 / (k + 1)
 
 
 def en_tuple(t):
-    """(E_0, E_1, E_2, E_3)(t), E_n(t) = int_0^1 v^n exp(i t v) dv, as a tuple of complex.
-
-    Real arithmetic, no allocation: the series term (i t)^m / m! is i^m a_m with a_m = t^m / m!
-    real (divisions replaced by the reciprocal table INV), and dividing by i t is a swap and a sign."""
+    """(E_0, E_1, E_2, E_3)(t), E_n(t) = int_0^1 v^n exp(i t v) dv (complex), in real arithmetic."""
     if abs(t) < SERIES_RADIUS:
-        r0 = 0.0
-        r1 = 0.0
-        r2 = 0.0
-        r3 = 0.0
-        i0 = 0.0
-        i1 = 0.0
-        i2 = 0.0
-        i3 = 0.0
+        re, im = scratch_zeros(4), scratch_zeros(4)
         a = 1.0  # t^m / m!
         for m in range(26):
-            v0 = a * INV[m]
-            v1 = a * INV[m + 1]
-            v2 = a * INV[m + 2]
-            v3 = a * INV[m + 3]
-            q = m & 3
-            if q == 0:
-                r0 += v0
-                r1 += v1
-                r2 += v2
-                r3 += v3
-            elif q == 1:
-                i0 += v0
-                i1 += v1
-                i2 += v2
-                i3 += v3
-            elif q == 2:
-                r0 -= v0
-                r1 -= v1
-                r2 -= v2
-                r3 -= v3
+            sa = a if m & 2 == 0 else -a  # i^m a: its sign, and whether it is real (m even)
+            if m & 1 == 0:
+                for n in range(4):
+                    re[n] += sa * INV[m + n]
             else:
-                i0 -= v0
-                i1 -= v1
-                i2 -= v2
-                i3 -= v3
+                for n in range(4):
+                    im[n] += sa * INV[m + n]
             a = a * t * INV[m]
             if abs(a) < 1e-18:
                 break
-        return complex(r0, i0), complex(r1, i1), complex(r2, i2), complex(r3, i3)
-    c = np.cos(t)
-    s = np.sin(t)
+        return complex(re[0], im[0]), complex(re[1], im[1]), complex(re[2], im[2]), complex(re[3], im[3])
+    c, s = np.cos(t), np.sin(t)
     # E_0 = (e - 1) / (i t);  E_n = (e - n E_{n-1}) / (i t);  z / (i t) = (Im z - i Re z) / t
-    r0 = s / t
-    i0 = -(c - 1.0) / t
-    r1 = (s - i0) / t
-    i1 = -(c - r0) / t
-    r2 = (s - 2.0 * i1) / t
-    i2 = -(c - 2.0 * r1) / t
-    r3 = (s - 3.0 * i2) / t
-    i3 = -(c - 3.0 * r2) / t
+    r0, i0 = s / t, -(c - 1.0) / t
+    r1, i1 = (s - i0) / t, -(c - r0) / t
+    r2, i2 = (s - 2.0 * i1) / t, -(c - 2.0 * r1) / t
+    r3, i3 = (s - 3.0 * i2) / t, -(c - 3.0 * r2) / t
     return complex(r0, i0), complex(r1, i1), complex(r2, i2), complex(r3, i3)
 
 
 def term_bases(u, thj, f):
-    """b_n = f u^(1+n) E_n(u Theta_j), n = 0..3, f = exp(i phi_prev) (phi_prev: angle at the start of
-    section j): every derivative of T_j(u) is i^(npre+nt) b_nt, times d_j if it is not
-    differentiated in d_j."""
+    """b_n = f u^(1+n) E_n(u Theta_j), n = 0..3, f = exp(i phi) at the start of section j."""
     e0, e1, e2, e3 = en_tuple(u * thj)
     u2 = u * u
     u3 = u2 * u
@@ -117,10 +70,8 @@ def term_ydd(j, dj, ydot, b0, b1, b2):
     P = 0.0
     for ll in range(j):
         P += ydot[3 + ll]
-    D = ydot[j]
-    W = ydot[3 + j]
-    ib0 = complex(-b0.imag, b0.real)
-    ib1 = complex(-b1.imag, b1.real)
+    D, W = ydot[j], ydot[3 + j]
+    ib0, ib1 = complex(-b0.imag, b0.real), complex(-b1.imag, b1.real)
     return -(P * P * dj) * b0 + (2.0 * P * D) * ib0 - (2.0 * P * W * dj) * b1 + (2.0 * D * W) * ib1 \
         - (W * W * dj) * b2
 
@@ -135,12 +86,9 @@ def y_of_q(q, d, th, ydot, dq):
 
 
 def backbone_points(q, n_per_section, out):
-    """Backbone points [X, Z] at n_per_section + 1 evenly spaced material points per section
-    (shared section ends counted once): out (3 n + 1, 2), m."""
-    base = 0.0j
-    phi = 0.0
-    out[0, 0] = 0.0
-    out[0, 1] = 0.0
+    """Backbone points [X, Z] (m), out (3 n + 1, 2): base, then n evenly spaced points per section."""
+    base, phi = 0.0j, 0.0
+    out[0, 0] = out[0, 1] = 0.0
     r = 1
     for s in range(3):
         ds = q[s]
@@ -149,8 +97,7 @@ def backbone_points(q, n_per_section, out):
         for m in range(1, n_per_section + 1):
             u = m / n_per_section
             p = base + f * u * ds * en_tuple(u * ths)[0]
-            out[r, 0] = p.imag
-            out[r, 1] = p.real
+            out[r, 0], out[r, 1] = p.imag, p.real
             r += 1
         base = base + f * ds * en_tuple(ths)[0]
         phi += ths

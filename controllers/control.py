@@ -1,19 +1,11 @@
-"""The paper's control laws on the analytic models.
+"""The paper's control laws on the analytic models (numba-compatible kernels).
 
 Master (12)-(13):  T1 = M1 u1 + N1 - J1^T F1,  u1 = J1^-1 (ddx_d + k1 de1 + k2 e1 - dJ1 dq1).
 Slave (17)-(18):   T2 = M2 u2 + N2 - J2^T F2,
                    u2 = J2^+ (ddx_d + k1 de1 + k2 e1 + k3 de2 + k4 e2 - dJ2 dq2) + phi_N,
-with e1 = x_d - x1 (11), e2 = x1 - x2 (16), J2^+ = J2^T (J2 J2^T)^-1 (7) and the null-space terms
-de_N = P (g - dq2) (23), J_phi = dJ2^+ J2 + J2^+ dJ2 J2^+ J2 (26),
-phi_N = P (dg + kn de_N) - J_phi (g - dq2) (27), P = I - J2^+ J2, g and dg from the sub-task (33).
-
-Note on eq. (28): substituting (27) into (25) gives dde_N = -kn P de_N - J2^+ dJ2 de_N (the paper
-prints +kn, a sign typo: with +kn the null-space error would grow).
-
-dJ2^+ is exact: d/dt [J^T A^-1] = dJ^T A^-1 - J^T A^-1 dA A^-1, A = J J^T, dA = dJ J^T + J dJ^T.
-
-Kernels are numba-compatible (compiled by `harness.loop.fast`); `slave_control` is a readable pure-numpy
-entry point returning a dictionary.
+e1 = x_d - x1 (11), e2 = x1 - x2 (16), J2^+ = J2^T (J2 J2^T)^-1 (7), de_N = P (g - dq2) (23),
+J_phi = dJ2^+ J2 + J2^+ dJ2 J2^+ J2 (26), phi_N = P (dg + kn de_N) - J_phi (g - dq2) (27),
+P = I - J2^+ J2, g and dg from the sub-task (33); dJ2^+ exact.  (The paper's (28) prints +kn: a sign typo.)
 """
 
 from __future__ import annotations
@@ -39,17 +31,11 @@ DET_MIN = 1e-14  # det(J2 J2^T) below this is reported as a singular configurati
 
 
 def master_control_kernel(pk, gains, q, dq, xd, dxd, ddxd, F1, T1, info):
-    """Master feedback linearization (12)-(13).  Writes T1 (2,) and info (MASTER_INFO,):
-    x1, e1, de1, a1 = ddx_d + k1 de1 + k2 e1 (the commanded task acceleration), dx1.
-    Returns det(J1) (0 means singular: T1 is then not written)."""
-    x = scratch(2)
-    J = scratch((2, 2))
-    Jd = scratch((2, 2))
-    M = scratch((2, 2))
-    N = scratch(2)
+    """Master law (12)-(13): writes T1 (2,) and info (MASTER_INFO,) = x1, e1, de1, a1 = ddx_d + k1 de1 +
+    k2 e1, dx1.  Returns det(J1) (0: singular, T1 not written)."""
+    x, J, Jd, M, N = scratch(2), scratch((2, 2)), scratch((2, 2)), scratch((2, 2)), scratch(2)
     master_kernel(pk, q, dq, x, J, Jd, M, N)
-    k1 = gains[0]
-    k2 = gains[1]
+    k1, k2 = gains[0], gains[1]
     v = scratch(2)
     for i in range(2):
         dx = J[i, 0] * dq[0] + J[i, 1] * dq[1]
@@ -80,9 +66,7 @@ def pinv_terms(J, Jd, Jp, Jpd):
     det = A00 * A11 - A01 * A01
     if det <= DET_MIN:
         return det
-    i00 = A11 / det
-    i01 = -A01 / det
-    i11 = A00 / det
+    i00, i01, i11 = A11 / det, -A01 / det, A00 / det  # A^-1
     # W = A^-1 dA A^-1 (symmetric)
     t00 = D00 * i00 + D01 * i01
     t01 = D00 * i01 + D01 * i11
@@ -100,30 +84,19 @@ def pinv_terms(J, Jd, Jp, Jpd):
 
 
 def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2, T2, u2, deN, info):
-    """Slave feedback linearization (17)-(18) with the null-space terms (23)-(33).
+    """Slave law (17)-(18) with the null-space terms (23)-(33).
 
-    pk: packed SlaveParams; gains: [k1, k2, k3, k4, ky, ks, kn] (optionally followed by two fault
-    factors [e2_sign, null_space_scale] used to test bounds files); spec: packed sub-task;
-    q, dq (6,) sensed slave state; x1, dx1 (2,) sensed master tip and velocity; a1 (2,) the master's
-    commanded task acceleration ddx_d + k1 de1 + k2 e1; F2 (2,) interaction force.
-    Writes T2 (6,), u2 (6,), deN (6,) and info (SLAVE_INFO,): x2, e2, de2, beta, y_a, det, beta_m,
-    beta_l.  Returns det(J2 J2^T); if it is <= DET_MIN the configuration is singular and T2/u2 are
-    set to zero (the caller reports it).
-    """
-    k3 = gains[2]
-    k4 = gains[3]
-    ky = gains[4]
-    ks = gains[5]
-    kn = gains[6]
-    sgn = 1.0
+    pk: packed SlaveParams; gains: [k1, k2, k3, k4, ky, ks, kn] (+ optional fault factors [e2_sign,
+    null_space_scale]); spec: packed sub-task; q, dq (6,) sensed; x1, dx1 (2,) master tip and velocity;
+    a1 (2,) master's commanded task acceleration; F2 (2,).  Writes T2, u2, deN (6,) and info (SLAVE_INFO,):
+    x2, e2, de2, beta, y_a, det, beta_m, beta_l.  Returns det(J2 J2^T); <= DET_MIN: singular, T2 = u2 = 0."""
+    k3, k4, ky, ks, kn = gains[2], gains[3], gains[4], gains[5], gains[6]
+    sgn = 1.0  # fault factors: e2 sign and null-space scale
     nss = 1.0
     if gains.shape[0] > 8:
         sgn = gains[7]
         nss = gains[8]
-    x = scratch(2)
-    J = scratch((2, 6))
-    H = scratch((2, 6, 6))
-    Hd = scratch((2, 6, 6))
+    x, J, H, Hd = scratch(2), scratch((2, 6)), scratch((2, 6, 6)), scratch((2, 6, 6))
     tip_kinematics(q, dq, 3, x, J, H, Hd)
     Jd = scratch_zeros((2, 6))
     for i in range(2):
@@ -132,14 +105,12 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
             for b in range(6):
                 acc += H[i, a, b] * dq[b]
             Jd[i, a] = acc
-    Jp = scratch_zeros((6, 2))
-    Jpd = scratch_zeros((6, 2))
+    Jp, Jpd = scratch_zeros((6, 2)), scratch_zeros((6, 2))
     det = pinv_terms(J, Jd, Jp, Jpd)
     # task-space errors (16)
     v = scratch(2)
     for i in range(2):
-        dx2 = 0.0
-        jdq = 0.0
+        dx2 = jdq = 0.0
         for a in range(6):
             dx2 += J[i, a] * dq[a]
             jdq += Jd[i, a] * dq[a]
@@ -152,26 +123,19 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
     info[SI_DET] = det
     if det <= DET_MIN:
         for a in range(6):
-            T2[a] = 0.0
-            u2[a] = 0.0
-            deN[a] = 0.0
-        info[SI_BETA] = 0.0
+            T2[a] = u2[a] = deN[a] = 0.0
+        info[SI_BETA] = info[SI_BM] = info[SI_BL] = 0.0
         info[SI_YA] = 1.0
-        info[SI_BM] = 0.0
-        info[SI_BL] = 0.0
         return det
     # sub-task (29)-(33): g = ks ky y^2 grad beta, dg exact
-    grad = scratch(6)
-    graddot = scratch(6)
-    parts = scratch(3)
+    grad, graddot, parts = scratch(6), scratch(6), scratch(3)
     beta = subtask_kernel(spec, J, H, Jd, Hd, q, dq, grad, graddot, parts)
     ya = np.exp(-ky * beta)
     betad = 0.0
     for a in range(6):
         betad += grad[a] * dq[a]
     yad = -ky * ya * betad
-    g = scratch(6)
-    gd = scratch(6)
+    g, gd = scratch(6), scratch(6)
     for a in range(6):
         g[a] = ks * ky * ya * ya * grad[a]
         gd[a] = ks * ky * (2.0 * ya * yad * grad[a] + ya * ya * graddot[a])
@@ -180,8 +144,7 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
     info[SI_BM] = parts[0]
     info[SI_BL] = parts[1]
     # projector P = I - J^+ J, J_phi (26)
-    P = scratch((6, 6))
-    JpJ = scratch((6, 6))
+    P, JpJ = scratch((6, 6)), scratch((6, 6))
     for a in range(6):
         for b in range(6):
             s = Jp[a, 0] * J[0, b] + Jp[a, 1] * J[1, b]
@@ -204,10 +167,7 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
             acc += P[a, b] * r[b]
         deN[a] = acc
     # J_phi r = dJ^+ (J r) + J^+ (dJ J^+ J r)
-    Jr0 = 0.0
-    Jr1 = 0.0
-    Kr0 = 0.0
-    Kr1 = 0.0
+    Jr0 = Jr1 = Kr0 = Kr1 = 0.0
     for b in range(6):
         Jr0 += J[0, b] * r[b]
         Jr1 += J[1, b] * r[b]
@@ -222,8 +182,7 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
     for a in range(6):
         u2[a] = Jp[a, 0] * v[0] + Jp[a, 1] * v[1] + nss * phi[a]
     # T2 = M u2 + N2 - J^T F2 (17)
-    M = scratch((6, 6))
-    N = scratch(6)
+    M, N = scratch((6, 6)), scratch(6)
     mass_nle_kernel(pk, q, dq, nodes, weights, M, N)
     for a in range(6):
         acc = N[a] - (J[0, a] * F2[0] + J[1, a] * F2[1])
@@ -235,10 +194,9 @@ def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2
 
 def control_laws(mpk, spk, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F, T1, T2, u2, deN,
                  minfo, sinfo):
-    """The paper's law: master (12)-(13) and slave (17)-(18) with the null-space terms (23)-(33) on a sensed
-    state (16,) = [q1, dq1, q2, dq2], desired tip xd, dxd, ddxd (2,) (40) and tip forces F (4,) N.  Writes
-    T1 (2,), T2 (6,), u2 (6,), deN (6,), minfo (MASTER_INFO,), sinfo (SLAVE_INFO,).  Returns a status code
-    (`controllers.status`: ST_OK, ST_MASTER_SINGULAR, ST_SLAVE_SINGULAR)."""
+    """The paper's whole law on sensed (16,) = [q1, dq1, q2, dq2], x_d, dx_d, ddx_d (2,) (40) and forces
+    F (4,) N: writes T1 (2,), T2, u2, deN (6,), minfo, sinfo.  Returns ST_OK, ST_MASTER_SINGULAR or
+    ST_SLAVE_SINGULAR."""
     q1 = sensed[0:2]
     dq1 = sensed[2:4]
     q2 = sensed[4:10]
@@ -256,11 +214,10 @@ def control_laws(mpk, spk, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F
 KERNELS = ("master_control_kernel", "pinv_terms", "slave_control_kernel", "control_laws")
 
 
-# --------------------------------------------------------------------------------------------- API
 def slave_control(p: SlaveParams, gains: Gains, spec: SubtaskSpec, q2, dq2, x1, dx1, a1,
                   F2=(0.0, 0.0)) -> dict:
-    """Slave law (17)-(18) with null-space terms.  Returns dict with T2, u2, deN (6,), x2, e2, de2
-    (2,), beta, ya, det."""
+    """Slave law (17)-(18) with null-space terms: dict of T2, u2, deN (6,), x2, e2, de2 (2,), beta, ya,
+    det, beta_limits.  Raises FloatingPointError when J2 J2^T is singular."""
     nodes, weights = gauss_legendre01(p.n_quad)
     T2, u2, deN, info = np.zeros(6), np.zeros(6), np.zeros(6), np.empty(SLAVE_INFO)
     f = [np.ascontiguousarray(v, dtype=float) for v in (q2, dq2, x1, dx1, a1, F2)]

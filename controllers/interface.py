@@ -1,43 +1,12 @@
-"""The controller interface: what a controller receives every control step and what it returns.
+"""The controller protocol: ``reset(ctx: ControllerContext)`` once before the run, then
+``step(obs: Observation) -> Action`` once per control step (period ``ctx.dt``).
 
-A controller is a class with
-
-* ``reset(ctx: ControllerContext) -> None`` once before the run (the scenario as the controller may
-  see it: nominal models, gains, control period, plant actuation, its validated parameters);
-* ``step(obs: Observation) -> Action`` once per control step (period ``ctx.dt``).
-
-Frames and units (as everywhere in the harness): planar task space x = [X, Z] in metres, Z up,
-relative to each arm's base; master joints q1 = [q_a, q_b] (rad); slave q2 = [d1, d2, d3, k1, k2, k3]
-(section arc lengths m, curvatures 1/m); forces N, moments N m.
-
-Observation (filled in place by the harness, never re-allocated; read it, do not keep references
-past the step):
-  t (s); k (step index); q1, dq1 (2,); q2, dq2 (6,) -- the *sensed* states (true state + the
-  scenario's AWGN, see harness.loop.kernels.add_noise), views of ``sensed`` (16,) = [q1, dq1, q2,
-  dq2]; x_d, dx_d, ddx_d (2,) the desired master-tip trajectory, paper eq. (40); F1, F2 (2,) the
-  interaction forces of (1) when the plant provides them (the scenario's ``interaction_forces``),
-  zeros otherwise.
-
-Action (the controller owns one, preallocated by ``Controller.__init__``; write into its arrays):
-  T1 (2,) master joint torques (N m), paper eq. (12);
-  T2 (6,) slave generalized forces (N on d_i, N m on k_i), paper eq. (17): drives a torque plant
-      (MuJoCo ``actuation = "torque"``, the analytic plant) and is the servo feed-forward otherwise;
-  u2 (6,) commanded slave acceleration ddq2 (paper eq. (18)): a servo plant integrates it into its
-      reference, q2_ref' = dq2_ref, dq2_ref' = u2 (semi-implicit Euler over dt);
-  q2_ref, dq2_ref (6,) with ``use_ref = True``: the servo reference given directly (resolved-rate
-      controllers), instead of integrating u2;
-  deN (6,) optional diagnostic: the null-space error of eq. (23) (recorded; zeros if unused).
-
-Which slave command a controller provides is its ``actuations`` tuple ("torque" needs T2, "servo"
-needs u2 or the reference); the harness rejects a mismatch with the plant before running.
-
-Parameters: a controller declares ``Params`` (a frozen dataclass with defaults, optional ``check()``
-raising ParamsError, see `check_range`); the harness decodes ``[controller] params`` into it with the
-scenario's validator (one-line errors naming ``controller.params.<key>``).
-
-The nominal analytic models are available as plain functions bound to the nominal parameters:
-`NominalModels` (``ctx.models``).  With the compiled kernels (the harness passes them) a call costs
-microseconds; the maths is the interpreted ``controllers/`` code either way.
+Task space x = [X, Z] (m, Z up) relative to each arm's base; q1 = [q_a, q_b] (rad); q2 = [d1, d2, d3 (m),
+k1, k2, k3 (1/m)]; forces N, moments N m.  ``actuations`` says which slave command a controller
+provides ("torque": T2; "servo": u2 or the reference); the harness rejects a mismatch before running.
+``Params`` (a frozen dataclass with defaults, optional ``check()`` raising ParamsError) is decoded from
+``[controller] params`` by the scenario's validator, one line per error naming
+``controller.params.<key>``.  ``ctx.models`` (`NominalModels`): the nominal analytic models.
 """
 
 from __future__ import annotations
@@ -70,8 +39,11 @@ class ControllerDiverged(RuntimeError):
 
 
 class Observation:
-    """What a controller sees at one control step (see the module docstring).  All arrays are views of
-    buffers owned by the harness and overwritten every step."""
+    """What a controller sees at one step; views of harness buffers overwritten every step.
+
+    t (s), k (step index); sensed (16,) = [q1, dq1, q2, dq2]: true state + the scenario's noise, with
+    views q1, dq1 (2,), q2, dq2 (6,); x_d, dx_d, ddx_d (2,): desired master tip, eq. (40); F (4,) =
+    [F1, F2] (2,) each: interaction forces of (1) when the plant provides them, else zeros."""
 
     __slots__ = ("t", "k", "sensed", "q1", "dq1", "q2", "dq2", "x_d", "dx_d", "ddx_d", "F", "F1", "F2")
 
@@ -87,27 +59,25 @@ class Observation:
 
 
 class Action:
-    """What a controller commands at one control step (see the module docstring)."""
+    """What a controller commands at one step (preallocated; write into its arrays).
+
+    T1 (2,) N m, eq. (12); T2 (6,) [N, N m], eq. (17): drives a torque plant, servo feed-forward
+    otherwise; u2 (6,) commanded ddq2, eq. (18): a servo plant integrates it into its reference;
+    q2_ref, dq2_ref (6,) with use_ref = True: the servo reference given directly; deN (6,): the
+    null-space error (23), recorded (optional)."""
 
     __slots__ = ("T1", "T2", "u2", "deN", "q2_ref", "dq2_ref", "use_ref")
 
     def __init__(self) -> None:
-        self.T1 = np.zeros(2)
-        self.T2 = np.zeros(6)
-        self.u2 = np.zeros(6)
-        self.deN = np.zeros(6)
-        self.q2_ref = np.zeros(6)
-        self.dq2_ref = np.zeros(6)
+        self.T1, self.T2, self.u2, self.deN = np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6)
+        self.q2_ref, self.dq2_ref = np.zeros(6), np.zeros(6)
         self.use_ref = False
 
 
 class NominalModels:
-    """The nominal analytic models (controllers/) bound to the nominal parameters.
-
-    `kernels`: a namespace holding the controllers/ kernels (the harness passes the compiled ones,
-    `harness.loop.fast.K`); default: the interpreted functions (same maths, slower).  Every method
-    returns views of buffers owned by this object (valid until the next call of the same method).
-    """
+    """The nominal analytic models bound to the nominal parameters.  kernels: a namespace of the
+    controllers/ kernels (the harness passes the compiled ones; default interpreted).  Methods return
+    views of buffers owned by this object, valid until the next call of the same method."""
 
     def __init__(self, master_p: MasterParams, slave_p: SlaveParams, subtask: SubtaskSpec | None = None,
                  kernels: Any = None) -> None:
@@ -118,7 +88,6 @@ class NominalModels:
                                             pinv_terms=control.pinv_terms,
                                             control_laws=control.control_laws)
         self._k = kernels
-        self.master_params, self.slave_params = master_p, slave_p
         self.mpk = master.packed(master_p)
         self.spk = slave_p.packed()
         self.nodes, self.weights = slave.gauss_legendre01(slave_p.n_quad)
@@ -144,8 +113,7 @@ class NominalModels:
         return self._x2, self._J2, self._Jd2
 
     def slave_dynamics(self, q2, dq2):
-        """Slave Lagrangian dynamics: M2 (6,6), N2 (6,) = C2 dq2 + G2 + K2 + D2 dq2 (gravity, elastic,
-        damping) so that M2 ddq2 + N2 = T2 + J2^T F2, eq. (1)."""
+        """Slave dynamics, eq. (1): M2 (6,6), N2 (6,) = C2 dq2 + G2 + K2 + D2 dq2."""
         self._k.mass_nle_kernel(self.spk, q2, dq2, self.nodes, self.weights, self._M2, self._N2)
         return self._M2, self._N2
 
@@ -155,10 +123,8 @@ class NominalModels:
         return self._G2
 
     def paper_law(self, gains, sensed, xd, dxd, ddxd, F, T1, T2, u2, deN, minfo, sinfo) -> int:
-        """The paper's whole law (12)-(13), (17)-(18), (23)-(33) on the sensed state (16,)
-        (`controllers.control.control_laws`, the kernel of the harness' compiled loops): gains = packed
-        gains + [e2_sign, null_space_scale]; writes T1, T2, u2, deN, minfo, sinfo.  Returns a status code
-        (`controllers.status`)."""
+        """The paper's whole law (`controllers.control.control_laws`); gains = packed gains + [e2_sign,
+        null_space_scale].  Returns a status code."""
         return self._k.control_laws(self.mpk, self.spk, self.nodes, self.weights, gains, self.spec, sensed,
                                     xd, dxd, ddxd, F, T1, T2, u2, deN, minfo, sinfo)
 
@@ -171,17 +137,12 @@ class NominalModels:
 
 @dataclass(frozen=True)
 class ControllerContext:
-    """The scenario as a controller sees it at `reset` (everything on the nominal/controller side).
+    """The scenario as a controller sees it at `reset` (the nominal/controller side).
 
-    dt: control period (s); n_steps; actuation: "torque" or "servo" (what the plant needs);
-    plant: plant kind (informational; a controller must not depend on the plant's parameters);
-    master, slave, gains, subtask: the nominal models and the paper's gains (39) and sub-task;
-    F: (2, 2) interaction forces [F1, F2] of the scenario (N); seed: the scenario seed;
-    params: the controller's validated `Params` instance (None without `Params`);
-    models: `NominalModels` bound to master/slave; q0 (16,): the initial sensed state is in the first
-    Observation, q0 is the noise-free initial state (for servo references); faults: (e2_sign,
-    null_space_scale) of the scenario's [faults] (deliberate faults of the paper's law, for mutation
-    tests of bounds files; other controllers may ignore them)."""
+    dt: control period (s); actuation: "torque" or "servo"; plant: plant kind (informational);
+    F (2, 2): [F1, F2] (N); params: the validated `Params` (or None); models: `NominalModels`; q0 (16,):
+    the noise-free initial state; faults: (e2_sign, null_space_scale), deliberate faults of the paper's
+    law for mutation tests of bounds files."""
 
     dt: float
     n_steps: int
@@ -209,17 +170,12 @@ def check_range(key: str, value: float, lo: float | None = None, hi: float | Non
 
 
 class Controller:
-    """Base class of every controller (built-in or user).  Subclasses set the class attributes and
-    implement `reset` and `step`; see the module docstring for the data.
+    """Base class of every controller: set the class attributes, implement `reset` and `step`.
 
-    name: short name (built-ins: the name used by ``--controller``); description: one line;
-    actuations: the plant actuations it supports ("torque": it computes T2; "servo": it computes u2
-    or the servo reference); plants: the plant kinds it runs on ("mujoco", "analytic", "cosserat"; None:
-    any); requires: plant settings it needs, {plant kind: {dotted scenario key: value}} (e.g.
-    ``{"mujoco": {"plant.enforce_cc": True}}``: on the MuJoCo plant only the constant-curvature chain);
-    Params: a frozen dataclass of parameters with defaults (optional method ``check(self)`` raising
-    ParamsError) or None.  The harness checks actuations, plants and requirements before a run and says
-    in one line what does not match."""
+    actuations: what it supports ("torque": computes T2; "servo": u2 or the reference); plants: plant
+    kinds it runs on (None: any); requires: {plant kind: {dotted scenario key: value}}, e.g.
+    ``{"mujoco": {"plant.enforce_cc": True}}``; Params: a frozen dataclass with defaults (optional
+    ``check(self)`` raising ParamsError) or None."""
 
     name = "controller"
     description = ""

@@ -1,13 +1,8 @@
 """Analytic model of the planar 2-link revolute master (paper Sec. II-C, VI).
 
-q1 = [q_a, q_b] (rad), measured from +Z toward +X (right-handed about +Y, as a MuJoCo hinge about
-y).  Task space x1 = [X, Z] (m), relative to the master base:
-
-    X = l1 sin q_a + l2 sin(q_a + q_b),   Z = l1 cos q_a + l2 cos(q_a + q_b).
-
-Uniform links (centre of mass at l/2, centroidal inertia m l^2/12), gravity along -Z, optional
-viscous joint friction.  Packed parameter layout (MasterParams -> `packed`): [l1, l2, m1, m2, I1, I2,
-b1, b2, g].
+q1 = [q_a, q_b] (rad) from +Z toward +X (a MuJoCo hinge about +y); task x1 = [X, Z] (m) from the base:
+X = l1 sin q_a + l2 sin(q_a + q_b), Z = l1 cos q_a + l2 cos(q_a + q_b).  Uniform links (centre of mass
+at l/2, inertia m l^2/12), gravity along -Z, optional viscous joint friction.
 """
 
 from __future__ import annotations
@@ -23,17 +18,12 @@ def packed(p: MasterParams) -> np.ndarray:
 
 
 def master_kernel(pk, q, dq, x, J, Jd, M, N):
-    """Everything the master controller needs, from q (2,), dq (2,):
-    x (2,) tip, J (2,2), Jd (2,2) = dJ/dt, M (2,2) inertia, N (2,) = C dq + G + B dq."""
+    """From q, dq (2,): x (2,) tip, J (2,2), Jd (2,2) = dJ/dt, M (2,2), N (2,) = C dq + G + B dq."""
     l1, l2, m1, m2, I1, I2, b1, b2, g = pk[0], pk[1], pk[2], pk[3], pk[4], pk[5], pk[6], pk[7], pk[8]
-    s1 = np.sin(q[0])
-    c1 = np.cos(q[0])
-    s12 = np.sin(q[0] + q[1])
-    c12 = np.cos(q[0] + q[1])
-    s2 = np.sin(q[1])
-    c2 = np.cos(q[1])
-    w1 = dq[0]
-    w12 = dq[0] + dq[1]
+    s1, c1 = np.sin(q[0]), np.cos(q[0])
+    s12, c12 = np.sin(q[0] + q[1]), np.cos(q[0] + q[1])
+    s2, c2 = np.sin(q[1]), np.cos(q[1])
+    w1, w12 = dq[0], dq[0] + dq[1]
     x[0] = l1 * s1 + l2 * s12
     x[1] = l1 * c1 + l2 * c12
     J[0, 0] = l1 * c1 + l2 * c12
@@ -44,8 +34,7 @@ def master_kernel(pk, q, dq, x, J, Jd, M, N):
     Jd[0, 1] = -l2 * s12 * w12
     Jd[1, 0] = -l1 * c1 * w1 - l2 * c12 * w12
     Jd[1, 1] = -l2 * c12 * w12
-    lc1 = 0.5 * l1
-    lc2 = 0.5 * l2
+    lc1, lc2 = 0.5 * l1, 0.5 * l2
     M[0, 0] = I1 + I2 + m1 * lc1 * lc1 + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * c2)
     M[0, 1] = I2 + m2 * (lc2 * lc2 + l1 * lc2 * c2)
     M[1, 0] = M[0, 1]
@@ -58,38 +47,28 @@ def master_kernel(pk, q, dq, x, J, Jd, M, N):
 
 
 def master_accel(pk, s, T1, F1, acc):
-    """Forward dynamics of the master (paper eq. (1), i = 1): acc (4,) = d/dt [q1, dq1] of the state
-    s (4,) = [q1, dq1] under joint torques T1 (2,) N m and the tip force F1 (2,) N, from
-    M1 ddq1 = T1 - N1 + J1^T F1 (2x2 solve by Cramer's rule).  False if M1 is singular.
-    Numba-compatible with heap work arrays: compiled by the Cosserat plant
-    (`harness.plant.cosserat.plant`)."""
-    x = np.empty(2)
-    J = np.empty((2, 2))
-    Jd = np.empty((2, 2))
-    M = np.empty((2, 2))
-    N = np.empty(2)
+    """Forward dynamics, eq. (1) i = 1: acc (4,) = d/dt s of s (4,) = [q1, dq1] under T1 (2,) N m and the
+    tip force F1 (2,) N (Cramer's rule).  False if M1 is singular.  Heap work arrays: compiled by the
+    Cosserat plant."""
+    x, J, Jd, M, N = np.empty(2), np.empty((2, 2)), np.empty((2, 2)), np.empty((2, 2)), np.empty(2)
     master_kernel(pk, s[0:2], s[2:4], x, J, Jd, M, N)
     r0 = T1[0] - N[0] + J[0, 0] * F1[0] + J[1, 0] * F1[1]
     r1 = T1[1] - N[1] + J[0, 1] * F1[0] + J[1, 1] * F1[1]
     det = M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
     if not det > 0.0:
         return False
-    acc[0] = s[2]
-    acc[1] = s[3]
+    acc[0], acc[1] = s[2], s[3]
     acc[2] = (M[1, 1] * r0 - M[0, 1] * r1) / det
     acc[3] = (M[0, 0] * r1 - M[1, 0] * r0) / det
     return True
 
 
 def master_points(pk, m, base, out):
-    """Base, elbow and tip of the master, world frame (n, 3, 3), m, for the master states m (n, 4) [q1, dq1]
-    (or (n, 2)) with its base at base (3,) (task [X, Z] -> world (b_x + X, b_y, b_z + Z)).
-    Numba-compatible."""
-    l1 = pk[0]
-    l2 = pk[1]
+    """Base, elbow and tip, world frame, out (n, 3, 3) m, of the states m (n, >= 2) [q1, ...] with the
+    base at base (3,) (task [X, Z] -> world (b_x + X, b_y, b_z + Z))."""
+    l1, l2 = pk[0], pk[1]
     for k in range(m.shape[0]):
-        q0 = m[k, 0]
-        q1 = m[k, 1]
+        q0, q1 = m[k, 0], m[k, 1]
         for i in range(3):
             for j in range(3):
                 out[k, i, j] = base[j]
@@ -103,11 +82,12 @@ KERNELS = ("master_kernel",)  # master_accel and master_points: compiled where u
 
 
 def _eval(p: MasterParams, q, dq=None):
+    """(x1 (2,) m, J1 (2,2), dJ1/dt (2,2), M1 (2,2) kg m^2, N1 (2,) N m) at q1, dq1 (default 0)."""
     q = np.asarray(q, dtype=float)
     dq = np.zeros(2) if dq is None else np.asarray(dq, dtype=float)
-    x, J, Jd, M, N = np.empty(2), np.empty((2, 2)), np.empty((2, 2)), np.empty((2, 2)), np.empty(2)
-    master_kernel(packed(p), q, dq, x, J, Jd, M, N)
-    return x, J, Jd, M, N
+    out = np.empty(2), np.empty((2, 2)), np.empty((2, 2)), np.empty((2, 2)), np.empty(2)
+    master_kernel(packed(p), q, dq, *out)
+    return out
 
 
 def fk(p: MasterParams, q) -> np.ndarray:
@@ -136,7 +116,7 @@ def nle(p: MasterParams, q, dq) -> np.ndarray:
 
 
 def gravity_force(p: MasterParams, q) -> np.ndarray:
-    """dV/dq1 (2,), N m (N1 at rest without friction)."""
+    """dV/dq1 (2,), N m (N1 at rest)."""
     return _eval(p, q)[4]
 
 

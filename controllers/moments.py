@@ -1,24 +1,13 @@
-"""The per-section quadrature moments of the fused slave dynamics (`slave.mass_nle_kernel`) as power
-series in the section's bending angle, with coefficients tabulated once per quadrature rule.
+"""The per-section quadrature moments of `slave.mass_nle_kernel` as power series in the section's bend
+angle Theta, coefficients tabulated once per Gauss-Legendre rule (the same sums, regrouped).
 
-Along section s the backbone point's derivatives are affine in the bases (controllers.cc `term_bases`)
+With the bases b_n(u) = f u^(n+1) E_n(u Theta) (`cc.term_bases`), |f| = 1, and mu_j = sum_g w_g u_g^j:
 
-    b_n(u) = f u^(n+1) E_n(u Theta) = f sum_m (i Theta)^m u^(m+n+1) / (m! (m+n+1)),   |f| = 1,
+    Q[0, n+1]   = sum_g w_g b_n(u_g)                =  f sum_p (i Theta)^p a_{n,p} mu_{p+n+1}
+    Q[k+1, l+1] = sum_g w_g conj(b_k(u_g)) b_l(u_g) =    sum_p (i Theta)^p c_{kl,p} mu_{p+k+l+2}
 
-and `mass_nle_kernel` needs the Gauss-Legendre sums (weights w_g, nodes u_g on [0, 1])
-
-    Q[0, n+1]   = sum_g w_g b_n(u_g)                  = f sum_p (i Theta)^p  a_{n,p} mu_{p+n+1}
-    Q[k+1, l+1] = sum_g w_g conj(b_k(u_g)) b_l(u_g)   =   sum_p (i Theta)^p  c_{kl,p} mu_{p+k+l+2}
-
-with mu_j = sum_g w_g u_g^j (the rule's moments), a_{n,p} = 1 / (p! (p+n+1)) and
-c_{kl,p} = sum_{m=0..p} (-1)^m / (m! (m+k+1) (p-m)! (p-m+l+1)) (rationals, computed exactly here).
-These are the same sums regrouped, not a different integral: the series gives the quadrature's own
-value (with few points the quadrature's error too), to rounding.  The kernel evaluates them with one
-real multiply-add per moment and power instead of `en_tuple` and nine complex products per node.
-
-Used where |Theta| <= MOMENT_RADIUS: there every term is below about 1.5 in size (no cancellation
-beyond rounding) and the series stops after at most P_MAX powers; elsewhere, and for nodes that are
-not `gauss_legendre01(n)` with 2 <= n <= N_RULES, the caller sums over the nodes as before.
+a_{n,p} = 1 / (p! (p+n+1)), c_{kl,p} = sum_{m=0..p} (-1)^m / (m! (m+k+1) (p-m)! (p-m+l+1)).  Used for
+|Theta| <= MOMENT_RADIUS and the rules n = 2..N_RULES; elsewhere the caller sums over the nodes.
 """
 
 from __future__ import annotations
@@ -27,6 +16,8 @@ from fractions import Fraction
 from math import factorial
 
 import numpy as np
+
+from .scratch import scratch, scratch_zeros
 
 MOMENT_RADIUS = 1.5  # rad, |Theta| up to which the series is used
 P_MAX = 36  # powers of Theta tabulated (the term at p = 36 is < 1.5^36 / 36! ~ 5e-36 at the radius)
@@ -37,7 +28,7 @@ MOMENTS = ((-1, 0), (-1, 1), (-1, 2), (0, 0), (0, 1), (0, 2), (1, 1), (1, 2))
 
 
 def gauss_legendre01(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss-Legendre nodes and weights on [0, 1] (n points; also `controllers.slave.gauss_legendre01`)."""
+    """Gauss-Legendre nodes and weights (n,) each on [0, 1]."""
     x, w = np.polynomial.legendre.leggauss(n)
     return 0.5 * (x + 1.0), 0.5 * w
 
@@ -54,8 +45,8 @@ def _rules() -> tuple[np.ndarray, np.ndarray]:
 
 
 def _series_table() -> np.ndarray:
-    """COEF[n, q, p]: the coefficient of Theta^p in moment q (MOMENTS order) for the n-point rule, the
-    factor i^p folded in as a sign (even p: real part, odd p: imaginary part)."""
+    """COEF[n, q, p]: coefficient of Theta^p in moment q (MOMENTS order), n-point rule, i^p as a sign
+    (even p: real part, odd p: imaginary part)."""
     sign = [1, 1, -1, -1]  # i^p = 1, i, -1, -i: the sign of its nonzero part
     coef = np.zeros((N_RULES + 1, len(MOMENTS), P_MAX + 3))
     for q, (k, l) in enumerate(MOMENTS):
@@ -78,61 +69,33 @@ CTAIL = np.maximum.accumulate(np.abs(COEF[2:]).max(axis=(0, 1))[::-1])[::-1].cop
 
 
 def section_moments(th, f, nodes, Q):
-    """Fill Q[0, 0..3], Q[1, 1..3] and Q[2, 2..3] (complex (3, 4), the sums above) for a section of bending
-    angle th (rad) starting at direction f = exp(i phi) by the series; returns False, leaving Q
-    untouched, when |th| > MOMENT_RADIUS or `nodes` is not a tabulated Gauss-Legendre rule (the
-    caller then sums over the nodes)."""
+    """Fill Q[0, 0..3], Q[1, 1..3], Q[2, 2..3] (complex (3, 4)) of a section of bend th (rad) starting
+    at direction f = exp(i phi).  False (Q untouched) when |th| > MOMENT_RADIUS or `nodes` is not a
+    tabulated rule."""
     n = nodes.shape[0]
     if abs(th) > MOMENT_RADIUS or n < 2 or n > N_RULES or nodes[0] != NODE0[n]:
         return False
-    r0 = COEF[n, 0, 0]
-    r1 = COEF[n, 1, 0]
-    r2 = COEF[n, 2, 0]
-    r3 = COEF[n, 3, 0]
-    r4 = COEF[n, 4, 0]
-    r5 = COEF[n, 5, 0]
-    r6 = COEF[n, 6, 0]
-    r7 = COEF[n, 7, 0]
-    i0 = 0.0
-    i1 = 0.0
-    i2 = 0.0
-    i3 = 0.0
-    i4 = 0.0
-    i5 = 0.0
-    i6 = 0.0
-    i7 = 0.0
+    re = scratch(8)
+    im = scratch_zeros(8)
+    for q in range(8):
+        re[q] = COEF[n, q, 0]
     a = abs(th)
     t = 1.0  # th^p
     for p in range(1, P_MAX, 2):
         t *= th  # odd power p: the imaginary parts
-        i0 += t * COEF[n, 0, p]
-        i1 += t * COEF[n, 1, p]
-        i2 += t * COEF[n, 2, p]
-        i3 += t * COEF[n, 3, p]
-        i4 += t * COEF[n, 4, p]
-        i5 += t * COEF[n, 5, p]
-        i6 += t * COEF[n, 6, p]
-        i7 += t * COEF[n, 7, p]
+        for q in range(8):
+            im[q] += t * COEF[n, q, p]
         t *= th  # even power p + 1: the real parts
-        r0 += t * COEF[n, 0, p + 1]
-        r1 += t * COEF[n, 1, p + 1]
-        r2 += t * COEF[n, 2, p + 1]
-        r3 += t * COEF[n, 3, p + 1]
-        r4 += t * COEF[n, 4, p + 1]
-        r5 += t * COEF[n, 5, p + 1]
-        r6 += t * COEF[n, 6, p + 1]
-        r7 += t * COEF[n, 7, p + 1]
+        for q in range(8):
+            re[q] += t * COEF[n, q, p + 1]
         if abs(t) * a * CTAIL[p + 2] < TAIL:  # the terms from p + 2 on (|th| < 1.5 < p: they shrink)
             break
     Q[0, 0] = MU[n, 0]
-    Q[0, 1] = f * complex(r0, i0)
-    Q[0, 2] = f * complex(r1, i1)
-    Q[0, 3] = f * complex(r2, i2)
-    Q[1, 1] = complex(r3, i3)
-    Q[1, 2] = complex(r4, i4)
-    Q[1, 3] = complex(r5, i5)
-    Q[2, 2] = complex(r6, i6)
-    Q[2, 3] = complex(r7, i7)
+    for m in range(3):
+        Q[0, 1 + m] = f * complex(re[m], im[m])
+        Q[1, 1 + m] = complex(re[3 + m], im[3 + m])
+    Q[2, 2] = complex(re[6], im[6])
+    Q[2, 3] = complex(re[7], im[7])
     return True
 
 

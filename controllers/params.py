@@ -1,12 +1,7 @@
-"""Frozen model parameters and controller gains (numpy only).
+"""Frozen model parameters and controller gains (numpy only; every number a configurable default).
 
-Every number here is a *documented default*, configurable by the user.  The paper (shared/paper.md)
-fixes only the master link lengths (l = 0.6 m), the gains (39) and the trajectory (40); it takes the
-Octarm dynamic model from Tatlicioglu et al. whose numbers are not available to us, so every slave
-parameter below is **our proposal**, not the paper's.
-
-Frames and units: planar task space x = [X, Z] in metres, Z up, gravity along -Z.  Angles in rad,
-curvatures in 1/m, forces in N, moments in N m.
+The paper fixes the master link lengths, the gains (39) and the trajectory (40); every slave number is
+our proposal (docs/models.md).  Task space x = [X, Z] (m), Z up, gravity along -Z; rad, 1/m, N, N m.
 """
 
 from __future__ import annotations
@@ -46,8 +41,7 @@ def _packed(name: str, default: tuple):
 
 
 def _pack_layout(cls) -> tuple[tuple[str, ...], dict[str, int], int]:
-    """(field names, pack name -> offset, size) of the fields declared with `_packed`, in declaration
-    order."""
+    """(field names, pack name -> offset, size) of the `_packed` fields, in declaration order."""
     names, offsets, off = [], {}, 0
     for f in fields(cls):
         if "pack" in f.metadata:
@@ -59,12 +53,7 @@ def _pack_layout(cls) -> tuple[tuple[str, ...], dict[str, int], int]:
 
 @dataclass(frozen=True)
 class MasterParams:
-    """Planar 2-link revolute master in the x-z plane (paper Sec. II-C, VI).
-
-    Joint angles are measured from +Z towards +X (a right-handed rotation about +Y), so
-    x1 = [l1 sin q_a + l2 sin(q_a + q_b), l1 cos q_a + l2 cos(q_a + q_b)].
-    Links are uniform rods: centre of mass at l/2, inertia m l^2 / 12 about the centre (our default).
-    """
+    """Planar 2-link revolute master (paper Sec. II-C, VI); uniform links (`controllers.master`)."""
 
     lengths: tuple[float, float] = (0.6, 0.6)  # m, paper Sec. VI
     masses: tuple[float, float] = (1.0, 1.0)  # kg, our proposal
@@ -76,14 +65,8 @@ class MasterParams:
             object.__setattr__(self, f, _tup(getattr(self, f)))
             if len(getattr(self, f)) != 2:
                 raise ParameterError(f"master.{f} must have 2 entries, got {getattr(self, f)!r}")
-        _check_positive("master", "lengths", self.lengths)
-        _check_positive("master", "masses", self.masses)
-        _check_positive("master", "damping", self.damping, allow_zero=True)
+            _check_positive("master", f, getattr(self, f), allow_zero=f == "damping")
         _check_positive("master", "gravity", self.gravity, allow_zero=True)
-
-    @property
-    def reach(self) -> float:
-        return self.lengths[0] + self.lengths[1]
 
     @property
     def inertias(self) -> tuple[float, float]:
@@ -93,17 +76,9 @@ class MasterParams:
 
 @dataclass(frozen=True)
 class SlaveParams:
-    """Planar 3-section constant-curvature Octarm (our proposal; the paper's numbers are not public).
+    """Planar 3-section constant-curvature Octarm, q2 = [d1, d2, d3 (m), k1, k2, k3 (1/m)]
+    (`controllers.slave`).  `_packed` fields enter `packed()` (layout SLAVE_PACK) in this order."""
 
-    q2 = [d1, d2, d3, k1, k2, k3]: current arc length of each section (m) and its curvature (1/m).
-    Base at the origin, tangent +Z; k > 0 bends toward +X.
-
-    Each section carries a constant mass spread uniformly over its *material* coordinate; the
-    Lagrangian has gravity, bending energy 1/2 Kb_i d_i k_i^2 and extension energy
-    1/2 Ke_i (d_i - L0_i)^2, plus optional viscous damping on q2 rates.
-    """
-
-    # fields with a `pack` name enter the kernels' packed vector (`packed`, layout SLAVE_PACK), in this order
     rest_lengths: tuple[float, float, float] = _packed("L0", (0.30, 0.30, 0.30))  # L0, m
     masses: tuple[float, float, float] = _packed("m", (1.0, 0.7, 0.4))  # kg, base to tip
     bending_stiffness: tuple[float, float, float] = _packed("Kb", (8.0, 3.0, 1.0))  # Kb, N m^2
@@ -119,22 +94,16 @@ class SlaveParams:
     n_quad: int = 8  # Gauss-Legendre points per section for the energy integrals
 
     def __post_init__(self) -> None:
-        three = (
-            "rest_lengths", "masses", "bending_stiffness", "extension_stiffness",
-            "extension_damping", "bending_damping", "slice_inertia",
-        )
-        for f in three:
+        for f, allow_zero in (("rest_lengths", False), ("masses", False), ("bending_stiffness", True),
+                              ("extension_stiffness", True), ("extension_damping", True),
+                              ("bending_damping", True), ("slice_inertia", True)):
             object.__setattr__(self, f, _tup(getattr(self, f)))
             if len(getattr(self, f)) != 3:
                 raise ParameterError(f"slave.{f} must have 3 entries, got {getattr(self, f)!r}")
+            _check_positive("slave", f, getattr(self, f), allow_zero=allow_zero)
         object.__setattr__(self, "gravity", _tup(self.gravity))
         if len(self.gravity) != 2 or not np.all(np.isfinite(self.gravity)):
             raise ParameterError(f"slave.gravity = {self.gravity!r}: must be 2 finite numbers (X, Z)")
-        for f in ("rest_lengths", "masses"):
-            _check_positive("slave", f, getattr(self, f))
-        for f in ("bending_stiffness", "extension_stiffness", "extension_damping",
-                  "bending_damping", "slice_inertia"):
-            _check_positive("slave", f, getattr(self, f), allow_zero=True)
         if not (np.isfinite(self.max_extension) and self.max_extension > 1.0):
             raise ParameterError(f"slave.max_extension = {self.max_extension!r}: must be > 1")
         if not (0.0 < self.max_bend <= np.pi):
@@ -142,20 +111,17 @@ class SlaveParams:
         if not (isinstance(self.n_quad, int) and 2 <= self.n_quad <= 32):
             raise ParameterError(f"slave.n_quad = {self.n_quad!r}: must be an integer in [2, 32]")
 
-    # --- ranges -------------------------------------------------------------------------------
     @property
     def length_range(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) (3,) each, m: the section lengths' range [L0, max_extension L0]."""
         L0 = np.asarray(self.rest_lengths)
         return L0.copy(), self.max_extension * L0
 
-    # --- packed arrays for the compiled kernels ------------------------------------------------
     def packed(self) -> np.ndarray:
-        """The fields declared with a pack name, concatenated in declaration order: float64
-        (SLAVE_PACK_SIZE,), entry SLAVE_PACK[name] + i = component i of that field."""
+        """float64 (SLAVE_PACK_SIZE,): entry SLAVE_PACK[name] + i = component i of that field."""
         return np.concatenate([getattr(self, f) for f in _PACK_FIELDS]).astype(np.float64)
 
 
-# the packed layout of SlaveParams, generated from its field declarations: name -> offset
 _PACK_FIELDS, SLAVE_PACK, SLAVE_PACK_SIZE = _pack_layout(SlaveParams)
 
 
@@ -184,12 +150,8 @@ class Gains:
 
 @dataclass(frozen=True)
 class SubtaskSpec:
-    """Which sub-tasks (29)-(33) run in the null space and how they combine.
-
-    kinds: subset of {"manipulability", "limits"}; their beta functions are summed with `weights`,
-    beta = sum_j w_j beta_j(q2), so y_a = exp(-ky beta) = prod_j exp(-ky w_j beta_j).
-    `limit_power` p shapes the limits term (see controllers.subtasks).
-    """
+    """Null-space sub-tasks (29)-(33): beta = sum_j weights_j beta_j(q2) over `kinds` (subset of
+    {"manipulability", "limits"}); `limit_power` p of the limits term (`controllers.subtasks`)."""
 
     kinds: tuple[str, ...] = ("manipulability", "limits")
     weights: tuple[float, ...] = (1.0, 0.05)

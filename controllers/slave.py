@@ -1,23 +1,11 @@
-"""Analytic model of the planar 3-section Octarm slave: kinematics and Lagrangian dynamics.
+"""Analytic model of the planar 3-section Octarm slave, q2 = [d1, d2, d3 (m), k1, k2, k3 (1/m)], tip x2 =
+[X, Z] (m).  Paper eq. (1), i = 2: M2 ddq + N2 = T2 + J2^T F2, N2 = C dq + G + K + D dq, from
 
-q2 = [d1, d2, d3, k1, k2, k3] (section arc lengths in m, curvatures in 1/m).  Base at the origin,
-tangent +Z, k > 0 bends toward +X.  Task space x2 = [X, Z] (m) of the tip.
-
-Dynamics (paper eq. (1) with i = 2): M2(q) ddq + N2(q, dq) = T2 + J2^T F2, from the Lagrangian
-
-    T = sum_s int_0^1 [ m_s/2 |dp_s(u)/dt|^2 + I_s/2 (dtheta_s(u)/dt)^2 ] du        (kinetic)
+    T = sum_s int_0^1 [ m_s/2 |dp_s(u)/dt|^2 + I_s/2 (dtheta_s(u)/dt)^2 ] du
     V = -sum_s m_s int_0^1 g . p_s(u) du + sum_s [ Kb_s d_s k_s^2 / 2 + Ke_s (d_s - L0_s)^2 / 2 ]
 
-with each section's mass m_s spread uniformly over its material coordinate u (so over its current
-length), p_s(u) the backbone point, theta_s(u) the backbone angle and I_s an optional slice
-rotational inertia.  The integrals use Gauss-Legendre quadrature with `n_quad` points per section;
-the integrands are entire functions of u so 8 points are exact to rounding for |k d| <= pi/2.
-N2 = C(q, dq) dq + G(q) + K(q) + D dq.  One implementation in production: `mass_nle_kernel` (M2 and N2
-together, Coriolis in Lagrange form); the Christoffel form lives in tests/reference_models.py and checks it.
-
-Public functions take the frozen `SlaveParams` and return new arrays; the `*_kernel` functions take
-the packed parameter vector (`SlaveParams.packed()`, layout `controllers.params.SLAVE_PACK`) and output
-arrays and are compiled by `harness.loop.fast`.
+(mass uniform over the material coordinate u; Gauss-Legendre quadrature, `n_quad` points per section).
+Kernels take `SlaveParams.packed()`; the Christoffel form is tests/reference_models.py.
 """
 
 from __future__ import annotations
@@ -40,44 +28,24 @@ PACK_IS = SLAVE_PACK["Is"]
 PACK_G = SLAVE_PACK["g"]
 
 
-# ---------------------------------------------------------------------------------------------
-# kernels (numba-compatible)
-# ---------------------------------------------------------------------------------------------
 def elastic_kernel(pk, q, out):
     """dV_elastic/dq (6,): V = sum Kb d k^2 / 2 + Ke (d - L0)^2 / 2."""
     for i in range(3):
-        d = q[i]
-        k = q[3 + i]
+        d, k = q[i], q[3 + i]
         out[i] = 0.5 * pk[PACK_KB + i] * k * k + pk[PACK_KE + i] * (d - pk[PACK_L0 + i])
         out[3 + i] = pk[PACK_KB + i] * d * k
 
 
 def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
-    """Fused M2 (6,6) and N2 (6,) for the control loop (outputs overwritten).
+    """M2 (6,6) and N2 (6,) together (outputs overwritten); nodes, weights: Gauss-Legendre rule on [0, 1].
 
-    pk: SlaveParams.packed(); q, dq (6,); nodes, weights: Gauss-Legendre rule on [0, 1]; M (6,6), N (6,) out.
-    * the Coriolis/centripetal vector uses the Lagrange form for a continuum of particles,
-      C(q, dq) dq = sum_s int m_s J_p^T (d^2 p/dt^2 at ddq = 0) du  (+ the slice-rotation analogue),
-      with d^2 p/dt^2|_{ddq=0} = ydot^T H_y ydot + sum_i dp/dTheta_i * 2 dk_i dd_i.  It equals the
-      Christoffel form C dq (tests/reference_models.py) identically (tested to rounding), without
-      building the 6x6x6 tensor dM/dq;
-    * along section s the point's q-gradient is affine in two scalar functions of u,
-      J_p(u) = V0 + b0(u) V1 + b1(u) V2 (b_n = exp(i phi_s) u^(1+n) E_n(u Theta_s), controllers.cc
-      `term_bases`; V0 = the completed sections' end terms, V1, V2 constant), and d^2 p/dt^2 is
-      affine in b0, b1, b2 (`term_ydd`).  So the quadrature only accumulates the weighted moments
-      sum_g w_g conj(phi_k) psi_m of (1, b0, b1, b2) (the same Gauss-Legendre points and weights),
-      and M and N are assembled once per section from them: the same sums, regrouped;
-    * for |Theta_s| <= 1.5 those moments come from their power series in Theta_s with coefficients
-      tabulated per rule (`controllers.moments.section_moments`): the same sums again, without a
-      loop over the nodes (the node loop's en_tuple and complex products were half of this kernel).
-    """
-    d = scratch(3)
-    th = scratch(3)
-    ydot = scratch(6)
+    Coriolis in Lagrange form: C dq = sum_s int m_s J_p^T (d^2p/dt^2 at ddq = 0) du (+ slice rotation).
+    Along section s, J_p(u) = V0 + b0(u) V1 + b1(u) V2 and d^2p/dt^2 is affine in (1, b0, b1, b2)
+    (`cc.term_bases`, `cc.term_ydd`), so the quadrature only needs the moments Q (`moments`)."""
+    d, th, ydot = scratch(3), scratch(3), scratch(6)
     y_of_q(q, d, th, ydot, dq)
     # prefix sums over the completed sections: y-gradient and ydot^T H_y ydot of their end terms
-    PJ = scratch_cz((3, 6))
-    Pcor = scratch_cz(3)
+    PJ, Pcor = scratch_cz((3, 6)), scratch_cz(3)
     fs = scratch_c(3)  # exp(i phi) at the start of each section
     fs[0] = 1.0
     phi = 0.0
@@ -98,27 +66,20 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
     cen = scratch(3)  # 2 dk_i dd_i
     for i in range(3):
         cen[i] = 2.0 * dq[3 + i] * dq[i]
-    Y = scratch_c((3, 6))  # y-space V0, V1, V2
-    V = scratch_c((3, 6))  # q-space (B^T Y)
-    Z = scratch_c((3, 6))
+    Y, V, Z = scratch_c((3, 6)), scratch_c((3, 6)), scratch_c((3, 6))  # V0, V1, V2 in y-space; V = B^T Y
     Q = scratch_c((3, 4))  # Q[k, m] = sum_g w conj(phi_k) psi_m
     A = scratch_c(4)  # d^2p/dt^2 = sum_m A_m psi_m, psi = (1, b0, b1, b2)
     alpha = scratch(6)
     for s in range(3):
-        ms = pk[PACK_M + s]
-        Is = pk[PACK_IS + s]
-        ds = d[s]
-        ids = complex(0.0, ds)
-        # J_p(u) = V0 + b0 V1 + b1 V2 in y-space (term_grad_add: i b0 d_s on earlier angles, b0 on
-        # d_s, i b1 d_s on Theta_s)
+        ms, Is = pk[PACK_M + s], pk[PACK_IS + s]
+        ds, ids = d[s], complex(0.0, d[s])
+        # J_p(u) = V0 + b0 V1 + b1 V2 in y-space (as term_grad_add)
         for a in range(6):
             Y[0, a] = PJ[s, a]
-            Y[1, a] = 0.0
-            Y[2, a] = 0.0
+            Y[1, a] = Y[2, a] = 0.0
         for ll in range(s):
             Y[1, 3 + ll] = ids
-        Y[1, s] = 1.0
-        Y[2, 3 + s] = ids
+        Y[1, s], Y[2, 3 + s] = 1.0, ids
         for k in range(3):
             for i in range(3):
                 V[k, i] = Y[k, i] + Y[k, 3 + i] * q[3 + i]
@@ -127,8 +88,7 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
         P = 0.0
         for ll in range(s):
             P += ydot[3 + ll]
-        D = ydot[s]
-        W = ydot[3 + s]
+        D, W = ydot[s], ydot[3 + s]
         A[0] = Pcor[s]
         A[1] = complex(-(P * P * ds), 2.0 * P * D)
         A[2] = complex(-(2.0 * P * W * ds), 2.0 * D * W)
@@ -137,8 +97,7 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
             A[0] += Y[0, 3 + i] * cen[i]
             A[1] += Y[1, 3 + i] * cen[i]
             A[2] += Y[2, 3 + i] * cen[i]
-        # weighted moments over the Gauss-Legendre points of the section: by their power series in
-        # Theta_s (controllers.moments, the same sums) where it applies, else node by node
+        # the section's weighted moments: by their series (controllers.moments), else node by node
         if not section_moments(th[s], fs[s], nodes, Q):
             for k in range(3):
                 for m in range(4):
@@ -146,8 +105,7 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
             for g in range(nodes.shape[0]):
                 w = weights[g]
                 b0, b1, b2, b3 = term_bases(nodes[g], th[s], fs[s])
-                wb0 = w * b0.conjugate()
-                wb1 = w * b1.conjugate()
+                wb0, wb1 = w * b0.conjugate(), w * b1.conjugate()
                 Q[0, 0] += w
                 Q[0, 1] += w * b0
                 Q[0, 2] += w * b1
@@ -210,9 +168,6 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
 KERNELS = ("elastic_kernel", "mass_nle_kernel")
 
 
-# ---------------------------------------------------------------------------------------------
-# public API: f(params, q, dq, ...) -> array
-# ---------------------------------------------------------------------------------------------
 def _q(q) -> np.ndarray:
     q = np.ascontiguousarray(q, dtype=np.float64)
     if q.shape != (6,):
@@ -220,25 +175,25 @@ def _q(q) -> np.ndarray:
     return q
 
 
+def _tip(q, dq, order: int):
+    out = np.empty(2), np.empty((2, 6)), np.empty((2, 6, 6)), np.empty((2, 6, 6))
+    tip_kinematics(_q(q), _q(dq), order, *out)
+    return out
+
+
 def tip_position(p: SlaveParams, q) -> np.ndarray:
     """Tip x2 = [X, Z] (2,), m."""
-    x = np.empty(2)
-    tip_kinematics(_q(q), np.zeros(6), 0, x, np.empty((2, 6)), np.empty((2, 6, 6)), np.empty((2, 6, 6)))
-    return x
+    return _tip(q, np.zeros(6), 0)[0]
 
 
 def jacobian(p: SlaveParams, q) -> np.ndarray:
     """J2 = dx2/dq2 (2, 6)."""
-    J = np.empty((2, 6))
-    tip_kinematics(_q(q), np.zeros(6), 1, np.empty(2), J, np.empty((2, 6, 6)), np.empty((2, 6, 6)))
-    return J
+    return _tip(q, np.zeros(6), 1)[1]
 
 
 def tip_hessian(p: SlaveParams, q) -> np.ndarray:
     """d^2 x2 / dq2^2, (2, 6, 6)."""
-    H = np.empty((2, 6, 6))
-    tip_kinematics(_q(q), np.zeros(6), 2, np.empty(2), np.empty((2, 6)), H, np.empty((2, 6, 6)))
-    return H
+    return _tip(q, np.zeros(6), 2)[2]
 
 
 def jacobian_dot(p: SlaveParams, q, dq) -> np.ndarray:
@@ -248,24 +203,21 @@ def jacobian_dot(p: SlaveParams, q, dq) -> np.ndarray:
 
 def tip_derivatives(p: SlaveParams, q, dq) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(x2 (2,), J2 (2,6), H = d^2x2/dq^2 (2,6,6), dH/dt (2,6,6))."""
-    x, J, H, Hd = np.empty(2), np.empty((2, 6)), np.empty((2, 6, 6)), np.empty((2, 6, 6))
-    tip_kinematics(_q(q), _q(dq), 3, x, J, H, Hd)
-    return x, J, H, Hd
+    return _tip(q, dq, 3)
 
 
 def backbone(p: SlaveParams, q, n_per_section: int = 20) -> np.ndarray:
-    """Backbone points [X, Z] (3 n + 1, 2), m, base first, for drawing."""
+    """Backbone points [X, Z] (3 n + 1, 2), m, base first."""
     out = np.empty((3 * n_per_section + 1, 2))
     backbone_points(_q(q), int(n_per_section), out)
     return out
 
 
-def mass_and_nle(p: SlaveParams, q, dq) -> tuple[np.ndarray, np.ndarray]:
-    """(M2 (6,6), N2 (6,)) of paper eq. (1): `mass_nle_kernel`, the kernel of the control law and the
-    plants."""
+def mass_and_nle(p: SlaveParams, q, dq, pk=None) -> tuple[np.ndarray, np.ndarray]:
+    """(M2 (6,6), N2 (6,)) of paper eq. (1) (`mass_nle_kernel`); pk: packed parameters (default p's)."""
     nodes, weights = gauss_legendre01(p.n_quad)
     M, N = np.empty((6, 6)), np.empty(6)
-    mass_nle_kernel(p.packed(), _q(q), _q(dq), nodes, weights, M, N)
+    mass_nle_kernel(p.packed() if pk is None else pk, _q(q), _q(dq), nodes, weights, M, N)
     return M, N
 
 
@@ -280,14 +232,11 @@ def nle(p: SlaveParams, q, dq) -> np.ndarray:
 
 
 def gravity_force(p: SlaveParams, q) -> np.ndarray:
-    """dV_gravity/dq2 (6,): the gravity part of N2 (N2 at rest with the stiffnesses set to 0)."""
+    """dV_gravity/dq2 (6,): N2 at rest with the stiffnesses set to 0."""
     pk = p.packed()
     pk[PACK_KB:PACK_KB + 3] = 0.0
     pk[PACK_KE:PACK_KE + 3] = 0.0
-    nodes, weights = gauss_legendre01(p.n_quad)
-    M, N = np.empty((6, 6)), np.empty(6)
-    mass_nle_kernel(pk, _q(q), np.zeros(6), nodes, weights, M, N)
-    return N
+    return mass_and_nle(p, q, np.zeros(6), pk)[1]
 
 
 def elastic_force(p: SlaveParams, q) -> np.ndarray:

@@ -1,9 +1,6 @@
-"""Named status codes of a run's step: what the loop's kernels, the plants' `advance` / `true_state` and
-`harness.loop.common.set_outcome` exchange.  0 is a step that went well; every other code ends the run
-as "diverged" with `Status(code).text` in its message.
-
-The compiled kernels use the `ST_*` integer constants below (numba reads module-level integers as
-constants); Python code uses `Status` members (an IntEnum: equal to those integers)."""
+"""Named status codes of a run's step (kernels, plants' `advance` / `true_state`, the loop): 0 is a step
+that went well; any other code ends the run as "diverged" with `Status(code).text` in its message.
+Compiled kernels use the ST_* integers (numba reads module-level integers as constants)."""
 
 from __future__ import annotations
 
@@ -11,40 +8,25 @@ from enum import IntEnum
 
 
 class Status(IntEnum):
-    OK = 0
-    NONFINITE = 1
-    MASTER_SINGULAR = 2
-    SLAVE_SINGULAR = 3
-    RUNAWAY = 4
-    SECTION_LENGTH = 5
-    MUJOCO_STATE = 6
-    MUJOCO_WARNING = 7
-    PLANT_STATE = 8
+    """A status code and its one-line `text`."""
 
-    @property
-    def text(self) -> str:
-        return _TEXT[self]
+    OK = 0, "ok"
+    NONFINITE = 1, "non-finite state or command"
+    MASTER_SINGULAR = 2, "master Jacobian J1 singular"
+    SLAVE_SINGULAR = 3, "slave J2 J2^T singular"
+    RUNAWAY = 4, "runaway tracking error (|e| > 1 m)"
+    SECTION_LENGTH = 5, "slave section length <= 0"
+    MUJOCO_STATE = 6, "non-finite or exploding MuJoCo state (|x| > 1e6)"
+    MUJOCO_WARNING = 7, "MuJoCo warning"
+    PLANT_STATE = 8, "non-finite or exploding plant state (|x| > 1e6)"
 
+    def __new__(cls, value: int, text: str) -> Status:
+        member = int.__new__(cls, value)
+        member._value_ = value
+        member.text = text
+        return member
 
-_TEXT = {
-    Status.OK: "ok",
-    Status.NONFINITE: "non-finite state or command",
-    Status.MASTER_SINGULAR: "master Jacobian J1 singular",
-    Status.SLAVE_SINGULAR: "slave J2 J2^T singular",
-    Status.RUNAWAY: "runaway tracking error (|e| > 1 m)",
-    Status.SECTION_LENGTH: "slave section length <= 0",
-    Status.MUJOCO_STATE: "non-finite or exploding MuJoCo state (|x| > 1e6)",
-    Status.MUJOCO_WARNING: "MuJoCo warning",
-    Status.PLANT_STATE: "non-finite or exploding plant state (|x| > 1e6)",
-}
 
 # the same codes as plain integers, for the compiled kernels
-ST_OK = int(Status.OK)
-ST_NONFINITE = int(Status.NONFINITE)
-ST_MASTER_SINGULAR = int(Status.MASTER_SINGULAR)
-ST_SLAVE_SINGULAR = int(Status.SLAVE_SINGULAR)
-ST_RUNAWAY = int(Status.RUNAWAY)
-ST_SECTION_LENGTH = int(Status.SECTION_LENGTH)
-ST_MUJOCO_STATE = int(Status.MUJOCO_STATE)
-ST_MUJOCO_WARNING = int(Status.MUJOCO_WARNING)
-ST_PLANT_STATE = int(Status.PLANT_STATE)
+(ST_OK, ST_NONFINITE, ST_MASTER_SINGULAR, ST_SLAVE_SINGULAR, ST_RUNAWAY, ST_SECTION_LENGTH, ST_MUJOCO_STATE,
+ ST_MUJOCO_WARNING, ST_PLANT_STATE) = (int(s) for s in Status)

@@ -1,23 +1,12 @@
 """Null-space sub-tasks, paper Sec. V, eqs. (29)-(33) and (41).
 
-A sub-task is a non-negative function beta(q2) that the null-space motion tries to *increase*:
-y_a = exp(-ky beta) (29), J_s = dy_a/dq2 (31), g = -ks J_s^T y_a (33), i.e. g = ks ky y_a^2 grad beta.
-
-Shipped sub-tasks (combined as beta = sum_j w_j beta_j):
-
-* ``manipulability`` (41): beta_m = sqrt(det(J2 J2^T)).
-* ``limits``: keeps section lengths and bending angles inside their ranges,
-  beta_l = sum_j (1 - s_j^(2p)) with normalised coordinates s_j in [-1, 1] on the allowed range:
-  s = (d_i - c_i)/h_i for lengths (range [L0, e L0], centre c, half-width h) and s = k_i d_i / bmax
-  for bending angles.  beta_l is largest at the centre of the box and its gradient grows like
-  2p s^(2p-1)/h toward the limits, where it dominates the manipulability gradient (which alone
-  drives the base section far past its range and shrinks the tip section).
-
-For the exact time derivative of g (needed by phi_N, eq. 27) every sub-task returns beta, its
-gradient and the time derivative of its gradient along dq2; all closed form (the manipulability
-terms use the exact tip Hessian and its time derivative from `controllers.cc`).
-
-Sub-task selection is packed for the kernels as `spec = [w_manip, w_limits, p, e, bmax, L0_1..3]`.
+A sub-task beta(q2) >= 0 is increased by the null-space motion: y_a = exp(-ky beta) (29), J_s = dy_a/dq2
+(31), g = -ks J_s^T y_a = ks ky y_a^2 grad beta (33); beta = sum_j w_j beta_j of
+* ``manipulability`` (41): beta_m = sqrt(det(J2 J2^T));
+* ``limits``: beta_l = sum_j (1 - s_j^(2p)), s_j in [-1, 1] the normalised section lengths (range [L0,
+  e L0]) and bend angles k d / bmax; its gradient grows steeply toward the limits.
+Each returns beta, grad beta and d/dt grad beta (closed form).  Packed spec = [w_manip, w_limits, p,
+e, bmax, L0 (3)].
 """
 
 from __future__ import annotations
@@ -27,6 +16,7 @@ import numpy as np
 from .cc import gram_terms
 from .params import SlaveParams, SubtaskSpec
 from .scratch import scratch
+from .slave import jacobian
 from .tip import tip_kinematics
 
 SPEC_SIZE = 8
@@ -40,35 +30,25 @@ def pack_subtask(spec: SubtaskSpec, slave: SlaveParams) -> np.ndarray:
 
 
 def manipulability_kernel(J, H, Jd, Hd, grad, graddot):
-    """beta_m = sqrt(det A), A = J J^T, with grad (6,) and d/dt grad (6,) (outputs overwritten).
-
-    J (2,6), H (2,6,6) = dJ/dq, Jd (2,6) = dJ/dt, Hd (2,6,6) = dH/dt.  Returns (beta, det A).
-    """
+    """beta_m = sqrt(det A), A = J J^T; writes grad, graddot (6,).  J, Jd (2,6) = dJ/dt, H, Hd (2,6,6) =
+    dJ/dq and its rate.  Returns (beta, det A)."""
     gt = scratch(6)
     gram_terms(J, Jd, gt)
     A00, A01, A11, Ad00, Ad01, Ad11 = gt[0], gt[1], gt[2], gt[3], gt[4], gt[5]
     det = A00 * A11 - A01 * A01
     if det <= 0.0:
         for c in range(6):
-            grad[c] = 0.0
-            graddot[c] = 0.0
+            grad[c] = graddot[c] = 0.0
         return 0.0, det
     beta = np.sqrt(det)
     detd = Ad00 * A11 + A00 * Ad11 - 2.0 * A01 * Ad01
     betad = detd / (2.0 * beta)
     for c in range(6):
         # dA/dq_c = H_c J^T + J H_c^T and its time derivative
-        dA00 = 0.0
-        dA01 = 0.0
-        dA11 = 0.0
-        dAd00 = 0.0
-        dAd01 = 0.0
-        dAd11 = 0.0
+        dA00 = dA01 = dA11 = dAd00 = dAd01 = dAd11 = 0.0
         for a in range(6):
-            h0 = H[0, a, c]
-            h1 = H[1, a, c]
-            hd0 = Hd[0, a, c]
-            hd1 = Hd[1, a, c]
+            h0, h1 = H[0, a, c], H[1, a, c]
+            hd0, hd1 = Hd[0, a, c], Hd[1, a, c]
             dA00 += 2.0 * h0 * J[0, a]
             dA01 += h0 * J[1, a] + J[0, a] * h1
             dA11 += 2.0 * h1 * J[1, a]
@@ -84,13 +64,10 @@ def manipulability_kernel(J, H, Jd, Hd, grad, graddot):
 
 
 def limit_powers(s, p2):
-    """(s^(p2-2), s^(p2-1), s^p2); an integer p2 >= 2 (the usual case) by multiplications
-    (binary powering, exact to rounding) instead of three pow() calls."""
+    """(s^(p2-2), s^(p2-1), s^p2); an integer p2 >= 2 by binary powering."""
     n = int(p2)
     if n == p2 and n >= 2:
-        a = 1.0
-        b = s
-        e = n - 2
+        a, b, e = 1.0, s, n - 2
         while e > 0:
             if e & 1:
                 a *= b
@@ -103,20 +80,15 @@ def limit_powers(s, p2):
 
 def limits_kernel(spec, q, dq, grad, graddot):
     """beta_l = sum (1 - s^(2p)) over 3 lengths and 3 bending angles; grad and d/dt grad (6,)."""
-    p2 = 2.0 * spec[2]
-    ext = spec[3]
-    bmax = spec[4]
+    p2, ext, bmax = 2.0 * spec[2], spec[3], spec[4]
     beta = 0.0
     for c in range(6):
-        grad[c] = 0.0
-        graddot[c] = 0.0
+        grad[c] = graddot[c] = 0.0
     for i in range(3):
         L0 = spec[5 + i]
-        cen = 0.5 * L0 * (1.0 + ext)
-        hw = 0.5 * L0 * (ext - 1.0)
+        cen, hw = 0.5 * L0 * (1.0 + ext), 0.5 * L0 * (ext - 1.0)
         # length coordinate
-        s = (q[i] - cen) / hw
-        sd = dq[i] / hw
+        s, sd = (q[i] - cen) / hw, dq[i] / hw
         sm2, sm1, sp = limit_powers(s, p2)
         beta += 1.0 - sp
         grad[i] += -p2 * sm1 / hw
@@ -139,11 +111,9 @@ def limits_kernel(spec, q, dq, grad, graddot):
 def subtask_kernel(spec, J, H, Jd, Hd, q, dq, grad, graddot, parts):
     """Combined beta = w_m beta_m + w_l beta_l with grad and d/dt grad (6,) (overwritten).
     parts (3,) receives [beta_m, beta_l, det(J J^T)].  Returns beta."""
-    g1 = scratch(6)
-    gd1 = scratch(6)
+    g1, gd1 = scratch(6), scratch(6)
     beta_m, det = manipulability_kernel(J, H, Jd, Hd, g1, gd1)
-    parts[0] = beta_m
-    parts[2] = det
+    parts[0], parts[2] = beta_m, det
     beta = spec[0] * beta_m
     for c in range(6):
         grad[c] = spec[0] * g1[c]
@@ -162,7 +132,6 @@ def subtask_kernel(spec, J, H, Jd, Hd, q, dq, grad, graddot, parts):
 KERNELS = ("manipulability_kernel", "limit_powers", "limits_kernel", "subtask_kernel")
 
 
-# --------------------------------------------------------------------------------------------- API
 def beta(spec: SubtaskSpec, slave: SlaveParams, q, dq=None) -> tuple[float, np.ndarray, np.ndarray]:
     """(beta, grad beta (6,), d/dt grad beta (6,)) of the combined sub-task at q2, dq2."""
     q = np.ascontiguousarray(q, dtype=float)
@@ -177,6 +146,5 @@ def beta(spec: SubtaskSpec, slave: SlaveParams, q, dq=None) -> tuple[float, np.n
 
 def manipulability(slave: SlaveParams, q) -> float:
     """Paper eq. (41): sqrt(det(J2 J2^T))."""
-    x, J, H, Hd = np.empty(2), np.empty((2, 6)), np.empty((2, 6, 6)), np.empty((2, 6, 6))
-    tip_kinematics(np.ascontiguousarray(q, dtype=float), np.zeros(6), 1, x, J, H, Hd)
+    J = jacobian(slave, q)
     return float(np.sqrt(max(np.linalg.det(J @ J.T), 0.0)))

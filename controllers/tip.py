@@ -1,15 +1,7 @@
-"""The tip of the 3-section constant-curvature arm and its exact q-derivatives to third order, the
-per-step form used by the controllers (paper eqs. (17)-(33) need x2, J2, dJ2/dt and, for the sub-task's
-exact rate (27), H = d^2 x2/dq2^2 and dH/dt).
-
-Same representation as `controllers.cc` (c = Z + i X, E_n(t) = int_0^1 v^n exp(i t v) dv, y = [d, Theta]).
-Here the tip is written by its tails: R_j = sum_{m >= j} d_m f_m E_0(Theta_m) is the chord from the start
-of section j to the tip, f_j = exp(i phi_j).  Turning Theta_l turns every later section rigidly, so
-dc/dTheta_l = i (R_{l+1} + d_l f_l E_1(Theta_l)), and each second derivative in y is one closed form
-in the bases f_j E_n(Theta_j) and the tails (`tip_y_blocks`); their time derivatives give dH/dt.  Tests
-check it against the generic role-by-role path (tests/reference_models.py) and finite differences.
-
-numpy only, numba-compatible subset, no allocation of returned arrays (`harness.loop.fast` compiles it).
+"""The tip of the 3-section CC arm and its exact q-derivatives to third order, per control step (x2, J2,
+dJ2/dt, and for the sub-task's rate (27) H = d^2 x2/dq2^2 and dH/dt).  Representation as `controllers.cc`;
+the tails R_j = sum_{m >= j} d_m f_m E_0(Theta_m) (chord from section j's start to the tip) give
+dc/dTheta_l = i (R_{l+1} + d_l f_l E_1(Theta_l)).  Checked against tests/reference_models.py.
 """
 
 from __future__ import annotations
@@ -19,11 +11,8 @@ from .scratch import scratch_c
 
 
 def tip_bases(q, b, R):
-    """Bases of the tip: b (3, 4) complex, b[j, n] = f_j E_n(Theta_j) with f_j = exp(i phi_j) the tangent at
-    the start of section j, and the tails R (4,) complex, R[j] = sum_{m >= j} d_m b[m, 0] (the chord from
-    the start of section j to the tip; R[0] = tip, R[3] = 0).
-
-    f_{j+1} = f_j exp(i Theta_j), with exp(i t) = 1 + i t E_0(t): no trigonometric call beyond E_n's."""
+    """b (3, 4) complex: b[j, n] = f_j E_n(Theta_j), f_j = exp(i phi_j) the tangent at the start of
+    section j; tails R (4,) complex: R[j] = sum_{m >= j} d_m b[m, 0] (R[0] = tip, R[3] = 0)."""
     f = 1.0 + 0.0j
     for j in range(3):
         th = q[3 + j] * q[j]
@@ -39,12 +28,10 @@ def tip_bases(q, b, R):
 
 
 def tip_y_blocks(c, G, diag, XdT, XTT):
-    """The tip's y-Hessian blocks (y = [d, Theta]; the d-d block is zero) from the bases c[j, 0], c[j, 1]
-    (b of tip_bases, or their time derivatives for dH_y/dt), G (3,) = dc/dTheta (or its rate) and
-    diag (3,) = d^2c/dTheta_j^2 (or its rate):
-    XdT (3,3)[j, l] = d^2c/(dd_j dTheta_l) = i c[j, 1] (l = j), i c[j, 0] (l < j: an earlier angle turns
-    section j rigidly), 0 (l > j); XTT (3,3) symmetric, d^2c/(dTheta_l dTheta_m) = i G[m] (l < m), diag[m]
-    (l = m).  With G[i] = i (R_{i+1} + d_i b[i, 1]) and diag[j] = -(R_{j+1} + d_j b[j, 2])."""
+    """The tip's y-Hessian blocks (y = [d, Theta]; the d-d block is zero) from bases c (b of tip_bases or
+    their rates), G (3,) = dc/dTheta and diag (3,) = d^2c/dTheta_j^2 (or their rates):
+    XdT (3,3)[j, l] = d^2c/(dd_j dTheta_l) = i c[j, 1] (l = j), i c[j, 0] (l < j), 0 (l > j);
+    XTT (3,3) symmetric, d^2c/(dTheta_l dTheta_m) = i G[m] (l < m), diag[m] (l = m)."""
     for j in range(3):
         ic0 = complex(-c[j, 0].imag, c[j, 0].real)
         for m in range(3):
@@ -63,32 +50,21 @@ def tip_y_blocks(c, G, diag, XdT, XTT):
 
 def put_sym(X, a, b, v):
     """X[:, a, b] = X[:, b, a] = [Im v, Re v] (X (2,6,6): [X, Z] rows of a symmetric q-derivative)."""
-    X[0, a, b] = v.imag
-    X[1, a, b] = v.real
-    X[0, b, a] = v.imag
-    X[1, b, a] = v.real
+    X[0, a, b], X[1, a, b] = v.imag, v.real
+    X[0, b, a], X[1, b, a] = v.imag, v.real
 
 
 def tip_kinematics(q, dq, order, x, J, H, Hd):
-    """Tip of the 3-section arm and its q-derivatives, as real arrays in [X, Z] rows.
+    """Tip and its q-derivatives in [X, Z] rows: q, dq (6,); x (2,) m; J (2,6) (order >= 1);
+    H (2,6,6) = d^2x/dq^2 (order >= 2); Hd (2,6,6) = dH/dt along dq (order >= 3).  J2dot = H . dq.
 
-    q, dq: (6,) [d (m), k (1/m)] and rates.  x (2,) m; J (2,6) = dx/dq (order >= 1); H (2,6,6) =
-    d^2x/dq^2 (order >= 2); Hd (2,6,6) = dH/dt along dq (order >= 3).  J2dot = H . dq.
-
-    In y = [d, Theta] every derivative of the tip c = Z + i X is a closed form in the bases b[j, n] =
-    f_j E_n(Theta_j) and the tails R (tip_bases, tip_y_blocks); the rates of those (Hy's time derivative
-    Ty along ydot) follow from db[j, n]/dt = i (phidot_j b[j, n] + Thetadot_j b[j, n + 1]).  The chain rule
-    to q = [d, k] (Theta_i = k_i d_i: column d_i of B = dy/dq is e_{d_i} + k_i e_{Theta_i}, column k_i is
-    d_i e_{Theta_i}) is written out per pair of sections, with the product rule for dH/dt:
+    Chain rule y -> q (Theta_i = k_i d_i), with the product rule for dH/dt:
         H[d_i, d_j] = k_j XdT[i, j] + k_i XdT[j, i] + k_i k_j XTT[i, j]
         H[d_i, k_j] = d_j (XdT[i, j] + k_i XTT[i, j]) + [i = j] G[i]
-        H[k_i, k_j] = d_i d_j XTT[i, j].
-    """
-    b = scratch_c((3, 4))
-    R = scratch_c(4)
+        H[k_i, k_j] = d_i d_j XTT[i, j]."""
+    b, R = scratch_c((3, 4)), scratch_c(4)
     tip_bases(q, b, R)
-    x[0] = R[0].imag
-    x[1] = R[0].real
+    x[0], x[1] = R[0].imag, R[0].real
     if order < 1:
         return
     G = scratch_c(3)
@@ -97,25 +73,18 @@ def tip_kinematics(q, dq, order, x, J, H, Hd):
         G[i] = complex(-v.imag, v.real)  # dc/dTheta_i (dc/dd_i = b[i, 0])
         jd = b[i, 0] + q[3 + i] * G[i]
         jk = q[i] * G[i]
-        J[0, i] = jd.imag
-        J[1, i] = jd.real
-        J[0, 3 + i] = jk.imag
-        J[1, 3 + i] = jk.real
+        J[0, i], J[1, i] = jd.imag, jd.real
+        J[0, 3 + i], J[1, 3 + i] = jk.imag, jk.real
     if order < 2:
         return
-    XdT = scratch_c((3, 3))
-    XTT = scratch_c((3, 3))
-    diag = scratch_c(3)
+    XdT, XTT, diag = scratch_c((3, 3)), scratch_c((3, 3)), scratch_c(3)
     for i in range(3):
         diag[i] = -(R[i + 1] + q[i] * b[i, 2])
     tip_y_blocks(b, G, diag, XdT, XTT)
     if order >= 3:
         # rates: Thetadot, phidot, db/dt (n = 0..2), the tails' rates Rd, and Gd = dG/dt
-        bd = scratch_c((3, 3))
-        Rd = scratch_c(4)
-        Gd = scratch_c(3)
-        YdT = scratch_c((3, 3))
-        YTT = scratch_c((3, 3))
+        bd, Rd, Gd = scratch_c((3, 3)), scratch_c(4), scratch_c(3)
+        YdT, YTT = scratch_c((3, 3)), scratch_c((3, 3))
         phid = 0.0
         for j in range(3):
             thd = q[3 + j] * dq[j] + q[j] * dq[3 + j]  # dTheta_j/dt
@@ -133,11 +102,9 @@ def tip_kinematics(q, dq, order, x, J, H, Hd):
             diagd[i] = -(Rd[i + 1] + dq[i] * b[i, 2] + q[i] * bd[i, 2])
         tip_y_blocks(bd, Gd, diagd, YdT, YTT)
     for i in range(3):
-        di = q[i]
-        ki = q[3 + i]
+        di, ki = q[i], q[3 + i]
         for j in range(3):
-            dj = q[j]
-            kj = q[3 + j]
+            dj, kj = q[j], q[3 + j]
             xt = XTT[i, j]
             hdk = dj * (XdT[i, j] + ki * xt)
             if i == j:
@@ -150,10 +117,8 @@ def tip_kinematics(q, dq, order, x, J, H, Hd):
                 put_sym(H, 3 + i, 3 + j, hkk)
             if order < 3:
                 continue
-            ddi = dq[i]
-            kdi = dq[3 + i]
-            ddj = dq[j]
-            kdj = dq[3 + j]
+            ddi, kdi = dq[i], dq[3 + i]
+            ddj, kdj = dq[j], dq[3 + j]
             yt = YTT[i, j]
             gdk = (ddj * (XdT[i, j] + ki * xt)
                    + dj * (YdT[i, j] + kdi * xt + ki * yt))

@@ -1,14 +1,7 @@
-"""Plants: the "true" systems the controllers drive, one module per plant family.
-
-* `harness.plant.mujoco_model`: the MuJoCo model (MJCF + MjSpec-generated Octarm chain) and
-  `harness.plant.chain_map`: the chain <-> q2 maps (sensing, actuation, elastic correction);
-* `harness.plant.analytic`: the paper's analytic models themselves as the plant (RK4);
-* `harness.plant.cosserat`: a Cosserat rod (PyElastica) slave + the rigid master, stepped from
-  Python (protocol `harness.plant.stepped.SteppedPlant`).
-
-`build_plant(scn)` builds the plant a scenario asks for; a plant validates its own inputs (scene
-MJCF, compile errors) and reports them as `ConfigError` naming the scenario field, so that
-`harness.config` never needs to import a plant.  The loop (`harness.loop.simulate`) takes the plant.
+"""Plants: the "true" systems the controllers drive: the MuJoCo chain (`mujoco_model`, maps in
+`chain_map`), the analytic models themselves (`analytic`) and the Cosserat rod (`cosserat`).
+`build_plant(scn)` builds the one a scenario asks for and reports plant errors as `ConfigError` naming
+the scenario field (so `harness.config` never imports a plant).
 """
 
 from __future__ import annotations
@@ -45,17 +38,6 @@ def _field_error(scn: Scenario, exc: Exception) -> ConfigError | None:
     return None
 
 
-def check_gravity(scn: Scenario) -> None:
-    """Both robots of the MuJoCo plant share one world: plant.slave.gravity = (0, -plant.master.gravity)."""
-    gm = float(scn.plant_master.gravity)
-    gs = tuple(float(v) for v in scn.plant_slave.gravity)
-    if not np.allclose(gs, (0.0, -gm), rtol=1e-12, atol=1e-12):
-        raise ConfigError(f"plant.master.gravity = {gm:g} and plant.slave.gravity = [{gs[0]:g}, {gs[1]:g}] "
-                          f"differ: the MuJoCo plant has one world for both robots, so plant.slave.gravity "
-                          f"must be [0, {-gm:g}] (set both, or neither)", path="plant.slave.gravity",
-                          value=gs)
-
-
 def build_plant(scn: Scenario) -> Any:
     """The plant of `scn` (`AnalyticPlant`, `MujocoPlant` or `CosseratPlant`), built and checked.
     Raises ConfigError."""
@@ -67,12 +49,11 @@ def build_plant(scn: Scenario) -> Any:
     if kind == "mujoco":
         from harness.plant.mujoco_model import MujocoPlant, PlantModelError
 
-        check_gravity(scn)
         try:
             return MujocoPlant.build(scn)
         except PlantModelError as exc:
-            if str(exc).startswith("environment."):
-                raise ConfigError(str(exc), path=str(exc).split(":", 1)[0]) from None
+            if exc.path is not None:
+                raise ConfigError(str(exc), path=exc.path) from None
             located = _field_error(scn, exc)
             if located is not None:
                 raise located from None

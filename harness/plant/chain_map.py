@@ -1,30 +1,22 @@
-"""The discretized Octarm chain <-> CC coordinates q2: sensing, actuation and elastic-correction maps.
-
-The joint layout and the CC manifold (joints = C [d - L0, k d], [d - L0, k d] = R joints) are
-described in `harness.plant.mujoco_model`.  The per-step functions ``chain_*`` below are plain loops
-over float64/int64 arrays (no Python objects, no np.dot/np.linalg) so they can be compiled with numba
-from the harness' step kernel (`harness.loop.fast`); each writes into an ``out`` array.  ``ChainMap``
-holds the model's addresses and constant maps, with allocating wrappers for interactive use.
+"""The discretized Octarm chain <-> CC coordinates q2: sensing, actuation and elastic-correction maps
+(layout: `harness.plant.mujoco_model`; joints = C [d - L0, k d], [d - L0, k d] = R joints, R C = I).
+The ``chain_*`` kernels are numba-compatible loops writing into ``out``; ``ChainMap`` holds a model's
+addresses and constant arrays, with allocating wrappers.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import mujoco
 import numpy as np
 
 from controllers.scratch import scratch, scratch_zeros
 
-# ================================================================================================
-# Numba-compatible per-step kernels (plain loops, float64/int64 arrays in, results written to `out`)
-# ================================================================================================
 
 def chain_joints_from_q2(q2, C, L0, out):
-    """CC manifold -> chain joints.  q2 (6,) = [d (m), k (1/m)]; C (n_chain, 6); L0 (3,); out (n_chain,).
-
-    out = C u with u = [d - L0, k * d] (extensions in m, section bends in rad).
-    """
+    """CC manifold -> chain joints: out (n_chain,) = C u, u = [d - L0, k d] (m, rad); q2 (6,), C (n_chain, 6),
+    L0 (3,)."""
     n = C.shape[0]
     u = scratch(6)
     for i in range(3):
@@ -37,21 +29,8 @@ def chain_joints_from_q2(q2, C, L0, out):
         out[r] = acc
 
 
-def chain_joints_jacobian(q2, C, out):
-    """A(q2) = d qpos_chain / d q2, out (n_chain, 6) (columns d1..d3 in 1, k1..k3 in m).
-
-    A[:, i] = C[:, i] + k_i C[:, 3+i],  A[:, 3+i] = d_i C[:, 3+i]  (from u = [d - L0, k d]).
-    """
-    n = C.shape[0]
-    for r in range(n):
-        for i in range(3):
-            out[r, i] = C[r, i] + q2[3 + i] * C[r, 3 + i]
-            out[r, 3 + i] = q2[i] * C[r, 3 + i]
-
-
 def chain_joints_rate_add(q2, dq2, C, scale, out):
-    """out (n_chain,) += scale (n_chain,) * A(q2) dq2, the joint rates of a CC motion, without forming A
-    (columns as in ``chain_joints_jacobian``: C[:, i] + k_i C[:, 3+i] and d_i C[:, 3+i])."""
+    """out (n_chain,) += scale (n_chain,) * A(q2) dq2 (joint rates of a CC motion; A: `ChainMap.jacobian`)."""
     n = C.shape[0]
     for r in range(n):
         v = 0.0
@@ -60,35 +39,13 @@ def chain_joints_rate_add(q2, dq2, C, scale, out):
         out[r] += scale[r] * v
 
 
-def chain_q2_from_joints(qpos_chain, R, L0, out):
-    """Sense q2 (6,) from chain joints (n_chain,).  R (6, n_chain): u = R qpos_chain; L0 (3,).
-
-    d_i = L0_i + (least-squares fit of the slide extensions, rows 0..2 of R = pinv(S)),
-    k_i = (sum of section i's hinge angles, rows 3..5 of R) / d_i.  Exact on the CC manifold (R C = I).
-    """
-    n = R.shape[1]
-    for i in range(3):
-        e = 0.0
-        th = 0.0
-        for c in range(n):
-            e += R[i, c] * qpos_chain[c]
-            th += R[3 + i, c] * qpos_chain[c]
-        d = L0[i] + e
-        out[i] = d
-        out[3 + i] = th / d
-
-
 def chain_sense(qpos_chain, qvel_chain, R, L0, q2, dq2):
-    """Sense q2 (6,) and dq2/dt (6,) [m/s, 1/(m s)] from chain joint positions and velocities
-    (n_chain,) in one pass over R: q2 as in ``chain_q2_from_joints`` (the same sums, identical
-    numbers), dd_i = (R du)_i, dk_i = (dTheta_i - k_i dd_i) / d_i with du = R qvel_chain.
-    """
+    """Sensed q2, dq2 (6,) from chain joint positions and velocities (n_chain,): d_i = L0_i + (R qpos)_i
+    (least-squares fit of the slide extensions), k_i = (R qpos)_{3+i} / d_i (section i's hinge sum over
+    d_i; exact on the manifold), dd_i = (R qvel)_i, dk_i = ((R qvel)_{3+i} - k_i dd_i) / d_i."""
     n = R.shape[1]
     for i in range(3):
-        e = 0.0
-        th = 0.0
-        de = 0.0
-        dth = 0.0
+        e = th = de = dth = 0.0
         for c in range(n):
             e += R[i, c] * qpos_chain[c]
             th += R[3 + i, c] * qpos_chain[c]
@@ -96,32 +53,19 @@ def chain_sense(qpos_chain, qvel_chain, R, L0, q2, dq2):
             dth += R[3 + i, c] * qvel_chain[c]
         d = L0[i] + e
         k = th / d
-        q2[i] = d
-        q2[3 + i] = k
-        dq2[i] = de
-        dq2[3 + i] = (dth - k * de) / d
+        q2[i], q2[3 + i] = d, k
+        dq2[i], dq2[3 + i] = de, (dth - k * de) / d
 
 
 def chain_force_from_T2(q2, T2, R, out):
-    """Virtual-work map of T2 = [F_d1..3 (N), M_k1..3 (N m^2)] onto the chain joints, out (n_chain,).
-
-    tau = B^T T2 with B = d q2_sensed / d qpos_chain (the transpose of the velocity sensing map), so
-    A(q2)^T tau = (B A)^T T2 = T2 exactly on the CC manifold (B A = I), and tau . qvel = T2 . dq2_sensed
-    everywhere.  Written out for this layout:
-      * every hinge of section i gets the same torque  M_k_i / d_i  (N m);
-      * with G_i = F_d_i - k_i M_k_i / d_i (the part of F_d not produced by the hinge torques through
-        d theta / d d_i = k_i / N) and y = (S^T S)^-1 G, every interior slide (j >= 1) of section i gets
-        y_i / N, the boundary slide (i, 0) gets (y_{i-1} + y_i) / (2N) (y_{-1} = 0), the tip slide
-        y_2 / (2N): the minimum-norm slide forces (P^T G, P = pinv(S)), equal within a section.
-    q2 is the state at which the map is evaluated (normally the sensed q2).
-    """
+    """Virtual-work map of T2 = [F_d (N), M_k (N m^2)] onto the chain joints, out (n_chain,) = B^T T2 with
+    B = d q2_sensed / d qpos_chain, so A^T out = T2 on the CC manifold and out . qvel = T2 . dq2_sensed:
+    each hinge of section i gets M_k_i / d_i, the slides R[:3]^T of F_d_i - k_i M_k_i / d_i."""
     n = R.shape[1]
     w = scratch(6)
     for i in range(3):
-        d = q2[i]
-        mk = T2[3 + i] / d
-        w[3 + i] = mk
-        w[i] = T2[i] - q2[3 + i] * mk
+        mk = T2[3 + i] / q2[i]
+        w[i], w[3 + i] = T2[i] - q2[3 + i] * mk, mk
     for c in range(n):
         acc = 0.0
         for r in range(6):
@@ -130,35 +74,17 @@ def chain_force_from_T2(q2, T2, R, out):
 
 
 def muscle_commands(q2, T2, radius, max_force, out):
-    """Force commands of the antagonistic muscle groups that realize T2 on the CC model; returns how many
-    of the 6 commands lie outside [0, F_max] (MuJoCo clips those: saturated groups).
-
-    q2 (6,) = [d (m), k (1/m)], normally the sensed q2; T2 (6,) = [F_d1..3 (N), M_k1..3 (N m^2)], the
-    generalized forces of the controller (paper (17)); radius (3,) = r_i (m), the lateral offsets of
-    the groups; max_force (3,) = F_max,i (N); out (6,) = [p+_1, p-_1, p+_2, p-_2, p+_3, p-_3] (N), the
-    group at s = +r then the one at s = -r of each section (the order of ChainMap.muscle_actuator_ids).
-
-    A group at offset s pushes along a fibre of length l_s = d (1 - s k) (extensor: force p >= 0
-    lengthens it), so its generalized force on (d_i, k_i) is p (dl_s/dd, dl_s/dk) = p (1 - s k, -s d).
-    The pair realizes [F_d, M_k] when A p = T with A = [[1 - r k, 1 + r k], [-r d, r d]], det A = 2 r d:
-      p+ = F_d / 2 - (1 + r k) M_k / (2 r d),    p- = F_d / 2 + (1 - r k) M_k / (2 r d).
-    The commands are written unclipped: the muscle actuators are ctrllimited to [0, F_max], so MuJoCo
-    clips them (a group cannot pull, nor push past F_max), and each section's actuator state follows
-    the clipped command with the time constant tau.  What the loop must do at each control step, with
-    the same sensed q2 and T2 as the torque mode's ``chain_force_from_T2``:
-      n_sat = muscle_commands(q2s, T2, radius, max_force, out);  ctrl[muscle_actuator_ids] = out
-    (held over the control period; n_sat, summed over the run, counts saturated group-steps).
-    """
+    """Commands out (6,) = [p+_1, p-_1, p+_2, ...] (N) of the muscle groups at offsets s = +r, -r (radius
+    (3,), m) that realize T2 (6,) at q2 (6,); returns how many lie outside [0, max_force] (MuJoCo clips
+    them: saturated groups).  A group at offset s pushes along a fibre l_s = d (1 - s k), so the pair
+    realizes [F_d, M_k] by p+ = F_d/2 - (1 + r k) M_k / (2 r d), p- = F_d/2 + (1 - r k) M_k / (2 r d)."""
     n_sat = 0
     for i in range(3):
-        d = q2[i]
-        k = q2[3 + i]
-        r = radius[i]
+        d, k, r = q2[i], q2[3 + i], radius[i]
         m = T2[3 + i] / (2.0 * r * d)
         pp = 0.5 * T2[i] - (1.0 + r * k) * m
         pm = 0.5 * T2[i] + (1.0 - r * k) * m
-        out[2 * i] = pp
-        out[2 * i + 1] = pm
+        out[2 * i], out[2 * i + 1] = pp, pm
         if pp < 0.0 or pp > max_force[i]:
             n_sat += 1
         if pm < 0.0 or pm > max_force[i]:
@@ -166,49 +92,26 @@ def muscle_commands(q2, T2, radius, max_force, out):
     return n_sat
 
 
-def chain_extension(qpos_chain, R, section, is_hinge, e, sq):
-    """Section extensions e (3,) = R[:3] qpos_chain (m) and, per section, the sum of its squared hinge
-    angles sq (3,) (rad^2): what the chain's elastic energy and its gradient are built from."""
-    e[:] = 0.0
-    sq[:] = 0.0
-    for c in range(R.shape[1]):
+def chain_elastic_correction(qpos_chain, R, C, L0, section, is_hinge, seg_kb, ke, k_joint, k_shape, out):
+    """Elastic force to ADD to MuJoCo's joint springs (through qfrc_applied), out (n_chain,), so that
+    springs + out = -grad E,
+
+      E = sum_i [ seg_kb_i / (2 d_i) sum_j theta_ij^2 + 1/2 ke_i (d_i - L0_i)^2 ] + 1/2 sum_s k_shape_s r_s^2,
+
+    d_i = L0_i + (R qpos)_i, theta_ij section i's hinges, r = s - C_e (P s) the non-CC part of the slides
+    s (P = R[:3]).  On the manifold E is the analytic elastic energy, so A^T (springs + out) = -dV/dq2;
+    the shape term keeps the non-CC slide patterns as stiff as the springs.  A stiff state-dependent
+    force: recompute it every physics step.  R (6, n), C (n, 6), L0, seg_kb = N Kb, ke (3,); section,
+    is_hinge (n,) int64; k_joint (n,) MuJoCo joint stiffness; k_shape (n,) (0 on hinges)."""
+    n = R.shape[1]
+    e, sq = scratch_zeros(3), scratch_zeros(3)
+    for c in range(n):
         q = qpos_chain[c]
         for i in range(3):
             e[i] += R[i, c] * q
         if is_hinge[c] == 1:
             sq[section[c]] += q * q
-
-
-def chain_elastic_correction(qpos_chain, R, C, L0, section, is_hinge, seg_kb, ke, k_joint, k_shape, out):
-    """Generalized elastic force to ADD (through qfrc_applied) to MuJoCo's own joint springs, out (n_chain,).
-
-    Result = -grad E(qpos_chain) - (-k_joint * qpos_chain), so that springs + correction = -grad E with
-      E = sum_i [ seg_kb_i / (2 d_i) sum_j theta_ij^2 + 1/2 ke_i (d_i - L0_i)^2 ] + E_shape,
-      E_shape = 1/2 sum_slides k_shape_s r_s^2,   r = s - C_e (P s)  (the non-CC part of the slides),
-    d_i = L0_i + (P s)_i sensed as in ``chain_q2_from_joints`` (P = rows 0..2 of R = pinv(S)), theta_ij
-    the hinges of section i, seg_kb_i = N Kb_i (N m^2), ke_i = Ke_i (N/m), s the slides.  On the CC
-    manifold E equals the analytic sum_i 1/2 Kb_i d_i k_i^2 + 1/2 Ke_i (d_i - L0_i)^2, so
-    A^T (springs + correction) = -dV_elastic/dq2 exactly.
-
-    E_shape vanishes with its gradient on the manifold (C_e P projects onto it): it keeps the non-CC
-    slide patterns (e.g. one segment stretched, its neighbour compressed) as stiff as MuJoCo's local
-    springs (``build_model`` sets k_shape = the slide stiffness); the sensed-length energy alone would
-    leave those 3N - 2 patterns without any stiffness.  k_shape = 0 gives exactly the brief's energy.
-
-    The correction is a stiff state-dependent force (its linearization has rates of a few hundred
-    rad/s, from the length dependence of the bending stiffness): recompute it at every physics step.
-    Holding it over several 1 ms steps (zero-order hold) was measured to destabilize N = 1..8.
-
-    Arrays: qpos_chain (n,); R (6, n); C (n, 6); L0 (3,); section (n,) int64 in 0..2 (2 for the tip);
-    is_hinge (n,) int64 (1 hinge, 0 slide); seg_kb, ke (3,); k_joint (n,) MuJoCo joint stiffness
-    (springref 0); k_shape (n,) (0 on hinges); out (n,).
-    """
-    n = R.shape[1]
-    e = scratch(3)
-    sq = scratch(3)
-    chain_extension(qpos_chain, R, section, is_hinge, e, sq)
-    dEdd = scratch(3)
-    dinv = scratch(3)
+    dEdd, dinv = scratch(3), scratch(3)
     for i in range(3):
         d = L0[i] + e[i]
         dinv[i] = 1.0 / d
@@ -237,59 +140,27 @@ def chain_elastic_correction(qpos_chain, R, C, L0, section, is_hinge, seg_kb, ke
         out[c] = -grad + k_joint[c] * q
 
 
-def chain_elastic_energy(qpos_chain, R, C, L0, section, is_hinge, seg_kb, ke, k_shape):
-    """The energy E (J) whose negative gradient ``chain_elastic_correction`` completes (see there)."""
-    n = R.shape[1]
-    e = scratch(3)
-    sq = scratch(3)
-    chain_extension(qpos_chain, R, section, is_hinge, e, sq)
-    E = 0.0
-    for i in range(3):
-        E += 0.5 * seg_kb[i] * sq[i] / (L0[i] + e[i]) + 0.5 * ke[i] * e[i] * e[i]
-    for c in range(n):
-        if is_hinge[c] == 0:
-            r = qpos_chain[c]
-            for i in range(3):
-                r -= C[c, i] * e[i]
-            E += 0.5 * k_shape[c] * r * r
-    return E
-
-
-# ================================================================================================
-# Constant matrices of the layout
-# ================================================================================================
-
 def chain_layout(n_segments: int) -> dict[str, np.ndarray]:
-    """Constant layout arrays for N segments per section (no MuJoCo needed).
-
-    Returns dict with ``C`` (n_chain, 6), ``R`` (6, n_chain), ``S`` (n_slides, 3) (extensions e -> slides),
-    ``section`` and ``is_hinge`` (n_chain,) int64, ``slide_index`` (n_slides,) chain indices of the slides,
-    ``segment`` (n_chain,) segment index j (N for the tip slide).  R C = I_6.
-    """
+    """Constant layout arrays for N segments per section: ``C`` (n_chain, 6), ``R`` (6, n_chain) (R C = I),
+    ``S`` (n_slides, 3) (extensions -> slides), ``section``, ``is_hinge``, ``segment`` (n_chain,) int64
+    (segment N for the tip slide), ``slide_index`` (n_slides,)."""
     N = int(n_segments)
     n = 6 * N + 1
+    section = np.r_[np.repeat(np.arange(3), 2 * N), 2].astype(np.int64)
+    segment = np.r_[np.tile(np.repeat(np.arange(N), 2), 3), N].astype(np.int64)
+    is_hinge = np.r_[np.tile([0, 1], 3 * N), 0].astype(np.int64)
     C = np.zeros((n, 6))
-    section = np.zeros(n, dtype=np.int64)
-    is_hinge = np.zeros(n, dtype=np.int64)
-    segment = np.zeros(n, dtype=np.int64)
-    c = 0
-    for i in range(3):
-        for j in range(N):
-            # slide (i, j)
-            if j == 0:
-                C[c, i] = 0.5 / N
-                if i > 0:
-                    C[c, i - 1] = 0.5 / N
-            else:
-                C[c, i] = 1.0 / N
-            section[c], segment[c] = i, j
-            c += 1
-            # hinge (i, j)
+    for c in range(n - 1):
+        i, j = section[c], segment[c]
+        if is_hinge[c]:
             C[c, 3 + i] = 1.0 / N
-            section[c], segment[c], is_hinge[c] = i, j, 1
-            c += 1
-    C[c, 2] = 0.5 / N  # tip slide
-    section[c], segment[c] = 2, N
+        elif j == 0:  # the rod from the previous section's last midpoint (or the base)
+            C[c, i] = 0.5 / N
+            if i > 0:
+                C[c, i - 1] = 0.5 / N
+        else:
+            C[c, i] = 1.0 / N
+    C[n - 1, 2] = 0.5 / N  # tip slide
     slide_index = np.flatnonzero(is_hinge == 0)
     S = C[slide_index, :3].copy()
     P = np.linalg.pinv(S)  # (3, n_slides), P S = I
@@ -301,40 +172,15 @@ def chain_layout(n_segments: int) -> dict[str, np.ndarray]:
             "slide_index": slide_index, "segment": segment}
 
 
-# ================================================================================================
-# ChainMap
-# ================================================================================================
-
-def _ro(a, dtype=np.float64) -> np.ndarray:
-    a = np.ascontiguousarray(np.array(a, dtype=dtype))
-    a.setflags(write=False)
-    return a
-
-
 @dataclass(frozen=True, eq=False)
 class ChainMap:
-    """Addresses and constant arrays tying the MuJoCo model to the 6 CC coordinates q2.
+    """Addresses and constant arrays tying a MuJoCo model to q2 (read-only, C-contiguous float64/int64).
 
-    All arrays are read-only, float64 or int64, C-contiguous (ready for numba kernels).
-
-    Attributes
-    ----------
-    n_segments: N, segments per section; n_chain = 6 N + 1 chain joints.
-    master_qpos_adr, master_dof_adr (2,): shoulder, elbow.  master_actuator_ids (2,).
-    chain_qpos_adr, chain_dof_adr (n_chain,): chain joints in MuJoCo order (per segment slide, hinge;
-        tip slide last).  chain_actuator_ids (n_chain,): the servo/motor of each chain joint (empty for
-        muscle actuation).
-    muscle_actuator_ids (6,): the muscle groups [s1 +r, s1 -r, s2 +r, ...] (``muscle_commands`` order;
-        empty unless muscle actuation); muscle_radius, muscle_max_force (3,): r (m), F_max (N).
-    master_site_id, tip_site_id: ``master_tip_site``, ``octarm_tip_site``.
-    master_base_pos, octarm_base_pos (3,): world positions of the bases (task space origin).
-    C (n_chain, 6), R (6, n_chain), L0 (3,): joints = C [d - L0, k d];  [d - L0, k d] = R joints.
-    section, is_hinge, segment (n_chain,) int64.
-    joint_stiffness (n_chain,): MuJoCo chain-joint stiffness; shape_stiffness (n_chain,): E_shape weights
-        (= the slide stiffness, 0 on hinges).
-    seg_kb (3,) = N Kb; ke (3,) = Ke.
-    armature (n_chain,); servo_kp, servo_kv (n_chain,) (zeros for torque actuation); tip_mass (kg).
-    """
+    Chain arrays (n_chain = 6N + 1) in MuJoCo order; chain_actuator_ids: the servo/motor per joint (empty
+    for muscles); muscle_actuator_ids (6,): ``muscle_commands`` order (else empty); muscle_radius,
+    muscle_max_force (3,) m, N; *_base_pos (3,): world positions of the bases; C, R, L0 as
+    ``chain_layout``; joint_stiffness: MuJoCo's; shape_stiffness, seg_kb, ke: ``chain_elastic_correction``;
+    servo_kp, servo_kv (zeros unless servo)."""
 
     n_segments: int
     actuation: str
@@ -362,10 +208,16 @@ class ChainMap:
     shape_stiffness: np.ndarray
     seg_kb: np.ndarray
     ke: np.ndarray
-    armature: np.ndarray
     servo_kp: np.ndarray
     servo_kv: np.ndarray
-    tip_mass: float
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            if f.type == "np.ndarray":
+                integer = f.name.endswith(("_adr", "_ids")) or f.name in ("section", "is_hinge", "segment")
+                a = np.array(getattr(self, f.name), dtype=np.int64 if integer else np.float64, order="C")
+                a.setflags(write=False)
+                object.__setattr__(self, f.name, a)
 
     @property
     def n_chain(self) -> int:
@@ -377,7 +229,6 @@ class ChainMap:
         return (self.R, self.C, self.L0, self.section, self.is_hinge, self.seg_kb, self.ke,
                 self.joint_stiffness, self.shape_stiffness)
 
-    # --- allocating convenience wrappers ----------------------------------------------------------
     def joints_from_q2(self, q2) -> np.ndarray:
         """(n_chain,) chain joint positions on the CC manifold for q2 (6,)."""
         out = np.empty(self.n_chain)
@@ -385,16 +236,13 @@ class ChainMap:
         return out
 
     def jacobian(self, q2) -> np.ndarray:
-        """A(q2) = d joints / d q2, (n_chain, 6)."""
-        out = np.empty((self.n_chain, 6))
-        chain_joints_jacobian(np.asarray(q2, dtype=float), self.C, out)
-        return out
+        """A(q2) = d joints / d q2 (n_chain, 6): columns C[:, i] + k_i C[:, 3+i] and d_i C[:, 3+i]."""
+        q2 = np.asarray(q2, dtype=float)
+        return np.hstack([self.C[:, :3] + q2[3:] * self.C[:, 3:], q2[:3] * self.C[:, 3:]])
 
     def q2_from_joints(self, qpos_chain) -> np.ndarray:
         """Sensed q2 (6,) from chain joint positions (n_chain,)."""
-        out = np.empty(6)
-        chain_q2_from_joints(np.asarray(qpos_chain, dtype=float), self.R, self.L0, out)
-        return out
+        return self.sense_joints(qpos_chain, np.zeros(self.n_chain))[0]
 
     def sense_joints(self, qpos_chain, qvel_chain) -> tuple[np.ndarray, np.ndarray]:
         """Sensed (q2, dq2) (6,) each from chain joint positions and velocities (n_chain,)."""
@@ -410,8 +258,7 @@ class ChainMap:
         return out
 
     def muscle_commands(self, q2, T2) -> tuple[np.ndarray, int]:
-        """Muscle group commands (6,) for T2 at q2 and the number of saturated groups
-        (``muscle_commands``)."""
+        """Muscle group commands (6,) for T2 at q2 and the number of saturated groups."""
         out = np.empty(6)
         n_sat = muscle_commands(np.asarray(q2, dtype=float), np.asarray(T2, dtype=float),
                                 self.muscle_radius, self.muscle_max_force, out)
@@ -423,18 +270,8 @@ class ChainMap:
         chain_elastic_correction(np.asarray(qpos_chain, dtype=float), *self.elastic_args, out)
         return out
 
-    def elastic_energy(self, qpos_chain) -> float:
-        """Exact discrete elastic energy E (J) of ``chain_elastic_correction``."""
-        return float(chain_elastic_energy(np.asarray(qpos_chain, dtype=float), self.R, self.C, self.L0,
-                                          self.section, self.is_hinge, self.seg_kb, self.ke,
-                                          self.shape_stiffness))
-
-    # --- MjData helpers ---------------------------------------------------------------------------
     def chain_qpos(self, d: mujoco.MjData) -> np.ndarray:
         return d.qpos[self.chain_qpos_adr].copy()
-
-    def chain_qvel(self, d: mujoco.MjData) -> np.ndarray:
-        return d.qvel[self.chain_dof_adr].copy()
 
     def set_q2(self, d: mujoco.MjData, q2, dq2=None) -> None:
         """Put the chain on the CC manifold at q2 (and velocity A dq2; zero if None)."""
@@ -443,7 +280,7 @@ class ChainMap:
 
     def sense(self, d: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
         """(q2, dq2) sensed from the chain joints of d."""
-        return self.sense_joints(self.chain_qpos(d), self.chain_qvel(d))
+        return self.sense_joints(self.chain_qpos(d), d.qvel[self.chain_dof_adr])
 
     def master_tip(self, m: mujoco.MjModel, d: mujoco.MjData) -> np.ndarray:
         """[X, Z] of master_tip_site relative to master_base (needs up-to-date kinematics)."""
@@ -457,6 +294,5 @@ class ChainMap:
 
 
 # kernels compiled by harness.loop.fast (numba) together with controllers/
-KERNELS = ("chain_joints_from_q2", "chain_joints_jacobian", "chain_joints_rate_add", "chain_q2_from_joints",
-           "chain_sense", "chain_force_from_T2", "muscle_commands", "chain_extension",
-           "chain_elastic_correction", "chain_elastic_energy")
+KERNELS = ("chain_joints_from_q2", "chain_joints_rate_add", "chain_sense",
+           "chain_force_from_T2", "muscle_commands", "chain_elastic_correction")

@@ -1,34 +1,10 @@
-"""Environment objects the Octarm can touch, contact sensing and the t = 0 clearance check (MuJoCo plant).
+"""Environment objects the Octarm can touch, contact sensing and the t = 0 clearance check (MuJoCo plant;
+docs/guide/contact.md).  Objects are world geoms in the slave's plane (world = octarm_base + [X, 0, Z]);
+every segment capsule and a tip sphere touch them through explicit frictionless pairs with
 
-Geometry.  Each `EnvObject` becomes a world geom in the slave's plane (world = octarm_base + [X, 0, Z]):
-`plane` (MuJoCo plane, local +z = the object's `normal`), `box` (y half size `BOX_DEPTH`) or `sphere`.
-The Octarm gets collision geometry along its whole body: every segment capsule (the rod of rest length,
-radius 0.02 m) and a sphere on the tip body (radius `TIP_RADIUS_FACTOR` x the capsule radius, so that a
-head-on push is carried by the tip body).  Contacts are explicit `<pair>`s (arm geom, object) only:
-the arm does not collide with itself, the master never collides (its geoms stay contype = 0).
+    solref = (-k (1 - d) A_b, -c (1 - d) A_b),  solimp = (d, d, 0.001, 0.5, 2)  =>  f = k r + c dr/dt
 
-Contact law (frictionless, condim 1).  MuJoCo's soft constraint, in static equilibrium (v = 0, a = 0),
-gives the normal force f = k_ref r d / ((1 - d) A) with r the penetration, d the impedance (solimp),
-A the constraint's diagonal approximation (for a body against the world: body_invweight0[b, 0], a
-constant of the model) and, for solref = (-s, -b) < 0, k_ref = s / d.  Hence (measured in
-tests/test_contact.py, exact to the solver tolerance):
-
-    solref = (-k (1 - d) A_b, -c (1 - d) A_b),  solimp = (d, d, 0.001, 0.5, 2)  (constant d)
-    =>  f = k r + c dr/dt,   c = 2 zeta sqrt(k m_b),  m_b = 1 / A_b,
-
-one `<pair>` per (arm geom, object) with the A_b of that arm body.  k = `stiffness` [N/m],
-zeta = `damping_ratio`.  Outside static equilibrium MuJoCo's solution differs from the spring-damper
-by the constraint's dynamics (the soft constraint is solved implicitly against the full inertia).
-
-Sensing (`ContactMap`, all MuJoCo contact sensors, read from d.sensordata by the compiled loop):
-tip netforce (force of the tip body ON the objects, world frame), whole-arm netforce (subtree of the
-first segment), whole-arm minimum distance (penetration = -dist) and the `N_POINTS` largest contacts
-(position, force, normal) for the recordings.  MuJoCo computes them inside mj_step at the step's
-start state.
-
-Solver: the scene's settings (Newton, no warm start, no island discovery) are kept with contacts:
-measured on scenarios/contact.toml (4 s, N = 8, torque), warm start gives the same states to 1e-13
-and no speed-up (loop 1.66 s with, 1.62 s without); `SOLVER_WARMSTART` switches it on.
+in static equilibrium (r penetration, d the impedance, A_b = body_invweight0, c = 2 zeta sqrt(k / A_b)).
 """
 
 from __future__ import annotations
@@ -45,19 +21,15 @@ IMPEDANCE = 0.9  # solimp d (constant over the penetration)
 BOX_DEPTH = 0.15  # m, y half size of box obstacles
 TIP_RADIUS_FACTOR = 1.25  # tip sphere radius / segment capsule radius
 N_POINTS = 4  # contact points recorded per control step (largest forces)
-SOLVER_WARMSTART = False  # see the module docstring (measured: no benefit with contacts)
 # contact sensor data bits (mjtConDataField order) and reductions
 _FOUND, _FORCE, _DIST, _POS, _NORMAL = 1, 2, 8, 16, 32
 _MINDIST, _MAXFORCE, _NETFORCE = 1, 2, 3
-# layout of ContactMap.adr: sensordata addresses of the four sensors
-TIP_NET, ARM_NET, ARM_MIN, ARM_PTS = 0, 1, 2, 3
-POINT_WIDTH = 1 + 3 + 3 + 3  # found, force (contact frame), pos, normal
 
 
 @dataclass(frozen=True)
 class ContactMap:
-    """Where the contact sensors live in d.sensordata (adr: int64 (4,) [tip net, arm net, arm mindist,
-    arm points]), the object geom ids, and the tip body id (for constant tip forces)."""
+    """d.sensordata addresses adr (4,) int64 [tip net, arm net, arm mindist, arm points], the object and
+    arm geom ids and the tip body id."""
 
     adr: np.ndarray
     object_geoms: np.ndarray
@@ -78,24 +50,17 @@ def _quat_y(theta: float) -> list[float]:
 
 
 def _add_object(spec: mujoco.MjSpec, obj: EnvObject, base: np.ndarray) -> str:
-    pos = [base[0] + obj.position[0], base[1], base[2] + obj.position[1]]
     name = f"env_{obj.name}_geom"
-    g = spec.worldbody.add_geom(name=name, pos=pos, contype=0, conaffinity=0, condim=1, density=0.0)
     if obj.kind == "plane":
-        nx, nz = obj.normal
-        g.type = mujoco.mjtGeom.mjGEOM_PLANE
-        g.size = [0.4, BOX_DEPTH, 0.02]
-        g.quat = _quat_y(math.atan2(nx, nz))
-        g.rgba = [0.55, 0.55, 0.6, 0.5]
+        kw = dict(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0.4, BOX_DEPTH, 0.02],
+                  quat=_quat_y(math.atan2(*obj.normal)), rgba=[0.55, 0.55, 0.6, 0.5])
     elif obj.kind == "box":
-        g.type = mujoco.mjtGeom.mjGEOM_BOX
-        g.size = [obj.size[0], BOX_DEPTH, obj.size[1]]
-        g.quat = _quat_y(obj.angle)
-        g.rgba = [0.3, 0.6, 0.4, 0.6]
+        kw = dict(type=mujoco.mjtGeom.mjGEOM_BOX, size=[obj.size[0], BOX_DEPTH, obj.size[1]],
+                  quat=_quat_y(obj.angle), rgba=[0.3, 0.6, 0.4, 0.6])
     else:
-        g.type = mujoco.mjtGeom.mjGEOM_SPHERE
-        g.size = [obj.size[0], 0.0, 0.0]
-        g.rgba = [0.3, 0.6, 0.4, 0.6]
+        kw = dict(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[obj.size[0], 0.0, 0.0], rgba=[0.3, 0.6, 0.4, 0.6])
+    spec.worldbody.add_geom(name=name, pos=[base[0] + obj.position[0], base[1], base[2] + obj.position[1]],
+                            contype=0, conaffinity=0, condim=1, density=0.0, **kw)
     return name
 
 
@@ -108,8 +73,8 @@ def _contact_sensor(spec, name, objtype, objname, data, reduce, num):
 def add_environment(spec: mujoco.MjSpec, env: EnvironmentConfig, invweight: dict[str, float],
                     arm_geoms: list[tuple[str, str]]) -> None:
     """Add the objects, the tip sphere, one pair per (arm geom, object) and the contact sensors to `spec`
-    and enable contacts.  invweight: body name -> body_invweight0[b, 0] of a compiled model without the
-    environment (the pairs' solref needs it); arm_geoms: (geom name, body name) of the segment capsules."""
+    and enable contacts.  invweight: body name -> body_invweight0[b, 0] of the model without the
+    environment; arm_geoms: (geom name, body name) of the segment capsules."""
     base = np.asarray(spec.body("octarm_base").pos, dtype=float)
     tip = spec.body("octarm_tip_body")
     r = float(spec.geom(arm_geoms[0][0]).size[0])
@@ -131,8 +96,6 @@ def add_environment(spec: mujoco.MjSpec, env: EnvironmentConfig, invweight: dict
     _contact_sensor(spec, "arm_contact_pts", xbody, first, _FOUND | _FORCE | _POS | _NORMAL, _MAXFORCE,
                     N_POINTS)
     spec.option.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
-    if SOLVER_WARMSTART:
-        spec.option.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_WARMSTART)
 
 
 def contact_map(m: mujoco.MjModel) -> ContactMap:
@@ -146,8 +109,8 @@ def contact_map(m: mujoco.MjModel) -> ContactMap:
 
 
 def clearance(m: mujoco.MjModel, d: mujoco.MjData, cm: ContactMap) -> list[tuple[int, int, float]]:
-    """(object geom, arm geom, signed distance m) of every pair closer than 0 at the current qpos
-    (mj_forward must have run): MuJoCo's own mj_geomDistance."""
+    """(object geom, arm geom, signed distance m) of every penetrating pair (mj_geomDistance; after
+    mj_forward)."""
     out = []
     fromto = np.zeros(6)
     for g2 in cm.object_geoms:

@@ -1,6 +1,5 @@
-"""The closed loop's initial state (both arms at rest), computed from the scenario alone: used by the
-loops (`harness.loop.common.initial_state`) and by the MuJoCo plant builder to check that no environment
-object intersects the arm at t = 0."""
+"""The closed loop's initial state (both arms at rest) from the scenario alone (the loops, and the MuJoCo
+plant's t = 0 clearance check)."""
 
 from __future__ import annotations
 
@@ -15,19 +14,12 @@ class InitialStateError(ValueError):
     """The scenario's initial state is impossible (one line, naming the field)."""
 
 
-def _desired0(scn: Scenario) -> np.ndarray:
-    tr = scn.trajectory
-    return np.array([tr.center[0], tr.center[1] + tr.amplitude[1]])  # x_d(0), eq. (40)
-
-
 def initial_state(scn: Scenario) -> np.ndarray:
-    """[q1, dq1, q2, dq2] (16,) at t = 0, both arms at rest.
-
-    Master: inverse kinematics of x_d(0) + initial.master_offset (plant master geometry).
-    Slave: initial.slave_q2, or equal section lengths with curvature initial.slave_curvature each,
-    the length chosen (Newton on Z) so that the tip height equals the master tip's.
-    """
-    xd0 = _desired0(scn)
+    """[q1, dq1, q2, dq2] (16,) at t = 0, at rest.  Master: inverse kinematics of x_d(0) (40) +
+    initial.master_offset.  Slave: initial.slave_q2, or equal section lengths of curvature
+    initial.slave_curvature, the length (Newton on Z) putting the tip at the master tip's height."""
+    tr = scn.trajectory
+    xd0 = np.array([tr.center[0], tr.center[1] + tr.amplitude[1]])
     x0 = xd0 + np.asarray(scn.initial.master_offset, dtype=float)
     pm = scn.plant_master
     try:
