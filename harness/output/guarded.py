@@ -90,29 +90,32 @@ class ChildWriter:
         got: list[int] = []
         old = (signal.signal(signal.SIGINT, lambda signum, frame: got.append(signum))
                if threading.current_thread() is threading.main_thread() else None)
+        self.stderr: list[bytes] = []
         try:
-            proc.start()
-            self.proc = proc
-        finally:
+            try:
+                proc.start()
+                self.proc = proc
+            finally:
+                send.close()
+                os.close(err_w)
+                if self.proc is None:
+                    os.close(err_r)
+                    self.recv.close()
+            self._drain = threading.Thread(target=_drain, args=(err_r, self.stderr), daemon=True)
+            self._drain.start()
+            # restored inside the try: a Ctrl-C from here on still kills the child below
             if old is not None:
                 signal.signal(signal.SIGINT, old)
-            send.close()
-            os.close(err_w)
-            if self.proc is None:
-                os.close(err_r)
-                self.recv.close()
-        self.stderr: list[bytes] = []
-        self._drain = threading.Thread(target=_drain, args=(err_r, self.stderr), daemon=True)
-        self._drain.start()
-        if got:
-            try:
+            if got:
                 if callable(old):
                     old(signal.SIGINT, None)  # default: raises KeyboardInterrupt
                 elif old != signal.SIG_IGN:
                     raise KeyboardInterrupt
-            except BaseException:
-                self.kill()
-                raise
+        except BaseException:
+            if old is not None and signal.getsignal(signal.SIGINT) is not old:
+                signal.signal(signal.SIGINT, old)
+            self.kill()
+            raise
 
     def wait(self) -> Path:
         path, proc, pid = self.path, self.proc, self.proc.pid
