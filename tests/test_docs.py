@@ -71,3 +71,31 @@ def test_the_controller_example_of_the_guide_runs_on_the_default_plant(tmp_path)
     res = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stdout + res.stderr
     assert "status ok" in res.stdout
+
+
+CODE_REF = re.compile(r"`((?:controllers|harness)/[a-z_/]+\.py)`: ((?:`[A-Za-z_]\w*`(?:, | and )?)+)")
+
+
+def test_docs_name_code_that_exists():
+    """Every "`module.py`: `name`, ..." reference in the docs names a file and a top-level definition
+    (or a class attribute) that exist, so a renamed or removed function cannot stay documented."""
+    import ast
+
+    root = Path(__file__).resolve().parents[1]
+    missing = []
+    for doc in [root / "README.md", *sorted((root / "docs").rglob("*.md"))]:
+        for path, names in CODE_REF.findall(doc.read_text(encoding="utf-8")):
+            src = root / path
+            if not src.is_file():
+                missing.append(f"{doc.name}: {path}")
+                continue
+            defined = {n.name for n in ast.walk(ast.parse(src.read_text(encoding="utf-8")))
+                       if isinstance(n, ast.FunctionDef | ast.ClassDef)}
+            defined |= {t.id for n in ast.parse(src.read_text(encoding="utf-8")).body
+                        if isinstance(n, ast.Assign) for t in n.targets if isinstance(t, ast.Name)}
+            missing += [f"{doc.name}: {path}: {n}" for n in re.findall(r"`(\w+)`", names) if n not in defined]
+        text = doc.read_text(encoding="utf-8")
+        for path in re.findall(r"`((?:controllers|harness|tests|benchmarks|examples)/[\w/]+\.py)", text):
+            if not (root / path).is_file():
+                missing.append(f"{doc.name}: {path}")
+    assert not missing, f"docs name code that does not exist: {missing}"
