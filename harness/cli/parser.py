@@ -108,7 +108,8 @@ def _add_scenario_options(p: argparse.ArgumentParser, *, sim: bool = True) -> No
                             "Shortcut for --set plant.kind=... "
                             "Default: from the scenario (paper: mujoco).")
     p.add_argument("--actuation", choices=ACTUATIONS, default=None,
-                   help="MuJoCo slave actuation, each defined per unit length of a section: 'servo' "
+                   help="Slave actuation (MuJoCo chain and Cosserat rod), each defined per unit length of a "
+                        "section: 'servo' "
                         "(position servos tracking the integrated command; hides the slave's inertia and the "
                         "controller's dynamics model), 'torque' (the controller's T2 as ideal generalized "
                         "forces; hides actuator dynamics and limits) or 'muscle' (two one-sided extensor "

@@ -117,8 +117,8 @@ class PlantConfig:
                 "take the nominal [master] value") = None
     slave: doc(Slave | None, '"none" = same as [slave]; or a [plant.slave] table whose missing keys take '
                "the nominal [slave] value") = None
-    actuation: doc(Literal[ACTUATIONS], '"servo" | "torque" | "muscle" (mujoco only).  "servo": position '
-                   "servos, defined per unit length, track the integrated command q2_ref: they hide the "
+    actuation: doc(Literal[ACTUATIONS], '"servo" | "torque" | "muscle".  "servo": position servos, '
+                   "defined per unit length, track the integrated command q2_ref: they hide the "
                    "slave's inertia and the controller's dynamics model (the stiff inner loop does the "
                    'work).  "torque": the controller\'s T2 acts on the body as ideal, instantaneous '
                    'generalized forces: hides actuator dynamics and limits.  "muscle": two one-sided '
@@ -239,6 +239,8 @@ class ForceSensingConfig:
 class SensingConfig:
     force: doc(ForceSensingConfig, "what the laws (13), (17) get as F = [F1, F2]") = \
         field(default_factory=ForceSensingConfig)
+    dq2_cutoff: doc(num("", **POS) | None, 'Hz, first-order low-pass on the sensed dq2 (after the noise; '
+                    'the laws get the filtered rates); "none" = unfiltered') = None
 
 
 @dataclass(frozen=True)

@@ -452,6 +452,25 @@ def active_loads(T2, q2, sec, l0, act_n, act_m, act_m_base):
     for i in range(3):
         mu[i] = T2[3 + i] / q2[i]
         ax[i] = T2[i] - q2[3 + i] * mu[i]
+    _section_loads(mu, ax, sec, l0, act_n, act_m, act_m_base)
+
+
+@njit(cache=True)
+def muscle_loads(p, radius, sec, l0, act_n, act_m, act_m_base):
+    """Muscle group forces p (6,) [p+_1, p-_1, ...] (N, pushing, at s = +r_i, -r_i; radius (3,) m) -> the
+    active loads of their fibres by virtual work per unit length (a fibre l_s = int (1 - s kappa) ds):
+    axial force p+ + p- and couple mu = -r (p+ - p-) on every cross-section of the section."""
+    mu = np.empty(3)
+    ax = np.empty(3)
+    for i in range(3):
+        mu[i] = -radius[i] * (p[2 * i] - p[2 * i + 1])
+        ax[i] = p[2 * i] + p[2 * i + 1]
+    _section_loads(mu, ax, sec, l0, act_n, act_m, act_m_base)
+
+
+@njit(cache=True)
+def _section_loads(mu, ax, sec, l0, act_n, act_m, act_m_base):
+    """Per-section couple mu (3,) N m and axial force ax (3,) N -> act_n (ne,), act_m (3, nv), act_m_base."""
     ne = sec.shape[0]
     for j in range(ne):
         act_n[j] = ax[sec[j]]

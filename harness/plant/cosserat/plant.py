@@ -11,7 +11,11 @@ rigid 2-link master, as a `harness.plant.stepped.SteppedPlant` for `harness.loop
   replaces the passive stiffness the controller's T2 compensates (eq. 18 includes it in N2), so the
   feed-forward keeps the inertial, gravity and damping part (feeding the whole T2 cancels the
   rod's stiffness about q2_ref and makes the closed loop diverge within 25 ms: measured).
-  Torque actuation: T2 as internal section loads.  q2 is sensed by the
+  Torque actuation: T2 as internal section loads.  Muscle actuation: the MuJoCo chain's groups and
+  parameters (plant.muscle_*): commands p = `chain_map.muscle_commands`(sensed q2, T2), clipped to
+  [0, F_max], followed by the group forces with MuJoCo's filterexact step act += (p - act)(1 - e^(-T/tau))
+  after each control period T over which act is held (the chain's order at physics_dt = control_dt),
+  acting as the rod's fibre loads (`CosseratSlave`, Actuation).  q2 is sensed by the
   least-squares CC fit of each section (`CosseratSlave.sense`).
 * Master: the analytic master dynamics (`controllers.master.master_accel`, paper eq. 1, which MuJoCo's
   master matches to round-off), classical RK4 with steps of at most 1 ms (`master_rk4`, compiled here).
@@ -40,6 +44,7 @@ from controllers import master as master_model
 from controllers import slave as slave_model
 from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
+from harness.plant.chain_map import muscle_commands
 from harness.plant.cosserat import contact as rod_contact
 from harness.plant.cosserat.rod import CosseratSlave, auto_dt, check_steps_per_control, stable_dt
 from harness.plant.initial import InitialStateError, initial_state
@@ -151,7 +156,8 @@ class CosseratPlant:
                 scn.plant_slave, c.elements_per_section, dt=dt,
                 material_damping=(scn.plant.bending_viscosity, scn.plant.extension_viscosity),
                 shear_factor=c.shear_factor, actuation=scn.plant.actuation,
-                rotary_radius=c.rotary_radius, elastic_law=c.elastic_law)
+                rotary_radius=c.rotary_radius, elastic_law=c.elastic_law,
+                muscle_radius=scn.plant.muscle_radius)
         except ValueError as exc:
             raise ConfigError(_field_of(str(exc), scn), path="plant.cosserat") from None
         self.actuation = scn.plant.actuation
@@ -167,6 +173,11 @@ class CosseratPlant:
         self._q_ref = np.zeros(6)
         self._ff = np.zeros(6)
         self._spk = scn.plant_slave.packed()
+        self._fmax = np.repeat(np.asarray(scn.plant.muscle_max_force, dtype=float), 2)
+        self._tau = np.repeat(np.asarray(scn.plant.muscle_time_constant, dtype=float), 2)
+        self.muscle_force = np.zeros(6)  # N, muscle group forces (the actuator state)
+        self._ctrl = np.zeros(6)  # N, muscle commands clipped to [0, F_max]
+        self.saturated = 0  # muscle group-steps commanded outside [0, F_max]
         nn = 3 * self.slave.n + 1
         self._geo = {"centreline": np.zeros((nn, 3)), "sections": np.zeros((4, 3)),
                      "master": np.zeros((3, 3))}
@@ -198,11 +209,17 @@ class CosseratPlant:
         self._T1[:] = 0.0
         self._T2[:] = 0.0
         self._q_ref[:] = state0[4:10]
+        self.muscle_force[:] = 0.0
+        self._ctrl[:] = 0.0
 
     def command(self, T1, T2, q2_ref, dq2_ref, q2_sensed=None) -> None:
         self._T1[:] = T1
         self._T2[:] = T2
         self._q_ref[:] = q2_ref
+        if self.actuation == "muscle":
+            self.saturated += muscle_commands(q2_sensed, self._T2, self.slave.muscle_radius, self._fmax[::2],
+                                              self._ctrl)
+            np.clip(self._ctrl, 0.0, self._fmax, out=self._ctrl)
 
     def advance(self, dt: float) -> int:
         nsub = max(1, math.ceil(dt / MASTER_MAX_H - 1e-9))
@@ -216,6 +233,9 @@ class CosseratPlant:
                 ff = self._ff
                 feedforward(self._T2, self._q2, self._spk, ff)
             ok = self.slave.step(self._q_ref, dt, ff)
+        elif self.actuation == "muscle":
+            ok = self.slave.step(self.muscle_force, dt)
+            self.muscle_force += (self._ctrl - self.muscle_force) * -np.expm1(-dt / self._tau)
         else:
             ok = self.slave.step(self._T2, dt)
         return 0 if ok else 8
@@ -297,4 +317,5 @@ class CosseratPlant:
         s = self.slave
         return {"master_base": tuple(MASTER_BASE.tolist()), "slave_base": tuple(SLAVE_BASE.tolist()),
                 "actuation": self.actuation, "elements_per_section": s.n, "rod_dt": s.dt,
-                "stable_dt": self.stable_dt, "section_nodes": s.section_nodes.tolist()}
+                "stable_dt": self.stable_dt, "section_nodes": s.section_nodes.tolist(),
+                **({"muscle_saturated_steps": self.saturated} if self.actuation == "muscle" else {})}

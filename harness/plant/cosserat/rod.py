@@ -4,7 +4,7 @@ API
 ---
     plant = CosseratSlave(params: SlaveParams, elements_per_section=10, dt=None,
                           material_damping=None, shear_factor=100.0, actuation="servo",
-                          rotary_radius=0.04, elastic_law="analytic")
+                          rotary_radius=0.04, elastic_law="analytic", muscle_radius=(0.16, 0.12, 0.09))
     plant.reset(q2, dq2=None)           # CC shape of q2 at rest-strain equilibrium (servo), time = 0
     plant.step(command (6,), duration, feedforward=None) -> bool   # False if the state diverged
     plant.sense() -> (q2 (6,), dq2 (6,))                 # least-squares CC fit of each section
@@ -122,6 +122,12 @@ of section i (rest-length weighted mean at boundaries, full at the base spring) 
 force T_d_i - k_i T_k_i / d_i on its elements (theta = k d: T_k dk = (T_k / d) dtheta -
 (k T_k / d) dd, the README's MuJoCo torque mapping).  With the analytic law the static equilibrium
 under T2 is exactly the analytic one.
+`actuation="muscle"`: the command is the force p (6,) = [p+_1, p-_1, ...] (N, >= 0 pushing) of the two
+extensor groups of each section at lateral offsets s = +r_i, -r_i (`muscle_radius`, along d1); a fibre
+of length l_s = int (1 - s kappa) ds does the virtual work of an axial force p and a couple -s p on
+every cross-section of its section (`kernels.muscle_loads`): on a CC section, the generalized force
+p (1 - s k, -s d) of the MuJoCo chain's fibres d (1 - s k) (`harness.plant.chain_map.muscle_commands`).
+The force dynamics and limits are the plant's (`harness.plant.cosserat.plant`).
 
 Sensing
 -------
@@ -212,15 +218,15 @@ class CosseratSlave:
                  dt: float | None = None, material_damping=None,
                  shear_factor: float = DEFAULT_SHEAR_FACTOR, actuation: str = "servo",
                  rotary_radius: float = DEFAULT_ROTARY_RADIUS, elastic_law: str = "analytic",
-                 stepper: str = "numba") -> None:
+                 stepper: str = "numba", muscle_radius=(0.16, 0.12, 0.09)) -> None:
         if not isinstance(params, SlaveParams):
             raise _err("params", type(params).__name__, "must be a controllers.params.SlaveParams")
         n = elements_per_section
         if not (isinstance(n, (int, np.integer)) and not isinstance(n, bool) and 2 <= n <= 200):
             raise _err("elements_per_section", n, "must be an integer in [2, 200]")
         n = int(n)
-        if actuation not in ("servo", "torque"):
-            raise _err("actuation", actuation, "must be 'servo' or 'torque'")
+        if actuation not in ("servo", "torque", "muscle"):
+            raise _err("actuation", actuation, "must be 'servo', 'torque' or 'muscle'")
         if elastic_law not in ("analytic", "linear"):
             raise _err("elastic_law", elastic_law, "must be 'analytic' or 'linear'")
         if stepper not in ("numba", "pyelastica"):
@@ -257,6 +263,7 @@ class CosseratSlave:
         self.n = n
         self.dt = float(dt)
         self.actuation = actuation
+        self.muscle_radius = np.asarray(muscle_radius, dtype=float)
         self.eta_b, self.eta_a = eta_b, eta_a
         self.shear_factor = float(shear_factor)
         self.analytic_law = elastic_law == "analytic"
@@ -453,7 +460,8 @@ class CosseratSlave:
 
     def step(self, command, duration: float, feedforward=None) -> bool:
         """Advance by `duration` (a multiple of dt) with the command held: servo: q2 command (rest
-        strains, plus `feedforward` T2 if given); torque: T2.  Returns False if the state diverged."""
+        strains, plus `feedforward` T2 if given); torque: T2; muscle: the group forces p (N).  Returns
+        False if the state diverged."""
         command = self._vec6("command", command)
         m = round(duration / self.dt)
         tol = 1e-9 * max(1.0, duration)
@@ -464,6 +472,9 @@ class CosseratSlave:
                 raise _err("command", tuple(command), "commanded section lengths must be > 0")
             self._set_rest(command)
             self._set_active(None if feedforward is None else self._vec6("feedforward", feedforward))
+        elif self.actuation == "muscle":
+            kr.muscle_loads(command, self.muscle_radius, self._sec, self._l0, self._act_n, self._act_m,
+                            self._act_m_base)
         else:
             self._set_active(command)
         self._fit_valid = False  # the rod moves: a cached CC fit is stale
