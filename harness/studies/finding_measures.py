@@ -197,17 +197,72 @@ def _measure_flip(scn, traj) -> dict[str, float]:
     """The closed loop linearized over one control period at the run's end (`harness.studies.stability`,
     noise off): radius = its spectral radius, flip = -Re of its most negative eigenvalue (> 1: a mode that
     flips sign every period and grows, at the Nyquist frequency of the control rate), flip_on_junction =
-    1 if that mode's largest components are hinges next to a section boundary, else 0."""
+    1 if that mode's two largest components are hinges (chain) or elements (rod) next to the boundary
+    of sections 0-1 or 1-2, else 0."""
     from harness.studies.stability import linearize
 
     res = linearize(scn, float(traj.t[-1]) if len(traj) else 0.0)
     j = res.most_negative()
     top = [name for name, _ in res.dominant(j, 2)]
-    n = scn.plant.segments
-    junction = ({f"octarm_s{i}_seg{n - 1}_hinge" for i in range(2)}
-                | {f"octarm_s{i}_seg0_hinge" for i in (1, 2)})
+    if scn.plant.kind == "cosserat":
+        n = scn.plant.cosserat.elements_per_section
+        junction = {f"s{i}_el{n - 1}.angle" for i in range(2)} | {f"s{i}_el0.angle" for i in (1, 2)}
+    else:
+        n = scn.plant.segments
+        junction = ({f"octarm_s{i}_seg{n - 1}_hinge" for i in range(2)}
+                    | {f"octarm_s{i}_seg0_hinge" for i in (1, 2)})
     return {"radius": res.radius, "flip": float(-res.eigenvalues[j].real),
             "flip_on_junction": float(all(any(name.startswith(x) for x in junction) for name in top))}
+
+
+def _measure_poles(scn, traj) -> dict[str, float]:
+    """The loop linearized at the run's end against the closed forms: pole_error = the largest distance
+    (|.|) of a pole of (15) (k1, k2) or (21) (k3, k4) under a zero-order hold over T, each twice (X, Z),
+    the one-period matrix [[1 - kp T^2/2, T - kd T^2/2], [-kp T, 1 - kd T]], to its nearest eigenvalue
+    not matched before; null_error: the same for 1 - k_n T (the null-space velocity, 4 times)."""
+    from harness.studies.stability import linearize
+
+    g, T = scn.gains, scn.control_dt
+    lam = list(linearize(scn, float(traj.t[-1])).eigenvalues)
+
+    def worst(targets) -> float:
+        err = 0.0
+        for z in targets:
+            j = int(np.argmin([abs(x - z) for x in lam]))
+            err = max(err, abs(lam.pop(j) - z))
+        return err
+
+    zoh = [np.linalg.eigvals([[1 - kp * T * T / 2, T - kd * T * T / 2], [-kp * T, 1 - kd * T]])
+           for kp, kd in ((g.k2, g.k1), (g.k4, g.k3))]
+    return {"pole_error": worst([z for pair in zoh for z in pair] * 2), "null_error": worst([1 - g.kn * T] * 4)}
+
+
+MARGIN_BOUNDS = {"analytic": "paper_analytic", "mujoco": "paper_mujoco", "cosserat": "paper_cosserat"}
+
+
+def _measure_margins(scn, traj) -> dict[str, float]:
+    """`harness.studies.margin.margins` of the scenario against the plant's shipped paper bounds
+    (MARGIN_BOUNDS) over slave_mass and master_mass (rtol 0.05, no probes, one thread): per parameter
+    <p>_lower, <p>_upper (the margins, scale factors) and <p>_lower_fail, <p>_upper_fail (the first
+    failing scale; nan at a range end)."""
+    import tempfile
+    from pathlib import Path
+
+    from harness.config.bounds import load_bounds
+    from harness.config.load import dump_scenario
+    from harness.studies.margin import margins
+
+    with tempfile.TemporaryDirectory() as tmp:
+        src = dump_scenario(scn, Path(tmp) / "scenario.toml")
+        rows = margins(scn, load_bounds(MARGIN_BOUNDS[scn.plant.kind]), ("slave_mass", "master_mass"),
+                       source=src, probes=0, workers=1, executor="threads")
+    out = {}
+    for m in rows:
+        for side in ("lower", "upper"):
+            d = m.sides[side]
+            out[f"{m.param}_{side}"] = d["margin"]
+            out[f"{m.param}_{side}_fail"] = math.nan if d.get("fail") is None else d["fail"]
+    return out
 
 
 MEASURES: dict[str, Callable[[Any, Any], dict[str, float]]] = {
@@ -220,6 +275,8 @@ MEASURES: dict[str, Callable[[Any, Any], dict[str, float]]] = {
     "elastic_laws": _measure_elastic_laws,
     "chain_vs_rod": _measure_chain_vs_rod,
     "flip": _measure_flip,
+    "poles": _measure_poles,
+    "margins": _measure_margins,
 }
 
 MEASURE_UNITS = {"diverged_at": "s", "arc_departure": "mm", "chained_cc_tip": "mm", "settle_3s_error": "mm",
