@@ -234,7 +234,8 @@ def _measure_poles(scn, traj) -> dict[str, float]:
 
     zoh = [np.linalg.eigvals([[1 - kp * T * T / 2, T - kd * T * T / 2], [-kp * T, 1 - kd * T]])
            for kp, kd in ((g.k2, g.k1), (g.k4, g.k3))]
-    return {"pole_error": worst([z for pair in zoh for z in pair] * 2), "null_error": worst([1 - g.kn * T] * 4)}
+    poles = [z for pair in zoh for z in pair] * 2
+    return {"pole_error": worst(poles), "null_error": worst([1 - g.kn * T] * 4)}
 
 
 MARGIN_BOUNDS = {"analytic": "paper_analytic", "mujoco": "paper_mujoco", "cosserat": "paper_cosserat"}
