@@ -1,40 +1,6 @@
-"""Findings: the harness's scientific results as small runnable files, rerun by `teleop findings`.
-
-A finding is one TOML file in the shipped `findings/` folder (package data `harness._data.findings`)::
-
-    [finding]
-    title = "Mass mismatch is first order"        # one line
-    claim = "..."                                  # the sentence the checks below state
-    method = "..."                                 # plant, settings, what is measured (optional)
-    scenario = "paper"                             # base scenario (optional; default: the paper's)
-    set = ["plant.kind='analytic'", ...]           # overrides applied to every run
-    show = ["nominal.e2_rms"]                      # quantities reported beside the checks (optional)
-    figures = ["nominal"]                          # runs whose Figs 2-4 `teleop findings` writes (optional)
-
-    [[run]]                                        # one or more runs of the base scenario
-    name = "plus10"
-    set = ["plant.slave.masses=[1.1,0.77,0.44]"]   # this run's own overrides
-    measure = ["diverged"]                         # optional derived measurements (finding_measures)
-    # simulate = false                             # only the measures (on the scenario), no closed loop
-
-    [ratio]                                        # optional: quotient of two measured quantities
-    plus20_over_plus10 = ["plus20.e2_rms", "plus10.e2_rms"]
-
-    [claim]                                        # the claim as bounds: <quantity>_max / <quantity>_min
-    plus20_over_plus10_min = 1.8
-    plus20_over_plus10_max = 2.2
-    [claim.plus10]                                 # a run's metrics: the bounds-file format
-    status_ok = true                               #   (harness.config.bounds), checked by check_bounds
-    e2_rms_min = 0.03
-
-Quantities are named `<run>.<metric>` (every metric of `harness.loop.metrics.compute_metrics`),
-`<run>.<measure key>` (the derived measurements) and `<ratio name>`.  Top-level `[claim]` keys bound
-derived quantities and ratios (a dotted quantity is written with `_` for `.`, e.g. `exact_eq28_corrected`
-for `exact.eq28_corrected`); `[claim.<run>]` tables are bounds files' `[bounds]` tables for that run.
-
-`run_findings(names)` runs them and returns one `FindingResult` each; `findings_table` renders the
-markdown table that the docs' findings page includes (claim, measured values, holds).  Everything is
-deterministic: the same files give the same numbers.
+"""Findings: the harness's scientific results as small runnable files (`findings/`, package data
+`harness._data.findings`), rerun by `teleop findings`.  File format: docs/findings.md.  `run_findings`
+returns one `FindingResult` each; `findings_table` renders the docs' markdown table.  Deterministic.
 """
 
 from __future__ import annotations

@@ -1,23 +1,8 @@
-"""Robustness margins: for each mismatch parameter, the largest deviation from the nominal scenario in each
-direction for which the scenario still passes a bounds file (`teleop margin`, `harness.api.margins`).
-
-A parameter (`PARAMS`, or any scenario key as a scale factor) moves along a ray from the nominal point:
-a scale factor s (the scenario value times s; s = 1 nominal) or an absolute value (delay, segments, SNR).
-Each search brackets the pass/fail edge (steps of x2 in the scale, or doubling steps in the value) inside
-the parameter's range, then bisects the bracket until it is narrower than the tolerance (`rtol` on the
-scale: s_fail / s_pass < 1 + rtol; `atol` on values; integer parameters exactly).  The pass point of the
-bracket is the margin (a deviation that is known to pass); the fail point, the first bound it violates
-and the measured value of that bound's metric at both points are reported.
-
-Monotonicity is not assumed: after the edge is found, `probes` more points strictly between the nominal
-point and the edge (evenly spaced in log scale or value) are run; a probe that fails marks the edge
-"non-monotone" (the margin then holds only at the sampled points).
-
-Every run goes through the sweep executor (`harness.studies.executor.run_cases`: worker processes, threads
-or a Dask cluster); all searches advance together, one batch of runs per round.  Each finished run is
-appended to `results.jsonl` in the output folder (the sweep's journal, `harness.studies.results`), keyed by
-the hash of its resolved scenario: a second call with the same arguments reads the finished runs instead of
-running them (resume after an interruption).
+"""Robustness margins (`teleop margin`, `harness.api.margins`): for each mismatch parameter (`PARAMS`, or a
+scenario key as a scale factor) the largest deviation from the nominal scenario in each direction that
+still passes a bounds file, by bracketing (x2 steps) and bisection to a tolerance, then probes inside the
+margin (a failing probe marks the edge non-monotone).  Runs go through the sweep executor; each finished
+run is a line of `results.jsonl`, keyed by its scenario's hash, so a rerun resumes.  docs/stability.md.
 """
 
 from __future__ import annotations

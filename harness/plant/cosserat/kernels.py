@@ -1,21 +1,8 @@
-"""Compiled physics of the planar Octarm Cosserat rod (kernels for `harness.plant.cosserat.rod`).
-
-The maths, the frames and the parameter mapping are documented in `harness.plant.cosserat.rod`; this
-module holds the numba kernels only:
-
-* `rod_loads`: the elastic, damping, active and external loads of one step, written into the
-  PyElastica rod's own arrays (`internal_forces`, `internal_torques`, `external_forces`,
-  `external_torques`), from the strains computed by PyElastica's kernels
-  (`_compute_shear_stretch_strains`, `_compute_bending_twist_strains`, `_compute_dilatation_rate`,
-  `_inv_rotate`, through `harness.plant.cosserat.pyelastica`);
-* `run_steps`: position-Verlet steps (PyElastica's `PositionVerlet` scheme: half drift, loads,
-  kick, half drift) compiled into one loop with PyElastica's own update kernels
-  (`overload_operator_kinematic_numba`, `_update_accelerations`), so a step has no Python overhead;
-* `cc_fit`: the least-squares constant-curvature fit of a section's nodes (and its rates).
-
-Planar embedding: plane point [X, Z] -> (X, 0, Z); the rod's directors are d1 = (cos p, 0, -sin p),
-d2 = +Y, d3 = (sin p, 0, cos p) for an element at tangent angle p (from +Z toward +X), so a
-positive curvature k is a positive rotation about d2 = +Y and is kappa[1] in PyElastica's arrays.
+"""Compiled physics of the planar Octarm Cosserat rod (`harness.plant.cosserat.rod`; maths, frames and
+parameters: docs/plants.md, "The Cosserat rod's model"): `rod_loads` (elastic, damping, active and
+external loads from the strains of PyElastica's kernels, `harness.plant.cosserat.pyelastica`), `run_steps`
+(position Verlet with PyElastica's update kernels in one loop), `fit_rod` (the least-squares CC fit),
+`rest_strains`, `active_loads`, `muscle_loads`.
 """
 
 from __future__ import annotations

@@ -1,35 +1,19 @@
-"""The Cosserat-rod plant of a scenario: the rod slave (`harness.plant.cosserat.rod.CosseratSlave`) and the
-rigid 2-link master, as a `harness.plant.stepped.SteppedPlant` for `harness.loop.stepped_loop`.
+"""The Cosserat-rod plant of a scenario (`CosseratPlant`, a `harness.plant.stepped.SteppedPlant`): the rod
+slave (`CosseratSlave`: EI = Kb, EA = Ke L0, rho A = m / L0, GA = shear_factor EA, material damping
+plant.bending_viscosity / extension_viscosity, base clamped, gravity) and the analytic master (eq. 1,
+classical RK4 with steps of at most 1 ms, `master_rk4`).
 
-* Slave: one PyElastica Cosserat rod built from the plant slave parameters (EI = Kb, EA = Ke L0,
-  rho A = m / L0, GA = shear_factor EA), material damping plant.bending_viscosity (eta_b, N m^2 s)
-  and plant.extension_viscosity (eta_a, N s) per section, base clamped, gravity.  Servo actuation:
-  q2_ref becomes the rod's rest strains (the section's own stiffness is the servo; dq2_ref is not
-  used: the rod has no velocity servo), plus, if plant.servo_feedforward, the feed-forward
-  T2 - dV/dq2(q2) as internal section loads, with V = sum 1/2 Kb d k^2 + 1/2 Ke (d - L0)^2 the CC
-  elastic energy of the plant slave at the fitted q2 of the last `true_state`: the rest-strain servo
-  replaces the passive stiffness the controller's T2 compensates (eq. 18 includes it in N2), so the
-  feed-forward keeps the inertial, gravity and damping part (feeding the whole T2 cancels the
-  rod's stiffness about q2_ref and makes the closed loop diverge within 25 ms: measured).
-  Torque actuation: T2 as internal section loads.  Muscle actuation: the MuJoCo chain's groups and
-  parameters (plant.muscle_*): commands p = `chain_map.muscle_commands`(sensed q2, T2), clipped to
-  [0, F_max], followed by the group forces with MuJoCo's filterexact step act += (p - act)(1 - e^(-T/tau))
-  after each control period T over which act is held (the chain's order at physics_dt = control_dt),
-  acting as the rod's fibre loads (`CosseratSlave`, Actuation).  q2 is sensed by the
-  least-squares CC fit of each section (`CosseratSlave.sense`).
-* Master: the analytic master dynamics (`controllers.master.master_accel`, paper eq. 1, which MuJoCo's
-  master matches to round-off), classical RK4 with steps of at most 1 ms (`master_rk4`, compiled here).
-* Interaction forces: F1 on the master tip (J1^T F1), F2 on the rod's tip node.
-* Environment (`harness.plant.cosserat.contact`): plane and sphere objects act on every rod node (PyElastica's
-  penalty law, per node stiffness k); `forces` gives the true tip forces (F2 = constant + contact force
-  on the tip node) and the contact summary for the stepped loop's F_true / contact columns.
-* Time step: plant.cosserat.dt, or "auto" = control_dt / m, the largest below the rod's
-  explicit-stability estimate `stable_dt`; a set dt must be <= stable_dt and divide control_dt.
-* Recording geometry (world frame, bases at (0, -0.3, 0) master and (0, 0.3, 0) slave as in the
-  MJCF scene): "centreline" (3 n + 1, 3) rod nodes, "sections" (4, 3) section boundaries,
-  "master" (3, 3) master base, elbow, tip.  `geometry()` gives them for the current state; in a run
-  the loop calls `record(k)` (keeps the rod nodes and the master state of step k) and `finish` computes
-  the recorded arrays once at the end (same numbers, no per-step geometry work).
+* Servo actuation: q2_ref becomes the rod's rest strains; with plant.servo_feedforward the feed-forward
+  T2 - dV/dq2(q2) (`feedforward`; V the CC elastic energy at the fitted q2: the rest-strain servo
+  replaces the stiffness that T2 compensates) acts as internal loads.  Torque: T2 as internal loads.
+  Muscle: the MuJoCo chain's groups (plant.muscle_*): commands `chain_map.muscle_commands`(sensed q2,
+  T2) clipped to [0, F_max]; the group forces `muscle_force` (N) act as fibre loads, held over each
+  control period T, then follow MuJoCo's filterexact step act += (p - act)(1 - e^(-T/tau)).
+* Sensing: the least-squares CC fit of each section (`CosseratSlave.sense`).  Forces: F1 on the master
+  tip, F2 plus the contact force (`harness.plant.cosserat.contact`) on the rod's tip node.
+* Time step: plant.cosserat.dt or "auto" (`rod_dt`).  Geometry (world frame, bases as in the MJCF
+  scene): "centreline" (3 n + 1, 3), "sections" (4, 3), "master" (3, 3); `record(k)` keeps the nodes
+  and `finish` computes the recorded arrays once.
 """
 
 from __future__ import annotations
