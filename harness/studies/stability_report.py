@@ -85,55 +85,58 @@ def write_stability(res: Stability, out) -> list[Path]:
     """spectrum.csv (every eigenvalue: real, imag, modulus, angle, frequency, growth, dominant states),
     stability.json (verdict, radius, least stable mode, t, T, h) and stability.png in folder `out`."""
     import csv
+    import io
     import json
 
-    from harness.config.textio import jsonable
+    from harness.config.textio import jsonable, write_atomic
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rows = res.spectrum_rows()
-    p_csv = out / "spectrum.csv"
-    tmp = p_csv.with_suffix(".csv.tmp")
-    with tmp.open("w", newline="", encoding="utf-8") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    tmp.replace(p_csv)
-    p_json = out / "stability.json"
+    buf = io.StringIO(newline="")
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]))
+    w.writeheader()
+    w.writerows(rows)
     summary = {"verdict": res.verdict(), "class": res.verdict_class, "spectral_radius": res.radius,
                "t": res.t, "control_dt": res.T, "fd_step": res.h, "n_states": len(res.names),
                "least_stable": rows[0], "dominant": res.dominant(0, 6),
                "most_negative": rows[res.most_negative()],
                "plant": res.scenario.plant.kind, "actuation": res.scenario.plant.actuation}
-    tmp = p_json.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(jsonable(summary), indent=2) + "\n", encoding="utf-8")
-    tmp.replace(p_json)
-    return [p_csv, p_json, plot_stability(res, out / "stability.png")]
+    return [write_atomic(out / "spectrum.csv", buf.getvalue()),
+            write_atomic(out / "stability.json", json.dumps(jsonable(summary), indent=2) + "\n"),
+            plot_stability(res, out / "stability.png")]
+
+
+def _along(scn: Scenario, times, h=None, on_point=lambda res: None) -> tuple[Stability | None, str]:
+    """`linearize` at each of `times` (s, increasing) on one run of `scn`: (the point of largest spectral
+    radius or None, why the run stopped before the next point or "")."""
+    loop = ClosedLoopMap(scn)
+    worst = None
+    for t in times:
+        try:
+            res = linearize(scn, float(t), h, loop=loop)
+        except LinearizationError as exc:
+            return worst, str(exc)
+        on_point(res)
+        if worst is None or res.radius > worst.radius:
+            worst = res
+    return worst, ""
 
 
 # --- predicted stability map -------------------------------------------------------------------------
 def radius_along(scn: Scenario, times) -> dict:
-    """The least stable linearization along one run of `scn`: `linearize` at each of `times` (s, increasing)
-    on the same run.  Returns {radius (max over the points reached), t (where), class, frequency_hz,
-    dominant, reached (the last time linearized), stopped (message if the run stopped before the next
-    point, else ""), flip (the mode is real negative: a sign flip every period)}; radius nan if not even
-    the first point was reached."""
-    loop = ClosedLoopMap(scn)
-    best = {"radius": float("nan"), "t": float("nan"), "class": "not reached", "frequency_hz": float("nan"),
-            "dominant": "", "reached": float("nan"), "stopped": "", "flip": False}
-    for t in times:
-        try:
-            res = linearize(scn, float(t), loop=loop)
-        except LinearizationError as exc:
-            best["stopped"] = str(exc)
-            break
-        best["reached"] = res.t
-        if not res.radius <= best["radius"]:  # also replaces nan
-            best.update(radius=res.radius, t=res.t, frequency_hz=res.frequency(0),
-                        dominant=";".join(n for n, _ in res.dominant(0, 3)),
-                        flip=bool(abs(np.angle(res.eigenvalues[0])) > 0.99 * math.pi))
-            best["class"] = res.verdict_class
-    return best
+    """The least stable linearization along one run of `scn` (`_along`): {radius, t, class, frequency_hz,
+    dominant, reached (the last time linearized), stopped, flip (a real negative mode)}; radius nan and
+    class "not reached" if not even the first time was reached."""
+    reached = []
+    res, stopped = _along(scn, times, on_point=lambda r: reached.append(r.t))
+    if res is None:
+        nan = float("nan")
+        return {"radius": nan, "t": nan, "class": "not reached", "frequency_hz": nan, "dominant": "",
+                "reached": nan, "stopped": stopped, "flip": False}
+    return {"radius": res.radius, "t": res.t, "class": res.verdict_class, "frequency_hz": res.frequency(0),
+            "dominant": ";".join(n for n, _ in res.dominant(0, 3)), "reached": reached[-1],
+            "stopped": stopped, "flip": bool(abs(np.angle(res.eigenvalues[0])) > 0.99 * math.pi)}
 
 
 def predicted_map(kns, etas, overrides=(), times=(0.0,), say=lambda s: None) -> list[dict]:
@@ -166,8 +169,7 @@ def predicted_markdown(rows: list[dict], sim: list[dict] | None = None) -> str:
             txt += " / sim: " + ("ok" if s["status"] == "ok" else f"diverged {s['t_end']:.3f} s")
         return txt
 
-    lines = grid_lines(rows, text)
-    return "\n".join(lines)
+    return "\n".join(grid_lines(rows, text))
 
 
 def agreement(pred: list[dict], sim: list[dict]) -> list[dict]:
@@ -189,8 +191,6 @@ __all__ = ["agreement", "mode_shape", "plot_stability", "predicted_map", "predic
 
 def print_modes(res, modes: int) -> None:
     """`teleop stability --at T`: the verdict, the `modes` least stable modes and the most negative one."""
-    import math
-
     print(res.verdict())
     print(f"{len(res.names)} states; least stable modes (|lambda|, angle, Hz, growth 1/s, dominant):")
     for j in range(min(modes, len(res.eigenvalues))):
@@ -208,21 +208,14 @@ def least_stable_along(scn, times, h, out):
     """`teleop stability --at T1,T2,...`: one run linearized at each time (a table printed), the least
     stable point's files written to `out`; returns it with `.stopped` = why the run ended early ("" if
     it did not).  Raises LinearizationError when not even the first time could be linearized."""
-    loop = ClosedLoopMap(scn)
-    worst, stopped = None, ""
-    print("t (s)   radius     class     Hz       dominant")
-    for t in times:
-        try:
-            res = linearize(scn, t, h, loop=loop)
-        except LinearizationError as exc:
-            if worst is None:
-                raise
-            stopped = str(exc)
-            break
+    def row(res) -> None:
         dom = ", ".join(n for n, _ in res.dominant(0, 3))
         print(f"{res.t:6.3f}  {res.radius:.6f}  {res.verdict_class:8s}  {res.frequency(0):7.2f}  {dom}")
-        if worst is None or res.radius > worst.radius:
-            worst = res
+
+    print("t (s)   radius     class     Hz       dominant")
+    worst, stopped = _along(scn, times, h, row)
+    if worst is None:
+        raise LinearizationError(stopped)
     write_stability(worst, out)
     print(f"least stable: {worst.verdict()}")
     if stopped:
