@@ -28,7 +28,7 @@ from harness.config.load import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
-SHIPPED = (*KINDS, "findings")  # findings/: located by harness.studies.findings.findings_dir
+SHIPPED = KINDS
 SOURCES = ("pyproject.toml", "README.md", "harness", "controllers", *SHIPPED)
 
 

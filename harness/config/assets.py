@@ -1,4 +1,4 @@
-"""The shipped files: `mjcf/`, `scenarios/`, `bounds/`, `studies/` of the checkout.
+"""The shipped files: `mjcf/`, `scenarios/`, `bounds/`, `studies/`, `findings/` of the checkout.
 
 They stay at the top of the checkout (the customer's layout) and are installed as package data
 `harness._data.<kind>` (pyproject.toml maps each folder there with `package-dir`), so that a wheel
@@ -17,7 +17,7 @@ import importlib.util
 from functools import cache
 from pathlib import Path
 
-KINDS = ("mjcf", "scenarios", "bounds", "studies")
+KINDS = ("mjcf", "scenarios", "bounds", "studies", "findings")
 _CHECKOUT = Path(__file__).resolve().parents[2]
 
 

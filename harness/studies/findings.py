@@ -6,7 +6,6 @@ returns one `FindingResult` each; `findings_table` renders the docs' markdown ta
 from __future__ import annotations
 
 import difflib
-import importlib.util
 import math
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -14,24 +13,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from harness.config.assets import asset_dir
 from harness.config.bounds import Bounds, Violation, bounds_from_dict, check_bounds
 from harness.config.errors import ConfigError
 from harness.config.textio import read_toml
 from harness.studies.finding_measures import MEASURE_UNITS, MEASURES
 
-_CHECKOUT = Path(__file__).resolve().parents[2]
-
 
 def findings_dir() -> Path:
     """Folder of the shipped finding files (package data, else the checkout's `findings/`)."""
-    try:
-        spec = importlib.util.find_spec("harness._data.findings")
-    except ModuleNotFoundError:
-        spec = None
-    for loc in (spec.submodule_search_locations or []) if spec is not None else []:
-        if Path(loc).is_dir():
-            return Path(loc)
-    return _CHECKOUT / "findings"
+    return asset_dir("findings")
 
 
 # --------------------------------------------------------------------------------------------------
