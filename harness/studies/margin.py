@@ -18,6 +18,8 @@ from harness.config.bounds import FLAGS, Bounds, check_bounds, limit_of
 from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
 from harness.config.textio import toml_literal
+from harness.studies.cases import _get as get_field
+from harness.studies.cases import _scaled
 
 
 @dataclass(frozen=True)
@@ -68,8 +70,6 @@ def param_of(name: str) -> Param:
     """A named parameter of PARAMS, or any scenario key (dotted path) as a scale factor in [0.05, 20]."""
     if name in PARAMS:
         return PARAMS[name]
-    if name in PARAMS_RAYS:
-        return PARAMS_RAYS[name]
     if "." in name or name in ("control_dt", "duration"):
         return Param(name, (name,), "scale", 0.05, 20.0, description=f"{name} (x scenario value)")
     raise ConfigError.field("--param", name, f"expected one of {', '.join(PARAMS)} or a dotted scenario key")
@@ -88,10 +88,7 @@ def servo_note(scn: Scenario, names: Sequence[str]) -> str:
 
 # --- points of a search ---------------------------------------------------------------------------------
 def _get(scn: Scenario, key: str) -> Any:
-    from harness.studies.cases import _get as get_field
-
-    path = tuple(key.split("."))
-    return get_field(scn, path, scn, key)
+    return get_field(scn, tuple(key.split(".")), scn, key)
 
 
 def nominal_value(scn: Scenario, p: Param) -> float | None:
@@ -107,8 +104,6 @@ def nominal_value(scn: Scenario, p: Param) -> float | None:
 
 def overrides_at(scn: Scenario, p: Param, level: float) -> list[str]:
     """Scenario overrides putting p at `level` (scale factor or value)."""
-    from harness.studies.cases import _scaled
-
     out = []
     for key in p.keys:
         if p.mode == "rate":
@@ -358,7 +353,7 @@ def _side(search: Search, outcomes: dict) -> dict:
             "probes": list(search.probe_levels)}
 
 
-def margins(scn: Scenario, bounds: Bounds, params: Sequence[str] = DEFAULT_PARAMS, *, source=None,
+def margins(scn: Scenario, bounds: Bounds, params: Sequence[str | Param] = DEFAULT_PARAMS, *, source=None,
             base_set: Sequence[str] = (), rtol: float = 0.05, atol: float | None = None, probes: int = 2,
             out: Path | None = None, workers: int | None = None, scheduler: str | None = None,
             executor: str = "processes", say: Callable[[str], None] = lambda s: None,
@@ -372,7 +367,7 @@ def margins(scn: Scenario, bounds: Bounds, params: Sequence[str] = DEFAULT_PARAM
 
     if not (0 < rtol < 1):
         raise ConfigError.field("rtol", rtol, "expected a relative tolerance in (0, 1)")
-    plist = [param_of(n) for n in params]
+    plist = [n if isinstance(n, Param) else param_of(n) for n in params]
     journal = Journal(out)
     runner = Runner(workers, scheduler, "dask" if scheduler else executor)
     ctx = {"journal": journal, "bounds": bounds, "source": source, "set": list(base_set), "scn": scn,
@@ -455,13 +450,7 @@ def edge_trace(scn: Scenario, bounds: Bounds, pair: tuple[str, str], n_rays: int
     non_monotone}."""
     p1, p2 = param_of(pair[0]), param_of(pair[1])
     rays = [ray(p1, p2, 2 * math.pi * i / n_rays) for i in range(n_rays)]
-    for r in rays:
-        PARAMS_RAYS[r.name] = r
-    try:
-        rows = margins(scn, bounds, [r.name for r in rays], **kw)
-    finally:
-        for r in rays:
-            PARAMS_RAYS.pop(r.name, None)
+    rows = margins(scn, bounds, rays, **kw)
     out = []
     for r, m in zip(rays, rows, strict=True):
         d = m.sides.get("upper", {})
@@ -471,9 +460,6 @@ def edge_trace(scn: Scenario, bounds: Bounds, pair: tuple[str, str], n_rays: int
                     "fail_p1": None if fv is None else fv ** c, "fail_p2": None if fv is None else fv ** s,
                     "first_bound": d.get("first_bound", ""), "non_monotone": bool(d.get("non_monotone"))})
     return out
-
-
-PARAMS_RAYS: dict[str, Param] = {}  # rays of a running edge_trace, found by name (param_of)
 
 
 __all__ = ["DEFAULT_PARAMS", "Margin", "PARAMS", "Param", "Search", "edge_trace", "margins", "param_of",
