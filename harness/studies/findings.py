@@ -326,24 +326,25 @@ def check_text(c: Check) -> str:
     return f"{c.quantity} = {fmt(c.measured)}{unit} ({rel} {fmt(c.limit)}{unit})"
 
 
+def _parts(r: FindingResult, ok: str = "", bad: str = "", also: str = "") -> list[str]:
+    """The error, the checks (prefixed ok / bad) and the `show` quantities (prefixed also) of a result."""
+    parts = [f"error: {r.error}"] if r.error else []
+    parts += [f"{ok if c.holds else bad}{check_text(c)}" for c in r.checks]
+    return parts + [f"{also}{q} = {fmt(r.values.get(q))}{_unit(q)}" for q in r.finding.show]
+
+
 def report_text(r: FindingResult) -> str:
     """Claim / measured / holds for one finding, as printed by `teleop findings`."""
     verdict = "holds" if r.holds else "DOES NOT HOLD"
     lines = [f"{r.finding.name}: {verdict} ({r.wall_time:.1f} s)", f"  claim: {r.finding.claim}"]
-    if r.error:
-        lines.append(f"  error: {r.error}")
-    lines += [f"  {'ok ' if c.holds else 'BAD'} {check_text(c)}" for c in r.checks]
-    lines += [f"  also {q} = {fmt(r.values.get(q))}{_unit(q)}" for q in r.finding.show]
-    return "\n".join(lines)
+    return "\n".join(lines + [f"  {p}" for p in _parts(r, "ok  ", "BAD ", "also ")])
 
 
 def findings_table(results: Sequence[FindingResult]) -> str:
     """The markdown table the docs' findings page includes."""
     rows = ["| finding | claim | measured (limit) | holds |", "|---|---|---|---|"]
     for r in results:
-        parts = [f"error: {r.error}"] if r.error else []
-        parts += [check_text(c) for c in r.checks]
-        parts += [f"{q} = {fmt(r.values.get(q))}{_unit(q)}" for q in r.finding.show]
+        parts = _parts(r)
         measured = "<br>".join(p.replace("|", "\\|") for p in parts)
         claim = r.finding.claim.replace("|", "\\|").replace("\n", " ")
         rows.append(f"| **{r.finding.title}** (`{r.finding.name}`) | {claim} | {measured} | "

@@ -273,12 +273,9 @@ class Journal:
     def __init__(self, out: Path | None):
         from harness.studies.results import RESULTS, ResultsWriter, read_results
 
-        self.rows: dict[str, dict] = {}
-        self.writer = None
-        if out is not None:
-            path = Path(out) / RESULTS
-            self.rows = read_results(path)
-            self.writer = ResultsWriter(path)
+        path = None if out is None else Path(out) / RESULTS
+        self.rows: dict[str, dict] = {} if path is None else read_results(path)
+        self.writer = None if path is None else ResultsWriter(path)
 
     def add(self, row: dict) -> None:
         self.rows.setdefault(row["case_id"], row)
@@ -320,16 +317,14 @@ def run_levels(requests: list[tuple[Param, float]], ctx: dict) -> dict[tuple[str
             journal.add(make_row(case, res))
             ctx["say"](f"  {next(iter(case.params.items()))}: {res.get('status')}")
 
-        run_cases(ctx["runner"], ctx.get("case_fn", run_case), cases, ctx["metrics"], False, on_result)
+        run_cases(ctx["runner"], ctx["case_fn"] or run_case, cases, ctx["metrics"], False, on_result)
     return {k: _outcome(journal.rows[cid], bounds) for k, cid in keys.items()}
 
 
 @dataclass
 class Margin:
-    """One row of the margins table: for parameter `param`, the nominal point and per direction ("lower",
-    "upper"): the margin (last passing level; the range end if nothing failed), the first failing level,
-    the first bound it violates, that bound's metric at the margin and at the failing level, whether the
-    edge is non-monotone (probes that failed) and the number of runs."""
+    """One row of the margins table: `param`, its nominal point, and per direction ("lower", "upper") a dict
+    (`_side`): margin, first failing level, first violated bound, its metric at both, failed probes."""
 
     param: str
     nominal: float | None
@@ -371,9 +366,7 @@ def margins(scn: Scenario, bounds: Bounds, params: Sequence[str | Param] = DEFAU
     journal = Journal(out)
     runner = Runner(workers, scheduler, "dask" if scheduler else executor)
     ctx = {"journal": journal, "bounds": bounds, "source": source, "set": list(base_set), "scn": scn,
-           "runner": runner, "metrics": _metric_names(bounds), "say": say}
-    if case_fn is not None:
-        ctx["case_fn"] = case_fn
+           "runner": runner, "metrics": _metric_names(bounds), "say": say, "case_fn": case_fn}
     try:
         rows: dict[str, Margin] = {}
         searches: list[Search] = []
@@ -395,16 +388,13 @@ def margins(scn: Scenario, bounds: Bounds, params: Sequence[str | Param] = DEFAU
                 s = Search(p, nom, lim, rtol, tol, probes, quantum)
                 s.side = side
                 searches.append(s)
-        # the nominal point must pass
-        if searches:
-            nom_out = run_levels([(nominal_p, 1.0)], ctx)
-            first = next(iter(nom_out.values()))
+        outcomes: dict = {}
+        if searches:  # the nominal point must pass
+            first = run_levels([(nominal_p, 1.0)], ctx)[nominal_p.name, 1.0]
             if not first.passed:
                 raise ConfigError(f"the nominal scenario fails the bounds ({'; '.join(first.violations)}); "
                                   "no margin to search")
-        outcomes: dict = {}
-        if searches:
-            outcomes.update({(p.name, nominal_value(scn, p)): nom_out[nominal_p.name, 1.0] for p in plist})
+            outcomes.update({(p.name, nominal_value(scn, p)): first for p in plist})
         rnd = 0
         while not all(s.done for s in searches):
             rnd += 1

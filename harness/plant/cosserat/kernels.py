@@ -28,16 +28,10 @@ def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_len
               eta_e, eta_v, base_Q, base_B, base_eta, base_kappa0, act_n, act_m, act_m_base,
               node_force, tip_force, analytic_law, objs, cdamp, f_contact, dt, f_int, tau_int, f_ext,
               tau_ext):
-    """Loads of one step into f_int (3, nn), tau_int (3, ne), f_ext, tau_ext (see module cosserat).
-
-    eta_e (3, ne): Kelvin-Voigt viscosity of [shear, shear, axial] strain rates (N s);
-    eta_v (3, nv): of the curvature rates at the hinges (N m^2 s), applied implicitly;
-    act_n (ne,): active axial force (N, positive extends); act_m (3, nv), act_m_base (3,): active
-    couples at the hinges and the base half-element (N m, positive bends toward +kappa);
-    node_force (3, nn): gravity; tip_force (3,); objs (no, 6), cdamp (no, nn + 1), f_contact (3, nn) out:
-    environment contact (`contact_forces`); analytic_law: 1 for the energy
-    1/2 B (kappa - kappa0)^2 / eps (CC-consistent), 0 for the linear law B (kappa - kappa0).
-    """
+    """Loads of one step into f_int (3, nn), tau_int (3, ne), f_ext, tau_ext.  eta_e (3, ne) N s, eta_v
+    (3, nv) N m^2 s (implicit): Kelvin-Voigt viscosities; act_n (ne,) N (positive extends), act_m (3, nv),
+    act_m_base (3,) N m: active loads; node_force (3, nn) gravity; tip_force (3,); objs, cdamp,
+    f_contact: `contact_forces`; analytic_law 1: m = B (kappa - kappa0) / eps, 0: B (kappa - kappa0)."""
     ne = lengths.shape[0]
     nv = ne - 1
     nn = ne + 1
@@ -226,15 +220,10 @@ def run_steps(nsteps, dt, pos, vel, Q, omega, acc, alpha, mass, J, invJ, volume,
 
 @njit(cache=True)
 def contact_forces(pos, vel, objs, cdamp, f_contact):
-    """Frictionless penalty contact of the rod's nodes with the environment objects, into f_contact (3, nn)
-    (N, world frame, force ON the rod; the clamped base node 0 gets none).
-
-    objs (no, 6) rows [kind, X, Z, nX, nZ, R]: kind 0 = plane through (X, Z) with unit normal (nX, nZ)
-    toward the free side, 1 = sphere of centre (X, Z) and radius R; the last column of a plane is the
-    node contact radius r, of a sphere R + r.  cdamp (no, nn + 1): [k, c_1 .. c_nn] per object (k N/m,
-    c_j N s/m of node j).  The law of PyElastica's RodPlaneContact / RodSphereContact (Gazzola et al.
-    2018, eq. 4.8): penetration g = r - n . (x_j - X) (plane), g = R + r - |x_j - X| (sphere, n the unit
-    vector from the centre); if g > 0 the force is (k g - c n . v_j) n (not clamped, as PyElastica)."""
+    """Frictionless penalty contact ON the rod's nodes j >= 1, into f_contact (3, nn) (N, world frame):
+    objs (no, 6) rows [kind (0 plane, 1 sphere), X, Z, nX, nZ, r (plane) or R + r (sphere)], cdamp
+    (no, nn + 1) rows [k N/m, c_j N s/m]; penetration g > 0 gives (k g - c n . v_j) n (Gazzola et al.
+    2018, eq. 4.8; docs/plants.md, "Contact on the rod")."""
     nn = pos.shape[1]
     for i in range(3):
         for j in range(nn):
@@ -270,11 +259,8 @@ def _wrap(a):
 
 @njit(cache=True)
 def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
-    """Least-squares CC fit of each section's nodes; see `harness.plant.cosserat.rod` (Sensing).
-
-    xz, vxz (nn, 2): node positions and velocities [X, Z]; bounds (4,): section boundary nodes.
-    Writes q2 = [d, k] and dq2 (first-order rates) in place.
-    """
+    """Least-squares CC fit (docs/plants.md, Sensing) of the nodes xz, rates vxz (nn, 2) [X, Z] of each
+    section (boundary nodes bounds (4,)) into q2 = [d, k], dq2 (first-order rates)."""
     nn = xz.shape[0]
     ne = nn - 1
     phi = np.empty(ne)
@@ -406,11 +392,8 @@ def _at_hinges(v, sec, l0, out, base):
 
 @njit(cache=True)
 def rest_strains(q2c, n, L0, sec, l0, rest_sigma, rest_kappa, base_kappa0):
-    """Servo command q2c (6,) = [d, k] -> the rod's rest strains (see `harness.plant.cosserat.rod`,
-    Actuation): rest_sigma (3, ne) <- [0, 0, (d / L0) sinc(k h / 2) - 1] per element (h = d / n),
-    rest_kappa (3, nv) <- [0, k d / L0 (rest-length weighted mean at the hinges), 0], base_kappa0 (3,)
-    <- [0, k_1 d_1 / L0_1, 0].  L0 (3,) m, sec (ne,) section of each element, l0 (ne,) m.
-    Element by element the arithmetic of the former numpy expressions (same numbers)."""
+    """Servo command q2c (6,) = [d, k] -> rest_sigma (3, ne) <- [0, 0, (d / L0) sinc(k d / 2n) - 1],
+    rest_kappa (3, nv) <- [0, k d / L0 (`_at_hinges`), 0], base_kappa0 (3,) <- [0, k_1 d_1 / L0_1, 0]."""
     sig = np.empty(3)
     kap = np.empty(3)
     for i in range(3):
