@@ -172,20 +172,7 @@ def predicted_markdown(rows: list[dict], sim: list[dict] | None = None) -> str:
     return "\n".join(grid_lines(rows, text))
 
 
-def agreement(pred: list[dict], sim: list[dict]) -> list[dict]:
-    """Per cell: predicted diverging (class "unstable") against simulated diverging (status != "ok");
-    rows {kn, eta_b, predicted, simulated, agree}."""
-    simc = {(r["kn"], r["eta_b"]): r for r in sim}
-    out = []
-    for r in pred:
-        s = simc[r["kn"], r["eta_b"]]
-        p_div, s_div = r["class"] == "unstable", s["status"] != "ok"
-        out.append({"kn": r["kn"], "eta_b": r["eta_b"], "predicted": r["class"], "radius": r["radius"],
-                    "simulated": s["status"], "t_end": s["t_end"], "agree": p_div == s_div})
-    return out
-
-
-__all__ = ["agreement", "mode_shape", "plot_stability", "predicted_map", "predicted_markdown", "radius_along",
+__all__ = ["mode_shape", "plot_stability", "predicted_map", "predicted_markdown", "radius_along",
            "write_stability"]
 
 

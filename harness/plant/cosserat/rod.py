@@ -150,18 +150,12 @@ class CosseratSlave:
         b.mass[:] = 0.0
         b.mass[:-1] += 0.5 * me
         b.mass[1:] += 0.5 * me
-        J = np.zeros((3, 3, ne))
-        invJ = np.zeros((3, 3, ne))
+        d3 = np.arange(3)  # the diagonal of each element's 3 x 3 matrices
         jd = np.stack([rhoI[sec], rhoI[sec], 2.0 * rhoI[sec]]) * l0
-        for i in range(3):
-            J[i, i] = jd[i]
-            invJ[i, i] = 1.0 / jd[i]
-        b.mass_second_moment_of_inertia[:] = J
-        b.inv_mass_second_moment_of_inertia[:] = invJ
-        b.shear_matrix[:] = 0.0
-        b.shear_matrix[0, 0] = GA[sec]
-        b.shear_matrix[1, 1] = GA[sec]
-        b.shear_matrix[2, 2] = EA[sec]
+        for M, v in ((b.mass_second_moment_of_inertia, jd), (b.inv_mass_second_moment_of_inertia, 1.0 / jd),
+                     (b.shear_matrix, np.stack([GA[sec], GA[sec], EA[sec]]))):
+            M[:] = 0.0
+            M[d3, d3] = v
         # hinges: inside a section EI_i, at boundaries the series combination of the two half elements
         D0 = b.rest_voronoi_lengths.copy()
         Bh = np.empty(nv)
@@ -173,12 +167,9 @@ class CosseratSlave:
             etah[j] = (D0[j] / (0.5 * l0[j] / eb[0] + 0.5 * l0[j + 1] / eb[1])
                        if min(eb) > 0 else 0.0)
         b.bend_matrix[:] = 0.0
-        b.bend_matrix[0, 0] = Bh
-        b.bend_matrix[1, 1] = Bh
-        b.bend_matrix[2, 2] = Bh * (2.0 / 3.0)
+        b.bend_matrix[d3, d3] = np.stack([Bh, Bh, Bh * (2.0 / 3.0)])
         self._eta_v = np.stack([etah, etah, etah * (2.0 / 3.0)])
-        ea_e = self.eta_a[sec]
-        self._eta_e = np.stack([ea_e, ea_e, ea_e])
+        self._eta_e = np.stack([self.eta_a[sec]] * 3)
         self._base_B = np.array([EI[0], EI[0], EI[0] * 2.0 / 3.0])
         self._base_eta = np.array([self.eta_b[0], self.eta_b[0], self.eta_b[0] * 2.0 / 3.0])
         self._base_Q = np.eye(3)
