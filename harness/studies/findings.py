@@ -9,12 +9,12 @@ import difflib
 import math
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 from harness.config.assets import asset_dir
-from harness.config.bounds import Bounds, Violation, bounds_from_dict, check_bounds
+from harness.config.bounds import FLAGS, Bounds, Violation, bounds_from_dict, check_bounds, limit_of
 from harness.config.errors import ConfigError
 from harness.config.textio import read_toml
 from harness.studies.finding_measures import MEASURE_UNITS, MEASURES
@@ -262,10 +262,6 @@ def _run(f: Finding, scenarios: list, res: FindingResult, keep_trajectories: boo
 
 
 def _bounds_checks(run: str, bounds: Bounds, metrics: Mapping, bad: Mapping[str, Violation]) -> list[Check]:
-    from dataclasses import fields
-
-    from harness.config.bounds import FLAGS, limit_of
-
     out = []
     for fl in fields(bounds):
         key, limit = fl.name, getattr(bounds, fl.name)
@@ -309,10 +305,6 @@ def fmt(v: Any) -> str:
 
 def _unit(quantity: str) -> str:
     """' <unit>' of a run metric (from the bounds table) or a derived measurement, else ''."""
-    from dataclasses import fields
-
-    from harness.config.bounds import Bounds, limit_of
-
     key = quantity.rsplit(".", 1)[-1]
     limits = (limit_of(f.name) for f in fields(Bounds) if f.name.endswith(("_max", "_min")))
     units = {m: u for m, _, u in limits if u}
