@@ -104,11 +104,9 @@ def _arc_departure(p: np.ndarray) -> float:
 
 
 def _settled_rod(scn, law: str):
-    """The Cosserat rod (the plant's slave parameters, elastic law `law`, 10 elements per section,
-    servo rest strains at the fidelity study's worst shape: every section at full extension with
-    alternating +-max bends) settled under gravity with the fidelity study's raised damping (eta_b
-    0.3 N m^2 s, eta_a 3 N s) until no node moves faster than ROD_SETTLED_SPEED on average over a
-    ROD_SETTLE_CHECK interval.  Returns (rod, settle time s, tip after 3 s, converged)."""
+    """The rod (plant slave, elastic law `law`, 10 elements per section) servoed to the fidelity study's
+    "alternating max" shape, settled under gravity (eta_b 0.3 N m^2 s, eta_a 3 N s) to ROD_SETTLED_SPEED
+    per ROD_SETTLE_CHECK.  Returns (rod, settle time s, tip after 3 s, converged)."""
     from harness.plant.cosserat import CosseratSlave
     from harness.studies.fidelity_reference import static_shapes
 
@@ -132,10 +130,9 @@ def _settled_rod(scn, law: str):
 
 
 def _measure_rod_statics(scn, traj) -> dict[str, float]:
-    """The rod of `_settled_rod` with the `linear` law (the fidelity study's).  In mm: arc_departure
-    (the largest distance of a section's nodes from that section's best-fit circle), chained_cc_tip
-    (the distance between the rod's tip and the tip of its per-section CC fits chained from the base),
-    settle_3s_error (how far the tip still is from equilibrium after a fixed 3 s); settle_time (s)."""
+    """`_settled_rod` (`linear` law), in mm: arc_departure (largest node distance from its section's
+    best-fit circle), chained_cc_tip (tip to the tip of the chained CC fits), settle_3s_error (tip after
+    3 s to equilibrium); settle_time (s)."""
     from controllers import slave as slave_model
 
     rod, t, tip_3s, converged = _settled_rod(scn, "linear")
@@ -161,10 +158,8 @@ def _measure_elastic_laws(scn, traj) -> dict[str, float]:
 
 
 def _settled_chain(scn, enforce_cc: bool):
-    """The MuJoCo chain (the plant's segments and slave parameters) as a passive rod with the `linear`
-    law at the shape of `_settled_rod` (`fidelity_reference.PassiveChain`, material damping 0.01 N m^2 s
-    / 0.3 N s raised 30x while settling), stepped until no body moves faster than ROD_SETTLED_SPEED on
-    average over a ROD_SETTLE_CHECK interval.  Returns (chain, converged)."""
+    """The passive MuJoCo chain (`fidelity_reference.PassiveChain`, `linear` law) at the shape of
+    `_settled_rod`, settled like it.  Returns (chain, converged)."""
     from harness.studies.fidelity_reference import SETTLE_DAMPING, PassiveChain, static_shapes
 
     slave = scn.plant.slave if scn.plant.slave is not None else scn.slave
@@ -194,11 +189,9 @@ def _measure_chain_vs_rod(scn, traj) -> dict[str, float]:
 
 
 def _measure_flip(scn, traj) -> dict[str, float]:
-    """The closed loop linearized over one control period at the run's end (`harness.studies.stability`,
-    noise off): radius = its spectral radius, flip = -Re of its most negative eigenvalue (> 1: a mode that
-    flips sign every period and grows, at the Nyquist frequency of the control rate), flip_on_junction =
-    1 if that mode's two largest components are hinges (chain) or elements (rod) next to the boundary
-    of sections 0-1 or 1-2, else 0."""
+    """The loop linearized at the run's end (`harness.studies.stability`): radius (spectral), flip = -Re
+    of the most negative eigenvalue (> 1: a growing sign flip every period), flip_on_junction = 1 if
+    that mode's two largest components are hinges (chain) or elements (rod) at a section boundary."""
     from harness.studies.stability import linearize
 
     res = linearize(scn, float(traj.t[-1]) if len(traj) else 0.0)
@@ -242,10 +235,9 @@ MARGIN_BOUNDS = {"analytic": "paper_analytic", "mujoco": "paper_mujoco", "cosser
 
 
 def _measure_margins(scn, traj) -> dict[str, float]:
-    """`harness.studies.margin.margins` of the scenario against the plant's shipped paper bounds
-    (MARGIN_BOUNDS) over slave_mass and master_mass (rtol 0.05, no probes, one thread): per parameter
-    <p>_lower, <p>_upper (the margins, scale factors) and <p>_lower_fail, <p>_upper_fail (the first
-    failing scale; nan at a range end)."""
+    """`margin.margins` against the plant's paper bounds (MARGIN_BOUNDS) over slave_mass and master_mass
+    (rtol 0.05, no probes, one thread): <p>_lower, <p>_upper and <p>_lower_fail, <p>_upper_fail (nan at
+    a range end), scale factors."""
     import tempfile
     from pathlib import Path
 

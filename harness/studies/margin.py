@@ -24,10 +24,8 @@ from harness.studies.cases import _scaled
 
 @dataclass(frozen=True)
 class Param:
-    """A mismatch parameter: `keys` (scenario fields moved together), `mode` "scale" (factor of the
-    scenario's value of each key) or "value" (the value itself, the same for every key), its search range
-    [lo, hi], integer (bisection on integers), step (values: the grid the value lives on, e.g. control_dt
-    for a delay), plants it applies to (None = all), unit and description."""
+    """A mismatch parameter: `keys` (scenario fields moved together), `mode` "scale" (factor of each
+    key's value), "rate" (divides them) or "value", search range [lo, hi], plants (None = all)."""
 
     name: str
     keys: tuple[str, ...]
@@ -353,11 +351,10 @@ def margins(scn: Scenario, bounds: Bounds, params: Sequence[str | Param] = DEFAU
             out: Path | None = None, workers: int | None = None, scheduler: str | None = None,
             executor: str = "processes", say: Callable[[str], None] = lambda s: None,
             case_fn: Callable | None = None) -> list[Margin]:
-    """Margins of `scn` (the scenario of file `source` with overrides `base_set`, the cases are loaded
-    from them) against `bounds` for each parameter name.  rtol: relative tolerance of scale edges
-    (s_fail / s_pass - 1); atol: absolute tolerance of value edges (default: 1/100 of the range; delays
-    and integers are exact on their grid); probes: extra points per side inside the margin (non-monotone
-    check).  Raises ConfigError for bad input or when the nominal scenario itself fails the bounds."""
+    """Margins of `scn` (file `source` with overrides `base_set`, from which the cases are loaded) against
+    `bounds` per parameter.  rtol: scale edges (s_fail / s_pass - 1); atol: value edges (default 1/100 of
+    the range; delays and integers exact); probes: points per side inside the margin.  ConfigError for
+    bad input or a nominal scenario that fails the bounds."""
     from harness.studies.executor import Runner
 
     if not (0 < rtol < 1):
@@ -434,9 +431,8 @@ def ray(p1: Param, p2: Param, angle: float) -> Param:
 
 
 def edge_trace(scn: Scenario, bounds: Bounds, pair: tuple[str, str], n_rays: int = 8, **kw) -> list[dict]:
-    """The 2-D pass/fail edge of two scale parameters: `margins` along n_rays rays from the nominal point
-    in the (log p1, log p2) plane.  Rows {angle_deg, p1, p2 (scale factors at the margin), fail_p1,
-    fail_p2 (at the first failing point, None if the ray reached its range end), first_bound,
+    """The 2-D pass/fail edge of two scale parameters: `margins` along n_rays rays in the (log p1, log p2)
+    plane.  Rows {angle_deg, p1, p2 (at the margin), fail_p1, fail_p2 (None at a range end), first_bound,
     non_monotone}."""
     p1, p2 = param_of(pair[0]), param_of(pair[1])
     rays = [ray(p1, p2, 2 * math.pi * i / n_rays) for i in range(n_rays)]

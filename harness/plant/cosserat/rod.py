@@ -326,7 +326,8 @@ class CosseratSlave:
         while left > 0:
             n = min(left, BATCH_STEPS)
             try:
-                ok = self._run(n) and self._sane()
+                self._run(n)
+                ok = self._sane()
             except ArithmeticError:  # ZeroDivisionError on a collapsed element, FloatingPointError, ...
                 ok = False
             left -= n
@@ -338,20 +339,19 @@ class CosseratSlave:
                 raise RodStopped(f"rod stopped at t = {self.time:.6g} s")
         return True
 
-    def _run(self, n: int) -> bool:
-        """n rod steps; False if the positions are not finite."""
+    def _run(self, n: int) -> None:
+        """n rod steps (`_sane` checks the state after them)."""
         b = self._b
         if self.stepper == "numba":
-            return kr.run_steps(n, self.dt, b.position_collection, b.velocity_collection,
-                                b.director_collection, b.omega_collection, b.acceleration_collection,
-                                b.alpha_collection, b.mass,
-                                b.mass_second_moment_of_inertia, b.inv_mass_second_moment_of_inertia,
-                                *self._load_args()[5:], b.internal_forces, b.internal_torques,
-                                b.external_forces, b.external_torques)
+            kr.run_steps(n, self.dt, b.position_collection, b.velocity_collection, b.director_collection,
+                         b.omega_collection, b.acceleration_collection, b.alpha_collection, b.mass,
+                         b.mass_second_moment_of_inertia, b.inv_mass_second_moment_of_inertia,
+                         *self._load_args()[5:], b.internal_forces, b.internal_torques, b.external_forces,
+                         b.external_torques)
+            return
         t = np.float64(self.time)
         for _ in range(n):
             t = self._verlet.step_single_instance(b, t, np.float64(self.dt))
-        return True
 
     def _sane(self) -> bool:
         """Node positions, velocities and element angular velocities finite, every node within
