@@ -192,11 +192,8 @@ def _limit_key(q: str) -> str:
 
 
 def _num(v: Any) -> float | None:
-    if hasattr(v, "item"):
-        v = v.item()
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        return None
-    return float(v)
+    v = v.item() if hasattr(v, "item") else v
+    return None if isinstance(v, bool) or not isinstance(v, (int, float)) else float(v)
 
 
 def finding_scenarios(f: Finding) -> list:
@@ -240,11 +237,8 @@ def _run(f: Finding, scenarios: list, res: FindingResult, keep_trajectories: boo
         if r.simulate:
             traj = simulate(scn, progress=False)
             metrics = compute_metrics(traj, scn)
-        for k, v in metrics.items():
-            res.values[f"{r.name}.{k}"] = v
-        for m in r.measure:
-            for k, v in MEASURES[m](scn, traj).items():
-                res.values[f"{r.name}.{k}"] = v
+        for part in (metrics, *(MEASURES[m](scn, traj) for m in r.measure)):
+            res.values.update({f"{r.name}.{k}": v for k, v in part.items()})
         if r.bounds is not None:
             bad = {v.bound: v for v in check_bounds(metrics, r.bounds)}
             res.checks += _bounds_checks(r.name, r.bounds, metrics, bad)
