@@ -15,8 +15,7 @@ from harness.studies.stability import ClosedLoopMap, LinearizationError, Stabili
 from harness.studies.stability_map import grid_lines
 
 
-def mode_shape(res: Stability, j: int = 0,
-               scale: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+def mode_shape(res: Stability, j: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
     """(rest (m, 2), displaced (m, 2), scale): the slave's points [X, Z] (m) at the point of linearization
     and displaced along the real part of mode j (phase chosen to maximise it), scaled so that the largest
     point displacement is 5 % of the arm's length."""
@@ -27,10 +26,9 @@ def mode_shape(res: Stability, j: int = 0,
     pos = res.shapes["positions"]
     slave = res.shapes["slave"]
     p0 = pos(x0, slave)
-    if scale is None:
-        eps = 1e-6 / max(np.abs(vr).max(), 1e-300)
-        dp = np.abs(pos(x0 + eps * vr, slave) - p0).max() / eps
-        scale = 0.05 * float(np.sum(slave.rest_lengths)) / max(dp, 1e-300)
+    eps = 1e-6 / max(np.abs(vr).max(), 1e-300)
+    dp = np.abs(pos(x0 + eps * vr, slave) - p0).max() / eps
+    scale = 0.05 * float(np.sum(slave.rest_lengths)) / max(dp, 1e-300)
     return p0, pos(x0 + scale * vr, slave), float(scale)
 
 
@@ -49,9 +47,7 @@ def plot_stability(res: Stability, path, n_modes: int = 2) -> Path:
     ev = res.eigenvalues
     ax.plot(ev.real, ev.imag, "x", ms=5)
     ax.plot(ev[0].real, ev[0].imag, "ro", mfc="none", ms=9)
-    ax.set_aspect("equal")
-    ax.set_xlabel("Re lambda")
-    ax.set_ylabel("Im lambda")
+    ax.set(aspect="equal", xlabel="Re lambda", ylabel="Im lambda")
     ax.set_title(f"one-period spectrum, rho = {res.radius:.5f}", fontsize=9)
     for j, ax in enumerate(axes[1:]):
         j = min(j if j == 0 else _next_distinct(res, j), len(ev) - 1)
@@ -60,11 +56,8 @@ def plot_stability(res: Stability, path, n_modes: int = 2) -> Path:
         ax.plot(p1[:, 0], p1[:, 1], "r.-", lw=1, ms=3, label=f"mode x {sc:.3g}")
         half = 0.6 * float(np.ptp(p0[:, 1]) or 1.0)
         ax.set_xlim(float(p0[:, 0].mean()) - half, float(p0[:, 0].mean()) + half)
-        ax.set_aspect("equal", adjustable="box")
-        ax.set_xlabel("X (m)")
-        ax.set_ylabel("Z (m)")
-        lam = ev[j]
-        ax.set_title(f"|lambda| = {abs(lam):.5f}, {res.frequency(j):.1f} Hz\n"
+        ax.set(aspect="equal", adjustable="box", xlabel="X (m)", ylabel="Z (m)")
+        ax.set_title(f"|lambda| = {abs(ev[j]):.5f}, {res.frequency(j):.1f} Hz\n"
                      + ", ".join(n.removeprefix("octarm_") for n, _ in res.dominant(j, 3)), fontsize=7)
         ax.legend(fontsize=7)
     fig.tight_layout()
