@@ -15,11 +15,14 @@ from pathlib import Path
 from typing import Any
 
 from harness.config.bounds import FLAGS, Bounds, check_bounds, limit_of
+from harness.config.controller import resolve_controller
 from harness.config.errors import ConfigError
+from harness.config.load import load_scenario
 from harness.config.scenario import Scenario
 from harness.config.textio import toml_literal
 from harness.studies.cases import _get as get_field
-from harness.studies.cases import _scaled
+from harness.studies.cases import _scaled, scenario_id
+from harness.studies.study import Case
 
 
 @dataclass(frozen=True)
@@ -285,12 +288,7 @@ class Journal:
             self.writer.close()
 
 
-def _case(base_source, base_set: Sequence[str], scn: Scenario, p: Param, level: float):
-    from harness.config.controller import resolve_controller
-    from harness.config.load import load_scenario
-    from harness.studies.cases import scenario_id
-    from harness.studies.study import Case
-
+def _case(base_source, base_set: Sequence[str], scn: Scenario, p: Param, level: float) -> Case:
     ovr = overrides_at(scn, p, level)
     s = resolve_controller(load_scenario(base_source, [*base_set, *ovr]))
     cid = scenario_id(s)
