@@ -1,19 +1,12 @@
 """The Cosserat-rod plant of a scenario (`CosseratPlant`, a `harness.plant.stepped.SteppedPlant`): the rod
-slave (`CosseratSlave`: EI = Kb, EA = Ke L0, rho A = m / L0, GA = shear_factor EA, material damping
-plant.bending_viscosity / extension_viscosity, base clamped, gravity) and the analytic master (eq. 1,
-classical RK4 with steps of at most 1 ms, `master_rk4`).
-
-* Servo actuation: q2_ref becomes the rod's rest strains; with plant.servo_feedforward the feed-forward
-  T2 - dV/dq2(q2) (`feedforward`; V the CC elastic energy at the fitted q2: the rest-strain servo
-  replaces the stiffness that T2 compensates) acts as internal loads.  Torque: T2 as internal loads.
-  Muscle: the MuJoCo chain's groups (plant.muscle_*): commands `chain_map.muscle_commands`(sensed q2,
-  T2) clipped to [0, F_max]; the group forces `muscle_force` (N) act as fibre loads, held over each
-  control period T, then follow MuJoCo's filterexact step act += (p - act)(1 - e^(-T/tau)).
-* Sensing: the least-squares CC fit of each section (`CosseratSlave.sense`).  Forces: F1 on the master
-  tip, F2 plus the contact force (`harness.plant.cosserat.contact`) on the rod's tip node.
-* Time step: plant.cosserat.dt or "auto" (`rod_dt`).  Geometry (world frame, bases as in the MJCF
-  scene): "centreline" (3 n + 1, 3), "sections" (4, 3), "master" (3, 3); `record(k)` keeps the nodes
-  and `finish` computes the recorded arrays once.
+slave (`CosseratSlave`) and the analytic master (eq. 1, RK4 steps of at most 1 ms, `master_rk4`).
+Actuation: servo = q2_ref as rest strains plus, with plant.servo_feedforward, T2 - dV/dq2 at the fitted
+q2 (`feedforward`: the rest-strain servo replaces the stiffness T2 compensates); torque = T2 as
+internal loads; muscle = the chain's groups (plant.muscle_*): commands `chain_map.muscle_commands`
+(sensed q2, T2) clipped to [0, F_max], the forces `muscle_force` (N) held over each control period T,
+then act += (p - act)(1 - e^(-T/tau)) (MuJoCo's filterexact).  Sensing: the CC fit of each section.
+Forces: F1 on the master tip, F2 plus contact on the rod's tip node.  Time step: `rod_dt`.  Geometry
+(world frame): "centreline" (3 n + 1, 3), "sections" (4, 3), "master" (3, 3); docs/plants.md.
 """
 
 from __future__ import annotations
