@@ -151,6 +151,7 @@ class Search:
     atol: float
     probes: int
     quantum: float = 0.0  # values live on this grid (delay: control_dt); 0 = continuous
+    side: str = "upper"
     last_pass: float = float("nan")
     first_fail: float | None = None
     state: str = "bracket"
@@ -375,14 +376,12 @@ def margins(scn: Scenario, bounds: Bounds, params: Sequence[str | Param] = DEFAU
             quantum = scn.control_dt if p.name == "delay" else 0.0
             tol = atol if atol is not None else (p.hi - p.lo) / 100
             for side, lim in (("lower", p.lo), ("upper", p.hi)):
-                if (lim - nom) * (1 if side == "upper" else -1) <= 0:
-                    rows[p.name].sides[side] = {"margin": nom, "fail": None, "first_bound": "",
-                                                "range_end": True, "non_monotone": [], "probes": [],
-                                                "note": "nominal at the range end"}
+                if (lim - nom) * (1 if side == "upper" else -1) > 0:
+                    searches.append(Search(p, nom, lim, rtol, tol, probes, quantum, side=side))
                     continue
-                s = Search(p, nom, lim, rtol, tol, probes, quantum)
-                s.side = side
-                searches.append(s)
+                rows[p.name].sides[side] = {"margin": nom, "fail": None, "first_bound": "", "range_end": True,
+                                            "non_monotone": [], "probes": [],
+                                            "note": "nominal at the range end"}
         outcomes: dict = {}
         if searches:  # the nominal point must pass
             first = run_levels([(nominal_p, 1.0)], ctx)[nominal_p.name, 1.0]
@@ -393,19 +392,13 @@ def margins(scn: Scenario, bounds: Bounds, params: Sequence[str | Param] = DEFAU
         rnd = 0
         while not all(s.done for s in searches):
             rnd += 1
-            req = []
-            for s in searches:
-                if not s.done:
-                    req += [(s, lv) for lv in s.next_levels()]
-            if not req:
-                for s in searches:
-                    s.end_round()
-                continue
-            say(f"round {rnd}: {len(req)} run(s)")
-            res = run_levels([(s.param, lv) for s, lv in req], ctx)
-            outcomes.update(res)
-            for s, lv in req:
-                s.feed(lv, res[s.param.name, lv].passed)
+            req = [(s, lv) for s in searches if not s.done for lv in s.next_levels()]
+            if req:
+                say(f"round {rnd}: {len(req)} run(s)")
+                res = run_levels([(s.param, lv) for s, lv in req], ctx)
+                outcomes.update(res)
+                for s, lv in req:
+                    s.feed(lv, res[s.param.name, lv].passed)
             for s in searches:
                 s.end_round()
         for s in searches:
