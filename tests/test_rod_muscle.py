@@ -76,11 +76,11 @@ def _rod_hold(n):
     assert muscle_commands(Q2_HOLD, hold_T2(SLAVE, Q2_HOLD), R, FMAX, p) == 0
     rod = CosseratSlave(SLAVE, n, material_damping=(1.0, 10.0), actuation="muscle", muscle_radius=R)
     rod.reset(Q2_HOLD)
-    for _ in range(30):
+    for _ in range(50):
         rod.step(p, 0.1)
     tip = rod.tip()
-    rod.step(p, 0.2)
-    assert np.linalg.norm(rod.tip() - tip) < 1e-5  # settled
+    rod.step(p, 0.5)
+    assert np.linalg.norm(rod.tip() - tip) < 1e-4  # settled to a tenth of the 1 mm compared below
     return rod.tip()
 
 
