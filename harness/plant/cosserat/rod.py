@@ -257,15 +257,10 @@ class CosseratSlave:
         if np.any(dq2 != 0):
             dx = np.zeros_like(xz)
             da = np.zeros_like(ang)
-            for i in range(6):
-                if dq2[i] == 0:
-                    continue
-                eps = 1e-6 * max(1.0, abs(q2[i]))
-                qp, qm = q2.copy(), q2.copy()
-                qp[i] += eps
-                qm[i] -= eps
-                xp, ap = self._cc(qp)
-                xm, am = self._cc(qm)
+            for i in np.flatnonzero(dq2):  # central differences of the CC shape
+                e = 1e-6 * max(1.0, abs(q2[i])) * (np.arange(6) == i)
+                eps = e[i]
+                (xp, ap), (xm, am) = self._cc(q2 + e), self._cc(q2 - e)
                 dx += (xp - xm) / (2 * eps) * dq2[i]
                 da += (ap - am) / (2 * eps) * dq2[i]
             b.velocity_collection[0] = dx[:, 0]
