@@ -379,9 +379,6 @@ class CosseratSlave:
         """Tip node [X, Z] (2,), m."""
         return self._b.position_collection[[0, 2], -1].copy()
 
-    def tip_velocity(self) -> np.ndarray:
-        return self._b.velocity_collection[[0, 2], -1].copy()
-
     def centreline(self) -> np.ndarray:
         """Node positions (n_nodes, 3) in 3-D (X, 0, Z), base first (the recording's 3-D view)."""
         return self._b.position_collection.T.copy()
