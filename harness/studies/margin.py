@@ -78,10 +78,11 @@ def param_of(name: str) -> Param:
 
 def servo_note(scn: Scenario, names: Sequence[str]) -> str:
     """One line when a margin over the slave's inertia (slave_mass, plant.slave.masses,
-    plant.slave.slice_inertia) runs on a servo-actuated plant, else ''."""
+    plant.slave.slice_inertia) runs on the servo-actuated MuJoCo chain (the rod's rest-strain servo feels
+    the inertia: docs/stability.md), else ''."""
     hidden = sorted(n for n in names if n == "slave_mass" or n.startswith(("plant.slave.masses",
                                                                            "plant.slave.slice_inertia")))
-    if scn.plant.actuation != "servo" or scn.plant.kind == "analytic" or not hidden:
+    if scn.plant.actuation != "servo" or scn.plant.kind != "mujoco" or not hidden:
         return ""
     return (f"servo actuation: the position servos hide the slave's inertia; a margin over "
             f"{', '.join(hidden)} says little about the controller's dynamics model")
