@@ -18,17 +18,12 @@ def plot_edge(rows: list[dict], pair: tuple[str, str], path) -> Path:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(4.6, 4.2))
-    xs = [r["p1"] for r in rows] + [rows[0]["p1"]]
-    ys = [r["p2"] for r in rows] + [rows[0]["p2"]]
-    ax.plot(xs, ys, "g.-", label="last passing point")
-    fx = [r["fail_p1"] for r in rows if r["fail_p1"] is not None]
-    fy = [r["fail_p2"] for r in rows if r["fail_p2"] is not None]
-    ax.plot(fx, fy, "rx", label="first failing point")
+    closed = [*rows, rows[0]]
+    ax.plot([r["p1"] for r in closed], [r["p2"] for r in closed], "g.-", label="last passing point")
+    fails = [r for r in rows if r["fail_p1"] is not None]
+    ax.plot([r["fail_p1"] for r in fails], [r["fail_p2"] for r in fails], "rx", label="first failing point")
     ax.plot([1], [1], "ko", label="nominal")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel(f"{pair[0]} (x nominal)")
-    ax.set_ylabel(f"{pair[1]} (x nominal)")
+    ax.set(xscale="log", yscale="log", xlabel=f"{pair[0]} (x nominal)", ylabel=f"{pair[1]} (x nominal)")
     ax.legend(fontsize=7)
     fig.tight_layout()
     return save_figure(fig, path)
