@@ -222,9 +222,8 @@ class CosseratSlave:
 
     def _set_active(self, T2: np.ndarray | None) -> None:
         if T2 is None:
-            self._act_n[:] = 0.0
-            self._act_m[:] = 0.0
-            self._act_m_base[:] = 0.0
+            for a in (self._act_n, self._act_m, self._act_m_base):
+                a[:] = 0.0
             return
         self.sense_into(self._act_q2, self._act_dq2)
         kr.active_loads(T2, self._act_q2, self._sec, self._l0, self._act_n, self._act_m, self._act_m_base)
