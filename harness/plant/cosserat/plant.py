@@ -83,9 +83,7 @@ def feedforward(T2, q2, spk, out):
 def _field_of(msg: str, scn: Scenario) -> str:
     """Scenario field names for CosseratSlave's messages."""
     slave = "plant.slave." if scn.plant.slave is not None else "slave."
-    msg = msg.replace("plant.cosserat.slave.", slave)
-    msg = msg.replace("plant.cosserat.actuation", "plant.actuation")
-    return msg
+    return msg.replace("plant.cosserat.slave.", slave).replace("plant.cosserat.actuation", "plant.actuation")
 
 
 def rod_dt(scn: Scenario) -> tuple[float, float]:
@@ -257,10 +255,7 @@ class CosseratPlant:
     def geometry(self) -> dict[str, np.ndarray]:
         """The same arrays every call, updated in place (valid until the next advance)."""
         g = self._geo
-        pos = self.slave._b.position_collection
-        cl = g["centreline"]
-        cl[:] = pos.T
-        cl += SLAVE_BASE
+        cl = np.add(self.slave._b.position_collection.T, SLAVE_BASE, out=g["centreline"])
         g["sections"][:] = cl[self.slave.section_nodes]
         master_points(self.mpk, self._m[None], MASTER_BASE, g["master"][None])
         return g
@@ -270,9 +265,8 @@ class CosseratPlant:
         buffers are sized for the scenario the plant was built for and grow (doubling) for a longer run."""
         if k >= self._pos_hist.shape[0]:
             n = max(k + 1, 2 * self._pos_hist.shape[0])
-            self._pos_hist = np.concatenate([self._pos_hist, np.zeros((n - self._pos_hist.shape[0],
-                                                                       *self._pos_hist.shape[1:]))])
-            self._m_hist = np.concatenate([self._m_hist, np.zeros((n - self._m_hist.shape[0], 4))])
+            self._pos_hist, self._m_hist = (np.concatenate([a, np.zeros((n - len(a), *a.shape[1:]))])
+                                            for a in (self._pos_hist, self._m_hist))
         self._pos_hist[k] = self.slave._b.position_collection
         self._m_hist[k] = self._m
 
