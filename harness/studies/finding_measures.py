@@ -57,12 +57,9 @@ def _measure_closed_forms(scn, traj) -> dict[str, float]:
     """The recorded e1 and e2 against the closed-form solutions of (15) (k1, k2) and (21) (k3, k4) from
     their recorded initial values: the largest deviation relative to the largest initial component."""
     g = scn.gains
-    out = {}
-    for key, e, de, a, b in (("eq15_error", traj.e1, traj.de1, g.k1, g.k2),
-                             ("eq21_error", traj.e2, traj.de2, g.k3, g.k4)):
-        ref = _second_order(traj.t, e[0], de[0], a, b)
-        out[key] = float(np.abs(e - ref).max() / np.abs(e[0]).max())
-    return out
+    cases = (("eq15_error", traj.e1, traj.de1, g.k1, g.k2), ("eq21_error", traj.e2, traj.de2, g.k3, g.k4))
+    return {key: float(np.abs(e - _second_order(traj.t, e[0], de[0], a, b)).max() / np.abs(e[0]).max())
+            for key, e, de, a, b in cases}
 
 
 def _measure_beta(scn, traj) -> dict[str, float]:
@@ -76,8 +73,7 @@ def _measure_straight(scn, traj) -> dict[str, float]:
     from controllers.subtasks import manipulability
 
     d = np.asarray(scn.slave.rest_lengths, float)
-    q = np.concatenate([d, np.zeros(3)])
-    beta = float(manipulability(scn.slave, q))
+    beta = float(manipulability(scn.slave, np.concatenate([d, np.zeros(3)])))
     a = d**2 / 2 + d * (d.sum() - np.cumsum(d))
     closed = float(np.sqrt(3 * np.sum(a**2)))
     return {"beta_straight": beta, "beta_straight_closed_form": closed,
@@ -249,13 +245,9 @@ def _measure_margins(scn, traj) -> dict[str, float]:
         src = dump_scenario(scn, Path(tmp) / "scenario.toml")
         rows = margins(scn, load_bounds(MARGIN_BOUNDS[scn.plant.kind]), ("slave_mass", "master_mass"),
                        source=src, probes=0, workers=1, executor="threads")
-    out = {}
-    for m in rows:
-        for side in ("lower", "upper"):
-            d = m.sides[side]
-            out[f"{m.param}_{side}"] = d["margin"]
-            out[f"{m.param}_{side}_fail"] = math.nan if d.get("fail") is None else d["fail"]
-    return out
+    sides = [(f"{m.param}_{side}", m.sides[side]) for m in rows for side in ("lower", "upper")]
+    out = {k: d["margin"] for k, d in sides}
+    return out | {f"{k}_fail": math.nan if d.get("fail") is None else d["fail"] for k, d in sides}
 
 
 MEASURES: dict[str, Callable[[Any, Any], dict[str, float]]] = {
