@@ -340,26 +340,23 @@ def findings_table(results: Sequence[FindingResult]) -> str:
 
 def write_outputs(results: Sequence[FindingResult], table: Path, figures: Path,
                   combined: bool = True) -> list[Path]:
-    """Write the findings table (markdown; also `<table stem>-<finding>.md` per finding) and, for the
-    runs a finding names in `figures`, the paper's Figs 2-4 as
-    `<figures>/<finding>-<run>-fig{2,3,4}.png` (each file atomically).  combined=False writes only the
-    per-finding tables (a rerun of some findings must not replace the table of all).  Returns the paths."""
+    """Write the findings table (also `<table stem>-<finding>.md` per finding; combined=False: only those)
+    and the paper's Figs 2-4 of the runs a finding names, `<figures>/<finding>-<run>-fig{2,3,4}.png`
+    (each file atomically).  Returns the paths."""
     from harness.config.textio import write_atomic
     from harness.output.plots import fig_beta, fig_e1, fig_e2
 
     written = []
     for r in results:
-        for run in r.finding.figures:
-            if run not in r.trajectories:
-                continue
-            _, traj = r.trajectories[run]
+        for run in (x for x in r.finding.figures if x in r.trajectories):
+            traj = r.trajectories[run][1]
             figures.mkdir(parents=True, exist_ok=True)
             for tag, draw in (("fig2_e1", fig_e1), ("fig3_e2", fig_e2), ("fig4_beta", fig_beta)):
                 written.append(draw(traj, figures / f"{r.finding.name}-{run}-{tag}.png"))
     table.parent.mkdir(parents=True, exist_ok=True)
     for r in results:  # one table per finding, for pages that show a single one
-        one = table.with_name(f"{table.stem}-{r.finding.name}.md")
-        written.append(write_atomic(one, findings_table([r])))
+        written.append(write_atomic(table.with_name(f"{table.stem}-{r.finding.name}.md"),
+                                    findings_table([r])))
     if combined:
         written.append(write_atomic(table, findings_table(results)))
     return written
