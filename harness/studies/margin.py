@@ -96,12 +96,8 @@ def _get(scn: Scenario, key: str) -> Any:
 def nominal_value(scn: Scenario, p: Param) -> float | None:
     """The nominal point of p: 1 for a scale or rate; the scenario's value for a value parameter (a vector
     field: its first entry; None for an unset SNR)."""
-    if p.mode in ("scale", "rate"):
-        return 1.0
-    v = _get(scn, p.keys[0])
-    if v is None:
-        return None
-    return float(v[0] if isinstance(v, tuple | list) else v)
+    v = 1.0 if p.mode in ("scale", "rate") else _get(scn, p.keys[0])
+    return None if v is None else float(v[0] if isinstance(v, tuple | list) else v)
 
 
 def overrides_at(scn: Scenario, p: Param, level: float) -> list[str]:
@@ -129,12 +125,10 @@ def applies(scn: Scenario, p: Param) -> str:
         return f"not a parameter of the {scn.plant.kind} plant"
     if nominal_value(scn, p) is None:
         return "unset in the scenario (no nominal value)"
-    if p.mode == "scale":
-        for key in p.keys:
-            v = _get(scn, key)
-            vals = list(v) if isinstance(v, tuple | list) else [v]
-            if all(float(x) == 0.0 for x in vals):
-                return f"{key} is 0 in the scenario (a scale factor cannot move it)"
+    for key in p.keys if p.mode == "scale" else ():
+        v = _get(scn, key)
+        if all(float(x) == 0.0 for x in (v if isinstance(v, tuple | list) else [v])):
+            return f"{key} is 0 in the scenario (a scale factor cannot move it)"
     return ""
 
 
