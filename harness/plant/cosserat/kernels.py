@@ -141,10 +141,7 @@ def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_len
     # (J_i / (e_i dt)) (w_i' - w_i) = tau_i - sum_hinges g (w' differences); g = eta / (D0 eps)
     if dt > 0.0:
         g = np.empty(nv)
-        a = np.empty(ne)
-        b = np.empty(ne)
-        c = np.empty(ne)
-        r = np.empty(ne)
+        a, b, c, r = np.empty(ne), np.empty(ne), np.empty(ne), np.empty(ne)
         for i in range(3):
             for k in range(nv):
                 g[k] = eta_v[i, k] / rest_vor[k]

@@ -45,12 +45,9 @@ def stable_dt(params: SlaveParams, elements_per_section: int = DEFAULT_ELEMENTS,
     w_rot = np.sqrt(GA / rhoI + 4.0 * EI / (rhoI * h * h))
     z_ax = eta_a * w_ax / (2.0 * EA)
     z_sh = eta_a * w_sh / (2.0 * GA)
-    dts = np.concatenate([
-        2.0 / w_ax * (np.sqrt(1 + z_ax**2) - z_ax),
-        2.0 / w_sh * (np.sqrt(1 + z_sh**2) - z_sh),
-        2.0 / w_rot,
-    ])
-    return float(SAFETY * dts.min())
+    dts = (2.0 / w_ax * (np.sqrt(1 + z_ax**2) - z_ax), 2.0 / w_sh * (np.sqrt(1 + z_sh**2) - z_sh),
+           2.0 / w_rot)
+    return float(SAFETY * min(x.min() for x in dts))
 
 
 def auto_dt(control_dt: float, stable: float) -> float:

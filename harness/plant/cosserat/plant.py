@@ -45,11 +45,7 @@ _elastic_kernel = njit(cache=True)(slave_model.elastic_kernel)
 def master_rk4(mpk, s, T1, F1, h, nsub):
     """nsub classical RK4 steps of h (s) of the master, in place on s (4,) = [q1, dq1], T1 (2,) N m and
     the tip force F1 (2,) N held.  False on a singular mass matrix or a non-finite state."""
-    k1 = np.empty(4)
-    k2 = np.empty(4)
-    k3 = np.empty(4)
-    k4 = np.empty(4)
-    tmp = np.empty(4)
+    k1, k2, k3, k4, tmp = np.empty(4), np.empty(4), np.empty(4), np.empty(4), np.empty(4)
     for _ in range(nsub):
         ok = _master_accel(mpk, s, T1, F1, k1)
         for i in range(4):
