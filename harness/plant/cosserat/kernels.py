@@ -33,8 +33,7 @@ def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_len
     act_m_base (3,) N m: active loads; node_force (3, nn) gravity; tip_force (3,); objs, cdamp,
     f_contact: `contact_forces`; analytic_law 1: m = B (kappa - kappa0) / eps, 0: B (kappa - kappa0)."""
     ne = lengths.shape[0]
-    nv = ne - 1
-    nn = ne + 1
+    nv, nn = ne - 1, ne + 1
     _compute_shear_stretch_strains(pos, volume, lengths, tangents, radius, rest_lengths, rest_vor,
                                    dil, vdil, Q, sigma)
     _compute_bending_twist_strains(Q, rest_vor, kappa)
@@ -254,10 +253,7 @@ def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
     section (boundary nodes bounds (4,)) into q2 = [d, k], dq2 (first-order rates)."""
     nn = xz.shape[0]
     ne = nn - 1
-    phi = np.empty(ne)
-    phid = np.empty(ne)
-    c = np.empty(ne)
-    cd = np.empty(ne)
+    phi, phid, c, cd = np.empty(ne), np.empty(ne), np.empty(ne), np.empty(ne)
     prev = 0.0
     for j in range(ne):
         ex = xz[j + 1, 0] - xz[j, 0]
@@ -277,9 +273,7 @@ def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
         j0 = bounds[s]
         j1 = bounds[s + 1]
         m = j1 - j0
-        arc = np.empty(m)
-        smid = np.empty(m)
-        w = np.empty(m)
+        arc, smid, w = np.empty(m), np.empty(m), np.empty(m)
         for t in range(m):
             arc[t] = c[j0 + t]
         k = 0.0
@@ -288,15 +282,13 @@ def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
             for t in range(m):
                 smid[t] = acc + 0.5 * arc[t]
                 acc += arc[t]
-            sbar = 0.0
-            pbar = 0.0
+            sbar, pbar = 0.0, 0.0
             for t in range(m):
                 sbar += smid[t]
                 pbar += phi[j0 + t]
             sbar /= m
             pbar /= m
-            sxx = 0.0
-            sxy = 0.0
+            sxx, sxy = 0.0, 0.0
             for t in range(m):
                 sxx += (smid[t] - sbar) ** 2
                 sxy += (smid[t] - sbar) * (phi[j0 + t] - pbar)
@@ -325,8 +317,7 @@ def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
         for t in range(m):
             w[t] = (smid[t] - sbar) / sxx if m > 1 else 0.0
         # rates: a' = (da/dc) c' + (da/dk) k', k' = sum w (phi' - k s') (exact on CC data), iterated
-        dk = 0.0
-        dd = 0.0
+        dk, dd = 0.0, 0.0
         for _ in range(3):
             dd = 0.0
             dk_new = 0.0
@@ -385,8 +376,7 @@ def _at_hinges(v, sec, l0, out, base):
 def rest_strains(q2c, n, L0, sec, l0, rest_sigma, rest_kappa, base_kappa0):
     """Servo command q2c (6,) = [d, k] -> rest_sigma (3, ne) <- [0, 0, (d / L0) sinc(k d / 2n) - 1],
     rest_kappa (3, nv) <- [0, k d / L0 (`_at_hinges`), 0], base_kappa0 (3,) <- [0, k_1 d_1 / L0_1, 0]."""
-    sig = np.empty(3)
-    kap = np.empty(3)
+    sig, kap = np.empty(3), np.empty(3)
     for i in range(3):
         d = q2c[i]
         k = q2c[3 + i]
@@ -408,8 +398,7 @@ def active_loads(T2, q2, sec, l0, act_n, act_m, act_m_base):
     """Generalized forces T2 (6,) [T_d N, T_k N m] at the fitted q2 (6,) -> the internal active loads
     (see `harness.plant.cosserat.rod`, Actuation): mu = T_k / d, act_n (ne,) <- T_d - k mu per element,
     act_m (3, nv) <- [0, mu (rest-length weighted mean at the hinges), 0], act_m_base (3,) <- [0, mu_1, 0]."""
-    mu = np.empty(3)
-    ax = np.empty(3)
+    mu, ax = np.empty(3), np.empty(3)
     for i in range(3):
         mu[i] = T2[3 + i] / q2[i]
         ax[i] = T2[i] - q2[3 + i] * mu[i]
@@ -421,8 +410,7 @@ def muscle_loads(p, radius, sec, l0, act_n, act_m, act_m_base):
     """Muscle group forces p (6,) [p+_1, p-_1, ...] (N, pushing, at s = +r_i, -r_i; radius (3,) m) -> the
     active loads of their fibres by virtual work per unit length (a fibre l_s = int (1 - s kappa) ds):
     axial force p+ + p- and couple mu = -r (p+ - p-) on every cross-section of the section."""
-    mu = np.empty(3)
-    ax = np.empty(3)
+    mu, ax = np.empty(3), np.empty(3)
     for i in range(3):
         mu[i] = -radius[i] * (p[2 * i] - p[2 * i + 1])
         ax[i] = p[2 * i] + p[2 * i + 1]
