@@ -77,8 +77,7 @@ def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_len
     pair[:, :, 1] = Q[:, :, 0]
     half0 = 0.5 * rest_lengths[0]
     kb = _inv_rotate(pair)[:, 0] / half0
-    mb = np.empty(3)
-    wb = 0.0
+    mb, wb = np.empty(3), 0.0
     for i in range(3):
         dk = kb[i] - base_kappa0[i]
         el = base_B[i] * dk
@@ -345,11 +344,8 @@ def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
 def fit_rod(pos, vel, xz, vxz, bounds, n_iter, q2, dq2):
     """`cc_fit` of the rod's nodes pos, vel (3, nn) (the plane's X, Z rows copied into the scratch xz, vxz
     (nn, 2)) into q2, dq2 (6,)."""
-    for j in range(pos.shape[1]):
-        xz[j, 0] = pos[0, j]
-        xz[j, 1] = pos[2, j]
-        vxz[j, 0] = vel[0, j]
-        vxz[j, 1] = vel[2, j]
+    xz[:, 0], xz[:, 1] = pos[0], pos[2]
+    vxz[:, 0], vxz[:, 1] = vel[0], vel[2]
     cc_fit(xz, vxz, bounds, n_iter, q2, dq2)
 
 

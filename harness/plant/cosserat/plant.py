@@ -152,8 +152,7 @@ class CosseratPlant:
         nn = 3 * self.slave.n + 1
         self._geo = {"centreline": np.zeros((nn, 3)), "sections": np.zeros((4, 3)),
                      "master": np.zeros((3, 3))}
-        self._q2 = np.zeros(6)
-        self._dq2 = np.zeros(6)
+        self._q2, self._dq2 = np.zeros(6), np.zeros(6)  # the last CC fit (`true_state`)
         # recording (`record` / `finish`): per control step the rod nodes and the master state only; the
         # recorded geometry is computed from them once at the end
         self._pos_hist = np.zeros((scn.n_steps, 3, nn))
