@@ -147,12 +147,16 @@ def test_predicted_map_agrees_with_simulated_map():
     the run (linearized at 0, 0.5, 1 s) in exactly the cells whose simulation (1.5 s, same settings,
     `harness.studies.stability_map`) diverges."""
     from harness.studies.stability_map import stability_map
-    from harness.studies.stability_report import agreement, predicted_map
+    from harness.studies.stability_report import predicted_map
 
     kns, etas, ov = (10.0, 100.0), (0.001, 0.01, 1.0), ["plant.actuation=torque", "snr_db=none"]
     pred = predicted_map(kns, etas, ov, times=(0.0, 0.5, 1.0))
-    sim = stability_map(kns, etas, ov, duration=1.5)
-    cells = agreement(pred, sim)
+    simc = {(r["kn"], r["eta_b"]): r for r in stability_map(kns, etas, ov, duration=1.5)}
+    # per cell: predicted diverging (class "unstable") against simulated diverging (status != "ok")
+    cells = [{"kn": r["kn"], "eta_b": r["eta_b"], "predicted": r["class"], "radius": r["radius"],
+              "simulated": simc[r["kn"], r["eta_b"]]["status"],
+              "agree": (r["class"] == "unstable") == (simc[r["kn"], r["eta_b"]]["status"] != "ok")}
+             for r in pred]
     assert all(c["agree"] for c in cells), cells
     # both outcomes occur on this grid (the test can tell a wrong edge from a right one)
     assert {c["simulated"] == "ok" for c in cells} == {True, False}

@@ -97,10 +97,11 @@ def _scenario_options(p: argparse.ArgumentParser, *, sim: bool = True) -> None:
                "or 'cosserat' (PyElastica Cosserat rod); --set plant.kind=... Default: from the scenario "
                "(paper: mujoco).")
     a("--actuation", choices=ACTUATIONS, default=None,
-      help="MuJoCo slave actuation per unit section length: 'servo' (position servos on the integrated "
-           "command; hide the slave's inertia), 'torque' (T2 as ideal generalized forces) or 'muscle' (one-"
-           "sided extensors: push only, clip to [0, F_max], lag tau; plant.muscle_*); --set "
-           "plant.actuation=... Default: from the scenario (paper: servo).")
+      help="slave actuation (MuJoCo chain and Cosserat rod), per unit section length: 'servo' (position "
+           "servos on the integrated command; hide the slave's inertia and the controller's dynamics model), "
+           "'torque' (T2 as ideal generalized forces; hides actuator dynamics and limits) or 'muscle' (two "
+           "one-sided extensor groups per section: push only, clip to [0, F_max], lag tau; plant.muscle_*); "
+           "--set plant.actuation=... Default: from the scenario (paper: servo).")
     a("--segments", metavar="N", default=None,
       help="rigid segments per slave section of the MuJoCo model, integer in [1, 64]; --set "
            "plant.segments=N. Default: from the scenario (paper: 8).")

@@ -108,9 +108,15 @@ class PlantConfig:
                 "take the nominal [master] value") = None
     slave: doc(Slave | None, '"none" = same as [slave]; or a [plant.slave] table whose missing keys take '
                "the nominal [slave] value") = None
-    actuation: doc(Literal[ACTUATIONS], '(mujoco only) "servo": position servos track the integrated '
-                   'command; "torque": T2 as ideal generalized forces; "muscle": two one-sided extensor '
-                   "groups per section with force lag and limits (docs/plants.md)") = "servo"
+    actuation: doc(Literal[ACTUATIONS], '"servo" | "torque" | "muscle".  "servo": position servos, '
+                   "defined per unit length, track the integrated command q2_ref: they hide the "
+                   "slave's inertia and the controller's dynamics model (the stiff inner loop does the "
+                   'work).  "torque": the controller\'s T2 acts on the body as ideal, instantaneous '
+                   'generalized forces: hides actuator dynamics and limits.  "muscle": two one-sided '
+                   "extensor groups per section "
+                   "(force >= 0, lengthening the fibres at +-muscle_radius) with first-order force dynamics "
+                   "(muscle_time_constant) and limits (muscle_max_force): hides none of these; it cannot "
+                   "realize every T2 (commands outside [0, F_max] are clipped) and lags by tau") = "servo"
     segments: integer("rigid segments per section N (mujoco only)", ge=1, le=64) = 8
     enforce_cc: doc(bool, "equality constraints holding each section at constant curvature (mujoco "
                     "only)") = False
@@ -222,6 +228,8 @@ class ForceSensingConfig:
 class SensingConfig:
     force: doc(ForceSensingConfig, "what the laws (13), (17) get as F = [F1, F2]") = \
         field(default_factory=ForceSensingConfig)
+    dq2_cutoff: doc(num("", **POS) | None, 'Hz, first-order low-pass on the sensed dq2 (after the noise; '
+                    'the laws get the filtered rates); "none" = unfiltered') = None
 
 
 @dataclass(frozen=True)

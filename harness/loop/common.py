@@ -21,6 +21,8 @@ from controllers.subtasks import pack_subtask
 from harness.config.runtime import progress_bar_class
 from harness.config.scenario import Scenario
 from harness.loop.fast import K
+from harness.loop.force_kernels import filter_alpha
+from harness.loop.kernels import DQ2_FILTER
 from harness.loop.trajectory import Trajectory
 from harness.plant.initial import InitialStateError
 from harness.plant.initial import initial_state as _initial_state
@@ -74,14 +76,19 @@ def noise_table(scn: Scenario, n: int) -> tuple[np.ndarray, float]:
     ``noise_model = "per_vector"``: (n, 16).  ``"per_channel"`` (default): (n, 32), the same normals in
     columns 0:16 and, in row 0, columns 16:32, the running sums of squares of each true signal that
     `kernels.add_noise_channel` updates (so a fresh table per run).  Same seed -> same normals in both
-    models."""
+    models.  With ``sensing.dq2_cutoff``, DQ2_FILTER more columns follow: row 0 holds the filter gain
+    (`force_kernels.filter_alpha`) and the filtered dq2 (`kernels.sense_state`)."""
     if scn.snr_db is None:
-        return np.zeros((1, 16)), 0.0
-    rng = np.random.default_rng(scn.seed)
-    normals = rng.standard_normal((n, 16))
-    if scn.noise_model == "per_channel":
-        normals = np.concatenate([normals, np.zeros((n, 16))], axis=1)
-    return normals, float(10.0 ** (-scn.snr_db / 20.0))
+        normals, scale = np.zeros((1, 16)), 0.0
+    else:
+        normals = np.random.default_rng(scn.seed).standard_normal((n, 16))
+        if scn.noise_model == "per_channel":
+            normals = np.concatenate([normals, np.zeros((n, 16))], axis=1)
+        scale = float(10.0 ** (-scn.snr_db / 20.0))
+    if scn.sensing.dq2_cutoff is not None:
+        normals = np.concatenate([normals, np.zeros((normals.shape[0], DQ2_FILTER))], axis=1)
+        normals[0, -DQ2_FILTER] = filter_alpha(scn.sensing.dq2_cutoff, scn.control_dt)
+    return normals, scale
 
 
 class ChunkRun:

@@ -45,6 +45,9 @@ RUNAWAY = 1.0  # m: |e1| or |e2| beyond this is a runaway (the workspace is ~1 m
 
 
 # --- the per-step glue every loop body shares (the compiled loops and the Python-stepped loop) ---------
+DQ2_FILTER = 7  # noise-table columns of the sensed-dq2 filter: gain, filtered dq2 (6)
+
+
 def runaway(row):
     """True when the record row's |e1| or |e2| (1-norm, m) exceeds RUNAWAY."""
     return (abs(row[R_E1]) + abs(row[R_E1 + 1]) > RUNAWAY) or (abs(row[R_E2]) + abs(row[R_E2 + 1]) > RUNAWAY)
@@ -172,14 +175,24 @@ def record_row_info(t, state, xd, dxd, minfo, sinfo, T1, T2, u2, deN, row):
 def sense_state(state, noise, k, noise_scale, sensed):
     """The sensed state (16,) at control step k: the true state plus AWGN of either noise model
     (noise (n, 32) per channel, `add_noise_channel`; (n, 16) per vector, `add_noise`), or the true
-    state itself when noise_scale == 0 (noise is then not read)."""
-    if noise_scale > 0.0 and noise.shape[1] > 16:
+    state itself when noise_scale == 0 (normals not read).  With DQ2_FILTER more columns (row 0: gain
+    alpha, filtered dq2 y; `common.noise_table`): sensed dq2 <- y += alpha (sensed dq2 - y), y = the
+    sensed dq2 at k = 0."""
+    if noise_scale > 0.0 and noise.shape[1] >= 32:
         add_noise_channel(state, noise, k, noise_scale, sensed)
     elif noise_scale > 0.0:
         add_noise(state, noise[k], noise_scale, sensed)
     else:
         for i in range(16):
             sensed[i] = state[i]
+    if noise.shape[1] % 16 == DQ2_FILTER:
+        f = noise.shape[1] - DQ2_FILTER
+        for i in range(6):
+            if k > 0:
+                noise[0, f + 1 + i] += noise[0, f] * (sensed[10 + i] - noise[0, f + 1 + i])
+            else:
+                noise[0, f + 1 + i] = sensed[10 + i]
+            sensed[10 + i] = noise[0, f + 1 + i]
 
 
 def control_step(t, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, weights, gains, spec, F,

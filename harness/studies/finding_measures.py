@@ -57,12 +57,9 @@ def _measure_closed_forms(scn, traj) -> dict[str, float]:
     """The recorded e1 and e2 against the closed-form solutions of (15) (k1, k2) and (21) (k3, k4) from
     their recorded initial values: the largest deviation relative to the largest initial component."""
     g = scn.gains
-    out = {}
-    for key, e, de, a, b in (("eq15_error", traj.e1, traj.de1, g.k1, g.k2),
-                             ("eq21_error", traj.e2, traj.de2, g.k3, g.k4)):
-        ref = _second_order(traj.t, e[0], de[0], a, b)
-        out[key] = float(np.abs(e - ref).max() / np.abs(e[0]).max())
-    return out
+    cases = (("eq15_error", traj.e1, traj.de1, g.k1, g.k2), ("eq21_error", traj.e2, traj.de2, g.k3, g.k4))
+    return {key: float(np.abs(e - _second_order(traj.t, e[0], de[0], a, b)).max() / np.abs(e[0]).max())
+            for key, e, de, a, b in cases}
 
 
 def _measure_beta(scn, traj) -> dict[str, float]:
@@ -76,8 +73,7 @@ def _measure_straight(scn, traj) -> dict[str, float]:
     from controllers.subtasks import manipulability
 
     d = np.asarray(scn.slave.rest_lengths, float)
-    q = np.concatenate([d, np.zeros(3)])
-    beta = float(manipulability(scn.slave, q))
+    beta = float(manipulability(scn.slave, np.concatenate([d, np.zeros(3)])))
     a = d**2 / 2 + d * (d.sum() - np.cumsum(d))
     closed = float(np.sqrt(3 * np.sum(a**2)))
     return {"beta_straight": beta, "beta_straight_closed_form": closed,
@@ -104,11 +100,9 @@ def _arc_departure(p: np.ndarray) -> float:
 
 
 def _settled_rod(scn, law: str):
-    """The Cosserat rod (the plant's slave parameters, elastic law `law`, 10 elements per section,
-    servo rest strains at the fidelity study's worst shape: every section at full extension with
-    alternating +-max bends) settled under gravity with the fidelity study's raised damping (eta_b
-    0.3 N m^2 s, eta_a 3 N s) until no node moves faster than ROD_SETTLED_SPEED on average over a
-    ROD_SETTLE_CHECK interval.  Returns (rod, settle time s, tip after 3 s, converged)."""
+    """The rod (plant slave, elastic law `law`, 10 elements per section) servoed to the fidelity study's
+    "alternating max" shape, settled under gravity (eta_b 0.3 N m^2 s, eta_a 3 N s) to ROD_SETTLED_SPEED
+    per ROD_SETTLE_CHECK.  Returns (rod, settle time s, tip after 3 s, converged)."""
     from harness.plant.cosserat import CosseratSlave
     from harness.studies.fidelity_reference import static_shapes
 
@@ -132,10 +126,9 @@ def _settled_rod(scn, law: str):
 
 
 def _measure_rod_statics(scn, traj) -> dict[str, float]:
-    """The rod of `_settled_rod` with the `linear` law (the fidelity study's).  In mm: arc_departure
-    (the largest distance of a section's nodes from that section's best-fit circle), chained_cc_tip
-    (the distance between the rod's tip and the tip of its per-section CC fits chained from the base),
-    settle_3s_error (how far the tip still is from equilibrium after a fixed 3 s); settle_time (s)."""
+    """`_settled_rod` (`linear` law), in mm: arc_departure (largest node distance from its section's
+    best-fit circle), chained_cc_tip (tip to the tip of the chained CC fits), settle_3s_error (tip after
+    3 s to equilibrium); settle_time (s)."""
     from controllers import slave as slave_model
 
     rod, t, tip_3s, converged = _settled_rod(scn, "linear")
@@ -161,10 +154,8 @@ def _measure_elastic_laws(scn, traj) -> dict[str, float]:
 
 
 def _settled_chain(scn, enforce_cc: bool):
-    """The MuJoCo chain (the plant's segments and slave parameters) as a passive rod with the `linear`
-    law at the shape of `_settled_rod` (`fidelity_reference.PassiveChain`, material damping 0.01 N m^2 s
-    / 0.3 N s raised 30x while settling), stepped until no body moves faster than ROD_SETTLED_SPEED on
-    average over a ROD_SETTLE_CHECK interval.  Returns (chain, converged)."""
+    """The passive MuJoCo chain (`fidelity_reference.PassiveChain`, `linear` law) at the shape of
+    `_settled_rod`, settled like it.  Returns (chain, converged)."""
     from harness.studies.fidelity_reference import SETTLE_DAMPING, PassiveChain, static_shapes
 
     slave = scn.plant.slave if scn.plant.slave is not None else scn.slave
@@ -194,20 +185,69 @@ def _measure_chain_vs_rod(scn, traj) -> dict[str, float]:
 
 
 def _measure_flip(scn, traj) -> dict[str, float]:
-    """The closed loop linearized over one control period at the run's end (`harness.studies.stability`,
-    noise off): radius = its spectral radius, flip = -Re of its most negative eigenvalue (> 1: a mode that
-    flips sign every period and grows, at the Nyquist frequency of the control rate), flip_on_junction =
-    1 if that mode's largest components are hinges next to a section boundary, else 0."""
+    """The loop linearized at the run's end (`harness.studies.stability`): radius (spectral), flip = -Re
+    of the most negative eigenvalue (> 1: a growing sign flip every period), flip_on_junction = 1 if
+    that mode's two largest components are hinges (chain) or elements (rod) at a section boundary."""
     from harness.studies.stability import linearize
 
     res = linearize(scn, float(traj.t[-1]) if len(traj) else 0.0)
     j = res.most_negative()
     top = [name for name, _ in res.dominant(j, 2)]
-    n = scn.plant.segments
-    junction = ({f"octarm_s{i}_seg{n - 1}_hinge" for i in range(2)}
-                | {f"octarm_s{i}_seg0_hinge" for i in (1, 2)})
+    if scn.plant.kind == "cosserat":
+        n = scn.plant.cosserat.elements_per_section
+        junction = {f"s{i}_el{n - 1}.angle" for i in range(2)} | {f"s{i}_el0.angle" for i in (1, 2)}
+    else:
+        n = scn.plant.segments
+        junction = ({f"octarm_s{i}_seg{n - 1}_hinge" for i in range(2)}
+                    | {f"octarm_s{i}_seg0_hinge" for i in (1, 2)})
     return {"radius": res.radius, "flip": float(-res.eigenvalues[j].real),
             "flip_on_junction": float(all(any(name.startswith(x) for x in junction) for name in top))}
+
+
+def _measure_poles(scn, traj) -> dict[str, float]:
+    """The loop linearized at the run's end against the closed forms: pole_error = the largest distance
+    (|.|) of a pole of (15) (k1, k2) or (21) (k3, k4) under a zero-order hold over T, each twice (X, Z),
+    the one-period matrix [[1 - kp T^2/2, T - kd T^2/2], [-kp T, 1 - kd T]], to its nearest eigenvalue
+    not matched before; null_error: the same for 1 - k_n T (the null-space velocity, 4 times)."""
+    from harness.studies.stability import linearize
+
+    g, T = scn.gains, scn.control_dt
+    lam = list(linearize(scn, float(traj.t[-1])).eigenvalues)
+
+    def worst(targets) -> float:
+        err = 0.0
+        for z in targets:
+            j = int(np.argmin([abs(x - z) for x in lam]))
+            err = max(err, abs(lam.pop(j) - z))
+        return err
+
+    zoh = [np.linalg.eigvals([[1 - kp * T * T / 2, T - kd * T * T / 2], [-kp * T, 1 - kd * T]])
+           for kp, kd in ((g.k2, g.k1), (g.k4, g.k3))]
+    poles = [z for pair in zoh for z in pair] * 2
+    return {"pole_error": worst(poles), "null_error": worst([1 - g.kn * T] * 4)}
+
+
+MARGIN_BOUNDS = {"analytic": "paper_analytic", "mujoco": "paper_mujoco", "cosserat": "paper_cosserat"}
+
+
+def _measure_margins(scn, traj) -> dict[str, float]:
+    """`margin.margins` against the plant's paper bounds (MARGIN_BOUNDS) over slave_mass and master_mass
+    (rtol 0.05, no probes, one thread): <p>_lower, <p>_upper and <p>_lower_fail, <p>_upper_fail (nan at
+    a range end), scale factors."""
+    import tempfile
+    from pathlib import Path
+
+    from harness.config.bounds import load_bounds
+    from harness.config.load import dump_scenario
+    from harness.studies.margin import margins
+
+    with tempfile.TemporaryDirectory() as tmp:
+        src = dump_scenario(scn, Path(tmp) / "scenario.toml")
+        rows = margins(scn, load_bounds(MARGIN_BOUNDS[scn.plant.kind]), ("slave_mass", "master_mass"),
+                       source=src, probes=0, workers=1, executor="threads")
+    sides = [(f"{m.param}_{side}", m.sides[side]) for m in rows for side in ("lower", "upper")]
+    out = {k: d["margin"] for k, d in sides}
+    return out | {f"{k}_fail": math.nan if d.get("fail") is None else d["fail"] for k, d in sides}
 
 
 MEASURES: dict[str, Callable[[Any, Any], dict[str, float]]] = {
@@ -220,6 +260,8 @@ MEASURES: dict[str, Callable[[Any, Any], dict[str, float]]] = {
     "elastic_laws": _measure_elastic_laws,
     "chain_vs_rod": _measure_chain_vs_rod,
     "flip": _measure_flip,
+    "poles": _measure_poles,
+    "margins": _measure_margins,
 }
 
 MEASURE_UNITS = {"diverged_at": "s", "arc_departure": "mm", "chained_cc_tip": "mm", "settle_3s_error": "mm",

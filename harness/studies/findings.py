@@ -1,40 +1,6 @@
-"""Findings: the harness's scientific results as small runnable files, rerun by `teleop findings`.
-
-A finding is one TOML file in the shipped `findings/` folder (package data `harness._data.findings`)::
-
-    [finding]
-    title = "Mass mismatch is first order"        # one line
-    claim = "..."                                  # the sentence the checks below state
-    method = "..."                                 # plant, settings, what is measured (optional)
-    scenario = "paper"                             # base scenario (optional; default: the paper's)
-    set = ["plant.kind='analytic'", ...]           # overrides applied to every run
-    show = ["nominal.e2_rms"]                      # quantities reported beside the checks (optional)
-    figures = ["nominal"]                          # runs whose Figs 2-4 `teleop findings` writes (optional)
-
-    [[run]]                                        # one or more runs of the base scenario
-    name = "plus10"
-    set = ["plant.slave.masses=[1.1,0.77,0.44]"]   # this run's own overrides
-    measure = ["diverged"]                         # optional derived measurements (finding_measures)
-    # simulate = false                             # only the measures (on the scenario), no closed loop
-
-    [ratio]                                        # optional: quotient of two measured quantities
-    plus20_over_plus10 = ["plus20.e2_rms", "plus10.e2_rms"]
-
-    [claim]                                        # the claim as bounds: <quantity>_max / <quantity>_min
-    plus20_over_plus10_min = 1.8
-    plus20_over_plus10_max = 2.2
-    [claim.plus10]                                 # a run's metrics: the bounds-file format
-    status_ok = true                               #   (harness.config.bounds), checked by check_bounds
-    e2_rms_min = 0.03
-
-Quantities are named `<run>.<metric>` (every metric of `harness.loop.metrics.compute_metrics`),
-`<run>.<measure key>` (the derived measurements) and `<ratio name>`.  Top-level `[claim]` keys bound
-derived quantities and ratios (a dotted quantity is written with `_` for `.`, e.g. `exact_eq28_corrected`
-for `exact.eq28_corrected`); `[claim.<run>]` tables are bounds files' `[bounds]` tables for that run.
-
-`run_findings(names)` runs them and returns one `FindingResult` each; `findings_table` renders the
-markdown table that the docs' findings page includes (claim, measured values, holds).  Everything is
-deterministic: the same files give the same numbers.
+"""Findings: the harness's scientific results as small runnable files (`findings/`, package data
+`harness._data.findings`), rerun by `teleop findings`.  File format: docs/findings.md.  `run_findings`
+returns one `FindingResult` each; `findings_table` renders the docs' markdown table.  Deterministic.
 """
 
 from __future__ import annotations
@@ -42,12 +8,12 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 from harness.config.assets import asset_dir
-from harness.config.bounds import Bounds, Violation, bounds_from_dict, check_bounds
+from harness.config.bounds import FLAGS, Bounds, Violation, bounds_from_dict, check_bounds, limit_of
 from harness.config.errors import ConfigError
 from harness.config.schema import unknown_keys
 from harness.config.textio import read_toml
@@ -223,11 +189,8 @@ def _limit_key(q: str) -> str:
 
 
 def _num(v: Any) -> float | None:
-    if hasattr(v, "item"):
-        v = v.item()
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        return None
-    return float(v)
+    v = v.item() if hasattr(v, "item") else v
+    return None if isinstance(v, bool) or not isinstance(v, (int, float)) else float(v)
 
 
 def finding_scenarios(f: Finding) -> list:
@@ -271,11 +234,8 @@ def _run(f: Finding, scenarios: list, res: FindingResult, keep_trajectories: boo
         if r.simulate:
             traj = simulate(scn, progress=False)
             metrics = compute_metrics(traj, scn)
-        for k, v in metrics.items():
-            res.values[f"{r.name}.{k}"] = v
-        for m in r.measure:
-            for k, v in MEASURES[m](scn, traj).items():
-                res.values[f"{r.name}.{k}"] = v
+        for part in (metrics, *(MEASURES[m](scn, traj) for m in r.measure)):
+            res.values.update({f"{r.name}.{k}": v for k, v in part.items()})
         if r.bounds is not None:
             bad = {v.bound: v for v in check_bounds(metrics, r.bounds)}
             res.checks += _bounds_checks(r.name, r.bounds, metrics, bad)
@@ -293,10 +253,6 @@ def _run(f: Finding, scenarios: list, res: FindingResult, keep_trajectories: boo
 
 
 def _bounds_checks(run: str, bounds: Bounds, metrics: Mapping, bad: Mapping[str, Violation]) -> list[Check]:
-    from dataclasses import fields
-
-    from harness.config.bounds import FLAGS, limit_of
-
     out = []
     for fl in fields(bounds):
         key, limit = fl.name, getattr(bounds, fl.name)
@@ -340,10 +296,6 @@ def fmt(v: Any) -> str:
 
 def _unit(quantity: str) -> str:
     """' <unit>' of a run metric (from the bounds table) or a derived measurement, else ''."""
-    from dataclasses import fields
-
-    from harness.config.bounds import Bounds, limit_of
-
     key = quantity.rsplit(".", 1)[-1]
     limits = (limit_of(f.name) for f in fields(Bounds) if f.name.endswith(("_max", "_min")))
     units = {m: u for m, _, u in limits if u}
@@ -357,24 +309,25 @@ def check_text(c: Check) -> str:
     return f"{c.quantity} = {fmt(c.measured)}{unit} ({rel} {fmt(c.limit)}{unit})"
 
 
+def _parts(r: FindingResult, ok: str = "", bad: str = "", also: str = "") -> list[str]:
+    """The error, the checks (prefixed ok / bad) and the `show` quantities (prefixed also) of a result."""
+    parts = [f"error: {r.error}"] if r.error else []
+    parts += [f"{ok if c.holds else bad}{check_text(c)}" for c in r.checks]
+    return parts + [f"{also}{q} = {fmt(r.values.get(q))}{_unit(q)}" for q in r.finding.show]
+
+
 def report_text(r: FindingResult) -> str:
     """Claim / measured / holds for one finding, as printed by `teleop findings`."""
     verdict = "holds" if r.holds else "DOES NOT HOLD"
     lines = [f"{r.finding.name}: {verdict} ({r.wall_time:.1f} s)", f"  claim: {r.finding.claim}"]
-    if r.error:
-        lines.append(f"  error: {r.error}")
-    lines += [f"  {'ok ' if c.holds else 'BAD'} {check_text(c)}" for c in r.checks]
-    lines += [f"  also {q} = {fmt(r.values.get(q))}{_unit(q)}" for q in r.finding.show]
-    return "\n".join(lines)
+    return "\n".join(lines + [f"  {p}" for p in _parts(r, "ok  ", "BAD ", "also ")])
 
 
 def findings_table(results: Sequence[FindingResult]) -> str:
     """The markdown table the docs' findings page includes."""
     rows = ["| finding | claim | measured (limit) | holds |", "|---|---|---|---|"]
     for r in results:
-        parts = [f"error: {r.error}"] if r.error else []
-        parts += [check_text(c) for c in r.checks]
-        parts += [f"{q} = {fmt(r.values.get(q))}{_unit(q)}" for q in r.finding.show]
+        parts = _parts(r)
         measured = "<br>".join(p.replace("|", "\\|") for p in parts)
         claim = r.finding.claim.replace("|", "\\|").replace("\n", " ")
         rows.append(f"| **{r.finding.title}** (`{r.finding.name}`) | {claim} | {measured} | "
@@ -384,26 +337,23 @@ def findings_table(results: Sequence[FindingResult]) -> str:
 
 def write_outputs(results: Sequence[FindingResult], table: Path, figures: Path,
                   combined: bool = True) -> list[Path]:
-    """Write the findings table (markdown; also `<table stem>-<finding>.md` per finding) and, for the
-    runs a finding names in `figures`, the paper's Figs 2-4 as
-    `<figures>/<finding>-<run>-fig{2,3,4}.png` (each file atomically).  combined=False writes only the
-    per-finding tables (a rerun of some findings must not replace the table of all).  Returns the paths."""
+    """Write the findings table (also `<table stem>-<finding>.md` per finding; combined=False: only those)
+    and the paper's Figs 2-4 of the runs a finding names, `<figures>/<finding>-<run>-fig{2,3,4}.png`
+    (each file atomically).  Returns the paths."""
     from harness.config.textio import write_atomic
     from harness.output.plots import fig_beta, fig_e1, fig_e2
 
     written = []
     for r in results:
-        for run in r.finding.figures:
-            if run not in r.trajectories:
-                continue
-            _, traj = r.trajectories[run]
+        for run in (x for x in r.finding.figures if x in r.trajectories):
+            traj = r.trajectories[run][1]
             figures.mkdir(parents=True, exist_ok=True)
             for tag, draw in (("fig2_e1", fig_e1), ("fig3_e2", fig_e2), ("fig4_beta", fig_beta)):
                 written.append(draw(traj, figures / f"{r.finding.name}-{run}-{tag}.png"))
     table.parent.mkdir(parents=True, exist_ok=True)
     for r in results:  # one table per finding, for pages that show a single one
-        one = table.with_name(f"{table.stem}-{r.finding.name}.md")
-        written.append(write_atomic(one, findings_table([r])))
+        written.append(write_atomic(table.with_name(f"{table.stem}-{r.finding.name}.md"),
+                                    findings_table([r])))
     if combined:
         written.append(write_atomic(table, findings_table(results)))
     return written

@@ -1,23 +1,8 @@
-"""Robustness margins: for each mismatch parameter, the largest deviation from the nominal scenario in each
-direction for which the scenario still passes a bounds file (`teleop margin`, `harness.api.margins`).
-
-A parameter (`PARAMS`, or any scenario key as a scale factor) moves along a ray from the nominal point:
-a scale factor s (the scenario value times s; s = 1 nominal) or an absolute value (delay, segments, SNR).
-Each search brackets the pass/fail edge (steps of x2 in the scale, or doubling steps in the value) inside
-the parameter's range, then bisects the bracket until it is narrower than the tolerance (`rtol` on the
-scale: s_fail / s_pass < 1 + rtol; `atol` on values; integer parameters exactly).  The pass point of the
-bracket is the margin (a deviation that is known to pass); the fail point, the first bound it violates
-and the measured value of that bound's metric at both points are reported.
-
-Monotonicity is not assumed: after the edge is found, `probes` more points strictly between the nominal
-point and the edge (evenly spaced in log scale or value) are run; a probe that fails marks the edge
-"non-monotone" (the margin then holds only at the sampled points).
-
-Every run goes through the sweep executor (`harness.studies.executor.run_cases`: worker processes, threads
-or a Dask cluster); all searches advance together, one batch of runs per round.  Each finished run is
-appended to `results.jsonl` in the output folder (the sweep's journal, `harness.studies.results`), keyed by
-the hash of its resolved scenario: a second call with the same arguments reads the finished runs instead of
-running them (resume after an interruption).
+"""Robustness margins (`teleop margin`, `harness.api.margins`): for each mismatch parameter (`PARAMS`, or a
+scenario key as a scale factor) the largest deviation from the nominal scenario in each direction that
+still passes a bounds file, by bracketing (x2 steps) and bisection to a tolerance, then probes inside the
+margin (a failing probe marks the edge non-monotone).  Runs go through the sweep executor; each finished
+run is a line of `results.jsonl`, keyed by its scenario's hash, so a rerun resumes.  docs/stability.md.
 """
 
 from __future__ import annotations
@@ -30,17 +15,20 @@ from pathlib import Path
 from typing import Any
 
 from harness.config.bounds import FLAGS, Bounds, check_bounds, limit_of
+from harness.config.controller import resolve_controller
 from harness.config.errors import ConfigError
+from harness.config.load import load_scenario
 from harness.config.scenario import Scenario
 from harness.config.textio import toml_literal
+from harness.studies.cases import _get as get_field
+from harness.studies.cases import _scaled, scenario_id
+from harness.studies.study import Case
 
 
 @dataclass(frozen=True)
 class Param:
-    """A mismatch parameter: `keys` (scenario fields moved together), `mode` "scale" (factor of the
-    scenario's value of each key) or "value" (the value itself, the same for every key), its search range
-    [lo, hi], integer (bisection on integers), step (values: the grid the value lives on, e.g. control_dt
-    for a delay), plants it applies to (None = all), unit and description."""
+    """A mismatch parameter: `keys` (scenario fields moved together), `mode` "scale" (factor of each
+    key's value), "rate" (divides them) or "value", search range [lo, hi], plants (None = all)."""
 
     name: str
     keys: tuple[str, ...]
@@ -83,8 +71,6 @@ def param_of(name: str) -> Param:
     """A named parameter of PARAMS, or any scenario key (dotted path) as a scale factor in [0.05, 20]."""
     if name in PARAMS:
         return PARAMS[name]
-    if name in PARAMS_RAYS:
-        return PARAMS_RAYS[name]
     if "." in name or name in ("control_dt", "duration"):
         return Param(name, (name,), "scale", 0.05, 20.0, description=f"{name} (x scenario value)")
     raise ConfigError.field("--param", name, f"expected one of {', '.join(PARAMS)} or a dotted scenario key")
@@ -92,10 +78,11 @@ def param_of(name: str) -> Param:
 
 def servo_note(scn: Scenario, names: Sequence[str]) -> str:
     """One line when a margin over the slave's inertia (slave_mass, plant.slave.masses,
-    plant.slave.slice_inertia) runs on a servo-actuated plant, else ''."""
+    plant.slave.slice_inertia) runs on the servo-actuated MuJoCo chain (the rod's rest-strain servo feels
+    the inertia: docs/stability.md), else ''."""
     hidden = sorted(n for n in names if n == "slave_mass" or n.startswith(("plant.slave.masses",
                                                                            "plant.slave.slice_inertia")))
-    if scn.plant.actuation != "servo" or scn.plant.kind == "analytic" or not hidden:
+    if scn.plant.actuation != "servo" or scn.plant.kind != "mujoco" or not hidden:
         return ""
     return (f"servo actuation: the position servos hide the slave's inertia; a margin over "
             f"{', '.join(hidden)} says little about the controller's dynamics model")
@@ -103,27 +90,18 @@ def servo_note(scn: Scenario, names: Sequence[str]) -> str:
 
 # --- points of a search ---------------------------------------------------------------------------------
 def _get(scn: Scenario, key: str) -> Any:
-    from harness.studies.cases import _get as get_field
-
-    path = tuple(key.split("."))
-    return get_field(scn, path, scn, key)
+    return get_field(scn, tuple(key.split(".")), scn, key)
 
 
 def nominal_value(scn: Scenario, p: Param) -> float | None:
     """The nominal point of p: 1 for a scale or rate; the scenario's value for a value parameter (a vector
     field: its first entry; None for an unset SNR)."""
-    if p.mode in ("scale", "rate"):
-        return 1.0
-    v = _get(scn, p.keys[0])
-    if v is None:
-        return None
-    return float(v[0] if isinstance(v, tuple | list) else v)
+    v = 1.0 if p.mode in ("scale", "rate") else _get(scn, p.keys[0])
+    return None if v is None else float(v[0] if isinstance(v, tuple | list) else v)
 
 
 def overrides_at(scn: Scenario, p: Param, level: float) -> list[str]:
     """Scenario overrides putting p at `level` (scale factor or value)."""
-    from harness.studies.cases import _scaled
-
     out = []
     for key in p.keys:
         if p.mode == "rate":
@@ -147,12 +125,10 @@ def applies(scn: Scenario, p: Param) -> str:
         return f"not a parameter of the {scn.plant.kind} plant"
     if nominal_value(scn, p) is None:
         return "unset in the scenario (no nominal value)"
-    if p.mode == "scale":
-        for key in p.keys:
-            v = _get(scn, key)
-            vals = list(v) if isinstance(v, tuple | list) else [v]
-            if all(float(x) == 0.0 for x in vals):
-                return f"{key} is 0 in the scenario (a scale factor cannot move it)"
+    for key in p.keys if p.mode == "scale" else ():
+        v = _get(scn, key)
+        if all(float(x) == 0.0 for x in (v if isinstance(v, tuple | list) else [v])):
+            return f"{key} is 0 in the scenario (a scale factor cannot move it)"
     return ""
 
 
@@ -170,6 +146,7 @@ class Search:
     atol: float
     probes: int
     quantum: float = 0.0  # values live on this grid (delay: control_dt); 0 = continuous
+    side: str = "upper"
     last_pass: float = float("nan")
     first_fail: float | None = None
     state: str = "bracket"
@@ -293,12 +270,9 @@ class Journal:
     def __init__(self, out: Path | None):
         from harness.studies.results import RESULTS, ResultsWriter, read_results
 
-        self.rows: dict[str, dict] = {}
-        self.writer = None
-        if out is not None:
-            path = Path(out) / RESULTS
-            self.rows = read_results(path)
-            self.writer = ResultsWriter(path)
+        path = None if out is None else Path(out) / RESULTS
+        self.rows: dict[str, dict] = {} if path is None else read_results(path)
+        self.writer = None if path is None else ResultsWriter(path)
 
     def add(self, row: dict) -> None:
         self.rows.setdefault(row["case_id"], row)
@@ -310,12 +284,7 @@ class Journal:
             self.writer.close()
 
 
-def _case(base_source, base_set: Sequence[str], scn: Scenario, p: Param, level: float):
-    from harness.config.controller import resolve_controller
-    from harness.config.load import load_scenario
-    from harness.studies.cases import scenario_id
-    from harness.studies.study import Case
-
+def _case(base_source, base_set: Sequence[str], scn: Scenario, p: Param, level: float) -> Case:
     ovr = overrides_at(scn, p, level)
     s = resolve_controller(load_scenario(base_source, [*base_set, *ovr]))
     cid = scenario_id(s)
@@ -340,16 +309,14 @@ def run_levels(requests: list[tuple[Param, float]], ctx: dict) -> dict[tuple[str
             journal.add(make_row(case, res))
             ctx["say"](f"  {next(iter(case.params.items()))}: {res.get('status')}")
 
-        run_cases(ctx["runner"], ctx.get("case_fn", run_case), cases, ctx["metrics"], False, on_result)
+        run_cases(ctx["runner"], ctx["case_fn"] or run_case, cases, ctx["metrics"], False, on_result)
     return {k: _outcome(journal.rows[cid], bounds) for k, cid in keys.items()}
 
 
 @dataclass
 class Margin:
-    """One row of the margins table: for parameter `param`, the nominal point and per direction ("lower",
-    "upper"): the margin (last passing level; the range end if nothing failed), the first failing level,
-    the first bound it violates, that bound's metric at the margin and at the failing level, whether the
-    edge is non-monotone (probes that failed) and the number of runs."""
+    """One row of the margins table: `param`, its nominal point, and per direction ("lower", "upper") a dict
+    (`_side`): margin, first failing level, first violated bound, its metric at both, failed probes."""
 
     param: str
     nominal: float | None
@@ -373,27 +340,24 @@ def _side(search: Search, outcomes: dict) -> dict:
             "probes": list(search.probe_levels)}
 
 
-def margins(scn: Scenario, bounds: Bounds, params: Sequence[str] = DEFAULT_PARAMS, *, source=None,
+def margins(scn: Scenario, bounds: Bounds, params: Sequence[str | Param] = DEFAULT_PARAMS, *, source=None,
             base_set: Sequence[str] = (), rtol: float = 0.05, atol: float | None = None, probes: int = 2,
             out: Path | None = None, workers: int | None = None, scheduler: str | None = None,
             executor: str = "processes", say: Callable[[str], None] = lambda s: None,
             case_fn: Callable | None = None) -> list[Margin]:
-    """Margins of `scn` (the scenario of file `source` with overrides `base_set`, the cases are loaded
-    from them) against `bounds` for each parameter name.  rtol: relative tolerance of scale edges
-    (s_fail / s_pass - 1); atol: absolute tolerance of value edges (default: 1/100 of the range; delays
-    and integers are exact on their grid); probes: extra points per side inside the margin (non-monotone
-    check).  Raises ConfigError for bad input or when the nominal scenario itself fails the bounds."""
+    """Margins of `scn` (file `source` with overrides `base_set`, from which the cases are loaded) against
+    `bounds` per parameter.  rtol: scale edges (s_fail / s_pass - 1); atol: value edges (default 1/100 of
+    the range; delays and integers exact); probes: points per side inside the margin.  ConfigError for
+    bad input or a nominal scenario that fails the bounds."""
     from harness.studies.executor import Runner
 
     if not (0 < rtol < 1):
         raise ConfigError.field("rtol", rtol, "expected a relative tolerance in (0, 1)")
-    plist = [param_of(n) for n in params]
+    plist = [n if isinstance(n, Param) else param_of(n) for n in params]
     journal = Journal(out)
     runner = Runner(workers, scheduler, "dask" if scheduler else executor)
     ctx = {"journal": journal, "bounds": bounds, "source": source, "set": list(base_set), "scn": scn,
-           "runner": runner, "metrics": _metric_names(bounds), "say": say}
-    if case_fn is not None:
-        ctx["case_fn"] = case_fn
+           "runner": runner, "metrics": _metric_names(bounds), "say": say, "case_fn": case_fn}
     try:
         rows: dict[str, Margin] = {}
         searches: list[Search] = []
@@ -407,40 +371,29 @@ def margins(scn: Scenario, bounds: Bounds, params: Sequence[str] = DEFAULT_PARAM
             quantum = scn.control_dt if p.name == "delay" else 0.0
             tol = atol if atol is not None else (p.hi - p.lo) / 100
             for side, lim in (("lower", p.lo), ("upper", p.hi)):
-                if (lim - nom) * (1 if side == "upper" else -1) <= 0:
-                    rows[p.name].sides[side] = {"margin": nom, "fail": None, "first_bound": "",
-                                                "range_end": True, "non_monotone": [], "probes": [],
-                                                "note": "nominal at the range end"}
+                if (lim - nom) * (1 if side == "upper" else -1) > 0:
+                    searches.append(Search(p, nom, lim, rtol, tol, probes, quantum, side=side))
                     continue
-                s = Search(p, nom, lim, rtol, tol, probes, quantum)
-                s.side = side
-                searches.append(s)
-        # the nominal point must pass
-        if searches:
-            nom_out = run_levels([(nominal_p, 1.0)], ctx)
-            first = next(iter(nom_out.values()))
+                rows[p.name].sides[side] = {"margin": nom, "fail": None, "first_bound": "", "range_end": True,
+                                            "non_monotone": [], "probes": [],
+                                            "note": "nominal at the range end"}
+        outcomes: dict = {}
+        if searches:  # the nominal point must pass
+            first = run_levels([(nominal_p, 1.0)], ctx)[nominal_p.name, 1.0]
             if not first.passed:
                 raise ConfigError(f"the nominal scenario fails the bounds ({'; '.join(first.violations)}); "
                                   "no margin to search")
-        outcomes: dict = {}
-        if searches:
-            outcomes.update({(p.name, nominal_value(scn, p)): nom_out[nominal_p.name, 1.0] for p in plist})
+            outcomes.update({(p.name, nominal_value(scn, p)): first for p in plist})
         rnd = 0
         while not all(s.done for s in searches):
             rnd += 1
-            req = []
-            for s in searches:
-                if not s.done:
-                    req += [(s, lv) for lv in s.next_levels()]
-            if not req:
-                for s in searches:
-                    s.end_round()
-                continue
-            say(f"round {rnd}: {len(req)} run(s)")
-            res = run_levels([(s.param, lv) for s, lv in req], ctx)
-            outcomes.update(res)
-            for s, lv in req:
-                s.feed(lv, res[s.param.name, lv].passed)
+            req = [(s, lv) for s in searches if not s.done for lv in s.next_levels()]
+            if req:
+                say(f"round {rnd}: {len(req)} run(s)")
+                res = run_levels([(s.param, lv) for s, lv in req], ctx)
+                outcomes.update(res)
+                for s, lv in req:
+                    s.feed(lv, res[s.param.name, lv].passed)
             for s in searches:
                 s.end_round()
         for s in searches:
@@ -464,19 +417,12 @@ def ray(p1: Param, p2: Param, angle: float) -> Param:
 
 
 def edge_trace(scn: Scenario, bounds: Bounds, pair: tuple[str, str], n_rays: int = 8, **kw) -> list[dict]:
-    """The 2-D pass/fail edge of two scale parameters: `margins` along n_rays rays from the nominal point
-    in the (log p1, log p2) plane.  Rows {angle_deg, p1, p2 (scale factors at the margin), fail_p1,
-    fail_p2 (at the first failing point, None if the ray reached its range end), first_bound,
+    """The 2-D pass/fail edge of two scale parameters: `margins` along n_rays rays in the (log p1, log p2)
+    plane.  Rows {angle_deg, p1, p2 (at the margin), fail_p1, fail_p2 (None at a range end), first_bound,
     non_monotone}."""
     p1, p2 = param_of(pair[0]), param_of(pair[1])
     rays = [ray(p1, p2, 2 * math.pi * i / n_rays) for i in range(n_rays)]
-    for r in rays:
-        PARAMS_RAYS[r.name] = r
-    try:
-        rows = margins(scn, bounds, [r.name for r in rays], **kw)
-    finally:
-        for r in rays:
-            PARAMS_RAYS.pop(r.name, None)
+    rows = margins(scn, bounds, rays, **kw)
     out = []
     for r, m in zip(rays, rows, strict=True):
         d = m.sides.get("upper", {})
@@ -486,9 +432,6 @@ def edge_trace(scn: Scenario, bounds: Bounds, pair: tuple[str, str], n_rays: int
                     "fail_p1": None if fv is None else fv ** c, "fail_p2": None if fv is None else fv ** s,
                     "first_bound": d.get("first_bound", ""), "non_monotone": bool(d.get("non_monotone"))})
     return out
-
-
-PARAMS_RAYS: dict[str, Param] = {}  # rays of a running edge_trace, found by name (param_of)
 
 
 __all__ = ["DEFAULT_PARAMS", "Margin", "PARAMS", "Param", "Search", "edge_trace", "margins", "param_of",

@@ -18,17 +18,12 @@ def plot_edge(rows: list[dict], pair: tuple[str, str], path) -> Path:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(4.6, 4.2))
-    xs = [r["p1"] for r in rows] + [rows[0]["p1"]]
-    ys = [r["p2"] for r in rows] + [rows[0]["p2"]]
-    ax.plot(xs, ys, "g.-", label="last passing point")
-    fx = [r["fail_p1"] for r in rows if r["fail_p1"] is not None]
-    fy = [r["fail_p2"] for r in rows if r["fail_p2"] is not None]
-    ax.plot(fx, fy, "rx", label="first failing point")
+    closed = [*rows, rows[0]]
+    ax.plot([r["p1"] for r in closed], [r["p2"] for r in closed], "g.-", label="last passing point")
+    fails = [r for r in rows if r["fail_p1"] is not None]
+    ax.plot([r["fail_p1"] for r in fails], [r["fail_p2"] for r in fails], "rx", label="first failing point")
     ax.plot([1], [1], "ko", label="nominal")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel(f"{pair[0]} (x nominal)")
-    ax.set_ylabel(f"{pair[1]} (x nominal)")
+    ax.set(xscale="log", yscale="log", xlabel=f"{pair[0]} (x nominal)", ylabel=f"{pair[1]} (x nominal)")
     ax.legend(fontsize=7)
     fig.tight_layout()
     return save_figure(fig, path)
@@ -36,11 +31,7 @@ def plot_edge(rows: list[dict], pair: tuple[str, str], path) -> Path:
 
 # --- outputs --------------------------------------------------------------------------------------------
 def _fmt(v) -> str:
-    if v is None:
-        return "-"
-    if isinstance(v, float):
-        return f"{v:.4g}"
-    return str(v)
+    return "-" if v is None else f"{v:.4g}" if isinstance(v, float) else str(v)
 
 
 def _edge_metric(d: dict) -> str:
@@ -89,16 +80,12 @@ def plot_margins(rows: Sequence[Margin], path) -> Path:
         p = param_of(r.param)
         lo, hi = r.sides["lower"]["margin"], r.sides["upper"]["margin"]
         ax.barh([0], [hi - lo], left=[lo], height=0.5, color="tab:green", alpha=0.6)
-        for side, c in (("lower", "tab:red"), ("upper", "tab:red")):
-            f = r.sides[side].get("fail")
-            if f is not None:
-                ax.plot([f], [0], "x", color=c)
+        fails = [f for f in (r.sides[side].get("fail") for side in ("lower", "upper")) if f is not None]
+        ax.plot(fails, [0] * len(fails), "x", color="tab:red")
         ax.axvline(r.nominal, color="k", lw=1)
         if p.mode in ("scale", "rate"):
             ax.set_xscale("log")
-            ax.set_xlim(p.lo, p.hi)
-        else:
-            ax.set_xlim(p.lo, p.hi)
+        ax.set_xlim(p.lo, p.hi)
         ax.set_yticks([0], [f"{r.param} ({p.unit})" if p.unit else r.param], fontsize=8)
         ax.tick_params(axis="x", labelsize=7)
     axes[0, 0].set_title("passing range (green), first failing level (x), nominal (line)", fontsize=9)
@@ -110,19 +97,12 @@ def write_margins(rows: Sequence[Margin], out, tol_text: str = "") -> list[Path]
     """margins.md, margins.json and margins.png in folder `out` (atomic renames)."""
     import json
 
-    from harness.config.textio import jsonable
+    from harness.config.textio import jsonable, write_atomic
 
     out = Path(out)
-    md = out / "margins.md"
-    tmp = md.with_suffix(".md.tmp")
-    tmp.write_text(margins_markdown(rows, tol_text) + "\n", encoding="utf-8")
-    tmp.replace(md)
-    js = out / "margins.json"
-    tmp = js.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(jsonable([dataclasses.asdict(r) for r in rows]), indent=2) + "\n",
-                   encoding="utf-8")
-    tmp.replace(js)
-    paths = [md, js]
+    paths = [write_atomic(out / "margins.md", margins_markdown(rows, tol_text) + "\n"),
+             write_atomic(out / "margins.json", json.dumps(jsonable([dataclasses.asdict(r) for r in rows]),
+                                                          indent=2) + "\n")]
     if any(not r.note for r in rows):
         paths.append(plot_margins(rows, out / "margins.png"))
     return paths

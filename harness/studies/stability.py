@@ -1,34 +1,12 @@
-"""Linear stability of the sampled-data closed loop around a point of a scenario.
+"""Linear stability of the sampled-data closed loop around a point of a scenario (docs/stability.md).
 
-The closed loop is a discrete map over one control period T = control_dt,
-
-    x_{k+1} = Phi_k(x_k),   x = [plant state, servo reference (servo actuation), actuation-delay ring],
-
-made of: the plant's true state sensed without noise, the paper's law (12)-(13), (17)-(33) on it, the
-servo-reference update (semi-implicit Euler of u2), the delay ring of `plant.actuation_delay`, and the
-plant advanced over T with the command held (zero-order hold).  `linearize(scn, t)` runs the scenario
-to t with the same compiled per-step kernels as the Python-stepped loop (`harness.loop.stepped_loop`;
-`harness.loop.fast.K.stepped_paper_step`) and takes the Jacobian A = dPhi_k/dx by central finite
-differences of the WHOLE one-period map (every plant; for MuJoCo this includes the substeps, the elastic
-correction and the actuators, so `mujoco.mjd_transitionFD` is not needed).  The eigenvalues of A are the
-frozen-time poles of the loop at t: |lambda| > 1 grows, angle(lambda) / (2 pi T) is the mode's frequency
-(Hz; pi = the Nyquist frequency 1 / (2 T), a sign flip every period).
-
-Plant state coordinates (what is perturbed):
-* analytic: [q1 (2), dq1 (2), q2 (6), dq2 (6)] (rad, m, 1/m and rates);
-* mujoco: qpos (nq), qvel (nv), act (na) (the models here have hinges and slides only, nq = nv);
-  the rest of MuJoCo's physics state (warm start, time) is restored from the point of linearization;
-* cosserat: the master [q1, dq1] (4), then the rod in its plane: node X, Z (n_nodes each), element
-  angle about Y (n_elements), node velocities X, Z, element angular rate about Y (out-of-plane
-  motion is not perturbed: the arm and its loads are planar).
-
-Only the paper's law (`controller.name = "paper"`) is linearized (its state is the servo reference; a
-Python controller's internal state is not visible to the harness).
-
-Verdict: "unstable" if rho = max |lambda| > 1 + T / SLOW_S (a mode that grows by e within SLOW_S = 1 s
-or faster), "marginal" if 1 < rho <= 1 + T / SLOW_S (a slow drift, e.g. the null-space positions, which
-the law only steers through the sub-task gradient; a frozen-time analysis of a time-varying loop does
-not decide it), else "stable".
+The loop over one control period T is a map x_{k+1} = Phi_k(x_k), x = [plant state, servo reference
+(servo actuation), actuation-delay ring]; `linearize(scn, t)` runs the scenario to t (paper law, noise
+off) and differentiates the whole one-period map by central finite differences.  Plant coordinates:
+analytic [q1, dq1, q2, dq2]; mujoco qpos, qvel, act (the rest of MuJoCo's state restored from the point
+of linearization); cosserat the master [q1, dq1], then node X, Z (without the clamped base node), element
+angles about Y and their rates.  Verdict: "unstable" if rho = max |lambda| > 1 + T / SLOW_S, "marginal"
+if 1 < rho <= 1 + T / SLOW_S (a slow drift such as the null-space positions), else "stable".
 """
 
 from __future__ import annotations

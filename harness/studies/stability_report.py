@@ -15,8 +15,7 @@ from harness.studies.stability import ClosedLoopMap, LinearizationError, Stabili
 from harness.studies.stability_map import grid_lines
 
 
-def mode_shape(res: Stability, j: int = 0,
-               scale: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+def mode_shape(res: Stability, j: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
     """(rest (m, 2), displaced (m, 2), scale): the slave's points [X, Z] (m) at the point of linearization
     and displaced along the real part of mode j (phase chosen to maximise it), scaled so that the largest
     point displacement is 5 % of the arm's length."""
@@ -27,10 +26,9 @@ def mode_shape(res: Stability, j: int = 0,
     pos = res.shapes["positions"]
     slave = res.shapes["slave"]
     p0 = pos(x0, slave)
-    if scale is None:
-        eps = 1e-6 / max(np.abs(vr).max(), 1e-300)
-        dp = np.abs(pos(x0 + eps * vr, slave) - p0).max() / eps
-        scale = 0.05 * float(np.sum(slave.rest_lengths)) / max(dp, 1e-300)
+    eps = 1e-6 / max(np.abs(vr).max(), 1e-300)
+    dp = np.abs(pos(x0 + eps * vr, slave) - p0).max() / eps
+    scale = 0.05 * float(np.sum(slave.rest_lengths)) / max(dp, 1e-300)
     return p0, pos(x0 + scale * vr, slave), float(scale)
 
 
@@ -49,9 +47,7 @@ def plot_stability(res: Stability, path, n_modes: int = 2) -> Path:
     ev = res.eigenvalues
     ax.plot(ev.real, ev.imag, "x", ms=5)
     ax.plot(ev[0].real, ev[0].imag, "ro", mfc="none", ms=9)
-    ax.set_aspect("equal")
-    ax.set_xlabel("Re lambda")
-    ax.set_ylabel("Im lambda")
+    ax.set(aspect="equal", xlabel="Re lambda", ylabel="Im lambda")
     ax.set_title(f"one-period spectrum, rho = {res.radius:.5f}", fontsize=9)
     for j, ax in enumerate(axes[1:]):
         j = min(j if j == 0 else _next_distinct(res, j), len(ev) - 1)
@@ -60,11 +56,8 @@ def plot_stability(res: Stability, path, n_modes: int = 2) -> Path:
         ax.plot(p1[:, 0], p1[:, 1], "r.-", lw=1, ms=3, label=f"mode x {sc:.3g}")
         half = 0.6 * float(np.ptp(p0[:, 1]) or 1.0)
         ax.set_xlim(float(p0[:, 0].mean()) - half, float(p0[:, 0].mean()) + half)
-        ax.set_aspect("equal", adjustable="box")
-        ax.set_xlabel("X (m)")
-        ax.set_ylabel("Z (m)")
-        lam = ev[j]
-        ax.set_title(f"|lambda| = {abs(lam):.5f}, {res.frequency(j):.1f} Hz\n"
+        ax.set(aspect="equal", adjustable="box", xlabel="X (m)", ylabel="Z (m)")
+        ax.set_title(f"|lambda| = {abs(ev[j]):.5f}, {res.frequency(j):.1f} Hz\n"
                      + ", ".join(n.removeprefix("octarm_") for n, _ in res.dominant(j, 3)), fontsize=7)
         ax.legend(fontsize=7)
     fig.tight_layout()
@@ -85,55 +78,58 @@ def write_stability(res: Stability, out) -> list[Path]:
     """spectrum.csv (every eigenvalue: real, imag, modulus, angle, frequency, growth, dominant states),
     stability.json (verdict, radius, least stable mode, t, T, h) and stability.png in folder `out`."""
     import csv
+    import io
     import json
 
-    from harness.config.textio import jsonable
+    from harness.config.textio import jsonable, write_atomic
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rows = res.spectrum_rows()
-    p_csv = out / "spectrum.csv"
-    tmp = p_csv.with_suffix(".csv.tmp")
-    with tmp.open("w", newline="", encoding="utf-8") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    tmp.replace(p_csv)
-    p_json = out / "stability.json"
+    buf = io.StringIO(newline="")
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]))
+    w.writeheader()
+    w.writerows(rows)
     summary = {"verdict": res.verdict(), "class": res.verdict_class, "spectral_radius": res.radius,
                "t": res.t, "control_dt": res.T, "fd_step": res.h, "n_states": len(res.names),
                "least_stable": rows[0], "dominant": res.dominant(0, 6),
                "most_negative": rows[res.most_negative()],
                "plant": res.scenario.plant.kind, "actuation": res.scenario.plant.actuation}
-    tmp = p_json.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(jsonable(summary), indent=2) + "\n", encoding="utf-8")
-    tmp.replace(p_json)
-    return [p_csv, p_json, plot_stability(res, out / "stability.png")]
+    return [write_atomic(out / "spectrum.csv", buf.getvalue()),
+            write_atomic(out / "stability.json", json.dumps(jsonable(summary), indent=2) + "\n"),
+            plot_stability(res, out / "stability.png")]
+
+
+def _along(scn: Scenario, times, h=None, on_point=lambda res: None) -> tuple[Stability | None, str]:
+    """`linearize` at each of `times` (s, increasing) on one run of `scn`: (the point of largest spectral
+    radius or None, why the run stopped before the next point or "")."""
+    loop = ClosedLoopMap(scn)
+    worst = None
+    for t in times:
+        try:
+            res = linearize(scn, float(t), h, loop=loop)
+        except LinearizationError as exc:
+            return worst, str(exc)
+        on_point(res)
+        if worst is None or res.radius > worst.radius:
+            worst = res
+    return worst, ""
 
 
 # --- predicted stability map -------------------------------------------------------------------------
 def radius_along(scn: Scenario, times) -> dict:
-    """The least stable linearization along one run of `scn`: `linearize` at each of `times` (s, increasing)
-    on the same run.  Returns {radius (max over the points reached), t (where), class, frequency_hz,
-    dominant, reached (the last time linearized), stopped (message if the run stopped before the next
-    point, else ""), flip (the mode is real negative: a sign flip every period)}; radius nan if not even
-    the first point was reached."""
-    loop = ClosedLoopMap(scn)
-    best = {"radius": float("nan"), "t": float("nan"), "class": "not reached", "frequency_hz": float("nan"),
-            "dominant": "", "reached": float("nan"), "stopped": "", "flip": False}
-    for t in times:
-        try:
-            res = linearize(scn, float(t), loop=loop)
-        except LinearizationError as exc:
-            best["stopped"] = str(exc)
-            break
-        best["reached"] = res.t
-        if not res.radius <= best["radius"]:  # also replaces nan
-            best.update(radius=res.radius, t=res.t, frequency_hz=res.frequency(0),
-                        dominant=";".join(n for n, _ in res.dominant(0, 3)),
-                        flip=bool(abs(np.angle(res.eigenvalues[0])) > 0.99 * math.pi))
-            best["class"] = res.verdict_class
-    return best
+    """The least stable linearization along one run of `scn` (`_along`): {radius, t, class, frequency_hz,
+    dominant, reached (the last time linearized), stopped, flip (a real negative mode)}; radius nan and
+    class "not reached" if not even the first time was reached."""
+    reached = []
+    res, stopped = _along(scn, times, on_point=lambda r: reached.append(r.t))
+    if res is None:
+        nan = float("nan")
+        return {"radius": nan, "t": nan, "class": "not reached", "frequency_hz": nan, "dominant": "",
+                "reached": nan, "stopped": stopped, "flip": False}
+    return {"radius": res.radius, "t": res.t, "class": res.verdict_class, "frequency_hz": res.frequency(0),
+            "dominant": ";".join(n for n, _ in res.dominant(0, 3)), "reached": reached[-1],
+            "stopped": stopped, "flip": bool(abs(np.angle(res.eigenvalues[0])) > 0.99 * math.pi)}
 
 
 def predicted_map(kns, etas, overrides=(), times=(0.0,), say=lambda s: None) -> list[dict]:
@@ -166,31 +162,15 @@ def predicted_markdown(rows: list[dict], sim: list[dict] | None = None) -> str:
             txt += " / sim: " + ("ok" if s["status"] == "ok" else f"diverged {s['t_end']:.3f} s")
         return txt
 
-    lines = grid_lines(rows, text)
-    return "\n".join(lines)
+    return "\n".join(grid_lines(rows, text))
 
 
-def agreement(pred: list[dict], sim: list[dict]) -> list[dict]:
-    """Per cell: predicted diverging (class "unstable") against simulated diverging (status != "ok");
-    rows {kn, eta_b, predicted, simulated, agree}."""
-    simc = {(r["kn"], r["eta_b"]): r for r in sim}
-    out = []
-    for r in pred:
-        s = simc[r["kn"], r["eta_b"]]
-        p_div, s_div = r["class"] == "unstable", s["status"] != "ok"
-        out.append({"kn": r["kn"], "eta_b": r["eta_b"], "predicted": r["class"], "radius": r["radius"],
-                    "simulated": s["status"], "t_end": s["t_end"], "agree": p_div == s_div})
-    return out
-
-
-__all__ = ["agreement", "mode_shape", "plot_stability", "predicted_map", "predicted_markdown", "radius_along",
+__all__ = ["mode_shape", "plot_stability", "predicted_map", "predicted_markdown", "radius_along",
            "write_stability"]
 
 
 def print_modes(res, modes: int) -> None:
     """`teleop stability --at T`: the verdict, the `modes` least stable modes and the most negative one."""
-    import math
-
     print(res.verdict())
     print(f"{len(res.names)} states; least stable modes (|lambda|, angle, Hz, growth 1/s, dominant):")
     for j in range(min(modes, len(res.eigenvalues))):
@@ -208,21 +188,14 @@ def least_stable_along(scn, times, h, out):
     """`teleop stability --at T1,T2,...`: one run linearized at each time (a table printed), the least
     stable point's files written to `out`; returns it with `.stopped` = why the run ended early ("" if
     it did not).  Raises LinearizationError when not even the first time could be linearized."""
-    loop = ClosedLoopMap(scn)
-    worst, stopped = None, ""
-    print("t (s)   radius     class     Hz       dominant")
-    for t in times:
-        try:
-            res = linearize(scn, t, h, loop=loop)
-        except LinearizationError as exc:
-            if worst is None:
-                raise
-            stopped = str(exc)
-            break
+    def row(res) -> None:
         dom = ", ".join(n for n, _ in res.dominant(0, 3))
         print(f"{res.t:6.3f}  {res.radius:.6f}  {res.verdict_class:8s}  {res.frequency(0):7.2f}  {dom}")
-        if worst is None or res.radius > worst.radius:
-            worst = res
+
+    print("t (s)   radius     class     Hz       dominant")
+    worst, stopped = _along(scn, times, h, row)
+    if worst is None:
+        raise LinearizationError(stopped)
     write_stability(worst, out)
     print(f"least stable: {worst.verdict()}")
     if stopped:

@@ -1,12 +1,6 @@
-"""The Cosserat-rod plant (plant.kind = "cosserat"): a PyElastica rod slave and the analytic rigid master.
-
-* `rod`: `CosseratSlave`, the planar Octarm as one Cosserat rod (model, actuation, sensing by CC fit);
-* `kernels`: its compiled step (loads, position Verlet, CC fit, rest strains, active loads, contact);
-* `plant`: `CosseratPlant`, the scenario's plant (protocol `harness.plant.stepped.SteppedPlant`);
-* `contact`: the environment objects acting on every rod node;
-* `limits`: the explicit stable step, the refused configurations, interrupts and divergence;
-* `pyelastica`: the PyElastica internals the kernels call, behind a version guard.
-"""
+"""The Cosserat-rod plant (plant.kind = "cosserat"): a PyElastica rod slave (`rod`, compiled step `kernels`,
+`limits`, `contact`, PyElastica internals behind a version guard in `pyelastica`) and the analytic rigid
+master (`plant.CosseratPlant`)."""
 
 from harness.plant.cosserat.contact import NODE_RADIUS, contact_arrays
 from harness.plant.cosserat.plant import CosseratPlant, rod_dt

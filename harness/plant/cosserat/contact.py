@@ -1,30 +1,7 @@
-"""Environment objects on the Cosserat plant: the `[environment.objects.<name>]` of the scenario acting on
-every node of the rod (`harness.plant.cosserat.plant`), through the penalty law of PyElastica's
-`RodPlaneContact` / `RodSphereContact` compiled into the rod's own step
-(`harness.plant.cosserat.kernels.contact_forces`).
-
-Geometry (slave task frame [X, Z], base at the origin, as `EnvObject.position`).  Each node j >= 1 of the
-centreline is a ball of radius `NODE_RADIUS` (= the MuJoCo plant's segment capsule radius, 0.02 m), so
-contact can happen anywhere along the body.  `plane`: the wall through `position` with unit `normal`
-toward the free side; `sphere`: centre `position`, radius size[0].  `box`: not supported (PyElastica 1.0
-has rod-plane, rod-sphere, rod-cylinder and rod-rod contact only, no box): ConfigError.
-
-Law (frictionless; PyElastica's normal spring-damper, evaluated per node): penetration g_j > 0 of node j
-gives the force (k g_j - c_j n . v_j) n on that node (n the object's outward normal at the node), with
-k = `stiffness` (N/m) per node and c_j = 2 `damping_ratio` sqrt(k m_j), m_j the node's mass.  A static
-push carried by one node (the tip against a plane or a sphere) therefore gives F = k g, as the MuJoCo
-plant's contact (harness.plant.environment); when several nodes touch, the total is k times the sum of
-their penetrations (a contact stiffness per node, not per unit length).  Differences from PyElastica's
-classes: the law is evaluated at the nodes instead of the element centres (PyElastica's plane check at
-element centres misses a tip pushed head-on into a wall by half an element), PyElastica's extra plane
-"response force" (which cancels the normal part of the rod's own load and so makes the static
-penetration zero, not F / k) is not applied, and there is no friction.  As in PyElastica the force is
-not clamped at 0 (a fast separation can pull briefly).
-
-Sensing: F2 = the contact force ON the tip node (`tip_force`), N, slave frame; the summary `summary`
-has the record's `contact` layout [nodes in contact, net contact force on the rod X, Z (N), min signed
-distance node-object (m, < 0 = penetration; 0 without objects), tip node in contact (0/1)].
-"""
+"""Environment objects on the Cosserat plant: the scenario's `[environment.objects.<name>]` acting on every
+rod node through PyElastica's plane / sphere penalty law compiled into the rod's step
+(`kernels.contact_forces`); geometry, law, its differences from PyElastica and the sensed summary:
+docs/plants.md, "Contact on the rod"."""
 
 from __future__ import annotations
 

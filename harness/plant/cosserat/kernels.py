@@ -1,21 +1,8 @@
-"""Compiled physics of the planar Octarm Cosserat rod (kernels for `harness.plant.cosserat.rod`).
-
-The maths, the frames and the parameter mapping are documented in `harness.plant.cosserat.rod`; this
-module holds the numba kernels only:
-
-* `rod_loads`: the elastic, damping, active and external loads of one step, written into the
-  PyElastica rod's own arrays (`internal_forces`, `internal_torques`, `external_forces`,
-  `external_torques`), from the strains computed by PyElastica's kernels
-  (`_compute_shear_stretch_strains`, `_compute_bending_twist_strains`, `_compute_dilatation_rate`,
-  `_inv_rotate`, through `harness.plant.cosserat.pyelastica`);
-* `run_steps`: position-Verlet steps (PyElastica's `PositionVerlet` scheme: half drift, loads,
-  kick, half drift) compiled into one loop with PyElastica's own update kernels
-  (`overload_operator_kinematic_numba`, `_update_accelerations`), so a step has no Python overhead;
-* `cc_fit`: the least-squares constant-curvature fit of a section's nodes (and its rates).
-
-Planar embedding: plane point [X, Z] -> (X, 0, Z); the rod's directors are d1 = (cos p, 0, -sin p),
-d2 = +Y, d3 = (sin p, 0, cos p) for an element at tangent angle p (from +Z toward +X), so a
-positive curvature k is a positive rotation about d2 = +Y and is kappa[1] in PyElastica's arrays.
+"""Compiled physics of the planar Octarm Cosserat rod (`harness.plant.cosserat.rod`; maths, frames and
+parameters: docs/plants.md, "The Cosserat rod's model"): `rod_loads` (elastic, damping, active and
+external loads from the strains of PyElastica's kernels, `harness.plant.cosserat.pyelastica`), `run_steps`
+(position Verlet with PyElastica's update kernels in one loop), `fit_rod` (the least-squares CC fit),
+`rest_strains`, `active_loads`, `muscle_loads`.
 """
 
 from __future__ import annotations
@@ -41,19 +28,12 @@ def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_len
               eta_e, eta_v, base_Q, base_B, base_eta, base_kappa0, act_n, act_m, act_m_base,
               node_force, tip_force, analytic_law, objs, cdamp, f_contact, dt, f_int, tau_int, f_ext,
               tau_ext):
-    """Loads of one step into f_int (3, nn), tau_int (3, ne), f_ext, tau_ext (see module cosserat).
-
-    eta_e (3, ne): Kelvin-Voigt viscosity of [shear, shear, axial] strain rates (N s);
-    eta_v (3, nv): of the curvature rates at the hinges (N m^2 s), applied implicitly;
-    act_n (ne,): active axial force (N, positive extends); act_m (3, nv), act_m_base (3,): active
-    couples at the hinges and the base half-element (N m, positive bends toward +kappa);
-    node_force (3, nn): gravity; tip_force (3,); objs (no, 6), cdamp (no, nn + 1), f_contact (3, nn) out:
-    environment contact (`contact_forces`); analytic_law: 1 for the energy
-    1/2 B (kappa - kappa0)^2 / eps (CC-consistent), 0 for the linear law B (kappa - kappa0).
-    """
+    """Loads of one step into f_int (3, nn), tau_int (3, ne), f_ext, tau_ext.  eta_e (3, ne) N s, eta_v
+    (3, nv) N m^2 s (implicit): Kelvin-Voigt viscosities; act_n (ne,) N (positive extends), act_m (3, nv),
+    act_m_base (3,) N m: active loads; node_force (3, nn) gravity; tip_force (3,); objs, cdamp,
+    f_contact: `contact_forces`; analytic_law 1: m = B (kappa - kappa0) / eps, 0: B (kappa - kappa0)."""
     ne = lengths.shape[0]
-    nv = ne - 1
-    nn = ne + 1
+    nv, nn = ne - 1, ne + 1
     _compute_shear_stretch_strains(pos, volume, lengths, tangents, radius, rest_lengths, rest_vor,
                                    dil, vdil, Q, sigma)
     _compute_bending_twist_strains(Q, rest_vor, kappa)
@@ -97,8 +77,7 @@ def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_len
     pair[:, :, 1] = Q[:, :, 0]
     half0 = 0.5 * rest_lengths[0]
     kb = _inv_rotate(pair)[:, 0] / half0
-    mb = np.empty(3)
-    wb = 0.0
+    mb, wb = np.empty(3), 0.0
     for i in range(3):
         dk = kb[i] - base_kappa0[i]
         el = base_B[i] * dk
@@ -160,10 +139,7 @@ def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_len
     # (J_i / (e_i dt)) (w_i' - w_i) = tau_i - sum_hinges g (w' differences); g = eta / (D0 eps)
     if dt > 0.0:
         g = np.empty(nv)
-        a = np.empty(ne)
-        b = np.empty(ne)
-        c = np.empty(ne)
-        r = np.empty(ne)
+        a, b, c, r = np.empty(ne), np.empty(ne), np.empty(ne), np.empty(ne)
         for i in range(3):
             for k in range(nv):
                 g[k] = eta_v[i, k] / rest_vor[k]
@@ -213,8 +189,7 @@ def run_steps(nsteps, dt, pos, vel, Q, omega, acc, alpha, mass, J, invJ, volume,
               shear_matrix, bend_matrix, eta_e, eta_v, base_Q, base_B, base_eta, base_kappa0, act_n,
               act_m, act_m_base, node_force, tip_force, analytic_law, objs, cdamp, f_contact, f_int, tau_int,
               f_ext, tau_ext):
-    """`nsteps` position-Verlet steps of size dt (PyElastica's PositionVerlet order); returns False
-    as soon as the state is not finite."""
+    """`nsteps` position-Verlet steps of size dt (PyElastica's PositionVerlet order), in place."""
     half = 0.5 * dt
     for _ in range(nsteps):
         overload_operator_kinematic_numba(half, pos, Q, vel, omega)
@@ -230,24 +205,14 @@ def run_steps(nsteps, dt, pos, vel, Q, omega, acc, alpha, mass, J, invJ, volume,
             for k in range(omega.shape[1]):
                 omega[i, k] += dt * alpha[i, k]
         overload_operator_kinematic_numba(half, pos, Q, vel, omega)
-    for i in range(3):
-        for k in range(pos.shape[1]):
-            if not np.isfinite(pos[i, k]):
-                return False
-    return True
 
 
 @njit(cache=True)
 def contact_forces(pos, vel, objs, cdamp, f_contact):
-    """Frictionless penalty contact of the rod's nodes with the environment objects, into f_contact (3, nn)
-    (N, world frame, force ON the rod; the clamped base node 0 gets none).
-
-    objs (no, 6) rows [kind, X, Z, nX, nZ, R]: kind 0 = plane through (X, Z) with unit normal (nX, nZ)
-    toward the free side, 1 = sphere of centre (X, Z) and radius R; the last column of a plane is the
-    node contact radius r, of a sphere R + r.  cdamp (no, nn + 1): [k, c_1 .. c_nn] per object (k N/m,
-    c_j N s/m of node j).  The law of PyElastica's RodPlaneContact / RodSphereContact (Gazzola et al.
-    2018, eq. 4.8): penetration g = r - n . (x_j - X) (plane), g = R + r - |x_j - X| (sphere, n the unit
-    vector from the centre); if g > 0 the force is (k g - c n . v_j) n (not clamped, as PyElastica)."""
+    """Frictionless penalty contact ON the rod's nodes j >= 1, into f_contact (3, nn) (N, world frame):
+    objs (no, 6) rows [kind (0 plane, 1 sphere), X, Z, nX, nZ, r (plane) or R + r (sphere)], cdamp
+    (no, nn + 1) rows [k N/m, c_j N s/m]; penetration g > 0 gives (k g - c n . v_j) n (Gazzola et al.
+    2018, eq. 4.8; docs/plants.md, "Contact on the rod")."""
     nn = pos.shape[1]
     for i in range(3):
         for j in range(nn):
@@ -283,17 +248,11 @@ def _wrap(a):
 
 @njit(cache=True)
 def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
-    """Least-squares CC fit of each section's nodes; see `harness.plant.cosserat.rod` (Sensing).
-
-    xz, vxz (nn, 2): node positions and velocities [X, Z]; bounds (4,): section boundary nodes.
-    Writes q2 = [d, k] and dq2 (first-order rates) in place.
-    """
+    """Least-squares CC fit (docs/plants.md, Sensing) of the nodes xz, rates vxz (nn, 2) [X, Z] of each
+    section (boundary nodes bounds (4,)) into q2 = [d, k], dq2 (first-order rates)."""
     nn = xz.shape[0]
     ne = nn - 1
-    phi = np.empty(ne)
-    phid = np.empty(ne)
-    c = np.empty(ne)
-    cd = np.empty(ne)
+    phi, phid, c, cd = np.empty(ne), np.empty(ne), np.empty(ne), np.empty(ne)
     prev = 0.0
     for j in range(ne):
         ex = xz[j + 1, 0] - xz[j, 0]
@@ -313,9 +272,7 @@ def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
         j0 = bounds[s]
         j1 = bounds[s + 1]
         m = j1 - j0
-        arc = np.empty(m)
-        smid = np.empty(m)
-        w = np.empty(m)
+        arc, smid, w = np.empty(m), np.empty(m), np.empty(m)
         for t in range(m):
             arc[t] = c[j0 + t]
         k = 0.0
@@ -324,15 +281,13 @@ def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
             for t in range(m):
                 smid[t] = acc + 0.5 * arc[t]
                 acc += arc[t]
-            sbar = 0.0
-            pbar = 0.0
+            sbar, pbar = 0.0, 0.0
             for t in range(m):
                 sbar += smid[t]
                 pbar += phi[j0 + t]
             sbar /= m
             pbar /= m
-            sxx = 0.0
-            sxy = 0.0
+            sxx, sxy = 0.0, 0.0
             for t in range(m):
                 sxx += (smid[t] - sbar) ** 2
                 sxy += (smid[t] - sbar) * (phi[j0 + t] - pbar)
@@ -361,8 +316,7 @@ def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
         for t in range(m):
             w[t] = (smid[t] - sbar) / sxx if m > 1 else 0.0
         # rates: a' = (da/dc) c' + (da/dk) k', k' = sum w (phi' - k s') (exact on CC data), iterated
-        dk = 0.0
-        dd = 0.0
+        dk, dd = 0.0, 0.0
         for _ in range(3):
             dd = 0.0
             dk_new = 0.0
@@ -390,11 +344,8 @@ def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
 def fit_rod(pos, vel, xz, vxz, bounds, n_iter, q2, dq2):
     """`cc_fit` of the rod's nodes pos, vel (3, nn) (the plane's X, Z rows copied into the scratch xz, vxz
     (nn, 2)) into q2, dq2 (6,)."""
-    for j in range(pos.shape[1]):
-        xz[j, 0] = pos[0, j]
-        xz[j, 1] = pos[2, j]
-        vxz[j, 0] = vel[0, j]
-        vxz[j, 1] = vel[2, j]
+    xz[:, 0], xz[:, 1] = pos[0], pos[2]
+    vxz[:, 0], vxz[:, 1] = vel[0], vel[2]
     cc_fit(xz, vxz, bounds, n_iter, q2, dq2)
 
 
@@ -419,13 +370,9 @@ def _at_hinges(v, sec, l0, out, base):
 
 @njit(cache=True)
 def rest_strains(q2c, n, L0, sec, l0, rest_sigma, rest_kappa, base_kappa0):
-    """Servo command q2c (6,) = [d, k] -> the rod's rest strains (see `harness.plant.cosserat.rod`,
-    Actuation): rest_sigma (3, ne) <- [0, 0, (d / L0) sinc(k h / 2) - 1] per element (h = d / n),
-    rest_kappa (3, nv) <- [0, k d / L0 (rest-length weighted mean at the hinges), 0], base_kappa0 (3,)
-    <- [0, k_1 d_1 / L0_1, 0].  L0 (3,) m, sec (ne,) section of each element, l0 (ne,) m.
-    Element by element the arithmetic of the former numpy expressions (same numbers)."""
-    sig = np.empty(3)
-    kap = np.empty(3)
+    """Servo command q2c (6,) = [d, k] -> rest_sigma (3, ne) <- [0, 0, (d / L0) sinc(k d / 2n) - 1],
+    rest_kappa (3, nv) <- [0, k d / L0 (`_at_hinges`), 0], base_kappa0 (3,) <- [0, k_1 d_1 / L0_1, 0]."""
+    sig, kap = np.empty(3), np.empty(3)
     for i in range(3):
         d = q2c[i]
         k = q2c[3 + i]
@@ -447,11 +394,28 @@ def active_loads(T2, q2, sec, l0, act_n, act_m, act_m_base):
     """Generalized forces T2 (6,) [T_d N, T_k N m] at the fitted q2 (6,) -> the internal active loads
     (see `harness.plant.cosserat.rod`, Actuation): mu = T_k / d, act_n (ne,) <- T_d - k mu per element,
     act_m (3, nv) <- [0, mu (rest-length weighted mean at the hinges), 0], act_m_base (3,) <- [0, mu_1, 0]."""
-    mu = np.empty(3)
-    ax = np.empty(3)
+    mu, ax = np.empty(3), np.empty(3)
     for i in range(3):
         mu[i] = T2[3 + i] / q2[i]
         ax[i] = T2[i] - q2[3 + i] * mu[i]
+    _section_loads(mu, ax, sec, l0, act_n, act_m, act_m_base)
+
+
+@njit(cache=True)
+def muscle_loads(p, radius, sec, l0, act_n, act_m, act_m_base):
+    """Muscle group forces p (6,) [p+_1, p-_1, ...] (N, pushing, at s = +r_i, -r_i; radius (3,) m) -> the
+    active loads of their fibres by virtual work per unit length (a fibre l_s = int (1 - s kappa) ds):
+    axial force p+ + p- and couple mu = -r (p+ - p-) on every cross-section of the section."""
+    mu, ax = np.empty(3), np.empty(3)
+    for i in range(3):
+        mu[i] = -radius[i] * (p[2 * i] - p[2 * i + 1])
+        ax[i] = p[2 * i] + p[2 * i + 1]
+    _section_loads(mu, ax, sec, l0, act_n, act_m, act_m_base)
+
+
+@njit(cache=True)
+def _section_loads(mu, ax, sec, l0, act_n, act_m, act_m_base):
+    """Per-section couple mu (3,) N m and axial force ax (3,) N -> act_n (ne,), act_m (3, nv), act_m_base."""
     ne = sec.shape[0]
     for j in range(ne):
         act_n[j] = ax[sec[j]]

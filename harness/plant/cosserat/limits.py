@@ -1,27 +1,6 @@
-"""Limits of the Cosserat rod's explicit stepping and what it does on faults (`CosseratSlave`).
-
-* Stable step: `stable_dt` is a CFL-type estimate: min over sections of 2 / omega_max (axial and shear
-  waves 2 c / h, c = sqrt(EA / rho A), sqrt(GA / rho A); element rotation omega^2 = GA / rho I + 4 EI /
-  (rho I h^2)), reduced for the explicit extension damping by sqrt(1 + zeta^2) - zeta, times a safety
-  factor 0.5 (not calibrated against measured divergence limits).
-* Cost: a configuration that needs more than `MAX_STEPS_PER_CONTROL` = 1000 rod steps per control step
-  (per 1 ms for the rod alone) is refused before anything runs (`check_steps_per_control`, one line).
-  The default rod (10 elements per section) needs 14 rod steps per 1 ms; the step falls as 1 / n^2 with
-  n elements per section once the explicit extension damping sets it: 50 elements need 254, 100 need
-  1004 (refused: lower plant.extension_viscosity or use fewer elements).  At the limit one control step
-  costs 1000 rod steps, about 70 times the default's (a 20-s run at 10 elements: minutes instead of
-  seconds; each rod step costs more with more elements).  The limit keeps every configuration up to 50
-  elements per section with a margin of 4, and refuses masses or stiffnesses off by orders of magnitude
-  (a unit error: masses of 1e-6 kg need about 1e7 rod steps per control step).
-* Interrupts: `step` runs its rod steps in compiled batches of at most `BATCH_STEPS`; between batches
-  Python's signal handlers run (Ctrl-C) and, if `stop` (an Event, e.g. the harness's run-stop flag) is
-  set after a batch, `step` raises `RodStopped` (a KeyboardInterrupt) with the state of that batch: a
-  run stops within one control step of the first Ctrl-C, and a second Ctrl-C within one batch.
-* Divergence: a non-finite node position, velocity or angular velocity, a node farther than
-  `EXPLODING_LENGTHS` rod lengths from the base, or an arithmetic exception of the compiled step
-  (ZeroDivisionError on a collapsed element, FloatingPointError, OverflowError) ends `step` with False:
-  the plant reports it as a diverged run (status "diverged", with its time), never as an error.
-"""
+"""Limits of the Cosserat rod's explicit stepping and what it does on faults (`CosseratSlave`): the stable
+step `stable_dt`, the refused configurations (`check_steps_per_control`), interrupts (`RodStopped`) and
+divergence; described in docs/plants.md, "The Cosserat rod's model"."""
 
 from __future__ import annotations
 
@@ -66,12 +45,9 @@ def stable_dt(params: SlaveParams, elements_per_section: int = DEFAULT_ELEMENTS,
     w_rot = np.sqrt(GA / rhoI + 4.0 * EI / (rhoI * h * h))
     z_ax = eta_a * w_ax / (2.0 * EA)
     z_sh = eta_a * w_sh / (2.0 * GA)
-    dts = np.concatenate([
-        2.0 / w_ax * (np.sqrt(1 + z_ax**2) - z_ax),
-        2.0 / w_sh * (np.sqrt(1 + z_sh**2) - z_sh),
-        2.0 / w_rot,
-    ])
-    return float(SAFETY * dts.min())
+    dts = (2.0 / w_ax * (np.sqrt(1 + z_ax**2) - z_ax), 2.0 / w_sh * (np.sqrt(1 + z_sh**2) - z_sh),
+           2.0 / w_rot)
+    return float(SAFETY * min(x.min() for x in dts))
 
 
 def auto_dt(control_dt: float, stable: float) -> float:

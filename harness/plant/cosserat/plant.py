@@ -1,31 +1,12 @@
-"""The Cosserat-rod plant of a scenario: the rod slave (`harness.plant.cosserat.rod.CosseratSlave`) and the
-rigid 2-link master, as a `harness.plant.stepped.SteppedPlant` for `harness.loop.stepped_loop`.
-
-* Slave: one PyElastica Cosserat rod built from the plant slave parameters (EI = Kb, EA = Ke L0,
-  rho A = m / L0, GA = shear_factor EA), material damping plant.bending_viscosity (eta_b, N m^2 s)
-  and plant.extension_viscosity (eta_a, N s) per section, base clamped, gravity.  Servo actuation:
-  q2_ref becomes the rod's rest strains (the section's own stiffness is the servo; dq2_ref is not
-  used: the rod has no velocity servo), plus, if plant.servo_feedforward, the feed-forward
-  T2 - dV/dq2(q2) as internal section loads, with V = sum 1/2 Kb d k^2 + 1/2 Ke (d - L0)^2 the CC
-  elastic energy of the plant slave at the fitted q2 of the last `true_state`: the rest-strain servo
-  replaces the passive stiffness the controller's T2 compensates (eq. 18 includes it in N2), so the
-  feed-forward keeps the inertial, gravity and damping part (feeding the whole T2 cancels the
-  rod's stiffness about q2_ref and makes the closed loop diverge within 25 ms: measured).
-  Torque actuation: T2 as internal section loads.  q2 is sensed by the
-  least-squares CC fit of each section (`CosseratSlave.sense`).
-* Master: the analytic master dynamics (`controllers.master.master_accel`, paper eq. 1, which MuJoCo's
-  master matches to round-off), classical RK4 with steps of at most 1 ms (`master_rk4`, compiled here).
-* Interaction forces: F1 on the master tip (J1^T F1), F2 on the rod's tip node.
-* Environment (`harness.plant.cosserat.contact`): plane and sphere objects act on every rod node (PyElastica's
-  penalty law, per node stiffness k); `forces` gives the true tip forces (F2 = constant + contact force
-  on the tip node) and the contact summary for the stepped loop's F_true / contact columns.
-* Time step: plant.cosserat.dt, or "auto" = control_dt / m, the largest below the rod's
-  explicit-stability estimate `stable_dt`; a set dt must be <= stable_dt and divide control_dt.
-* Recording geometry (world frame, bases at (0, -0.3, 0) master and (0, 0.3, 0) slave as in the
-  MJCF scene): "centreline" (3 n + 1, 3) rod nodes, "sections" (4, 3) section boundaries,
-  "master" (3, 3) master base, elbow, tip.  `geometry()` gives them for the current state; in a run
-  the loop calls `record(k)` (keeps the rod nodes and the master state of step k) and `finish` computes
-  the recorded arrays once at the end (same numbers, no per-step geometry work).
+"""The Cosserat-rod plant of a scenario (`CosseratPlant`, a `harness.plant.stepped.SteppedPlant`): the rod
+slave (`CosseratSlave`) and the analytic master (eq. 1, RK4 steps of at most 1 ms, `master_rk4`).
+Actuation: servo = q2_ref as rest strains plus, with plant.servo_feedforward, T2 - dV/dq2 at the fitted
+q2 (`feedforward`: the rest-strain servo replaces the stiffness T2 compensates); torque = T2 as
+internal loads; muscle = the chain's groups (plant.muscle_*): commands `chain_map.muscle_commands`
+(sensed q2, T2) clipped to [0, F_max], the forces `muscle_force` (N) held over each control period T,
+then act += (p - act)(1 - e^(-T/tau)) (MuJoCo's filterexact).  Sensing: the CC fit of each section.
+Forces: F1 on the master tip, F2 plus contact on the rod's tip node.  Time step: `rod_dt`.  Geometry
+(world frame): "centreline" (3 n + 1, 3), "sections" (4, 3), "master" (3, 3); docs/plants.md.
 """
 
 from __future__ import annotations
@@ -40,6 +21,7 @@ from controllers import master as master_model
 from controllers import slave as slave_model
 from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
+from harness.plant.chain_map import muscle_commands
 from harness.plant.cosserat import contact as rod_contact
 from harness.plant.cosserat.rod import CosseratSlave, auto_dt, check_steps_per_control, stable_dt
 from harness.plant.initial import InitialStateError, initial_state
@@ -63,11 +45,7 @@ _elastic_kernel = njit(cache=True)(slave_model.elastic_kernel)
 def master_rk4(mpk, s, T1, F1, h, nsub):
     """nsub classical RK4 steps of h (s) of the master, in place on s (4,) = [q1, dq1], T1 (2,) N m and
     the tip force F1 (2,) N held.  False on a singular mass matrix or a non-finite state."""
-    k1 = np.empty(4)
-    k2 = np.empty(4)
-    k3 = np.empty(4)
-    k4 = np.empty(4)
-    tmp = np.empty(4)
+    k1, k2, k3, k4, tmp = np.empty(4), np.empty(4), np.empty(4), np.empty(4), np.empty(4)
     for _ in range(nsub):
         ok = _master_accel(mpk, s, T1, F1, k1)
         for i in range(4):
@@ -101,9 +79,7 @@ def feedforward(T2, q2, spk, out):
 def _field_of(msg: str, scn: Scenario) -> str:
     """Scenario field names for CosseratSlave's messages."""
     slave = "plant.slave." if scn.plant.slave is not None else "slave."
-    msg = msg.replace("plant.cosserat.slave.", slave)
-    msg = msg.replace("plant.cosserat.actuation", "plant.actuation")
-    return msg
+    return msg.replace("plant.cosserat.slave.", slave).replace("plant.cosserat.actuation", "plant.actuation")
 
 
 def rod_dt(scn: Scenario) -> tuple[float, float]:
@@ -151,7 +127,8 @@ class CosseratPlant:
                 scn.plant_slave, c.elements_per_section, dt=dt,
                 material_damping=(scn.plant.bending_viscosity, scn.plant.extension_viscosity),
                 shear_factor=c.shear_factor, actuation=scn.plant.actuation,
-                rotary_radius=c.rotary_radius, elastic_law=c.elastic_law)
+                rotary_radius=c.rotary_radius, elastic_law=c.elastic_law,
+                muscle_radius=scn.plant.muscle_radius)
         except ValueError as exc:
             raise ConfigError(_field_of(str(exc), scn), path="plant.cosserat") from None
         self.actuation = scn.plant.actuation
@@ -167,11 +144,15 @@ class CosseratPlant:
         self._q_ref = np.zeros(6)
         self._ff = np.zeros(6)
         self._spk = scn.plant_slave.packed()
+        self._fmax = np.repeat(np.asarray(scn.plant.muscle_max_force, dtype=float), 2)
+        self._tau = np.repeat(np.asarray(scn.plant.muscle_time_constant, dtype=float), 2)
+        self.muscle_force = np.zeros(6)  # N, muscle group forces (the actuator state)
+        self._ctrl = np.zeros(6)  # N, muscle commands clipped to [0, F_max]
+        self.saturated = 0  # muscle group-steps commanded outside [0, F_max]
         nn = 3 * self.slave.n + 1
         self._geo = {"centreline": np.zeros((nn, 3)), "sections": np.zeros((4, 3)),
                      "master": np.zeros((3, 3))}
-        self._q2 = np.zeros(6)
-        self._dq2 = np.zeros(6)
+        self._q2, self._dq2 = np.zeros(6), np.zeros(6)  # the last CC fit (`true_state`)
         # recording (`record` / `finish`): per control step the rod nodes and the master state only; the
         # recorded geometry is computed from them once at the end
         self._pos_hist = np.zeros((scn.n_steps, 3, nn))
@@ -198,11 +179,17 @@ class CosseratPlant:
         self._T1[:] = 0.0
         self._T2[:] = 0.0
         self._q_ref[:] = state0[4:10]
+        self.muscle_force[:] = 0.0
+        self._ctrl[:] = 0.0
 
     def command(self, T1, T2, q2_ref, dq2_ref, q2_sensed=None) -> None:
         self._T1[:] = T1
         self._T2[:] = T2
         self._q_ref[:] = q2_ref
+        if self.actuation == "muscle":
+            self.saturated += muscle_commands(q2_sensed, self._T2, self.slave.muscle_radius, self._fmax[::2],
+                                              self._ctrl)
+            np.clip(self._ctrl, 0.0, self._fmax, out=self._ctrl)
 
     def advance(self, dt: float) -> int:
         nsub = max(1, math.ceil(dt / MASTER_MAX_H - 1e-9))
@@ -216,6 +203,9 @@ class CosseratPlant:
                 ff = self._ff
                 feedforward(self._T2, self._q2, self._spk, ff)
             ok = self.slave.step(self._q_ref, dt, ff)
+        elif self.actuation == "muscle":
+            ok = self.slave.step(self.muscle_force, dt)
+            self.muscle_force += (self._ctrl - self.muscle_force) * -np.expm1(-dt / self._tau)
         else:
             ok = self.slave.step(self._T2, dt)
         return 0 if ok else 8
@@ -260,10 +250,7 @@ class CosseratPlant:
     def geometry(self) -> dict[str, np.ndarray]:
         """The same arrays every call, updated in place (valid until the next advance)."""
         g = self._geo
-        pos = self.slave._b.position_collection
-        cl = g["centreline"]
-        cl[:] = pos.T
-        cl += SLAVE_BASE
+        cl = np.add(self.slave._b.position_collection.T, SLAVE_BASE, out=g["centreline"])
         g["sections"][:] = cl[self.slave.section_nodes]
         master_points(self.mpk, self._m[None], MASTER_BASE, g["master"][None])
         return g
@@ -273,9 +260,8 @@ class CosseratPlant:
         buffers are sized for the scenario the plant was built for and grow (doubling) for a longer run."""
         if k >= self._pos_hist.shape[0]:
             n = max(k + 1, 2 * self._pos_hist.shape[0])
-            self._pos_hist = np.concatenate([self._pos_hist, np.zeros((n - self._pos_hist.shape[0],
-                                                                       *self._pos_hist.shape[1:]))])
-            self._m_hist = np.concatenate([self._m_hist, np.zeros((n - self._m_hist.shape[0], 4))])
+            self._pos_hist, self._m_hist = (np.concatenate([a, np.zeros((n - len(a), *a.shape[1:]))])
+                                            for a in (self._pos_hist, self._m_hist))
         self._pos_hist[k] = self.slave._b.position_collection
         self._m_hist[k] = self._m
 
@@ -297,4 +283,5 @@ class CosseratPlant:
         s = self.slave
         return {"master_base": tuple(MASTER_BASE.tolist()), "slave_base": tuple(SLAVE_BASE.tolist()),
                 "actuation": self.actuation, "elements_per_section": s.n, "rod_dt": s.dt,
-                "stable_dt": self.stable_dt, "section_nodes": s.section_nodes.tolist()}
+                "stable_dt": self.stable_dt, "section_nodes": s.section_nodes.tolist(),
+                **({"muscle_saturated_steps": self.saturated} if self.actuation == "muscle" else {})}

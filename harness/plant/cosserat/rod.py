@@ -1,148 +1,7 @@
-"""Cosserat-rod plant of the planar 3-section Octarm slave, on PyElastica.
-
-API
----
-    plant = CosseratSlave(params: SlaveParams, elements_per_section=10, dt=None,
-                          material_damping=None, shear_factor=100.0, actuation="servo",
-                          rotary_radius=0.04, elastic_law="analytic")
-    plant.reset(q2, dq2=None)           # CC shape of q2 at rest-strain equilibrium (servo), time = 0
-    plant.step(command (6,), duration, feedforward=None) -> bool   # False if the state diverged
-    plant.sense() -> (q2 (6,), dq2 (6,))                 # least-squares CC fit of each section
-    plant.tip() -> (2,)    plant.tip_velocity() -> (2,)   plant.centreline() -> (n_nodes, 3)
-    plant.external_tip_force(F (2,))                     # constant tip force [FX, FZ], N (held)
-    plant.section_nodes -> (4,) int                      # node indices of the section boundaries
-    plant.time, plant.dt, plant.stable_dt                # s
-    plant.stop                                           # None or an Event: set -> `step` raises RodStopped
-    stable_dt(params, elements_per_section, ...)         # explicit-stability estimate, s
-    check_steps_per_control(dt, control_dt) -> int       # rod steps per control step, ValueError above
-                                                         # MAX_STEPS_PER_CONTROL
-    material_damping_from_slave(params) -> (eta_b (3,), eta_a (3,))
-    hinge_damping(eta_b, h), slide_damping(eta_a, h)     # MuJoCo chain joint damping from the material
-Bad settings raise `ValueError` with one line naming the field, its value and the allowed range
-(fields are named `plant.cosserat.<name>`).
-
-Frames
-------
-The plane [X, Z] (Z up, base at the origin, tangent +Z, k > 0 bends toward +X) is embedded in
-PyElastica's 3-D space as (X, 0, Z).  An element at tangent angle p (from +Z toward +X) has the
-directors d1 = (cos p, 0, -sin p), d2 = +Y, d3 = (sin p, 0, cos p); a positive curvature is a
-positive rotation about d2, i.e. the second component `kappa[1]` of PyElastica's curvature.
-Gravity (gX, gZ) of `SlaveParams.gravity` is (gX, 0, gZ).  Loads stay in the plane, so the rod
-stays planar (out-of-plane and twist components stay at round-off level).
-
-Discretization and material
----------------------------
-One `elastica.CosseratRod` with n = `elements_per_section` elements per section (3 n elements,
-3 n + 1 nodes, section boundaries at nodes 0, n, 2n, 3n), rest element length l0_i = L0_i / n.
-Per section i (SlaveParams fields: L0 = rest_lengths, Kb = bending_stiffness, Ke =
-extension_stiffness, m = masses):
-
-    EI_i = Kb_i                        (N m^2; twist GJ_i = 2/3 EI_i, Poisson 0.5)
-    EA_i = Ke_i L0_i                   (N; so 1/2 EA (d/L0 - 1)^2 L0 = 1/2 Ke (d - L0)^2)
-    GA_i = shear_factor * EA_i         (N; default 100: shear lowers the first mode by 0.08 %)
-    rho A_i = m_i / L0_i               (kg/m of rest length: each section's mass uniform on it)
-    rho I_i = slice_inertia_i or rho A_i rotary_radius^2 / 4   (kg m; rotary inertia, a disc)
-
-Masses are lumped to nodes (half of each adjacent element), rotary inertia per element is
-diag(rho I, rho I, 2 rho I) l0.  Hinges (Voronoi points) inside a section carry EI_i; the hinge at
-a section boundary carries the series (harmonic) combination of the two half elements,
-D0 / (l0_i / (2 EI_i) + l0_j / (2 EI_j)).
-
-Elastic law.  PyElastica's own law (force S(sigma - sigma0)/e, moment B(kappa - kappa0)/e^3) is
-not the standard one (see shared/api-notes.md).  The rod's `shear_matrix`/`bend_matrix` hold the
-moduli above, and the whole elastic + damping + active load is computed by one compiled kernel
-(`cosserat_rod.rod_loads`) from the strains that PyElastica's kernels compute
-(`_compute_shear_stretch_strains`, `_compute_bending_twist_strains`, `_compute_dilatation_rate`):
-the rod's built-in force law is never evaluated (computing it and subtracting would cancel two
-large numbers).  With sigma, kappa the shear/stretch strain and curvature per *rest* length, e
-the element stretch and eps the Voronoi stretch, the stored energy per rest length is
-
-    elastic_law = "analytic" (default):  W = 1/2 (sigma - sigma0) S (sigma - sigma0)
-                                            + 1/2 (kappa - kappa0) B (kappa - kappa0) / eps
-    elastic_law = "linear":              W = 1/2 (sigma - sigma0) S (sigma - sigma0)
-                                            + 1/2 (kappa - kappa0) B (kappa - kappa0)
-
-so n = S(sigma - sigma0) (material frame) and m = B(kappa - kappa0)/eps (analytic) or
-B(kappa - kappa0) (linear).  kappa / eps is the curvature per *current* length, so on a
-constant-curvature section (kappa = k d / L0, eps = d / L0) the "analytic" energy is exactly
-1/2 Kb d k^2 + 1/2 Ke (d - L0)^2, the energy of `controllers.slave`: the rod then differs from
-the CC model only by its extra freedom (non-constant curvature, shear, rotary inertia), not by
-its material.  Its d/d(eps) adds a chord tension -1/4 sum_adjacent (kappa - kappa0) B (kappa -
-kappa0) / eps^2 per element (the bending-extension coupling of the analytic model: a pure
-moment extends a section by Kb k^2 / (2 Ke)).  The "linear" law is the textbook rod (its
-bending stiffness per current length is EI L0 / d).  Both give a pure end couple M a circular
-arc of curvature M / EI and an axial force F an extension F / EA per unit length (tests).
-The loads are assembled as in PyElastica's discretization: element force = difference of
-Q^T n (+ chord tension); element torque = difference of the hinge couples + trapezoidal
-kappa x m D0 + (sigma + e3) x n l0 + PyElastica's rotary-inertia terms (J w / e) x w and
-J w de/dt / e^2.
-
-Base clamp (second order).  Node 0 is held (its net force is set to zero, its velocity is zero),
-and a half-element rotational spring joins element 0 to the base frame (tangent +Z): its
-curvature is log(Q_0 Q_base^T) / (l0 / 2) with stiffness EI_1 and rest curvature that of
-section 1, so the tangent is clamped at s = 0, not at s = l0 / 2.
-
-Material damping (Kelvin-Voigt, internal)
------------------------------------------
-`material_damping = (eta_b (3,), eta_a (3,))`: bending viscosity eta_b (N m^2 s) and extension
-viscosity eta_a (N s) per section, on the strain rates:
-
-    m += eta_b d(kappa)/dt / eps   (analytic law; / 1 for linear),  d(kappa)/dt ~ (w_j+1 - w_j) / D0
-    n += diag(eta_a, eta_a, eta_a) d(sigma)/dt,    d(sigma)/dt = Q (v_i+1 - v_i) / l0 - w x (sigma + e3)
-
-(the shear viscosity equals eta_a).  It dissipates only strain rates (rigid motions are not
-damped; it is not PyElastica's mass-proportional `AnalyticalLinearDamper`).  The bending part is
-integrated implicitly (backward Euler over the kick, a tridiagonal solve per step) because, on
-the light rotary inertia, an explicit viscous hinge would need steps ~1e-6 s; the extension
-part is explicit (its limit is in `stable_dt`).  Dissipation on a CC section:
-R = 1/2 eta_b d k'^2 + 1/2 (eta_a / L0) d'^2 (at fixed d, resp. k), so the analytic
-generalized damping of SlaveParams maps as
-
-    bending_damping c_k (N m^2 s on k-rates)  <->  eta_b = c_k / L0
-    extension_damping c_d (N s/m on d-rates)  <->  eta_a = c_d L0      (`material_damping_from_slave`)
-
-A chain of rigid segments of length h discretizing the same rod gets hinge damping eta_b / h
-(N m s/rad, like its hinge stiffness EI / h) and slide damping eta_a / h (N s/m, like Ke L0 / h):
-`hinge_damping`, `slide_damping`.  Default: eta_b = 0.1 N m^2 s and eta_a = 3 N s in every
-section (`DEFAULT_ETA_B`, `DEFAULT_ETA_A`, = the scenario's plant.bending_viscosity /
-extension_viscosity), i.e. c_k = 0.03 and c_d = 10 in SlaveParams units: first bending mode
-1.28 Hz with a damping ratio of 11 % (`benchmarks/modal_cosserat.py`; README "Cosserat plant").
-
-Actuation
----------
-`actuation="servo"`: the command q2c = [d, k] becomes the rod's rest strains, the section's own
-stiffness is the servo: rest stretch of the elements of section i sigma0_3 = (d_i / L0_i)
-sinc(k_i h_i / 2) - 1 (h_i = d_i / n; the chord of an arc element, so the exact CC node set is the
-discrete rest shape), rest curvature kappa0 = k_i d_i / L0_i inside the section, the rest-length
-weighted mean at boundary hinges, that of section 1 at the base spring.  `feedforward` T2 is added
-as in torque mode.
-`actuation="torque"`: T2 = [T_d (N), T_k (N m)] acts as internal loads (virtual work with the
-current fitted d, k, held during `step`): a uniform active bending couple T_k_i / d_i on the hinges
-of section i (rest-length weighted mean at boundaries, full at the base spring) and an active axial
-force T_d_i - k_i T_k_i / d_i on its elements (theta = k d: T_k dk = (T_k / d) dtheta -
-(k T_k / d) dd, the README's MuJoCo torque mapping).  With the analytic law the static equilibrium
-under T2 is exactly the analytic one.
-
-Sensing
--------
-`sense()`: per section, the chords of its n elements (lengths c_j, angles phi_j from +Z toward
-+X, unwrapped) are fitted by a circle: phi_j = phi_0 + k s_j (least squares in s_j, the arc length
-at the chord's mid-arc), with the chord-to-arc correction a_j = 2 asin(k c_j / 2) / k iterated
-(16 times) with the fit; d = sum a_j.  On points sampled on an exact arc this recovers d and k to
-round-off.  Rates, from the node velocities: k' = sum w_j (phi_j' - k s_j') with w the least-squares
-weights, a_j' = (da/dc) c_j' + (da/dk) k', d' = sum a_j' (3 fixed-point passes; exact on CC
-data, first order in the residual otherwise).
-
-Time stepping
--------------
-Position Verlet (PyElastica's `PositionVerlet` order: half drift, loads, kick, half drift) with
-PyElastica's update kernels, compiled into one loop (`cosserat_rod.run_steps`); `stepper =
-"pyelastica"` runs `PositionVerlet.step_single_instance` on the PyElastica memory block instead
-(same numbers, slower; used to check the compiled loop).  The default dt is the largest 1 ms / m below
-`stable_dt`.
-
-The explicit step (`stable_dt`), refused configurations, interrupts and divergence:
-`harness.plant.cosserat.limits`.
+"""Cosserat-rod plant of the planar 3-section Octarm slave, on PyElastica: `CosseratSlave` (model,
+actuation, sensing by CC fit).  API, frames, discretization, elastic law, damping, actuation, sensing and
+time stepping: docs/plants.md, "The Cosserat rod's model".  Bad settings raise `ValueError` with one
+line naming `plant.cosserat.<name>`, its value and the allowed range.
 """
 
 from __future__ import annotations
@@ -212,15 +71,15 @@ class CosseratSlave:
                  dt: float | None = None, material_damping=None,
                  shear_factor: float = DEFAULT_SHEAR_FACTOR, actuation: str = "servo",
                  rotary_radius: float = DEFAULT_ROTARY_RADIUS, elastic_law: str = "analytic",
-                 stepper: str = "numba") -> None:
+                 stepper: str = "numba", muscle_radius=(0.16, 0.12, 0.09)) -> None:
         if not isinstance(params, SlaveParams):
             raise _err("params", type(params).__name__, "must be a controllers.params.SlaveParams")
         n = elements_per_section
         if not (isinstance(n, (int, np.integer)) and not isinstance(n, bool) and 2 <= n <= 200):
             raise _err("elements_per_section", n, "must be an integer in [2, 200]")
         n = int(n)
-        if actuation not in ("servo", "torque"):
-            raise _err("actuation", actuation, "must be 'servo' or 'torque'")
+        if actuation not in ("servo", "torque", "muscle"):
+            raise _err("actuation", actuation, "must be 'servo', 'torque' or 'muscle'")
         if elastic_law not in ("analytic", "linear"):
             raise _err("elastic_law", elastic_law, "must be 'analytic' or 'linear'")
         if stepper not in ("numba", "pyelastica"):
@@ -257,6 +116,7 @@ class CosseratSlave:
         self.n = n
         self.dt = float(dt)
         self.actuation = actuation
+        self.muscle_radius = np.asarray(muscle_radius, dtype=float)
         self.eta_b, self.eta_a = eta_b, eta_a
         self.shear_factor = float(shear_factor)
         self.analytic_law = elastic_law == "analytic"
@@ -290,18 +150,12 @@ class CosseratSlave:
         b.mass[:] = 0.0
         b.mass[:-1] += 0.5 * me
         b.mass[1:] += 0.5 * me
-        J = np.zeros((3, 3, ne))
-        invJ = np.zeros((3, 3, ne))
+        d3 = np.arange(3)  # the diagonal of each element's 3 x 3 matrices
         jd = np.stack([rhoI[sec], rhoI[sec], 2.0 * rhoI[sec]]) * l0
-        for i in range(3):
-            J[i, i] = jd[i]
-            invJ[i, i] = 1.0 / jd[i]
-        b.mass_second_moment_of_inertia[:] = J
-        b.inv_mass_second_moment_of_inertia[:] = invJ
-        b.shear_matrix[:] = 0.0
-        b.shear_matrix[0, 0] = GA[sec]
-        b.shear_matrix[1, 1] = GA[sec]
-        b.shear_matrix[2, 2] = EA[sec]
+        for M, v in ((b.mass_second_moment_of_inertia, jd), (b.inv_mass_second_moment_of_inertia, 1.0 / jd),
+                     (b.shear_matrix, np.stack([GA[sec], GA[sec], EA[sec]]))):
+            M[:] = 0.0
+            M[d3, d3] = v
         # hinges: inside a section EI_i, at boundaries the series combination of the two half elements
         D0 = b.rest_voronoi_lengths.copy()
         Bh = np.empty(nv)
@@ -313,12 +167,9 @@ class CosseratSlave:
             etah[j] = (D0[j] / (0.5 * l0[j] / eb[0] + 0.5 * l0[j + 1] / eb[1])
                        if min(eb) > 0 else 0.0)
         b.bend_matrix[:] = 0.0
-        b.bend_matrix[0, 0] = Bh
-        b.bend_matrix[1, 1] = Bh
-        b.bend_matrix[2, 2] = Bh * (2.0 / 3.0)
+        b.bend_matrix[d3, d3] = np.stack([Bh, Bh, Bh * (2.0 / 3.0)])
         self._eta_v = np.stack([etah, etah, etah * (2.0 / 3.0)])
-        ea_e = self.eta_a[sec]
-        self._eta_e = np.stack([ea_e, ea_e, ea_e])
+        self._eta_e = np.stack([self.eta_a[sec]] * 3)
         self._base_B = np.array([EI[0], EI[0], EI[0] * 2.0 / 3.0])
         self._base_eta = np.array([self.eta_b[0], self.eta_b[0], self.eta_b[0] * 2.0 / 3.0])
         self._base_Q = np.eye(3)
@@ -371,9 +222,8 @@ class CosseratSlave:
 
     def _set_active(self, T2: np.ndarray | None) -> None:
         if T2 is None:
-            self._act_n[:] = 0.0
-            self._act_m[:] = 0.0
-            self._act_m_base[:] = 0.0
+            for a in (self._act_n, self._act_m, self._act_m_base):
+                a[:] = 0.0
             return
         self.sense_into(self._act_q2, self._act_dq2)
         kr.active_loads(T2, self._act_q2, self._sec, self._l0, self._act_n, self._act_m, self._act_m_base)
@@ -406,15 +256,10 @@ class CosseratSlave:
         if np.any(dq2 != 0):
             dx = np.zeros_like(xz)
             da = np.zeros_like(ang)
-            for i in range(6):
-                if dq2[i] == 0:
-                    continue
-                eps = 1e-6 * max(1.0, abs(q2[i]))
-                qp, qm = q2.copy(), q2.copy()
-                qp[i] += eps
-                qm[i] -= eps
-                xp, ap = self._cc(qp)
-                xm, am = self._cc(qm)
+            for i in np.flatnonzero(dq2):  # central differences of the CC shape
+                e = 1e-6 * max(1.0, abs(q2[i])) * (np.arange(6) == i)
+                eps = e[i]
+                (xp, ap), (xm, am) = self._cc(q2 + e), self._cc(q2 - e)
                 dx += (xp - xm) / (2 * eps) * dq2[i]
                 da += (ap - am) / (2 * eps) * dq2[i]
             b.velocity_collection[0] = dx[:, 0]
@@ -453,7 +298,8 @@ class CosseratSlave:
 
     def step(self, command, duration: float, feedforward=None) -> bool:
         """Advance by `duration` (a multiple of dt) with the command held: servo: q2 command (rest
-        strains, plus `feedforward` T2 if given); torque: T2.  Returns False if the state diverged."""
+        strains, plus `feedforward` T2 if given); torque: T2; muscle: the group forces p (N).  Returns
+        False if the state diverged."""
         command = self._vec6("command", command)
         m = round(duration / self.dt)
         tol = 1e-9 * max(1.0, duration)
@@ -464,6 +310,9 @@ class CosseratSlave:
                 raise _err("command", tuple(command), "commanded section lengths must be > 0")
             self._set_rest(command)
             self._set_active(None if feedforward is None else self._vec6("feedforward", feedforward))
+        elif self.actuation == "muscle":
+            kr.muscle_loads(command, self.muscle_radius, self._sec, self._l0, self._act_n, self._act_m,
+                            self._act_m_base)
         else:
             self._set_active(command)
         self._fit_valid = False  # the rod moves: a cached CC fit is stale
@@ -471,7 +320,8 @@ class CosseratSlave:
         while left > 0:
             n = min(left, BATCH_STEPS)
             try:
-                ok = self._run(n) and self._sane()
+                self._run(n)
+                ok = self._sane()
             except ArithmeticError:  # ZeroDivisionError on a collapsed element, FloatingPointError, ...
                 ok = False
             left -= n
@@ -483,20 +333,19 @@ class CosseratSlave:
                 raise RodStopped(f"rod stopped at t = {self.time:.6g} s")
         return True
 
-    def _run(self, n: int) -> bool:
-        """n rod steps; False if the positions are not finite."""
+    def _run(self, n: int) -> None:
+        """n rod steps (`_sane` checks the state after them)."""
         b = self._b
         if self.stepper == "numba":
-            return kr.run_steps(n, self.dt, b.position_collection, b.velocity_collection,
-                                b.director_collection, b.omega_collection, b.acceleration_collection,
-                                b.alpha_collection, b.mass,
-                                b.mass_second_moment_of_inertia, b.inv_mass_second_moment_of_inertia,
-                                *self._load_args()[5:], b.internal_forces, b.internal_torques,
-                                b.external_forces, b.external_torques)
+            kr.run_steps(n, self.dt, b.position_collection, b.velocity_collection, b.director_collection,
+                         b.omega_collection, b.acceleration_collection, b.alpha_collection, b.mass,
+                         b.mass_second_moment_of_inertia, b.inv_mass_second_moment_of_inertia,
+                         *self._load_args()[5:], b.internal_forces, b.internal_torques, b.external_forces,
+                         b.external_torques)
+            return
         t = np.float64(self.time)
         for _ in range(n):
             t = self._verlet.step_single_instance(b, t, np.float64(self.dt))
-        return True
 
     def _sane(self) -> bool:
         """Node positions, velocities and element angular velocities finite, every node within
@@ -528,9 +377,6 @@ class CosseratSlave:
     def tip(self) -> np.ndarray:
         """Tip node [X, Z] (2,), m."""
         return self._b.position_collection[[0, 2], -1].copy()
-
-    def tip_velocity(self) -> np.ndarray:
-        return self._b.velocity_collection[[0, 2], -1].copy()
 
     def centreline(self) -> np.ndarray:
         """Node positions (n_nodes, 3) in 3-D (X, 0, Z), base first (the recording's 3-D view)."""
