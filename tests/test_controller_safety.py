@@ -433,7 +433,7 @@ def test_the_torque_hint_names_only_settings_that_differ_from_the_run():
     hint = failure_hint(*_diverged())
     assert hint.startswith("hint: ") and "\n" not in hint and "k_n = 100 past the sampled-data limit" in hint
     assert all(s in hint for s in ("plant.enforce_cc=true", "plant.bending_viscosity=[1.0,1.0,1.0]",
-                                   "gains.kn=60"))
+                                   "gains.kn=60", "sensing.dq2_cutoff=200"))
     hint = failure_hint(*_diverged("gains.kn=60", "plant.bending_viscosity=[2.0,2.0,2.0]"))
     assert "plant.enforce_cc=true" in hint and "gains.kn=60" not in hint and "bending_viscosity" not in hint
     assert failure_hint(*_diverged("plant.enforce_cc=true")) is None
@@ -453,7 +453,7 @@ def test_torque_on_the_free_chain_prints_one_hint(capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 1
     hints = [line for line in err if line.startswith("hint: ")]
-    assert len(hints) == 1 and len(_hint_options(hints[0])) == 3
+    assert len(hints) == 1 and len(_hint_options(hints[0])) == 4
 
 
 def test_every_setting_the_torque_hint_suggests_runs():
@@ -461,7 +461,7 @@ def test_every_setting_the_torque_hint_suggests_runs():
     from harness.cli import failure_hint
 
     options = _hint_options(failure_hint(*_diverged()))
-    assert len(options) == 3
+    assert len(options) == 4
     for opt in options:
         tr = simulate(load_scenario("paper", ['plant.actuation="torque"', "duration=5", "transient=1", opt]))
         assert tr.status == "ok" and len(tr) == 5000, (opt, tr.message)

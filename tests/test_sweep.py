@@ -616,14 +616,18 @@ scale = [0.5, 2.0]
     return path
 
 
-@pytest.mark.parametrize("actuation", ["servo", "muscle"])
+@pytest.mark.parametrize("actuation", ["servo", "muscle", "cosserat servo"])
 def test_a_servo_plant_warns_when_a_study_varies_what_it_hides(tmp_path, capsys, caplog, actuation):
-    """A study varying the slave's mass on a servo plant says so in one line before it runs and again in
-    its summary with the measured spread of e2; on a plant that feels the mass (muscles) it says nothing."""
+    """A study varying the slave's mass on the servo chain says so in one line before it runs and again in
+    its summary with the measured spread of e2; on a plant that feels the mass (muscles, the rod's
+    rest-strain servo) it says nothing."""
     from harness.studies.sweep import main_sweep
 
-    rc = main_sweep(_mass_study(tmp_path, actuation), out=tmp_path / "o", workers=1, progress=False,
-                    executor="threads")
+    study = _mass_study(tmp_path, actuation.split()[-1])
+    if actuation.startswith("cosserat"):
+        text = study.read_text().replace('set = ["', 'set = ["plant.kind=\'cosserat\'", "')
+        study.write_text(text)
+    rc = main_sweep(study, out=tmp_path / "o", workers=1, progress=False, executor="threads")
     assert rc == 0
     before = [r.getMessage() for r in caplog.records if "hide them" in r.getMessage()]  # logged at the start
     after = [ln for ln in capsys.readouterr().err.splitlines() if "hide them" in ln]  # in the summary

@@ -131,6 +131,8 @@ _TORQUE_FIXES = (
     (lambda s: max(s.plant.bending_viscosity) < 1.0, "--set plant.bending_viscosity=[1.0,1.0,1.0]",
      "10x the default bending damping"),
     (lambda s: s.gains.kn > 60.0, "--set gains.kn=60", "a lower null-space gain"),
+    (lambda s: s.sensing.dq2_cutoff is None, "--set sensing.dq2_cutoff=200",
+     "a 200 Hz low-pass on the sensed dq2"),
 )
 
 

@@ -117,14 +117,15 @@ def _study_document(study: Study, base: Scenario) -> dict:
 
 
 # slave dynamics parameters whose effect a servo-actuated plant hides: its stiff position servos track the
-# integrated command, so the slave's inertia and damping hardly enter (docs/plants.md, actuations)
+# integrated command, so the slave's inertia and damping hardly enter (docs/plants.md, actuations).  The
+# rod's servo is a rest-strain servo that feels the mass (docs/stability.md, rod margins): no warning there.
 HIDDEN_BY_SERVO = ("plant.slave.masses", "plant.slave.slice_inertia", "plant.slave.extension_damping",
                    "plant.slave.bending_damping", "plant.extension_viscosity", "plant.bending_viscosity")
 
 
 def hidden_factors(study: Study, cases: Sequence[Case]) -> list[str]:
-    """The study's factors that vary slave dynamics on a servo-actuated MuJoCo or Cosserat plant."""
-    servo = any(c.scenario.plant.kind in ("mujoco", "cosserat") and c.scenario.plant.actuation == "servo"
+    """The study's factors that vary slave dynamics on the servo-actuated MuJoCo chain."""
+    servo = any(c.scenario.plant.kind == "mujoco" and c.scenario.plant.actuation == "servo"
                 for c in cases)
     return [f.name for f in study.factors if servo and ".".join(f.path) in HIDDEN_BY_SERVO]
 
