@@ -37,6 +37,9 @@ from harness.loop.mujoco_loop import (
     warning_counts,
 )
 
+FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
+Q2_NAMES = ("d1", "d2", "d3", "k1", "k2", "k3")
+
 
 class MujocoStepped:
     """The MuJoCo plant of `harness.loop.mujoco_loop`, stepped from Python (`SteppedPlant`)."""
@@ -61,6 +64,7 @@ class MujocoStepped:
         self.qc, self.vc, self.corr = np.empty(self.n), np.empty(self.n), np.empty(self.n)
         self.geo = _Geometry(self.m, self.d, c, scn.n_steps, live=False)
         self.warned: dict[str, int] = {}
+        self.full = None  # the physics state kept by get_state(keep=True)
 
     def reset(self, state0: np.ndarray) -> None:
         """The plant is at the scenario's initial state after construction (make_plant)."""
@@ -106,6 +110,34 @@ class MujocoStepped:
     def record(self, k: int) -> None:
         self.geo.qpos_hist[k] = self.d.qpos
 
+    @property
+    def state_names(self) -> list[str]:
+        """qpos (joint names), qvel ("<joint> (rate)"), act; hinge and slide joints only (nq == nv)."""
+        m = self.m
+        if m.nq != m.nv:
+            raise NotImplementedError("plant: the MuJoCo model has ball or free joints (nq != nv); only "
+                                      "hinge and slide joints are supported")
+        jn = {int(m.jnt_qposadr[j]): m.joint(j).name or f"joint{j}" for j in range(m.njnt)}
+        qn = [jn.get(i, f"qpos[{i}]") for i in range(m.nq)]
+        return qn + [f"{n} (rate)" for n in qn] + [f"act[{i}]" for i in range(m.na)]
+
+    def get_state(self, keep: bool = False) -> np.ndarray:
+        """[qpos, qvel, act]; keep: also MuJoCo's whole physics state (time, warm start, ...)."""
+        d = self.d
+        if keep:
+            self.full = np.empty(mujoco.mj_stateSize(self.m, FULL))
+            mujoco.mj_getState(self.m, d, self.full, FULL)
+        return np.concatenate([d.qpos, d.qvel, d.act])
+
+    def set_state(self, x: np.ndarray) -> None:
+        m, d = self.m, self.d
+        if self.full is not None:
+            mujoco.mj_setState(m, d, self.full, FULL)
+        d.qpos[:] = x[:m.nq]
+        d.qvel[:] = x[m.nq:m.nq + m.nv]
+        d.act[:] = x[m.nq + m.nv:]
+        mujoco.mj_forward(m, d)
+
     def finish(self, traj, done: int) -> None:
         traj.meta.update(_plant_geometry(self.m, self.cmap, self.geo, done, traj))
         traj.meta["mujoco_warnings"] = int(sum(self.warned.values()))
@@ -137,8 +169,16 @@ class AnalyticStepped:
         self.work = (np.zeros(4), np.zeros(6), np.zeros(6), np.zeros(MASTER_INFO), np.zeros(SLAVE_INFO),
                      np.zeros(2), np.zeros(2), np.zeros(2), *(np.empty(16) for _ in range(5)))
 
+    state_names = ["q1[0]", "q1[1]", "dq1[0]", "dq1[1]", *Q2_NAMES, *(f"d{n}/dt" for n in Q2_NAMES)]
+
     def reset(self, state0: np.ndarray) -> None:
         self.state[:] = state0
+
+    def get_state(self, keep: bool = False) -> np.ndarray:  # noqa: ARG002 - nothing besides the state
+        return self.state.copy()
+
+    def set_state(self, x: np.ndarray) -> None:
+        self.state[:] = x
 
     def true_state(self, state: np.ndarray) -> int:
         state[:] = self.state
