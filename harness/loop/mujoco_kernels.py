@@ -1,8 +1,5 @@
-"""MuJoCo-plant loop kernels (numba-compatible; compiled by `harness.loop.fast`): the whole control
-loop of the MuJoCo plant in one kernel that calls MuJoCo's C functions by address (`harness.loop.native`),
-plus the sensing and command maps it uses and the recording-geometry helpers.  Status codes:
-`harness.loop.kernels`.
-"""
+"""MuJoCo-plant loop kernels (numba-compatible; compiled by `harness.loop.fast`): the whole control loop in
+one kernel, its sensing and command maps, and the recording-geometry helpers."""
 
 from __future__ import annotations
 
@@ -21,7 +18,14 @@ from harness.loop.force_kernels import (
     read_contact,
     sense_forces,
 )
-from harness.loop.kernels import ROW_W, control_step, runaway, section_collapsed, servo_reference_step
+from harness.loop.kernels import (
+    ROW_W,
+    control_step,
+    ring_index,
+    runaway,
+    section_collapsed,
+    servo_reference_step,
+)
 from harness.loop.native import MJ_KINEMATICS_FN, MJ_STEP_FN, copy_geometry, mj_call
 from harness.plant.chain_map import (
     chain_elastic_correction,
@@ -33,10 +37,6 @@ from harness.plant.chain_map import (
 )
 
 
-# =============================================================================================
-# MuJoCo plant: the whole control loop compiled, calling MuJoCo's C functions by address
-# (`harness.loop.native`: the addresses and the calls)
-# =============================================================================================
 def sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state):
     """True (noise-free) state (16,) [q1, dq1, q2, dq2] from MuJoCo joints; qc, vc (n_chain,) work."""
     for i in range(2):
@@ -60,24 +60,18 @@ def mujoco_state_status(state):
 
 
 def mujoco_commands(servo, feedforward, dt, q2s, T2, u2, ref, C, R, L0, kv_over_kp, muscle, cmd):
-    """Command vector cmd = [master torque (2), chain ctrl (n), chain feedforward force (n)] after the servo
-    reference ref (12,) = [q_ref, dq_ref] took the step dt with u2 (servo actuation; `chain_commands`).
-    Returns `chain_commands`' count of saturated muscle groups."""
+    """`chain_commands` after the servo reference ref (12,) took the step dt with u2 (servo actuation)."""
     if servo:
         servo_reference_step(ref, u2, dt)
     return chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, muscle, cmd)
 
 
 def chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, muscle, cmd):
-    """The chain's part of cmd = [master torque (2), chain ctrl (n), chain feedforward force (n)]; returns
-    the number of muscle groups whose command lies outside [0, F_max] (0 for the other actuations).
-
-    Torque actuation: chain ctrl = virtual-work map of T2 at the sensed q2s (motors).
-    Servo actuation: ctrl = joints(q_ref) + (kv/kp) A(q_ref) dq_ref (position servo with velocity
-    feed-forward folded into the target), feed-forward = virtual-work map of T2 at q_ref (if enabled).
-    Muscle actuation (muscle = (radius (3,), max_force (3,)), empty arrays otherwise): the first 6 entries
-    of the chain ctrl are the force commands of the muscle groups realizing T2 at q2s
-    (`chain_map.muscle_commands`, clipped to [0, F_max] by MuJoCo's ctrlrange); no feed-forward."""
+    """The chain's part of cmd = [master torque (2), chain ctrl (n), chain feed-forward force (n)]; returns
+    the number of muscle groups commanded outside [0, F_max].  Torque: ctrl = virtual-work map of T2 at the
+    sensed q2s.  Servo: ctrl = joints(q_ref) + (kv/kp) A(q_ref) dq_ref, feed-forward = the map of T2 at
+    q_ref (if enabled).  Muscle (muscle = (radius (3,), max_force (3,)), else empty arrays): ctrl[0:6] =
+    the group forces realizing T2 at q2s (`chain_map.muscle_commands`); no feed-forward."""
     n = C.shape[0]
     radius, max_force = muscle
     if radius.shape[0] > 0:
@@ -118,34 +112,20 @@ def master_tip_state(mpk, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, 
 
 
 def mujoco_chunk(k0, k1, model, plant, data, fargs):
-    """Control steps k0..k1-1 on the MuJoCo plant.
+    """Control steps k0..k1-1 on the MuJoCo plant: sense -> noise -> both laws -> record -> commands
+    (the ring cmdbuf (delay + 1, 2 + 2n), delay in control steps) -> `substeps` x (elastic correction +
+    mj_step, MuJoCo's C function by address, `harness.loop.native`).
 
-    model: the run's `harness.loop.common.RunModel` (mpk_c, spk_c, nodes, weights, gains, spec, F, traj,
-    s0);
-    plant: the MuJoCo plant's constants (mptr, dptr: mjModel*, mjData* addresses; mjfn = MJ_FUNCS; substeps;
-    dt: control period (s); m_qadr, m_dadr, m_act: master joint qpos/dof addresses and actuators; c_qadr,
-    c_dadr, c_act: the chain's; R, C, L0, eargs (ChainMap.elastic_args): the chain map; servo, feedforward,
-    kv_over_kp (n,), muscle ((radius, max_force) or two empty arrays): the actuation; c_act: the muscle
-    actuators under muscle actuation);
-    data: the run's buffers (qpos, qvel, ctrl, qfrc: numpy views of the MjData; noise, noise_scale;
-    ref (12,); cmdbuf; delay; rows, qpos_hist, cmd_log: this chunk's rows; geo_in, geo_out; wnum; nsat (1,):
-    the run's count of saturated muscle group-steps, added to).
-    Per step: sense -> noise -> both laws -> record -> commands (delayed by `delay` control steps through
-    the ring buffer cmdbuf (delay+1, 2+2n)) -> `substeps` x (elastic correction + mj_step).
-    cmd_log (rows, nu + nv): if it has rows ((k1 - k0) * substeps), row (k - k0) * substeps + s receives
-    [ctrl, qfrc] exactly as applied before that mj_step (for a raw-MuJoCo replay); 0 rows = off.
-    Recording geometry: qpos_hist (k1 - k0, nq) receives qpos at the start of each step (0 rows = off),
-    or, if geo_out = (body_pos, body_quat, master_pos, tip) has rows, `copy_geometry` fills them from the
-    kinematics MuJoCo computed inside the first mj_step of the step (the start state: valid for the
-    single-stage integrators, not RK4), geo_in = (xpos, xquat, site_xpos, xanchor, bodies, gids).
-    wnum: MuJoCo's warning counters (a view of mjData.warning.number), checked after every mj_step.
-    fargs = (sensordata, cadr (ContactMap.adr or empty), Fconst (4,) constant tip forces (F2 is applied by
-    the caller through xfrc_applied, F1 here through qfrc_applied = J1^T F1), fmode, fnoise, fstd, falpha,
-    fdelay, fbuf, ffilt (`sense_forces`), op_on, op, targets, hand (4,), target (2,) (operator, see
-    `harness.loop.force_kernels`), mpk_p (plant master, packed), cpts (k1 - k0, np, 6) contact points or
-    0 rows): the laws get the sensed F (`sense_forces`) instead of F (kept in the signature).
-    Returns (status, completed steps); status 6 = non-finite or exploding MuJoCo state, 7 = a MuJoCo
-    warning was raised during the last completed step (whose row is recorded)."""
+    model: the run's `RunModel`; plant: the constants (mptr, dptr: mjModel*, mjData*; mjfn = MJ_FUNCS;
+    substeps; dt (s); master qpos / dof addresses and actuators; the chain's, then R, C, L0, eargs (the
+    `ChainMap`); servo, feedforward, kv_over_kp (n,), muscle: the actuation); data: the run's buffers
+    (MjData views qpos, qvel, ctrl, qfrc; noise, noise_scale; ref (12,); cmdbuf; delay; this chunk's rows,
+    qpos_hist (0 rows: off) and cmd_log ((k1 - k0) * substeps, nu + nv): [ctrl, qfrc] as applied before
+    each mj_step, 0 rows: off; geo_in, geo_out (`copy_geometry`, filled from the kinematics of the first
+    mj_step of each step when geo_out has rows); wnum: mjData.warning.number; nsat (1,): saturated muscle
+    group-steps, added to); fargs: the forces (`harness.loop.force_args.ForceArgs.args`; the laws get
+    the sensed F).  Returns (status, completed steps); 6: non-finite or exploding MuJoCo state, 7: a
+    MuJoCo warning in the last completed step (whose row is recorded)."""
     mpk_c, spk_c, nodes, weights, gains, spec, F, traj, _s0 = model
     (mptr, dptr, mjfn, substeps, dt, m_qadr, m_dadr, m_act, c_qadr, c_dadr, c_act, R, C, L0, eargs, servo,
      feedforward, kv_over_kp, muscle) = plant
@@ -228,7 +208,7 @@ def mujoco_chunk(k0, k1, model, plant, data, fargs):
         cmd[1] = T1[1]
         nsat[0] += mujoco_commands(servo, feedforward, dt, sensed[4:10], T2, u2, ref, C, R, L0, kv_over_kp,
                                    muscle, cmd)
-        use = cmdbuf[(k - delay) % nb] if k >= delay else cmdbuf[0]
+        use = cmdbuf[ring_index(k, delay)]
         for i in range(2):
             ctrl[m_act[i]] = use[i]
         for c in range(c_act.shape[0]):
@@ -266,8 +246,7 @@ def mujoco_chunk(k0, k1, model, plant, data, fargs):
 
 
 def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):
-    """Raw MuJoCo: for each row of cmd_log (rows, nu + nv) copy [ctrl, qfrc_applied] in and mj_step
-    (the same physics steps as a logged `mujoco_chunk` run, without the harness)."""
+    """Raw MuJoCo: for each row of cmd_log (rows, nu + nv), [ctrl, qfrc_applied] <- row, mj_step."""
     nu = ctrl.shape[0]
     nv = qfrc.shape[0]
     for r in range(cmd_log.shape[0]):
@@ -284,12 +263,9 @@ KERNELS = ("sense_mujoco", "mujoco_state_status", "mujoco_commands", "chain_comm
            "mujoco_chunk", "replay_commands")
 
 
-# =============================================================================================
-# Recording geometry, after the loop: MuJoCo kinematics replay and analytic backbone, compiled
-# =============================================================================================
+# --- recording geometry after the loop ---------------------------------------------------------------
 def kinematics_replay(mptr, dptr, mjfn, qpos, qpos_hist, geo_in, geo_out):
-    """For each row of qpos_hist (n, nq): qpos <- row, MuJoCo's C mj_kinematics, `copy_geometry`
-    (qpos and geo_in views of the MjData at dptr)."""
+    """For each row of qpos_hist (n, nq): qpos <- row, mj_kinematics, `copy_geometry`."""
     nq = qpos.shape[0]
     for k in range(qpos_hist.shape[0]):
         for i in range(nq):
@@ -299,8 +275,8 @@ def kinematics_replay(mptr, dptr, mjfn, qpos, qpos_hist, geo_in, geo_out):
 
 
 def backbone_world(q2, n_per_section, base, out):
-    """Analytic backbone (controllers.cc.backbone_points) of every row of q2 (n, 6) in world
-    coordinates: out (n, 3 P + 1, 3) = (base_x + X, base_y, base_z + Z)."""
+    """Analytic backbone (`controllers.cc.backbone_points`) of every row of q2 (n, 6), world frame:
+    out (n, 3 P + 1, 3) = (base_x + X, base_y, base_z + Z)."""
     npts = 3 * n_per_section + 1
     pts = np.empty((npts, 2))
     for k in range(q2.shape[0]):

@@ -8,7 +8,7 @@ Per control step k (t = k control_dt), `Stepper.step`:
     controller step                      "paper": its compiled laws (12)-(13), (17)-(33) in one call
                                          (`K.stepped_paper_step`); else a `controllers.interface.Controller`
                                          through `harness.loop.interface_adapter.InterfaceController`
-    record row, command checks (1, 4)    `harness.loop.stepped_kernels`
+    record row, command checks (1, 4)    `harness.loop.kernels.stepped_after_control`
     servo reference                      dq2_ref += u2 dt, q2_ref += dq2_ref dt, or the controller's own
     plant.command(...)                   the commands of step k - actuation delay (ring of slots)
     status = plant.advance(control_dt)
@@ -29,12 +29,12 @@ from harness.config.scenario import Scenario
 from harness.loop.common import (
     CHUNK,
     STOP,
+    ChunkRun,
     RunModel,
     compile_model,
     noise_table,
+    part_trajectory,
     progress_bar,
-    run_meta,
-    set_outcome,
 )
 from harness.loop.fast import K
 from harness.loop.interface_adapter import ControllerFailure, InterfaceController, is_compiled
@@ -118,8 +118,7 @@ class Stepper:
             self.record(k)
         if st:
             return int(st), True
-        d = self.delay
-        self.plant.command(*self.views[(k - d) % (d + 1) if k >= d else 0])
+        self.plant.command(*self.views[K.ring_index(k, self.delay)])
         return int(self.plant.advance(dt) or 0), True
 
 
@@ -158,38 +157,29 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
 
     step = Stepper(scn, plant, model, ctrl, noise_table(scn, scn.n_steps),
                    plant.record if own_geo else copy_geometry).step
-    bar = progress_bar(progress, n, f"{plant.kind} plant ({plant.actuation}), controller {cname}")
-    status, done, interrupted = 0, 0, False
-    t0 = time.perf_counter()
-    try:
-        for k in range(n):
+
+    def steps(k0: int, k1: int) -> tuple[int, int]:
+        for k in range(k0, k1):
             status, recorded = step(k, rows[k])
-            done += recorded
+            run.done = k + recorded
             if status:
-                break
-            if (k + 1) % CHUNK == 0:
-                if bar is not None:
-                    bar.update(CHUNK)
-                if on_chunk is not None:
-                    part = Trajectory.from_rows(rows[k + 1 - CHUNK:k + 1])
-                    part.meta.update(run_meta(scn, 0.0))
-                    on_chunk(part)
-                if STOP.is_set():
-                    interrupted = True
-                    break
-    except KeyboardInterrupt:
-        interrupted = True
-    except ControllerFailure as exc:  # one line naming the controller, the step and the time
-        error, failed = str(exc), True
-    except Exception as exc:  # keep what was computed; report the cause
-        error = f"{type(exc).__name__}: {exc}"
+                return status, run.done - k0
+        return 0, k1 - k0
+
+    part = None if on_chunk is None else (lambda k, done: on_chunk(part_trajectory(scn, rows[k:done])))
+    run = ChunkRun(n, CHUNK, progress_bar(progress, n, f"{plant.kind} plant ({plant.actuation}), controller "
+                                          f"{cname}"), part)
+    try:
+        run.run(steps)
     finally:
-        if bar is not None:
-            bar.close()
         if ctrl is not None:
             ctrl.close()
-    traj = Trajectory.from_rows(rows[:done])
-    traj.meta.update(run_meta(scn, time.perf_counter() - t0))
+    failed = failed or isinstance(run.exc, ControllerFailure)
+    if failed:
+        error = error or str(run.exc)
+        run.error = ""
+    done, status = run.done, run.status
+    traj = run.trajectory(scn, rows)
     traj.meta["build_time"] = build_time
     traj.meta["controller"] = cname
     if own_geo:
@@ -202,9 +192,7 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
         traj.meta.update(getattr(plant, "meta", lambda: {})())
     if status == -1:  # a controller gave up (ControllerDiverged without a status code)
         traj.status, traj.message = "diverged", ctrl.diverged or "controller gave up"
-    elif failed:
+    elif failed:  # one line naming the controller, the step and the time
         traj.status, traj.message = "error", error
         traj.meta["failed_controller"] = cname
-    else:
-        set_outcome(traj, status, interrupted, error)
     return traj

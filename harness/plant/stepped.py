@@ -3,14 +3,22 @@
 A stepped plant simulates both arms; the controller sees only its sensed state.  Implementations: the
 Cosserat rod (`harness.plant.cosserat.plant`) and the MuJoCo and analytic adapters
 (`harness.loop.stepped_plants`).  Per control step of length control_dt the loop (`Stepper.step`) calls
-`true_state`, then (after the controller) `record(k)` or `slave_tip()` / `geometry()`, `command` (the
-commands of step k - actuation delay) and `advance(control_dt)`; at the end `finish(traj, done)` if the
-plant has it.
+`true_state`, then (after the controller) `record(k)`, `command` (the commands of step k - actuation delay)
+and `advance(control_dt)`.
+
+Optional members:
+* `record(k)` / `finish(traj, done)`: the plant keeps its recording geometry of step k and writes it into
+  traj at the end; without them it gives `slave_tip()` (its own slave tip [X, Z] (2,), m) and `geometry()`
+  (arrays such as "centreline" (n, 3), "sections" (4, 3), "master" (3, 3), world frame), copied each step;
+* `forces(F (4,), contact (5,))`: the true interaction forces of the step (else the scenario's constant
+  ones); `stop`: the run's stop flag, for plants with long inner loops;
+* `state_names`, `get_state(keep=False) -> (n,)`, `set_state(x)`: the plant's state coordinates (the
+  closed-loop map of `harness.studies.stability`); keep=True also keeps the rest of its physics state
+  (e.g. MuJoCo's warm start and time), which every later `set_state` restores.
 
 Units: q1 (rad), dq1 (rad/s), q2 = [d1, d2, d3 (m), k1, k2, k3 (1/m)] and rates; T1 (N m) master torques
 (eq. 13); T2 = [T_d (N), T_k (N m^2)] slave generalized forces (eq. 18).  Servo plants track q2_ref /
-dq2_ref and may add T2 as feed-forward; torque plants apply T2.  Task-space points [X, Z] (m) are
-relative to each robot's own base.  Statuses: `controllers.status.Status`.
+dq2_ref and may add T2 as feed-forward; torque plants apply T2.  Statuses: `controllers.status.Status`.
 """
 
 from __future__ import annotations
@@ -22,7 +30,7 @@ import numpy as np
 
 @runtime_checkable
 class SteppedPlant(Protocol):
-    """What `harness.loop.stepped_loop` and `harness.studies.stability` need from a plant."""
+    """What `harness.loop.stepped_loop` needs from a plant (the optional members: see the module)."""
 
     kind: str  # as Scenario.plant.kind
     actuation: str  # "servo" | "torque" | "muscle"
@@ -41,19 +49,3 @@ class SteppedPlant(Protocol):
 
     def true_state(self, out: np.ndarray) -> int | None:
         """Noise-free [q1, dq1, q2, dq2] into out (16,); None/0 or a status code."""
-
-    def slave_tip(self) -> np.ndarray:
-        """The plant's own slave tip [X, Z] (2,), m."""
-
-    def geometry(self) -> dict[str, np.ndarray]:
-        """Recording arrays at the current time ("centreline" (n, 3), "sections" (4, 3), "master" (3, 3))."""
-
-    # --- the plant's own state (the closed-loop map of `harness.studies.stability`) -----------------
-    state_names: list[str]  # one per component of get_state()
-
-    def get_state(self, keep: bool = False) -> np.ndarray:
-        """The plant's state coordinates (n,).  keep=True also keeps the rest of its physics state (e.g.
-        MuJoCo's warm start and time), which every later `set_state` restores."""
-
-    def set_state(self, x: np.ndarray) -> None:
-        """Put the plant at the coordinates x (n,) (the rest as kept by `get_state(keep=True)`)."""
