@@ -113,11 +113,15 @@ def _build(jit: bool) -> types.SimpleNamespace:
     ns.update(scratch_intrinsics())
     compiled = {}
     for name, f in names.items():
-        clone = types.FunctionType(f.__code__, ns, name, f.__defaults__, f.__closure__)
+        bound = getattr(f, "bound", None)  # a loop body of one plant (`kernels.bind`): its own namespace
+        clone = types.FunctionType(f.__code__, {} if bound else ns, name, f.__defaults__, f.__closure__)
         clone.__module__ = f.__module__
         clone.__qualname__ = f.__qualname__
         compiled[name] = numba.njit(cache=True, nogil=True, _nrt=name in heap)(clone)
     ns.update(compiled)
+    for name, f in names.items():
+        if getattr(f, "bound", None):
+            compiled[name].py_func.__globals__.update(ns, **{k: ns[v.__name__] for k, v in f.bound.items()})
     return types.SimpleNamespace(**compiled)
 
 

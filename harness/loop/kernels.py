@@ -6,6 +6,7 @@ glue.  Statuses: `controllers.status`.
 from __future__ import annotations
 
 import math
+import types
 
 import numpy as np
 
@@ -27,12 +28,17 @@ from controllers.scratch import scratch, scratch_zeros
 from controllers.status import ST_NONFINITE, ST_OK, ST_PLANT_STATE, ST_RUNAWAY, ST_SECTION_LENGTH
 from controllers.subtasks import limits_kernel
 from controllers.tip import tip_kinematics
+from harness.loop.force_kernels import CONTACT_INFO
 from harness.plant.analytic import plant_accel
 
 # record row layout (must match harness.loop.trajectory.ROW_FIELDS)
 R_T, R_Q1, R_DQ1, R_Q2, R_DQ2, R_XD, R_X1, R_X2 = 0, 1, 3, 5, 11, 17, 19, 21
 R_E1, R_E2, R_DE1, R_DE2, R_BETA, R_YA, R_DEN, R_T1, R_T2, R_U2 = 23, 25, 27, 29, 31, 32, 33, 39, 41, 47
 ROW_W = 53
+R_FT = ROW_W  # the interaction columns after them: F_true, F_sensed (4 each), contact, hand
+R_FS = R_FT + 4
+R_CI = R_FS + 4
+R_HAND = R_CI + CONTACT_INFO
 RUNAWAY = 1.0  # m: |e1| or |e2| beyond this is a runaway (the workspace is ~1 m)
 
 
@@ -233,17 +239,32 @@ def plant_substeps(state, t, h, nsub, continuous, model, F, mpk_p, spk_p, T1, T2
     return ST_OK
 
 
-def analytic_chunk(k0, k1, model, plant, data):
-    """Control steps k0..k1-1 of the closed loop on the analytic plant, in place on the state.
-    model: the run's `harness.loop.common.RunModel`; plant: (dt (s), nsub, continuous, mpk_p, spk_p: the
-    plant's own packed params); data: (state (16,), noise, noise_scale, F (4,) the laws get, rows of this
-    chunk, cmdbuf (delay + 1, 8) the ring of [T1, T2], delay in control steps).  The plant gets the
-    commands of step k - delay (of step 0 while k < delay), held over nsub RK4 steps of dt / nsub, or with
-    `continuous` the laws in every RK4 stage (delay 0).  Returns (status, completed steps)."""
-    mpk_c, spk_c, nodes, weights, gains, spec, Fp, traj, _s0 = model
-    dt, nsub, continuous, mpk_p, spk_p = plant
-    state, noise, noise_scale, F, rows, cmdbuf, delay = data
-    nb = delay + 1
+def plant_sense(k, i, state, row, plant):
+    """A plant's sensing in `loop_chunk` (bound per plant): the true state (16,) of step k and the row's
+    interaction columns (F_sensed: the forces the laws get); returns a status."""
+    raise NotImplementedError
+
+
+def plant_command(slot, T1, T2, u2, sensed, plant):
+    """A plant's command map in `loop_chunk` (bound per plant): the step's commands into its ring slot."""
+    raise NotImplementedError
+
+
+def plant_advance(k, i, st, use, state, law, plant):
+    """A plant's step in `loop_chunk` (bound per plant): over the control step with the ring slot `use` of
+    step k - delay; st != 0: the step failed and is not advanced.  Returns a status."""
+    raise NotImplementedError
+
+
+def loop_chunk(k0, k1, model, data, plant):
+    """Control steps k0..k1-1 of a compiled loop: the per-step sequence every compiled loop shares,
+    `plant_sense` -> `control_step` (x_d, noise, both laws, record row) -> status 4 on a runaway row ->
+    `plant_command` into the ring slot of step k -> `plant_advance` with the slot of step k - delay.
+    The plant kernels are bound per plant (`bind`: `analytic_loop`, `mujoco_kernels.mujoco_loop`); plant:
+    their constants and buffers.  data: (state (16,), noise, noise_scale, rows of this chunk, cmdbuf
+    (delay + 1, w), delay, dt (s)).  Returns (status, completed steps)."""
+    mpk_c, spk_c, nodes, weights, gains, spec, _F, traj, _s0 = model
+    state, noise, noise_scale, rows, cmdbuf, delay, dt = data
     # the step's arrays are made here, not by a helper: a scratch array lives in the frame that makes it
     T1 = scratch_zeros(2)
     T2 = scratch_zeros(6)
@@ -255,32 +276,79 @@ def analytic_chunk(k0, k1, model, plant, data):
     xd = scratch(2)
     dxd = scratch(2)
     ddxd = scratch(2)
+    law = (T1, T2, u2, deN, minfo, sinfo, xd, dxd, ddxd)
+    for k in range(k0, k1):
+        i = k - k0
+        r = rows[i]
+        st = plant_sense(k, i, state, r, plant)
+        if st != ST_OK:
+            return st, i
+        st = control_step(k * dt, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, weights, gains,
+                          spec, r[R_FS:R_FS + 4], xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, r)
+        if st == 0 and runaway(r):
+            st = ST_RUNAWAY
+        if st == 0:
+            plant_command(cmdbuf[k % (delay + 1)], T1, T2, u2, sensed, plant)
+        st = plant_advance(k, i, st, cmdbuf[ring_index(k, delay)], state, law, plant)
+        if st != ST_OK:
+            return st, i + 1
+    return ST_OK, k1 - k0
+
+
+def bind(fn, name, **kernels):
+    """`fn` with the global names `kernels` bound to those kernels, as the kernel `name` (a loop body of one
+    plant; `harness.loop.fast` compiles it with the compiled kernels bound)."""
+    out = types.FunctionType(fn.__code__, {**fn.__globals__, **kernels}, name)
+    out.__qualname__ = name
+    out.bound = kernels
+    return out
+
+
+def analytic_sense(k, i, state, row, plant):
+    """The analytic plant's state is the loop's; its force columns are constant (set by the driver)."""
+    return ST_OK
+
+
+def analytic_command(slot, T1, T2, u2, sensed, plant):
+    """slot (8,) <- [T1, T2]."""
+    for i in range(2):
+        slot[i] = T1[i]
+    for i in range(6):
+        slot[2 + i] = T2[i]
+
+
+def analytic_advance(k, i, st, use, state, law, plant):
+    """nsub RK4 steps of the analytic plant with the commands use = [T1, T2] held (or, `continuous`, the
+    laws in every stage); status 1 on a non-finite state, 5 on a section length <= 0."""
+    if st != 0:
+        return st
+    model, F, dt, nsub, continuous, mpk_p, spk_p, ks, tmp = plant
+    T1, T2, u2, deN, minfo, sinfo, xd, dxd, ddxd = law
+    st = plant_substeps(state, k * dt, dt / nsub, nsub, continuous, model, F, mpk_p, spk_p, use[0:2],
+                        use[2:8], u2, deN, minfo, sinfo, xd, dxd, ddxd, ks, tmp)
+    if st != ST_OK:
+        return st
+    for j in range(16):
+        if not np.isfinite(state[j]):
+            return ST_NONFINITE
+    return ST_SECTION_LENGTH if section_collapsed(state) else ST_OK
+
+
+def analytic_chunk(k0, k1, model, plant, data):
+    """Control steps k0..k1-1 on the analytic plant (`loop_chunk`, `analytic_loop`), in place on the state.
+    plant: (dt (s), nsub, continuous, mpk_p, spk_p: the plant's own packed params); data: (state (16,),
+    noise, noise_scale, F (4,) the laws get, rows of this chunk (F_sensed = F), cmdbuf (delay + 1, 8) the
+    ring of [T1, T2], delay).  Returns (status, completed steps)."""
+    dt, nsub, continuous, mpk_p, spk_p = plant
+    state, noise, noise_scale, F, rows, cmdbuf, delay = data
     ks = scratch((4, 16))
     tmp = scratch(16)
-    for k in range(k0, k1):
-        t = k * dt
-        st = control_step(t, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, weights, gains, spec, F,
-                          xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, rows[k - k0])
-        if st != 0:
-            return st, k - k0 + 1
-        slot = cmdbuf[k % nb]
-        for i in range(2):
-            slot[i] = T1[i]
-        for i in range(6):
-            slot[2 + i] = T2[i]
-        use = cmdbuf[ring_index(k, delay)]
-        st = plant_substeps(state, t, dt / nsub, nsub, continuous, model, F, mpk_p, spk_p, use[0:2], use[2:8],
-                            u2, deN, minfo, sinfo, xd, dxd, ddxd, ks, tmp)
-        if st != ST_OK:
-            return st, k - k0 + 1
-        for i in range(16):
-            if not np.isfinite(state[i]):
-                return ST_NONFINITE, k - k0 + 1
-        if section_collapsed(state):
-            return ST_SECTION_LENGTH, k - k0 + 1
-        if runaway(rows[k - k0]):
-            return ST_RUNAWAY, k - k0 + 1
-    return ST_OK, k1 - k0
+    return analytic_loop(k0, k1, model, (state, noise, noise_scale, rows, cmdbuf, delay, dt),
+                         (model, F, dt, nsub, continuous, mpk_p, spk_p, ks, tmp))
+
+
+analytic_loop = bind(loop_chunk, "analytic_loop", plant_sense=analytic_sense, plant_command=analytic_command,
+                     plant_advance=analytic_advance)
 
 
 # --- the Python-stepped loop's glue (`harness.loop.stepped_loop.Stepper`) ----------------------------
@@ -350,4 +418,5 @@ def stepped_paper_step(state, exploding, Ftrue, ignored, t, traj, noise, k, scal
 
 KERNELS = ("runaway", "section_collapsed", "servo_reference_step", "ring_index", "plant_substeps",
            "add_noise", "add_noise_channel", "sense_state", "record_row", "record_row_info", "control_step",
-           "desired", "analytic_chunk", "stepped_state_check", "stepped_after_control", "stepped_paper_step")
+           "desired", "analytic_loop", "analytic_sense", "analytic_command", "analytic_advance",
+           "analytic_chunk", "stepped_state_check", "stepped_after_control", "stepped_paper_step")

@@ -6,10 +6,9 @@ from __future__ import annotations
 import numpy as np
 
 from controllers.cc import backbone_points
-from controllers.control import MASTER_INFO, SLAVE_INFO
 from controllers.master import master_kernel
 from controllers.scratch import scratch, scratch_zeros
-from controllers.status import ST_MUJOCO_STATE, ST_MUJOCO_WARNING, ST_OK, ST_RUNAWAY, ST_SECTION_LENGTH
+from controllers.status import ST_MUJOCO_STATE, ST_MUJOCO_WARNING, ST_OK, ST_SECTION_LENGTH
 from harness.loop.force_kernels import (
     CONTACT_INFO,
     operator_advance,
@@ -19,10 +18,12 @@ from harness.loop.force_kernels import (
     sense_forces,
 )
 from harness.loop.kernels import (
-    ROW_W,
-    control_step,
-    ring_index,
-    runaway,
+    R_CI,
+    R_FS,
+    R_FT,
+    R_HAND,
+    bind,
+    loop_chunk,
     section_collapsed,
     servo_reference_step,
 )
@@ -93,13 +94,6 @@ def chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, muscl
     return 0
 
 
-# record-row columns after the control step's (harness.loop.trajectory.ROW_FIELDS)
-R_FT = ROW_W
-R_FS = R_FT + 4
-R_CI = R_FS + 4
-R_HAND = R_CI + CONTACT_INFO
-
-
 def master_tip_state(mpk, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1):
     """Master tip position xm and velocity vm = J1 dq1 (task frame) of the plant master (packed mpk)
     from MuJoCo's joints; J1 (2, 2) is left for J1^T F."""
@@ -111,138 +105,131 @@ def master_tip_state(mpk, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, 
         vm[i] = J1[i, 0] * dq1[0] + J1[i, 1] * dq1[1]
 
 
+def mujoco_sense(k, i, state, r, p):
+    """The true state from MuJoCo's joints (status 6, 5), the contact and operator forces, the sensed F into
+    the row, the qpos history."""
+    (mptr, dptr, mjfn, substeps, dt, m_qadr, m_dadr, m_act, c_qadr, c_dadr, c_act, R, C, L0, eargs, servo,
+     feedforward, kv_over_kp, muscle) = p[0]
+    qpos, qvel, ctrl, qfrc, ref, qpos_hist, cmd_log, geo_in, geo_out, wnum, nsat = p[1]
+    (sensordata, cadr, Fconst, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, op_on, op, targets, hand,
+     target, mpk_p, cpts) = p[2]
+    F2c, F1op, Ftrue, q1, dq1, xm, vm, J1, Jd1, M1, N1, nopts, qc, vc, corr = p[3]
+    sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state)
+    st = mujoco_state_status(state)
+    if st != ST_OK:
+        return st
+    read_contact(sensordata, cadr, F2c, r[R_CI:R_CI + CONTACT_INFO], cpts[i] if cpts.shape[0] > 0 else nopts)
+    if op_on:
+        master_tip_state(mpk_p, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1)
+        operator_force(op, hand, xm, vm, F1op)
+    for j in range(2):
+        Ftrue[j] = Fconst[j] + F1op[j]
+        Ftrue[2 + j] = Fconst[2 + j] + F2c[j]
+    sense_forces(Ftrue, k, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, r[R_FS:R_FS + 4])
+    for j in range(4):
+        r[R_FT + j] = Ftrue[j]
+    r[R_HAND] = hand[0]
+    r[R_HAND + 1] = hand[1]
+    if qpos_hist.shape[0] > 0:
+        for j in range(qpos.shape[0]):
+            qpos_hist[i, j] = qpos[j]
+    return ST_OK
+
+
+def mujoco_command(slot, T1, T2, u2, sensed, p):
+    """The command vector of the step into its ring slot (`mujoco_commands` at the sensed q2)."""
+    (mptr, dptr, mjfn, substeps, dt, m_qadr, m_dadr, m_act, c_qadr, c_dadr, c_act, R, C, L0, eargs, servo,
+     feedforward, kv_over_kp, muscle) = p[0]
+    qpos, qvel, ctrl, qfrc, ref, qpos_hist, cmd_log, geo_in, geo_out, wnum, nsat = p[1]
+    slot[0] = T1[0]
+    slot[1] = T1[1]
+    nsat[0] += mujoco_commands(servo, feedforward, dt, sensed[4:10], T2, u2, ref, C, R, L0, kv_over_kp,
+                               muscle, slot)
+
+
+def mujoco_advance(k, i, st, use, state, law, p):
+    """`substeps` x (operator and F1 forces, elastic correction, mj_step) with the commands `use`; a failed
+    step (st != 0) is not stepped (its geometry row from its kinematics).  Status 7 on a MuJoCo warning."""
+    (mptr, dptr, mjfn, substeps, dt, m_qadr, m_dadr, m_act, c_qadr, c_dadr, c_act, R, C, L0, eargs, servo,
+     feedforward, kv_over_kp, muscle) = p[0]
+    qpos, qvel, ctrl, qfrc, ref, qpos_hist, cmd_log, geo_in, geo_out, wnum, nsat = p[1]
+    (sensordata, cadr, Fconst, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, op_on, op, targets, hand,
+     target, mpk_p, cpts) = p[2]
+    F2c, F1op, Ftrue, q1, dq1, xm, vm, J1, Jd1, M1, N1, nopts, qc, vc, corr = p[3]
+    live = geo_out[0].shape[0] > 0
+    if st != 0:
+        if live:
+            mj_call(mjfn[MJ_KINEMATICS_FN], mptr, dptr)
+            copy_geometry(geo_in, i, geo_out)
+        return st
+    n = C.shape[0]
+    nu = ctrl.shape[0]
+    for j in range(2):
+        ctrl[m_act[j]] = use[j]
+    for c in range(c_act.shape[0]):
+        ctrl[c_act[c]] = use[2 + c]
+    apply1 = op_on or Fconst[0] != 0.0 or Fconst[1] != 0.0
+    hphys = dt / substeps
+    for s in range(substeps):
+        if apply1:  # operator's grip (+ constant F1) on the master handle, J1^T F1
+            if s > 0 or not op_on:  # at s = 0 with the operator: J1 and F1op are the step's own
+                master_tip_state(mpk_p, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1)
+                if op_on:
+                    operator_force(op, hand, xm, vm, F1op)
+            if op_on:
+                operator_target(targets, k * dt + s * hphys, target)
+                operator_advance(op, hand, target, F1op, hphys)
+            for j in range(2):
+                qfrc[m_dadr[j]] = J1[0, j] * (Fconst[0] + F1op[0]) + J1[1, j] * (Fconst[1] + F1op[1])
+        for c in range(n):
+            qc[c] = qpos[c_qadr[c]]
+        chain_elastic_correction(qc, *eargs, corr)
+        for c in range(n):
+            qfrc[c_dadr[c]] = use[2 + n + c] + corr[c]
+        if cmd_log.shape[0] > 0:
+            lr = cmd_log[i * substeps + s]
+            for j in range(nu):
+                lr[j] = ctrl[j]
+            for j in range(qfrc.shape[0]):
+                lr[nu + j] = qfrc[j]
+        mj_call(mjfn[MJ_STEP_FN], mptr, dptr)
+        if live and s == 0:
+            copy_geometry(geo_in, i, geo_out)
+        for w in range(wnum.shape[0]):
+            if wnum[w] != 0:  # any MuJoCo warning stops the run: it must never pass silently
+                return ST_MUJOCO_WARNING
+    return ST_OK
+
+
 def mujoco_chunk(k0, k1, model, plant, data, fargs):
-    """Control steps k0..k1-1 on the MuJoCo plant: sense -> noise -> both laws -> record -> commands
-    (the ring cmdbuf (delay + 1, 2 + 2n), delay in control steps) -> `substeps` x (elastic correction +
-    mj_step, MuJoCo's C function by address, `harness.loop.native`).
+    """Control steps k0..k1-1 on the MuJoCo plant (`loop_chunk` with `mujoco_sense`, `mujoco_command`,
+    `mujoco_advance`, `mujoco_loop`: `substeps` x (elastic correction + mj_step, MuJoCo's C function by
+    address)).
 
     model: the run's `RunModel`; plant: the constants (mptr, dptr: mjModel*, mjData*; mjfn = MJ_FUNCS;
     substeps; dt (s); master qpos / dof addresses and actuators; the chain's, then R, C, L0, eargs (the
     `ChainMap`); servo, feedforward, kv_over_kp (n,), muscle: the actuation); data: the run's buffers
-    (MjData views qpos, qvel, ctrl, qfrc; noise, noise_scale; ref (12,); cmdbuf; delay; this chunk's rows,
-    qpos_hist (0 rows: off) and cmd_log ((k1 - k0) * substeps, nu + nv): [ctrl, qfrc] as applied before
-    each mj_step, 0 rows: off; geo_in, geo_out (`copy_geometry`, filled from the kinematics of the first
-    mj_step of each step when geo_out has rows); wnum: mjData.warning.number; nsat (1,): saturated muscle
-    group-steps, added to); fargs: the forces (`harness.loop.force_args.ForceArgs.args`; the laws get
-    the sensed F).  Returns (status, completed steps); 6: non-finite or exploding MuJoCo state, 7: a
-    MuJoCo warning in the last completed step (whose row is recorded)."""
-    mpk_c, spk_c, nodes, weights, gains, spec, F, traj, _s0 = model
-    (mptr, dptr, mjfn, substeps, dt, m_qadr, m_dadr, m_act, c_qadr, c_dadr, c_act, R, C, L0, eargs, servo,
-     feedforward, kv_over_kp, muscle) = plant
+    (MjData views qpos, qvel, ctrl, qfrc; noise, noise_scale; ref (12,); cmdbuf (delay + 1, 2 + 2n); delay;
+    this chunk's rows, qpos_hist (0 rows: off) and cmd_log ((k1 - k0) * substeps, nu + nv): [ctrl, qfrc]
+    as applied before each mj_step, 0 rows: off; geo_in, geo_out (`copy_geometry`, filled from the
+    kinematics of the first mj_step of each step when geo_out has rows); wnum: mjData.warning.number; nsat
+    (1,): saturated muscle group-steps, added to); fargs: the forces (`harness.loop.force_args.ForceArgs`;
+    the laws get the sensed F).  Returns (status, completed steps); 6: non-finite or exploding MuJoCo
+    state, 7: a MuJoCo warning in the last completed step (whose row is recorded)."""
     (qpos, qvel, ctrl, qfrc, noise, noise_scale, ref, cmdbuf, delay, rows, qpos_hist, cmd_log, geo_in,
      geo_out, wnum, nsat) = data
-    (sensordata, cadr, Fconst, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, op_on, op, targets, hand,
-     target, mpk_p, cpts) = fargs
-    F2c = scratch_zeros(2)
-    F1op = scratch_zeros(2)
-    Ftrue = scratch_zeros(4)
-    q1 = scratch(2)
-    dq1 = scratch(2)
-    xm = scratch(2)
-    vm = scratch(2)
-    J1 = scratch((2, 2))
-    Jd1 = scratch((2, 2))
-    M1 = scratch((2, 2))
-    N1 = scratch(2)
-    nopts = scratch_zeros((0, 6))
-    apply1 = op_on or Fconst[0] != 0.0 or Fconst[1] != 0.0
-    hphys = dt / substeps
-    n = C.shape[0]
-    state = scratch(16)
-    sensed = scratch(16)
-    qc = np.empty(n)
-    vc = np.empty(n)
-    corr = np.empty(n)
-    # the control step's arrays: made here, not by a shared helper (a scratch array lives in the frame that
-    # makes it: a helper would hand back arrays over its finished frame)
-    T1 = scratch_zeros(2)
-    T2 = scratch_zeros(6)
-    u2 = scratch_zeros(6)
-    deN = scratch_zeros(6)
-    minfo = scratch(MASTER_INFO)
-    sinfo = scratch(SLAVE_INFO)
-    xd = scratch(2)
-    dxd = scratch(2)
-    ddxd = scratch(2)
-    nb = delay + 1
-    log = cmd_log.shape[0] > 0
-    hist = qpos_hist.shape[0] > 0
-    live = geo_out[0].shape[0] > 0
-    nu = ctrl.shape[0]
-    nv = qfrc.shape[0]
-    for k in range(k0, k1):
-        sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state)
-        st = mujoco_state_status(state)
-        if st != ST_OK:
-            return st, k - k0
-        t = k * dt
-        r = rows[k - k0]
-        read_contact(sensordata, cadr, F2c, r[R_CI:R_CI + CONTACT_INFO], cpts[k - k0] if cpts.shape[0] > 0
-                     else nopts)
-        if op_on:
-            master_tip_state(mpk_p, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1)
-            operator_force(op, hand, xm, vm, F1op)
-        for i in range(2):
-            Ftrue[i] = Fconst[i] + F1op[i]
-            Ftrue[2 + i] = Fconst[2 + i] + F2c[i]
-        sense_forces(Ftrue, k, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, r[R_FS:R_FS + 4])
-        for i in range(4):
-            r[R_FT + i] = Ftrue[i]
-        r[R_HAND] = hand[0]
-        r[R_HAND + 1] = hand[1]
-        st = control_step(t, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, weights, gains, spec,
-                          r[R_FS:R_FS + 4], xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, r)
-        if hist:
-            for i in range(qpos.shape[0]):
-                qpos_hist[k - k0, i] = qpos[i]
-        if st == 0 and runaway(r):
-            st = ST_RUNAWAY
-        if st != 0:  # the last recorded step is not stepped: its geometry row from its kinematics
-            if live:
-                mj_call(mjfn[MJ_KINEMATICS_FN], mptr, dptr)
-                copy_geometry(geo_in, k - k0, geo_out)
-            return st, k - k0 + 1
-        slot = k % nb
-        cmd = cmdbuf[slot]
-        cmd[0] = T1[0]
-        cmd[1] = T1[1]
-        nsat[0] += mujoco_commands(servo, feedforward, dt, sensed[4:10], T2, u2, ref, C, R, L0, kv_over_kp,
-                                   muscle, cmd)
-        use = cmdbuf[ring_index(k, delay)]
-        for i in range(2):
-            ctrl[m_act[i]] = use[i]
-        for c in range(c_act.shape[0]):
-            ctrl[c_act[c]] = use[2 + c]
-        for s in range(substeps):
-            if apply1:  # operator's grip (+ constant F1) on the master handle, J1^T F1
-                if s > 0 or not op_on:  # at s = 0 with the operator: J1 and F1op are the step's own
-                    master_tip_state(mpk_p, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1)
-                    if op_on:
-                        operator_force(op, hand, xm, vm, F1op)
-                if op_on:
-                    operator_target(targets, t + s * hphys, target)
-                    operator_advance(op, hand, target, F1op, hphys)
-                for i in range(2):
-                    qfrc[m_dadr[i]] = (J1[0, i] * (Fconst[0] + F1op[0])
-                                       + J1[1, i] * (Fconst[1] + F1op[1]))
-            for c in range(n):
-                qc[c] = qpos[c_qadr[c]]
-            chain_elastic_correction(qc, *eargs, corr)
-            for c in range(n):
-                qfrc[c_dadr[c]] = use[2 + n + c] + corr[c]
-            if log:
-                lr = cmd_log[(k - k0) * substeps + s]
-                for i in range(nu):
-                    lr[i] = ctrl[i]
-                for i in range(nv):
-                    lr[nu + i] = qfrc[i]
-            mj_call(mjfn[MJ_STEP_FN], mptr, dptr)
-            if live and s == 0:
-                copy_geometry(geo_in, k - k0, geo_out)
-            for w in range(wnum.shape[0]):
-                if wnum[w] != 0:  # any MuJoCo warning stops the run: it must never pass silently
-                    return ST_MUJOCO_WARNING, k - k0 + 1
-    return ST_OK, k1 - k0
+    n = plant[12].shape[0]
+    # F2c, F1op, Ftrue, q1, dq1, xm, vm, J1, Jd1, M1, N1, no contact points, qc, vc, corr
+    work = (scratch_zeros(2), scratch_zeros(2), scratch_zeros(4), scratch(2), scratch(2), scratch(2),
+            scratch(2), scratch((2, 2)), scratch((2, 2)), scratch((2, 2)), scratch(2), scratch_zeros((0, 6)),
+            np.empty(n), np.empty(n), np.empty(n))
+    buffers = (qpos, qvel, ctrl, qfrc, ref, qpos_hist, cmd_log, geo_in, geo_out, wnum, nsat)
+    return mujoco_loop(k0, k1, model, (scratch(16), noise, noise_scale, rows, cmdbuf, delay, plant[4]),
+                       (plant, buffers, fargs, work))
+
+
+mujoco_loop = bind(loop_chunk, "mujoco_loop", plant_sense=mujoco_sense, plant_command=mujoco_command,
+                   plant_advance=mujoco_advance)
 
 
 def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):
@@ -260,7 +247,8 @@ def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):
 # the kernels that allocate on the heap (run-time sizes), compiled with numba's runtime (harness.loop.fast)
 HEAP_KERNELS = ("mujoco_chunk", "backbone_world")
 KERNELS = ("sense_mujoco", "mujoco_state_status", "mujoco_commands", "chain_commands", "master_tip_state",
-           "mujoco_chunk", "replay_commands")
+           "mujoco_sense", "mujoco_command", "mujoco_advance", "mujoco_loop", "mujoco_chunk",
+           "replay_commands")
 
 
 # --- recording geometry after the loop ---------------------------------------------------------------
