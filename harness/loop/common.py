@@ -26,22 +26,6 @@ STOP = threading.Event()  # set from a signal handler to stop a run cleanly
 CHUNK = 250  # control steps between progress and interrupt checks
 
 
-def set_outcome(traj: Trajectory, status: int, interrupted: bool, error: str = "", detail: str = "") -> None:
-    """traj.status / message from a loop's end: an exception's text, a status code (`controllers.status`,
-    plus `detail`), an interrupt, or nothing (status stays "ok")."""
-    t_end = float(traj.t[-1]) if len(traj) else 0.0
-    if error:
-        traj.status, cause = "error", error
-    elif status != 0:
-        known = status in Status._value2member_map_
-        traj.status, cause = "diverged", (Status(status).text if known else "unknown") + detail
-    elif interrupted:
-        traj.status, cause = "interrupted", "interrupted"
-    else:
-        return
-    traj.message = f"{cause} at t = {t_end:.4f} s"
-
-
 class SimulationError(RuntimeError):
     """Bad initial conditions that make a run impossible (reported before any stepping)."""
 
@@ -118,10 +102,20 @@ class ChunkRun:
             self.wall = time.perf_counter() - t0
 
     def trajectory(self, scn: Scenario, rows: np.ndarray, detail: str = "") -> Trajectory:
-        """The run's Trajectory from rows[:done], its meta and outcome (`set_outcome`)."""
+        """The run's Trajectory from rows[:done] and its meta; status / message from the run's end: an
+        exception's text, a status code (`controllers.status`, plus `detail`), an interrupt, or "ok"."""
         traj = Trajectory.from_rows(rows[:self.done])
         traj.meta.update(run_meta(scn, self.wall))
-        set_outcome(traj, self.status, self.interrupted, self.error, detail)
+        if self.error:
+            traj.status, cause = "error", self.error
+        elif self.status != 0:
+            known = self.status in {int(s) for s in Status}
+            traj.status, cause = "diverged", (Status(self.status).text if known else "unknown") + detail
+        elif self.interrupted:
+            traj.status, cause = "interrupted", "interrupted"
+        else:
+            return traj
+        traj.message = f"{cause} at t = {float(traj.t[-1]) if len(traj) else 0.0:.4f} s"
         return traj
 
 

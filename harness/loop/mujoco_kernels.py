@@ -105,23 +105,31 @@ def master_tip_state(mpk, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, 
         vm[i] = J1[i, 0] * dq1[0] + J1[i, 1] * dq1[1]
 
 
+def master_grip(master, operator):
+    """The plant master's tip state (its J1 for J1^T F1) and, with the operator, the grip force F1op."""
+    qpos, qvel, m_qadr, m_dadr, mpk_p, q1, dq1, xm, vm, J1, Jd1, M1, N1 = master
+    op_on, op, targets, hand, target, F1op = operator
+    master_tip_state(mpk_p, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1)
+    if op_on:
+        operator_force(op, hand, xm, vm, F1op)
+
+
 def mujoco_sense(k, i, state, r, p):
-    """The true state from MuJoCo's joints (status 6, 5), the contact and operator forces, the sensed F into
-    the row, the qpos history."""
-    (mptr, dptr, mjfn, substeps, dt, m_qadr, m_dadr, m_act, c_qadr, c_dadr, c_act, R, C, L0, eargs, servo,
-     feedforward, kv_over_kp, muscle) = p[0]
-    qpos, qvel, ctrl, qfrc, ref, qpos_hist, cmd_log, geo_in, geo_out, wnum, nsat = p[1]
-    (sensordata, cadr, Fconst, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, op_on, op, targets, hand,
-     target, mpk_p, cpts) = p[2]
-    F2c, F1op, Ftrue, q1, dq1, xm, vm, J1, Jd1, M1, N1, nopts, qc, vc, corr = p[3]
+    """The true state from MuJoCo's joints (status 6, 5), the contact and operator forces, the sensed F
+    into the row, the qpos history."""
+    mj, master, chain, sensing, operator, rec, act = p
+    qpos, qvel, m_qadr, m_dadr = master[0], master[1], master[2], master[3]
+    c_qadr, c_dadr, R, C, L0, eargs, qc, vc, corr = chain
+    (sensordata, cadr, cpts, nopts, Fconst, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, F2c,
+     Ftrue) = sensing
+    F1op, hand, qpos_hist = operator[5], operator[3], rec[0]
     sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state)
     st = mujoco_state_status(state)
     if st != ST_OK:
         return st
     read_contact(sensordata, cadr, F2c, r[R_CI:R_CI + CONTACT_INFO], cpts[i] if cpts.shape[0] > 0 else nopts)
-    if op_on:
-        master_tip_state(mpk_p, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1)
-        operator_force(op, hand, xm, vm, F1op)
+    if operator[0]:
+        master_grip(master, operator)
     for j in range(2):
         Ftrue[j] = Fconst[j] + F1op[j]
         Ftrue[2 + j] = Fconst[2 + j] + F2c[j]
@@ -137,10 +145,8 @@ def mujoco_sense(k, i, state, r, p):
 
 
 def mujoco_command(slot, T1, T2, u2, sensed, p):
-    """The command vector of the step into its ring slot (`mujoco_commands` at the sensed q2)."""
-    (mptr, dptr, mjfn, substeps, dt, m_qadr, m_dadr, m_act, c_qadr, c_dadr, c_act, R, C, L0, eargs, servo,
-     feedforward, kv_over_kp, muscle) = p[0]
-    qpos, qvel, ctrl, qfrc, ref, qpos_hist, cmd_log, geo_in, geo_out, wnum, nsat = p[1]
+    """The step's command vector into its ring slot (`mujoco_commands` at the sensed q2)."""
+    servo, feedforward, dt, C, R, L0, kv_over_kp, muscle, ref, nsat = p[6]
     slot[0] = T1[0]
     slot[1] = T1[1]
     nsat[0] += mujoco_commands(servo, feedforward, dt, sensed[4:10], T2, u2, ref, C, R, L0, kv_over_kp,
@@ -150,12 +156,12 @@ def mujoco_command(slot, T1, T2, u2, sensed, p):
 def mujoco_advance(k, i, st, use, state, law, p):
     """`substeps` x (operator and F1 forces, elastic correction, mj_step) with the commands `use`; a failed
     step (st != 0) is not stepped (its geometry row from its kinematics).  Status 7 on a MuJoCo warning."""
-    (mptr, dptr, mjfn, substeps, dt, m_qadr, m_dadr, m_act, c_qadr, c_dadr, c_act, R, C, L0, eargs, servo,
-     feedforward, kv_over_kp, muscle) = p[0]
-    qpos, qvel, ctrl, qfrc, ref, qpos_hist, cmd_log, geo_in, geo_out, wnum, nsat = p[1]
-    (sensordata, cadr, Fconst, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, op_on, op, targets, hand,
-     target, mpk_p, cpts) = p[2]
-    F2c, F1op, Ftrue, q1, dq1, xm, vm, J1, Jd1, M1, N1, nopts, qc, vc, corr = p[3]
+    mj, master, chain, sensing, operator, rec, act = p
+    mptr, dptr, mjfn, substeps, dt, ctrl, qfrc, m_act, c_act, wnum = mj
+    c_qadr, c_dadr, R, C, L0, eargs, qc, vc, corr = chain
+    op_on, op, targets, hand, target, F1op = operator
+    qpos_hist, cmd_log, geo_in, geo_out = rec
+    qpos, m_dadr, J1, Fconst = master[0], master[3], master[9], sensing[4]
     live = geo_out[0].shape[0] > 0
     if st != 0:
         if live:
@@ -173,9 +179,7 @@ def mujoco_advance(k, i, st, use, state, law, p):
     for s in range(substeps):
         if apply1:  # operator's grip (+ constant F1) on the master handle, J1^T F1
             if s > 0 or not op_on:  # at s = 0 with the operator: J1 and F1op are the step's own
-                master_tip_state(mpk_p, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1)
-                if op_on:
-                    operator_force(op, hand, xm, vm, F1op)
+                master_grip(master, operator)
             if op_on:
                 operator_target(targets, k * dt + s * hphys, target)
                 operator_advance(op, hand, target, F1op, hphys)
@@ -203,8 +207,7 @@ def mujoco_advance(k, i, st, use, state, law, p):
 
 def mujoco_chunk(k0, k1, model, plant, data, fargs):
     """Control steps k0..k1-1 on the MuJoCo plant (`loop_chunk` with `mujoco_sense`, `mujoco_command`,
-    `mujoco_advance`, `mujoco_loop`: `substeps` x (elastic correction + mj_step, MuJoCo's C function by
-    address)).
+    `mujoco_advance`: `mujoco_loop`).
 
     model: the run's `RunModel`; plant: the constants (mptr, dptr: mjModel*, mjData*; mjfn = MJ_FUNCS;
     substeps; dt (s); master qpos / dof addresses and actuators; the chain's, then R, C, L0, eargs (the
@@ -216,16 +219,25 @@ def mujoco_chunk(k0, k1, model, plant, data, fargs):
     (1,): saturated muscle group-steps, added to); fargs: the forces (`harness.loop.force_args.ForceArgs`;
     the laws get the sensed F).  Returns (status, completed steps); 6: non-finite or exploding MuJoCo
     state, 7: a MuJoCo warning in the last completed step (whose row is recorded)."""
+    (mptr, dptr, mjfn, substeps, dt, m_qadr, m_dadr, m_act, c_qadr, c_dadr, c_act, R, C, L0, eargs, servo,
+     feedforward, kv_over_kp, muscle) = plant
     (qpos, qvel, ctrl, qfrc, noise, noise_scale, ref, cmdbuf, delay, rows, qpos_hist, cmd_log, geo_in,
      geo_out, wnum, nsat) = data
-    n = plant[12].shape[0]
-    # F2c, F1op, Ftrue, q1, dq1, xm, vm, J1, Jd1, M1, N1, no contact points, qc, vc, corr
-    work = (scratch_zeros(2), scratch_zeros(2), scratch_zeros(4), scratch(2), scratch(2), scratch(2),
-            scratch(2), scratch((2, 2)), scratch((2, 2)), scratch((2, 2)), scratch(2), scratch_zeros((0, 6)),
-            np.empty(n), np.empty(n), np.empty(n))
-    buffers = (qpos, qvel, ctrl, qfrc, ref, qpos_hist, cmd_log, geo_in, geo_out, wnum, nsat)
-    return mujoco_loop(k0, k1, model, (scratch(16), noise, noise_scale, rows, cmdbuf, delay, plant[4]),
-                       (plant, buffers, fargs, work))
+    (sensordata, cadr, Fconst, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, op_on, op, targets, hand,
+     target, mpk_p, cpts) = fargs
+    n = C.shape[0]
+    mj = (mptr, dptr, mjfn, substeps, dt, ctrl, qfrc, m_act, c_act, wnum)
+    # + the master tip's work: q1, dq1, xm, vm, J1, Jd1, M1, N1
+    master = (qpos, qvel, m_qadr, m_dadr, mpk_p, scratch(2), scratch(2), scratch(2), scratch(2),
+              scratch((2, 2)), scratch((2, 2)), scratch((2, 2)), scratch(2))
+    chain = (c_qadr, c_dadr, R, C, L0, eargs, np.empty(n), np.empty(n), np.empty(n))  # + qc, vc, corr
+    # + no contact points, then the contact force F2c and the true forces Ftrue
+    sensing = (sensordata, cadr, cpts, scratch_zeros((0, 6)), Fconst, fmode, fnoise, fstd, falpha, fdelay,
+               fbuf, ffilt, scratch_zeros(2), scratch_zeros(4))
+    operator = (op_on, op, targets, hand, target, scratch_zeros(2))  # + the grip force F1op
+    act = (servo, feedforward, dt, C, R, L0, kv_over_kp, muscle, ref, nsat)
+    return mujoco_loop(k0, k1, model, (scratch(16), noise, noise_scale, rows, cmdbuf, delay, dt),
+                       (mj, master, chain, sensing, operator, (qpos_hist, cmd_log, geo_in, geo_out), act))
 
 
 mujoco_loop = bind(loop_chunk, "mujoco_loop", plant_sense=mujoco_sense, plant_command=mujoco_command,
@@ -247,7 +259,7 @@ def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):
 # the kernels that allocate on the heap (run-time sizes), compiled with numba's runtime (harness.loop.fast)
 HEAP_KERNELS = ("mujoco_chunk", "backbone_world")
 KERNELS = ("sense_mujoco", "mujoco_state_status", "mujoco_commands", "chain_commands", "master_tip_state",
-           "mujoco_sense", "mujoco_command", "mujoco_advance", "mujoco_loop", "mujoco_chunk",
+           "master_grip", "mujoco_sense", "mujoco_command", "mujoco_advance", "mujoco_loop", "mujoco_chunk",
            "replay_commands")
 
 
