@@ -16,10 +16,13 @@ import numpy as np
 from controllers import master as master_model
 from controllers.control import MASTER_INFO, SLAVE_INFO
 from controllers.status import Status
+from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
 from harness.loop.common import RunModel
 from harness.loop.fast import K
+from harness.loop.force_args import ForceArgs
 from harness.loop.mujoco_loop import Geometry, actuation_args, make_plant, warning_counts
+from harness.plant.mujoco_model import MujocoPlant
 
 FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
 Q2_NAMES = ("d1", "d2", "d3", "k1", "k2", "k3")
@@ -31,7 +34,23 @@ class MujocoStepped:
     kind = "mujoco"
 
     def __init__(self, scn: Scenario, model: RunModel, plant=None) -> None:
+        for key, used in (("operator.enabled", scn.operator.enabled),
+                          ("sensing.force.mode", scn.sensing.force.mode == "sensed")):
+            if used:
+                raise ConfigError(f"{key}: needs the compiled MuJoCo loop (controller.name = 'paper'); the "
+                                  "Python-stepped MuJoCo plant does not simulate it", path=key)
+        plant = plant if plant is not None else MujocoPlant.build(scn)
         self.m, self.d, self.cmap = make_plant(scn, plant, model.s0)  # at the initial state
+        d, c = self.d, self.cmap
+        # the constant forces (F2 applied here) and the contact sensors, as the compiled loop
+        self.fa = ForceArgs(scn, self.m, d, c, plant.contact, 0, model.s0, model.F)
+        # `mujoco_kernels.master_grip`'s groups: + q1, dq1, xm, vm, J1, Jd1, M1, N1; the operator off
+        self.master = (d.qpos, d.qvel, c.master_qpos_adr, c.master_dof_adr, self.fa.mpk_p, np.zeros(2),
+                       np.zeros(2), np.zeros(2), np.zeros(2), np.zeros((2, 2)), np.zeros((2, 2)),
+                       np.zeros((2, 2)), np.zeros(2))
+        self.operator = (False, self.fa.op, self.fa.targets, self.fa.hand, self.fa.target, np.zeros(2))
+        self.apply1 = model.F[0] != 0.0 or model.F[1] != 0.0
+        self.F2c, self.nopts = np.zeros(2), np.zeros((0, 6))
         self.n = n = self.cmap.n_chain
         self.actuation = scn.plant.actuation
         self.servo = self.actuation == "servo"
@@ -70,6 +89,9 @@ class MujocoStepped:
         d.ctrl[self.ctrl_ids] = use[2:2 + self.ctrl_ids.shape[0]]
         wnum = d.warning.number
         for _ in range(self.sub):
+            if self.apply1:  # the constant F1 on the master handle, J1^T F1
+                K.master_grip(self.master, self.operator)
+                K.master_handle_force(self.master, self.operator, self.fa.Fconst, d.qfrc_applied)
             self.qc[:] = d.qpos[c.chain_qpos_adr]
             K.chain_elastic_correction(self.qc, *c.elastic_args, self.corr)
             d.qfrc_applied[c.chain_dof_adr] = use[2 + n:2 + 2 * n] + self.corr
@@ -78,6 +100,15 @@ class MujocoStepped:
                 self.warned = warning_counts(wnum)
                 return Status.MUJOCO_WARNING
         return 0
+
+    def forces(self, F: np.ndarray, contact: np.ndarray) -> None:
+        """The true forces (4,) ON the robots, constant + the contact force on the tip body, and the contact
+        summary (5,) (`read_contact`)."""
+        Fc = self.fa.Fconst
+        K.read_contact(self.fa.sensordata, self.fa.cadr, self.F2c, contact, self.nopts)
+        for i in range(2):
+            F[i] = Fc[i] + 0.0
+            F[2 + i] = Fc[2 + i] + self.F2c[i]
 
     def record(self, k: int) -> None:
         self.geo.qpos_hist[k] = self.d.qpos
