@@ -77,15 +77,16 @@ class Stepper:
         self.cmdbuf = np.zeros((self.delay + 1, 26))
         self.cmdbuf[:, 8:20] = self.ref
         self.views = [(c[0:2], c[2:8], c[8:14], c[14:20], c[20:26]) for c in self.cmdbuf]
+        self.done = 0  # rows recorded
 
-    def step(self, k: int, row: np.ndarray) -> tuple[int, bool]:
-        """Control step k, its record row into row (ROW_WIDTH,).  Returns (status, whether the row was
-        recorded); the plant is advanced only when the status is 0."""
+    def step(self, k: int, row: np.ndarray) -> int:
+        """Control step k, its record row into row (ROW_WIDTH,); `done` becomes k + 1 once it is recorded.
+        Returns the status; the plant is advanced only when it is 0."""
         a, ctrl, state, dt = self.model, self.ctrl, self.state, self.dt
         t = k * dt
         st = self.plant.true_state(state)
         if st:
-            return int(st), False
+            return int(st)
         if self.forces is not None:
             self.forces(self.Ftrue, self.cinfo)
         slot = self.cmdbuf[k % (self.delay + 1)]
@@ -97,11 +98,11 @@ class Stepper:
                 self.sensed, self.T1, self.T2, self.u2, self.deN, self.minfo, self.sinfo, row, self.cinfo,
                 _I_F, _I_FS, _I_C, ref_mode, self.ref, dt, slot)
             if s0:
-                return s0, False
+                return s0
         else:
             st = K.stepped_state_check(state, EXPLODING, self.Ftrue, self.Fsens, self.ignored)
             if st:
-                return st, False
+                return st
             K.desired(a.traj, t, self.xd, self.dxd, self.ddxd)
             K.sense_state(state, self.noise, k, self.scale, self.sensed)
             st = int(ctrl.step(t, self.sensed, self.xd, self.dxd, self.ddxd, self.T1, self.T2, self.u2,
@@ -116,10 +117,11 @@ class Stepper:
                                          self.sensed, slot)
         if self.record is not None:
             self.record(k)
+        self.done = k + 1
         if st:
-            return int(st), True
+            return int(st)
         self.plant.command(*self.views[K.ring_index(k, self.delay)])
-        return int(self.plant.advance(dt) or 0), True
+        return int(self.plant.advance(dt) or 0)
 
 
 def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
@@ -155,15 +157,14 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
         for name, v in plant.geometry().items():
             geo[name][k] = v
 
-    step = Stepper(scn, plant, model, ctrl, noise_table(scn, scn.n_steps),
-                   plant.record if own_geo else copy_geometry).step
+    stepper = Stepper(scn, plant, model, ctrl, noise_table(scn, scn.n_steps),
+                      plant.record if own_geo else copy_geometry)
 
     def steps(k0: int, k1: int) -> tuple[int, int]:
         for k in range(k0, k1):
-            status, recorded = step(k, rows[k])
-            run.done = k + recorded
+            status = stepper.step(k, rows[k])
             if status:
-                return status, run.done - k0
+                return status, stepper.done - k0
         return 0, k1 - k0
 
     part = None if on_chunk is None else (lambda k, done: on_chunk(part_trajectory(scn, rows[k:done])))
@@ -172,6 +173,7 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
     try:
         run.run(steps)
     finally:
+        run.done = stepper.done  # also after an exception inside a step
         if ctrl is not None:
             ctrl.close()
     failed = failed or isinstance(run.exc, ControllerFailure)

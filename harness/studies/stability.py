@@ -132,7 +132,7 @@ class ClosedLoopMap:
 
     def step(self) -> int:
         """One control step k -> k + 1; a `controllers.status.Status` code (0 = ok)."""
-        st, _ = self.stepper.step(self.k, self.row)
+        st = self.stepper.step(self.k, self.row)
         if not st:
             self.k += 1
         return st
