@@ -78,6 +78,11 @@ class Stepper:
         self.cmdbuf[:, 8:20] = self.ref
         self.views = [(c[0:2], c[2:8], c[8:14], c[14:20], c[20:26]) for c in self.cmdbuf]
         self.done = 0  # rows recorded
+        m = model  # the paper's one compiled call: its arguments around t, k, row and the ring slot
+        law = (self.scale, m.mpk_c, m.spk_c, m.nodes, m.weights, m.gains, m.spec, self.Fsens, self.xd,
+               self.dxd, self.ddxd, self.sensed, self.T1, self.T2, self.u2, self.deN, self.minfo, self.sinfo)
+        self._args = ((self.state, EXPLODING, self.Ftrue, self.ignored), (m.traj, self.noise), law,
+                      (self.cinfo, _I_F, _I_FS, _I_C, 1 if self.servo else 0, self.ref, self.dt))
 
     def step(self, k: int, row: np.ndarray) -> int:
         """Control step k, its record row into row (ROW_WIDTH,); `done` becomes k + 1 once it is recorded.
@@ -90,13 +95,9 @@ class Stepper:
         if self.forces is not None:
             self.forces(self.Ftrue, self.cinfo)
         slot = self.cmdbuf[k % (self.delay + 1)]
-        ref_mode = 1 if self.servo else 0
         if ctrl is None:  # the paper's law: check, laws, row and glue in one compiled call
-            s0, st = K.stepped_paper_step(
-                state, EXPLODING, self.Ftrue, self.ignored, t, a.traj, self.noise, k, self.scale, a.mpk_c,
-                a.spk_c, a.nodes, a.weights, a.gains, a.spec, self.Fsens, self.xd, self.dxd, self.ddxd,
-                self.sensed, self.T1, self.T2, self.u2, self.deN, self.minfo, self.sinfo, row, self.cinfo,
-                _I_F, _I_FS, _I_C, ref_mode, self.ref, dt, slot)
+            A, B, C, D = self._args
+            s0, st = K.stepped_paper_step(*A, t, *B, k, *C, row, *D, slot)
             if s0:
                 return s0
         else:
@@ -109,7 +110,7 @@ class Stepper:
                                self.deN))
             K.record_row(t, state, self.xd, self.dxd, a.mpk_c, a.gains, a.spec, self.T1, self.T2, self.u2,
                          self.deN, row)
-            ext = _NO_REF
+            ext, ref_mode = _NO_REF, 1 if self.servo else 0
             if self.servo and ctrl.use_ref:
                 ext, ref_mode = ctrl.ref, 2
             st = K.stepped_after_control(st, self.T1, self.T2, self.u2, row, self.Ftrue, self.Fsens,

@@ -51,6 +51,8 @@ class MujocoStepped:
         self.operator = (False, self.fa.op, self.fa.targets, self.fa.hand, self.fa.target, np.zeros(2))
         self.apply1 = model.F[0] != 0.0 or model.F[1] != 0.0
         self.F2c, self.nopts = np.zeros(2), np.zeros((0, 6))
+        if self.fa.cadr.shape[0] == 0:  # no contact sensors: the loop's constant forces, no call per step
+            self.forces = None
         self.n = n = self.cmap.n_chain
         self.actuation = scn.plant.actuation
         self.servo = self.actuation == "servo"
