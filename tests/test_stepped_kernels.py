@@ -5,6 +5,8 @@ loads do the generalized forces' virtual work."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -12,6 +14,8 @@ from harness.config.load import load_scenario
 from harness.loop.common import compile_model
 from harness.loop.stepped_loop import simulate_stepped
 from harness.plant import build_plant
+
+CONTACT = Path(__file__).resolve().parent.parent / "scenarios" / "contact.toml"
 
 
 class _PerStepGeometry:
@@ -140,3 +144,30 @@ def test_paper_fast_path_and_interface_agree_in_the_stepped_loop(extra):
         assert np.array_equal(getattr(runs[0], f), getattr(runs[1], f)), f
     if "sensing.force.mode=ignored" in extra:
         assert np.all(runs[0].F_sensed == 0.0) and np.any(runs[0].F_true != 0.0)
+
+
+@pytest.mark.parametrize("case", ["forces", "contact"])
+def test_python_stepped_mujoco_plant_equals_the_compiled_loop_with_interaction_forces(case):
+    """The Python-stepped MuJoCo plant feels the constant tip forces (F1 through J1^T F1, F2 on the tip body)
+    and reads the contact sensors as the compiled loop does: the paper's law through the interface
+    ("paper_interface", Python-stepped) gives the compiled loop's ("paper") rows bit for bit."""
+    from harness.loop import simulate
+
+    contact = ["duration=0.6", "transient=0", "operator.enabled=false", "sensing.force.mode=exact"]
+    path, extra = {"forces": (None, ["duration=0.3", "interaction_forces=[[0.5, -1.0], [0.2, 0.4]]"]),
+                   "contact": (CONTACT, contact)}[case]
+    a, b = (simulate(load_scenario(path, [*extra, f"controller.name={c}"]))
+            for c in ("paper", "paper_interface"))
+    assert a.status == b.status == "ok" and len(a) == len(b)
+    for f in ("q1", "q2", "T1", "T2", "u2", "F_true", "F_sensed", "contact", "x2_plant", "body_pos"):
+        assert np.array_equal(getattr(a, f), getattr(b, f)), f
+    if case == "contact":
+        assert np.any(a.contact[:, 0] > 0)  # the arm touches the ceiling
+
+
+def test_python_stepped_mujoco_plant_refuses_what_it_does_not_simulate():
+    from harness.config.errors import ConfigError
+    from harness.loop import simulate
+
+    with pytest.raises(ConfigError, match="operator.enabled"):
+        simulate(load_scenario(CONTACT, ["duration=0.1", "transient=0", "controller.name=paper_interface"]))

@@ -1,37 +1,22 @@
-"""Ahead-of-time compiled loop entry kernels: a run that never loads numba.
+"""Ahead-of-time compiled loop entry kernels: a run that never loads numba (which costs each process
+about 1.2-1.5 s: `benchmarks/bench_core.py`).
 
-Why.  Loading numba costs every process about 1.2-1.5 s before its first step on the reference
-machine (`benchmarks/bench_core.py`): importing numba and llvmlite (~0.4 s), then, at the first call
-of any kernel, even one loaded from numba's on-disk cache, initialising its CPU target: some 250
-implementation modules, one of which imports SciPy's linear algebra (~0.6-0.9 s).  For the 20-s paper
-run that is as long as the loop itself, and a sweep pays it again in every worker.
+The entry kernels called once per chunk of steps (`ENTRIES`) are compiled with `numba.pycc`, from the
+very function the JIT compiles and for the call's argument types (read in pure Python: `type_key`), into
+`<cache root>/aot-<digest>-<recipe>/octarm_<entry>_<types>.so` (`aot_dir`); later processes import it
+and call it like the jitted kernel (same numbers; its wrapper releases the GIL).  A missing module is
+built on first use (20-60 s, one line on stderr) under a file lock.
 
-What.  The loop's entry kernels, called once per chunk of steps (`ENTRIES`), are compiled once with
-`numba.pycc` into a CPython extension module in the kernel cache; every later process imports that
-module (milliseconds) and calls it like the jitted kernel, without importing numba.  The module is
-compiled from the very function the JIT compiles (`harness.loop.fast`, callees compiled by numba and
-linked in), for the exact argument types of the call, so the numbers are the same (tested
-bit-identical).  Its Python wrapper releases the GIL like `njit(nogil=True)`, so a sweep's threads
-still run side by side.
-
-Where.  One module per entry and argument types:
-`<cache root>/aot-<digest>-<recipe>/octarm_<entry>_<types>.so` (`harness.loop.fast.cache_root`; the
-digest covers the kernel sources, numba, numpy and Python, the recipe this module's build and the
-processor, `aot_dir`).
-The argument types are read in pure Python (dtype, ndim, layout, writeable, nested tuples: what
-`numba.typeof` looks at), so finding the module needs no numba.  A missing module is built on
-first use (about 20-60 s, one line on stderr), under a file lock so that sweep workers build it once.
-
-Fallback.  If the module cannot be built or loaded (no C compiler, a numba without pycc, ...), the
-jitted kernel runs instead (same numbers, numba's start-up cost) and the reason is written next to
-the module (`<module>.failed`, so later runs do not retry; delete it to retry) and logged once.
-TELEOP_NO_AOT=1: always the jitted kernels.  TELEOP_NO_JIT=1: interpreted kernels (`fast.kernels`).
+Fallback: if the module cannot be built or loaded (no C compiler, a numba without pycc, ...), the jitted
+kernel runs (same numbers) and the reason is written to `<module>.failed` (delete it to retry) and logged
+once.  TELEOP_NO_AOT=1: always the jitted kernels; TELEOP_NO_JIT=1: the interpreted ones.
 """
 
 from __future__ import annotations
 
 import contextlib
 import functools
+import hashlib
 import importlib.util
 import logging
 import os
@@ -49,7 +34,7 @@ from harness.loop import fast
 
 log = logging.getLogger(__name__)
 
-# Kernels called once per chunk of steps (not per step: finding the module costs ~50 us per call).
+# called once per chunk of steps, not per step (finding the module costs ~50 us per call)
 ENTRIES = ("mujoco_chunk", "analytic_chunk", "backbone_world", "kinematics_replay")
 
 
@@ -58,10 +43,8 @@ class Unsupported(TypeError):
 
 
 def type_key(a) -> str:
-    """A string that determines `numba.typeof(a)` for the argument types the loops pass: arrays
-    (dtype, ndim, layout C/F/A, writeable; numba's typeof does not look at alignment), bool, int,
-    float, numpy scalars, nested tuples.
-    Raises Unsupported for anything else."""
+    """A string that determines `numba.typeof(a)` for arrays (dtype, ndim, layout, writeable), bool, int,
+    float, numpy scalars and nested tuples; Unsupported for anything else."""
     if isinstance(a, np.ndarray):
         if a.dtype.fields is not None or a.dtype.hasobject:  # dtype.str would not tell records apart
             raise Unsupported(f"array of dtype {a.dtype}")
@@ -84,23 +67,19 @@ def type_key(a) -> str:
 
 
 def aot_dir() -> Path:
-    """Folder of the compiled entry modules for the current kernel sources and versions (and this
-    module's build recipe)."""
+    """Folder of the entry modules of the current kernel sources, versions, build recipe and processor."""
     return fast.cache_root() / f"aot-{fast.source_digest()}-{_recipe()}"
 
 
 @functools.cache
 def _recipe() -> str:
-    import hashlib
     import inspect
 
     return hashlib.sha256((inspect.getsource(sys.modules[__name__]) + _cpu_id()).encode()).hexdigest()[:8]
 
 
 def _cpu_id() -> str:
-    """The processor's model and instruction-set flags: a cache folder shared by different machines (a
-    network home) never hands one machine's module to another (numba links its jitted callees, compiled
-    for the host processor, into the module)."""
+    """The processor's model and flags: a cache shared by machines never hands one's module to another."""
     import platform
 
     lines = []
@@ -114,19 +93,6 @@ def _cpu_id() -> str:
     except OSError:
         pass
     return "".join(lines) or f"{platform.machine()} {platform.processor()}"
-
-
-def module_name(entry: str, key: str) -> str:
-    import hashlib
-
-    return f"octarm_{entry}_{hashlib.sha256(key.encode()).hexdigest()[:16]}"
-
-
-def _load(modname: str, path: Path):
-    spec = importlib.util.spec_from_file_location(modname, path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 @contextlib.contextmanager
@@ -143,8 +109,7 @@ def _locked(path: Path):
 
 @contextlib.contextmanager
 def _wrapper_releases_gil():
-    """numba.pycc compiles its Python wrappers with default flags; ask for the wrapper `njit(nogil=True)`
-    builds (`Flags.release_gil`: the GIL is released around the native call)."""
+    """pycc's Python wrappers release the GIL around the native call, as `njit(nogil=True)`."""
     import numba.pycc.compiler as pcc
 
     base = pcc.Flags
@@ -162,8 +127,7 @@ def _wrapper_releases_gil():
 
 
 def toolchain_problem() -> str | None:
-    """Why no module can be built here (no C compiler, no Python headers), or None: checked before
-    numba spends its 20-60 s compiling a module that could not be linked."""
+    """Why no module can be built here (no C compiler, no Python headers), or None."""
     import shutil
 
     cc = (os.environ.get("CC") or sysconfig.get_config_var("CC") or "cc").split()[0]
@@ -175,8 +139,7 @@ def toolchain_problem() -> str | None:
 
 
 def build(entry: str, args: tuple, modname: str, path: Path) -> None:
-    """Compile `entry` for the types of `args` into the extension module file `path` (atomic; needs the
-    C toolchain, `toolchain_problem`)."""
+    """Compile `entry` for the types of `args` into the extension module `path` (atomically)."""
     import numba
 
     disp = getattr(fast.kernels(True), entry)
@@ -198,14 +161,12 @@ def build(entry: str, args: tuple, modname: str, path: Path) -> None:
         os.replace(built, path)
 
 
-# Held while an entry resolves its module: importing one extension module from two threads at once fails
-# inside importlib (measured: "TypeError: can only concatenate str (not "NoneType") to str").
+# held while an entry resolves its module: importlib fails importing one extension from two threads at once
 _RESOLVING = threading.RLock()
 
 
 class Entry:
-    """Callable standing for the kernel `name`: the AOT module for the call's argument types, else the
-    jitted (or, with TELEOP_NO_JIT=1, interpreted) kernel."""
+    """The kernel `name`: the AOT module for the call's argument types, else the jitted kernel."""
 
     def __init__(self, name: str):
         self.name = name
@@ -218,7 +179,7 @@ class Entry:
             return getattr(fast.K, self.name)(*args)
         fn = self._fns.get(key)
         if fn is None:
-            with _RESOLVING:  # threads of one process (a sweep's thread executor) load each module once
+            with _RESOLVING:
                 fn = self._fns.get(key)
                 if fn is None:
                     fn = self._fns[key] = self._resolve(key, args)
@@ -228,7 +189,7 @@ class Entry:
         opts = options()
         if not opts.jit or not opts.aot:
             return getattr(fast.K, self.name)
-        modname = module_name(self.name, key)
+        modname = f"octarm_{self.name}_{hashlib.sha256(key.encode()).hexdigest()[:16]}"
         try:
             folder = aot_dir()
             path = folder / (modname + sysconfig.get_config_var("EXT_SUFFIX"))
@@ -236,16 +197,18 @@ class Entry:
             if not path.exists() and not failed.exists():
                 folder.mkdir(parents=True, exist_ok=True)
                 with _locked(folder / f".{modname}.lock"):
-                    if not path.exists() and not failed.exists():  # not built meanwhile by another process
+                    if not path.exists() and not failed.exists():  # not built meanwhile
                         self._build(args, modname, path, failed)
             if path.exists():
-                return getattr(_load(modname, path), self.name)
+                spec = importlib.util.spec_from_file_location(modname, path)
+                mod = importlib.util.module_from_spec(spec)
+                spec.loader.exec_module(mod)
+                return getattr(mod, self.name)
             reason = failed.read_text().strip() if failed.exists() else "not built"
         except Exception as e:  # noqa: BLE001 - unreadable cache, failed import: the JIT runs instead
             reason = f"{type(e).__name__}: {e}"
         log.warning("ahead-of-time kernel %s unavailable (%s); using the jitted kernel", self.name, reason)
         return getattr(fast.K, self.name)
-
 
     def _build(self, args: tuple, modname: str, path: Path, failed: Path) -> None:
         """Build the module, or record in `failed` why it cannot be (then the jitted kernel runs)."""
@@ -268,19 +231,15 @@ class _Entries:
     def __getattr__(self, name: str) -> Entry:
         if name not in ENTRIES:
             raise AttributeError(f"{name!r} is not an ahead-of-time entry kernel; ENTRIES: {ENTRIES}")
-        entry = self._entries.get(name)
-        if entry is None:  # setdefault: two threads asking at once get the same Entry
-            entry = self._entries.setdefault(name, Entry(name))
-        return entry
+        return self._entries.get(name) or self._entries.setdefault(name, Entry(name))  # one per name
 
 
 A = _Entries()  # A.mujoco_chunk(...): like fast.K.mujoco_chunk(...), without loading numba when built
 
 
 def forget() -> None:
-    """Forget the kernels resolved so far in this process (the next call resolves again: reads
-    TELEOP_NO_AOT / TELEOP_CACHE_DIR anew)."""
+    """Forget the modules resolved in this process (the next call reads TELEOP_NO_AOT / the cache anew)."""
     A._entries.clear()
 
 
-__all__ = ["A", "ENTRIES", "Entry", "Unsupported", "aot_dir", "build", "forget", "module_name", "type_key"]
+__all__ = ["A", "ENTRIES", "Entry", "Unsupported", "aot_dir", "build", "forget", "type_key"]

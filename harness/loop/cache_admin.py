@@ -1,14 +1,7 @@
-"""The compiled-kernel cache on disk (`teleop cache`): what is in it, and removing what this
-installation no longer uses.
-
-The cache root (`harness.loop.fast.cache_root`) holds one folder per kernel-source version:
-    numba-<digest>           numba's on-disk cache of the jitted kernels (`harness.loop.fast`)
-    aot-<digest>-<recipe>    the ahead-of-time entry modules (`harness.loop.aot`; recipe = aot.py's build
-                             recipe and this machine's processor)
-<digest> hashes the kernel sources and the numba, numpy and Python versions, so every code change or
-upgrade starts new folders and the old ones are never read again: 5-60 MB each.  Only folders named
-like that are listed or removed; anything else in the root is left alone.
-"""
+"""The compiled-kernel cache on disk (`teleop cache`): its folders numba-<digest> (`harness.loop.fast`) and
+aot-<digest>-<recipe> (`harness.loop.aot`), one per kernel-source version (5-60 MB each; a code change or
+upgrade starts new ones), and removing those this installation no longer uses.  Nothing else in the root
+is listed or removed."""
 
 from __future__ import annotations
 
@@ -25,8 +18,7 @@ _NAME = re.compile(r"^(numba)-([0-9a-f]{16})$|^(aot)-([0-9a-f]{16})-([0-9a-f]{8}
 
 @dataclass(frozen=True)
 class CacheFolder:
-    """One folder of the cache: path, kind ("numba" / "aot"), size in bytes, and whether this installation
-    on this machine uses it (`current`)."""
+    """One cache folder: path, kind ("numba" / "aot"), size (bytes), whether this installation uses it."""
 
     path: Path
     kind: str
@@ -46,8 +38,8 @@ def _size(path: Path) -> int:
 
 
 def folders(root: Path | None = None) -> list[CacheFolder]:
-    """The cache folders under `root` (default `fast.cache_root()`), sorted by name; [] if there is no
-    root yet.  Raises NotADirectoryError if `root` exists and is not a folder."""
+    """The cache folders under `root` (default `fast.cache_root()`) by name; NotADirectoryError if `root`
+    is not a folder."""
     root = fast.cache_root() if root is None else Path(root)
     if not root.exists():
         return []
@@ -65,7 +57,7 @@ def folders(root: Path | None = None) -> list[CacheFolder]:
 
 
 def remove(items: list[CacheFolder]) -> tuple[int, list[str]]:
-    """Delete the folders; returns (bytes freed, one message per folder that could not be removed)."""
+    """Delete the folders; (bytes freed, one message per folder that could not be removed)."""
     freed, errors = 0, []
     for item in items:
         try:

@@ -1,13 +1,10 @@
-"""What every closed loop shares: the stop flag, the initial state, the desired
-trajectory, the seeded noise table, the controller-side packed arrays and the run metadata.
-
-Used by the plant-specific loops (`harness.loop.analytic_loop`, `harness.loop.mujoco_loop`); it
-imports neither of them (the dispatch is `harness.loop.simulate`).
-"""
+"""What every closed loop shares: the run model, the stop flag, the initial state, the desired trajectory,
+the seeded noise table, the chunk driver and the run's outcome and metadata."""
 
 from __future__ import annotations
 
 import threading
+import time
 from functools import partial
 from typing import NamedTuple
 
@@ -28,22 +25,7 @@ from harness.plant.initial import InitialStateError
 from harness.plant.initial import initial_state as _initial_state
 
 STOP = threading.Event()  # set from a signal handler to stop a run cleanly
-CHUNK = 250  # control steps per compiled call between progress/interrupt checks
-
-def set_outcome(traj: Trajectory, status: int, interrupted: bool, error: str = "", detail: str = "") -> None:
-    """Set traj.status/message from a loop's end: an exception text (`error`), a kernel status code
-    (`controllers.status.Status`, plus `detail`), an interrupt, or nothing (status stays "ok")."""
-    t_end = float(traj.t[-1]) if len(traj) else 0.0
-    if error:
-        traj.status, cause = "error", error
-    elif status != 0:
-        known = status in Status._value2member_map_
-        traj.status, cause = "diverged", (Status(status).text if known else "unknown") + detail
-    elif interrupted:
-        traj.status, cause = "interrupted", "interrupted"
-    else:
-        return
-    traj.message = f"{cause} at t = {t_end:.4f} s"
+CHUNK = 250  # control steps between progress and interrupt checks
 
 
 class SimulationError(RuntimeError):
@@ -71,12 +53,9 @@ def initial_state(scn: Scenario) -> np.ndarray:
 
 
 def noise_table(scn: Scenario, n: int) -> tuple[np.ndarray, float]:
-    """Seeded standard-normal noise and the SNR scale 10^(-SNR/20) (0 = no noise).
-
-    ``noise_model = "per_vector"``: (n, 16).  ``"per_channel"`` (default): (n, 32), the same normals in
-    columns 0:16 and, in row 0, columns 16:32, the running sums of squares of each true signal that
-    `kernels.add_noise_channel` updates (so a fresh table per run).  Same seed -> same normals in both
-    models.  With ``sensing.dq2_cutoff``, DQ2_FILTER more columns follow: row 0 holds the filter gain
+    """Seeded standard normals and the SNR scale 10^(-SNR/20) (0: no noise): (n, 16) per vector; (n, 32)
+    per channel (columns 16:32 of row 0: the running sums of `kernels.add_noise_channel`).  With
+    ``sensing.dq2_cutoff``, DQ2_FILTER more columns: row 0 holds the filter gain
     (`force_kernels.filter_alpha`) and the filtered dq2 (`kernels.sense_state`)."""
     if scn.snr_db is None:
         normals, scale = np.zeros((1, 16)), 0.0
@@ -92,32 +71,67 @@ def noise_table(scn: Scenario, n: int) -> tuple[np.ndarray, float]:
 
 
 class ChunkRun:
-    """Drives a compiled loop over a run's control steps in calls of `size` steps (`run`), keeping where it is
-    (status, done, interrupted) up to date, so that a caller that catches an exception still knows how many
-    steps were recorded."""
+    """Drives a loop over a run's n control steps in calls of `size` steps (`run`), keeping status, done
+    (steps recorded), interrupted, error (an exception's text), exc (the exception) and wall (s) up to
+    date; the progress bar `bar` is closed at the end."""
 
     def __init__(self, n: int, size: int, bar=None, on_part=None):
         self.n, self.size, self.bar, self.on_part = n, size, bar, on_part
-        self.status, self.done, self.interrupted = 0, 0, False
+        self.status, self.done, self.interrupted, self.error, self.exc, self.wall = 0, 0, False, "", None, 0.0
 
     def run(self, call) -> None:
-        """call(k, k1) -> (status, steps done) runs steps k..k1-1.  After each call: the progress bar,
-        on_part(k, done) when steps were done; stops at a non-zero status or when STOP is set."""
-        k = 0
-        while k < self.n:
-            k1 = min(self.n, k + self.size)
-            self.status, m = call(k, k1)
-            self.done = k + m
+        """call(k, k1) -> (status, steps done) runs steps k..k1-1 (and may advance `done` as it goes).  After
+        each call: the bar, on_part(k, done) when steps were done; stops at a non-zero status, on STOP, a
+        KeyboardInterrupt (interrupted) or an exception (kept in error / exc)."""
+        t0 = time.perf_counter()
+        try:
+            k = 0
+            while k < self.n:
+                k1 = min(self.n, k + self.size)
+                self.status, m = call(k, k1)
+                self.done = k + m
+                if self.bar is not None:
+                    self.bar.update(m)
+                if self.on_part is not None and m:
+                    self.on_part(k, self.done)
+                if self.status != 0:
+                    break
+                k = k1
+                if STOP.is_set():
+                    self.interrupted = True
+                    break
+        except KeyboardInterrupt:
+            self.interrupted = True
+        except Exception as exc:  # keep what was computed; report the cause
+            self.exc, self.error = exc, f"{type(exc).__name__}: {exc}"
+        finally:
             if self.bar is not None:
-                self.bar.update(m)
-            if self.on_part is not None and m:
-                self.on_part(k, self.done)
-            if self.status != 0:
-                return
-            k = k1
-            if STOP.is_set():
-                self.interrupted = True
-                return
+                self.bar.close()
+            self.wall = time.perf_counter() - t0
+
+    def trajectory(self, scn: Scenario, rows: np.ndarray, detail: str = "") -> Trajectory:
+        """The run's Trajectory from rows[:done] and its meta; status / message from the run's end: an
+        exception's text, a status code (`controllers.status`, plus `detail`), an interrupt, or "ok"."""
+        traj = Trajectory.from_rows(rows[:self.done])
+        traj.meta.update(run_meta(scn, self.wall))
+        if self.error:
+            traj.status, cause = "error", self.error
+        elif self.status != 0:
+            known = self.status in {int(s) for s in Status}
+            traj.status, cause = "diverged", (Status(self.status).text if known else "unknown") + detail
+        elif self.interrupted:
+            traj.status, cause = "interrupted", "interrupted"
+        else:
+            return traj
+        traj.message = f"{cause} at t = {float(traj.t[-1]) if len(traj) else 0.0:.4f} s"
+        return traj
+
+
+def part_trajectory(scn: Scenario, rows: np.ndarray) -> Trajectory:
+    """A chunk of a run as a Trajectory (time series only), for `on_chunk`."""
+    part = Trajectory.from_rows(rows)
+    part.meta.update(run_meta(scn, 0.0))
+    return part
 
 
 def progress_bar(enabled: bool, total: int, desc: str):
@@ -131,15 +145,10 @@ def progress_bar(enabled: bool, total: int, desc: str):
 
 
 class RunModel(NamedTuple):
-    """A scenario compiled once per run (frozen, like Pinocchio's / MuJoCo's model): the controller-side
-    packed parameters, the quadrature, the constant forces, the desired trajectory and the initial state.
-    The loops, the plants' adapters and the controller context read it; per-run buffers (noise table,
-    record rows, command ring) are made by each run.
-
-    mpk_c: master params (`controllers.master.packed`), spk_c: slave params (`SlaveParams.packed`),
-    nodes, weights: Gauss-Legendre on [0, 1] (slave.n_quad,), gains: packed gains + [e2_sign,
-    null_space_scale], spec: packed sub-task (`controllers.subtasks.pack_subtask`), F (4,) N: constant
-    tip forces [F1, F2], traj (5,): desired-trajectory parameters, s0 (16,): [q1, dq1, q2, dq2] at t = 0."""
+    """A scenario compiled once per run (frozen, like Pinocchio's / MuJoCo's model); per-run buffers are
+    made by each run.  mpk_c, spk_c: the controller's packed master / slave params; nodes, weights:
+    Gauss-Legendre on [0, 1]; gains: packed gains + [e2_sign, null_space_scale]; spec: packed sub-task;
+    F (4,) N: constant tip forces [F1, F2]; traj (5,): desired trajectory; s0 (16,): state at t = 0."""
 
     mpk_c: np.ndarray
     spk_c: np.ndarray

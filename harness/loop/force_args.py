@@ -1,6 +1,5 @@
-"""The interaction-force arguments of the compiled MuJoCo loop (`harness.loop.mujoco_kernels.mujoco_chunk`):
-contact-sensor addresses, constant tip forces, the force-sensing chain (`sensing.force`) and the
-operator's hand (`operator`), built once per run from the scenario."""
+"""The interaction-force arguments of the compiled MuJoCo loop (`mujoco_kernels.mujoco_chunk`): contact
+sensors, constant tip forces, force sensing (`sensing.force`) and the operator's hand, built per run."""
 
 from __future__ import annotations
 
@@ -17,8 +16,7 @@ FORCE_NOISE_STREAM = 1  # the force noise uses its own seeded stream: default_rn
 
 
 def force_noise(scn: Scenario, n: int) -> np.ndarray:
-    """Standard-normal force-sensor noise (n, 4), seeded by (scn.seed, FORCE_NOISE_STREAM); (1, 4) zeros
-    when unused (so that the state noise of `noise_table` is unchanged by force sensing)."""
+    """Standard-normal force-sensor noise (n, 4) of its own seeded stream; (1, 4) zeros when unused."""
     fs = scn.sensing.force
     if fs.mode != "sensed" or fs.noise_std <= 0.0:
         return np.zeros((1, 4))
@@ -26,8 +24,8 @@ def force_noise(scn: Scenario, n: int) -> np.ndarray:
 
 
 class ForceArgs:
-    """Arrays of one run; `args(k0, k1)` is the `fargs` tuple of a chunk.  Applies the constant slave
-    tip force F2 through d.xfrc_applied on the tip body (its origin is the tip site)."""
+    """Arrays of one run; `args(k0, k1)`: the `fargs` of a chunk.  Applies the constant slave tip force F2
+    through d.xfrc_applied on the tip body."""
 
     def __init__(self, scn: Scenario, m: mujoco.MjModel, d: mujoco.MjData, cmap: ChainMap,
                  contact: ContactMap | None, n: int, s0: np.ndarray, F: np.ndarray):
@@ -56,7 +54,7 @@ class ForceArgs:
         self.cpts = np.zeros((n if contact is not None else 0, N_POINTS, 6))
 
     def args(self, k0: int, k1: int) -> tuple:
-        """The `fargs` of steps k0..k1 (the loop reads the sensors from `self.sensordata`, d.sensordata)."""
+        """The `fargs` of steps k0..k1."""
         return (self.sensordata, self.cadr, self.Fconst, self.mode, self.noise, self.std, self.alpha,
                 self.delay, self.buf, self.filt, self.op_on, self.op, self.targets, self.hand, self.target,
                 self.mpk_p, self.cpts[k0:k1] if self.cpts.shape[0] else self.cpts)

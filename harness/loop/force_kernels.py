@@ -1,10 +1,6 @@
-"""Interaction-force kernels (numba-compatible; compiled by `harness.loop.fast`): contact forces read from
-MuJoCo's contact sensors, the force-sensing chain the controller sees, and the operator's hand.
-
-Any loop can call these (the compiled MuJoCo loop does; a Python stepped loop can call them per step).
-Forces are ON the robots, at the tips, in the world X/Z plane, N: F = [F1x, F1z, F2x, F2z] as in the
-dynamics (1) and the laws (13), (17).
-"""
+"""Interaction-force kernels (numba-compatible): MuJoCo's contact sensors, the force sensing the laws see,
+the operator's hand.  F = [F1x, F1z, F2x, F2z] N ON the robots at the tips, world X/Z, as in (1), (13),
+(17)."""
 
 from __future__ import annotations
 
@@ -16,16 +12,14 @@ POINT_STRIDE = 10  # sensordata per contact point: found, force (contact frame, 
 
 
 def filter_alpha(cutoff: float | None, dt: float) -> float:
-    """Gain of the first-order low-pass y += alpha (x - y) sampled every dt: the exact discretisation
-    alpha = 1 - exp(-2 pi fc dt) of dy/dt = 2 pi fc (x - y) under a held input (1 = no filter)."""
+    """Gain of the low-pass y += alpha (x - y) sampled every dt: alpha = 1 - exp(-2 pi fc dt) (1: none)."""
     return 1.0 if cutoff is None else 1.0 - math.exp(-2.0 * math.pi * cutoff * dt)
 
 
 def read_contact(sensordata, adr, F2c, cinfo, pts):
-    """Contact state from MuJoCo's contact sensors (harness.plant.environment.ContactMap.adr (4,); empty
-    = no environment: zeros).  F2c (2,) <- contact force ON the tip body [X, Z] (the netforce sensor
-    reports the tip's force on the objects: sign flipped); cinfo (CONTACT_INFO,); pts (np, 6) <- the
-    largest contacts [pos xyz, force on the arm xyz] (frictionless: -f_n * normal), zeros if unused."""
+    """From MuJoCo's contact sensors (`ContactMap.adr` (4,); empty: no environment, zeros): F2c (2,) the
+    contact force ON the tip body [X, Z]; cinfo (CONTACT_INFO,); pts (np, 6) the largest contacts [pos
+    xyz, force on the arm xyz] (frictionless: -f_n * normal)."""
     if adr.shape[0] == 0:
         F2c[0] = 0.0
         F2c[1] = 0.0
@@ -53,12 +47,9 @@ def read_contact(sensordata, adr, F2c, cinfo, pts):
 
 
 def sense_forces(Ftrue, k, mode, noise, std, alpha, delay, buf, filt, out):
-    """What the controller gets at control step k from the true forces Ftrue (4,), into out (4,).
-
-    mode 0 exact: out = Ftrue; 2 ignored: out = 0; 1 sensed: x = Ftrue + std * noise[k] (noise (n, 4)
-    standard normal, read only if std > 0) -> first-order low-pass (gain alpha, state filt (4,),
-    started at the first sample at k = 0) -> pure delay of `delay` steps through the ring buffer
-    buf (delay + 1, 4) (before the first delayed sample arrives, the first sample)."""
+    """What the laws get at step k from the true forces Ftrue (4,), into out (4,): mode 0 exact: Ftrue;
+    2 ignored: 0; 1 sensed: Ftrue + std * noise[k] -> low-pass (gain alpha, state filt (4,), started at
+    k = 0) -> delay of `delay` steps (ring buf (delay + 1, 4); the first sample until it arrives)."""
     if mode == 0:
         for i in range(4):
             out[i] = Ftrue[i]
@@ -82,8 +73,7 @@ def sense_forces(Ftrue, k, mode, noise, std, alpha, delay, buf, filt, out):
 
 
 def operator_target(targets, t, out):
-    """Piecewise-linear target (2,) at time t of targets (nt, 3) rows [t, X, Z] (held outside; nt = 0:
-    out unchanged)."""
+    """Piecewise-linear target (2,) at time t of rows [t, X, Z] (held outside; none: out unchanged)."""
     nt = targets.shape[0]
     if nt == 0:
         return

@@ -1,22 +1,13 @@
-"""A controller written against `controllers.interface` (``reset(ctx)``, ``step(obs) -> Action``) as the
-controller of the one Python-level loop (`harness.loop.stepped_loop.simulate_stepped`).
+"""A `controllers.interface.Controller` (``reset(ctx)``, ``step(obs) -> Action``) as the controller of the
+Python-level loop (`harness.loop.stepped_loop`): fills the `Observation`, calls the controller, checks the
+`Action` and copies T1 (2,) N m, T2 (6,), u2 (6,), deN (6,) into the loop's buffers (with ``use_ref`` on
+a servo plant, its q2_ref / dq2_ref replace the loop's reference).
 
-`InterfaceController` fills the preallocated `Observation` (sensed state (16,), x_d, dx_d, ddx_d (2,),
-paper eq. (40), the scenario's interaction forces F (4,) N), calls the controller, checks the
-`Action` (shapes, finite values) and copies T1 (2,) N m, T2 (6,), u2 (6,), deN (6,) into the loop's
-buffers.  With ``use_ref`` (servo plants) the controller's q2_ref / dq2_ref replace the loop's
-integrated reference (`use_ref`, `ref` (12,)).
-
-Failures are one line naming the controller, the phase (construction, reset, step) and for a step its
-index and time:
-* the controller raises anything (`SystemExit` and `KeyboardInterrupt` included: a controller cannot
-  end the process), returns None, a wrong shape, a dtype that is not real (complex, strings, objects),
-  NaN or inf, or a call runs longer than `controller.step_timeout` -> `ControllerFailure` (the loop stops
-  with status "error", rows up to the previous step kept, meta "failed_controller");
-* a Ctrl-C / SIGTERM of the user interrupts a controller call at once (`HarnessInterrupt`, status
-  "interrupted"): the harness' handlers raise it while the main thread runs controller code;
-* `ControllerDiverged` -> its status code (or -1 with `diverged` holding the message); the row of that
-  step is recorded with the controller's last action, as in the compiled loops.
+Failures are one line naming the controller, the phase and for a step its index and time: anything the
+controller raises (`SystemExit`, `KeyboardInterrupt` included), None, a wrong shape or dtype, NaN / inf,
+or a call past `controller.step_timeout` -> `ControllerFailure` (status "error"); the user's Ctrl-C /
+SIGTERM -> `HarnessInterrupt` (status "interrupted"); `ControllerDiverged` -> its status code (or -1,
+`diverged` holding the message), the step's row recorded with the controller's last action.
 """
 
 from __future__ import annotations
@@ -49,8 +40,7 @@ from harness.loop.fast import K
 
 SHAPES = (("T1", 2), ("T2", 6), ("u2", 6), ("deN", 6))
 REF_SHAPES = (("q2_ref", 6), ("dq2_ref", 6))
-FIRST_CALL_TIMEOUT = 120.0  # s, at least this long for construction, reset and step 0 (they may compile
-#                             the nominal models' kernels on first use)
+FIRST_CALL_TIMEOUT = 120.0  # s at least for construction, reset and step 0 (they may compile kernels)
 _TIMER = hasattr(signal, "setitimer")
 STATUS_CODES = frozenset(int(s) for s in Status)
 
@@ -103,10 +93,9 @@ def check_action(act, name: str, k: int, t: float, servo: bool) -> str:
 
 
 class InterfaceController:
-    """The scenario's `controllers.interface.Controller` (built-in or user class) as the loop's
-    controller: ``reset(model)``, ``step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN) -> int``,
-    ``close()`` (the loop calls it at the end: restores the signal handlers a controller call needs).
-    A failure to construct the controller is raised by `reset` (the run then ends with status "error")."""
+    """The scenario's controller as the loop's: ``reset(model)``, ``step(t, sensed, xd, dxd, ddxd, T1, T2,
+    u2, deN) -> status``, ``close()`` (restores the signal handlers).  A failed construction is raised by
+    `reset`."""
 
     def __init__(self, scn: Scenario, model: RunModel) -> None:
         self.name = scn.controller.name
@@ -127,10 +116,9 @@ class InterfaceController:
         self.diverged = ""
         self.k = 0
 
-    # -- guarding the controller's calls ------------------------------------------------------------
     def _install(self) -> None:
-        """On the main thread: the alarm handler of the time limit, and Ctrl-C marked as the user's when
-        Python's default handler is in place (the CLI's own handler marks it already)."""
+        """On the main thread: the time limit's alarm handler, and Ctrl-C marked as the user's when Python's
+        default handler is in place."""
         if self._saved is not None or not self.main:
             return
         self._saved = {}
@@ -157,11 +145,9 @@ class InterfaceController:
         return ControllerFailure(f"controller {self.name!r} raised {describe_exception(e)} {phase}")
 
     def _call(self, where: str, limit: float | None, fn, *args):
-        """Call controller code under the time limit `limit` (s, None: none); `where` names the phase for
-        the one-line failure ("in reset", "at step 3 (t = 0.003 s)").  The user's Ctrl-C passes as
-        `HarnessInterrupt`; anything else the code raises (`SystemExit` and `KeyboardInterrupt` included),
-        or running past the limit, is a `ControllerFailure`.  `ControllerDiverged` passes through.  The
-        timer stays armed after the call: past it the alarm does nothing (`close` disarms it)."""
+        """Call controller code under the time limit (s, None: none); `where` names the phase ("in reset",
+        "at step 3 (t = 0.003 s)").  `HarnessInterrupt` and `ControllerDiverged` pass; anything else raised,
+        or running past the limit, is a `ControllerFailure`.  The timer stays armed (`close` disarms it)."""
         if self._saved is None:
             self._install()
         armed = self.main and limit is not None and _TIMER
@@ -193,7 +179,6 @@ class InterfaceController:
         finally:
             self.close()
 
-    # -- the loop's protocol ------------------------------------------------------------------------
     def reset(self, model: RunModel) -> None:
         self.obs.F[:] = model.F
         self.k = 0
@@ -227,10 +212,7 @@ class InterfaceController:
         T1[:] = act.T1
         T2[:] = act.T2
         u2[:] = act.u2
-        if getattr(act, "deN", None) is not None:
-            deN[:] = act.deN
-        else:
-            deN[:] = 0.0
+        deN[:] = act.deN if getattr(act, "deN", None) is not None else 0.0
         self.use_ref = self.servo and bool(getattr(act, "use_ref", False))
         if self.use_ref:
             self.ref[0:6] = act.q2_ref
@@ -239,8 +221,8 @@ class InterfaceController:
 
 
 def make_controller(scn: Scenario, model: RunModel | None = None, construct: bool = True):
-    """(instance, context) for a run: the class instantiated and the context its `reset` receives.
-    model: the scenario's `RunModel` (default: compiled here); construct=False: (the class, context)."""
+    """(instance, the context its `reset` receives); construct=False: (the class, context).  model: the
+    scenario's `RunModel` (default: compiled here)."""
     cfg = scn.controller
     cls = load_class(cfg.name)
     params = parse_params(cls, cfg.params, cfg.name)

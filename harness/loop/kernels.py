@@ -1,14 +1,12 @@
-"""Per-step loop kernels (numba-compatible; compiled by `harness.loop.fast` together with controllers/).
-
-Everything that happens once per control step and is not MuJoCo's `mj_step` lives here, fused, so
-that the Python side of the loop is one kernel call plus `mj_step`:
-  sensing noise -> master law -> slave law -> record row (and, for the analytic plant, RK4).
-
-Status codes returned by the kernels: `controllers.status` (ST_* here; a MuJoCo warning is counted by
-MuJoCo in mjData.warning and checked after every mj_step, so the run stops at the step that raised it).
+"""Per-step loop kernels (numba-compatible; compiled by `harness.loop.fast` with controllers/): sensing
+noise, both laws, the record row, the checks, the analytic plant's RK4 loop and the Python-stepped loop's
+glue.  Statuses: `controllers.status`.
 """
 
 from __future__ import annotations
+
+import math
+import types
 
 import numpy as np
 
@@ -27,24 +25,24 @@ from controllers.control import (
 )
 from controllers.master import master_kernel
 from controllers.scratch import scratch, scratch_zeros
-from controllers.status import (
-    ST_NONFINITE,
-    ST_OK,
-    ST_RUNAWAY,
-    ST_SECTION_LENGTH,
-)
+from controllers.status import ST_NONFINITE, ST_OK, ST_PLANT_STATE, ST_RUNAWAY, ST_SECTION_LENGTH
 from controllers.subtasks import limits_kernel
 from controllers.tip import tip_kinematics
+from harness.loop.force_kernels import CONTACT_INFO
 from harness.plant.analytic import plant_accel
 
 # record row layout (must match harness.loop.trajectory.ROW_FIELDS)
 R_T, R_Q1, R_DQ1, R_Q2, R_DQ2, R_XD, R_X1, R_X2 = 0, 1, 3, 5, 11, 17, 19, 21
 R_E1, R_E2, R_DE1, R_DE2, R_BETA, R_YA, R_DEN, R_T1, R_T2, R_U2 = 23, 25, 27, 29, 31, 32, 33, 39, 41, 47
 ROW_W = 53
+R_FT = ROW_W  # the interaction columns after them: F_true, F_sensed (4 each), contact, hand
+R_FS = R_FT + 4
+R_CI = R_FS + 4
+R_HAND = R_CI + CONTACT_INFO
 RUNAWAY = 1.0  # m: |e1| or |e2| beyond this is a runaway (the workspace is ~1 m)
 
 
-# --- the per-step glue every loop body shares (the compiled loops and the Python-stepped loop) ---------
+# --- the per-step glue every loop shares (the compiled loops and the Python-stepped loop) ---------------
 DQ2_FILTER = 7  # noise-table columns of the sensed-dq2 filter: gain, filtered dq2 (6)
 
 
@@ -66,11 +64,15 @@ def servo_reference_step(ref, u2, dt):
         ref[a] += ref[6 + a] * dt
 
 
+def ring_index(k, delay):
+    """The slot of the actuation-delay ring (delay + 1 slots) whose commands the plant gets at step k:
+    those of step k - delay, of step 0 while k < delay."""
+    return (k - delay) % (delay + 1) if k >= delay else 0
+
+
 def add_noise(state, noise_row, scale, out):
-    """AWGN at a given SNR on each fed-back vector (q1, dq1, q2, dq2 = state[0:2], [2:4], [4:10],
-    [10:16]): std = rms(vector) * scale, scale = 10^(-SNR/20) (signal power measured per step;
-    ``noise_model = "per_vector"``, the model before per-channel SNR: mixed units, so e.g. the curvature
-    noise scales with the section lengths, and a vector at rest gets no noise)."""
+    """AWGN on each fed-back vector (q1, dq1, q2, dq2; ``noise_model = "per_vector"``): std = rms(vector)
+    * scale, scale = 10^(-SNR/20), the power measured per step (a vector at rest gets no noise)."""
     bounds = (0, 2, 4, 10, 16)
     for v in range(4):
         a = bounds[v]
@@ -84,12 +86,9 @@ def add_noise(state, noise_row, scale, out):
 
 
 def add_noise_channel(state, noise, k, scale, out):
-    """AWGN at a given SNR on each fed-back signal separately (``noise_model = "per_channel"``, the
-    default): std_i = sqrt(P_i) * scale with P_i the running mean square of the TRUE signal i over the
-    control steps 0..k (a causal estimate of the channel's power over the run, the power MATLAB's
-    ``awgn(x, SNR, 'measured')`` would measure on that channel's whole time series).
-    noise (n, 32): [:, 0:16] standard normals, noise[0, 16:32] the running sums of squares (updated
-    here, so the table must be fresh for each run and steps visited in order k = 0, 1, ...)."""
+    """AWGN on each fed-back signal (``noise_model = "per_channel"``): std_i = sqrt(P_i) * scale, P_i the
+    running mean square of the true signal i over steps 0..k.  noise (n, 32): [:, 0:16] standard normals,
+    noise[0, 16:32] the running sums of squares (updated here: a fresh table per run, steps in order)."""
     for i in range(16):
         noise[0, 16 + i] += state[i] * state[i]
         std = np.sqrt(noise[0, 16 + i] / (k + 1)) * scale
@@ -149,9 +148,8 @@ def record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row):
 
 
 def record_row_info(t, state, xd, dxd, minfo, sinfo, T1, T2, u2, deN, row):
-    """record_row when both laws ran on the noise-free state with status 0: x1, e1, de1 from the
-    master info, x2, e2, de2, beta_m, y_a from the slave info (the same operations on the same
-    numbers as record_row: identical rows, without a second master_kernel / tip_kinematics)."""
+    """record_row when both laws ran on the noise-free state with status 0, from their master / slave
+    info (identical rows, without a second master_kernel / tip_kinematics)."""
     row[R_T] = t
     for i in range(16):
         row[R_Q1 + i] = state[i]
@@ -173,10 +171,9 @@ def record_row_info(t, state, xd, dxd, minfo, sinfo, T1, T2, u2, deN, row):
 
 
 def sense_state(state, noise, k, noise_scale, sensed):
-    """The sensed state (16,) at control step k: the true state plus AWGN of either noise model
-    (noise (n, 32) per channel, `add_noise_channel`; (n, 16) per vector, `add_noise`), or the true
-    state itself when noise_scale == 0 (normals not read).  With DQ2_FILTER more columns (row 0: gain
-    alpha, filtered dq2 y; `common.noise_table`): sensed dq2 <- y += alpha (sensed dq2 - y), y = the
+    """The sensed state (16,) at step k: the true state plus AWGN (noise (n, 32): `add_noise_channel`;
+    (n, 16): `add_noise`), or the true state when noise_scale == 0.  With DQ2_FILTER more columns (row 0:
+    gain alpha, filtered dq2 y; `common.noise_table`): sensed dq2 <- y += alpha (sensed dq2 - y), y = the
     sensed dq2 at k = 0."""
     if noise_scale > 0.0 and noise.shape[1] >= 32:
         add_noise_channel(state, noise, k, noise_scale, sensed)
@@ -197,10 +194,8 @@ def sense_state(state, noise, k, noise_scale, sensed):
 
 def control_step(t, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, weights, gains, spec, F,
                  xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, row):
-    """One control step at time t on the true state (16,): x_d(t) into xd, dxd, ddxd; the sensed
-    state (true state + AWGN noise_scale * noise[k], noise (n, 16) read only if noise_scale > 0) into
-    sensed; both laws (control_laws); the record row of the true state into row.  Returns
-    control_laws' status."""
+    """One control step at time t on the true state (16,): x_d(t) into xd, dxd, ddxd, the sensed state,
+    both laws (`control_laws`), the record row of the true state.  Returns control_laws' status."""
     desired(traj, t, xd, dxd, ddxd)
     sense_state(state, noise, k, noise_scale, sensed)
     st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F,
@@ -225,74 +220,65 @@ def desired(traj, t, xd, dxd, ddxd):
     ddxd[1] = -traj[3] * w * w * c
 
 
+RK4_T = (0.0, 0.5, 0.5, 1.0)  # the classical RK4's stage times (fractions of the step)
+
+
 def plant_substeps(state, t, h, nsub, continuous, model, F, mpk_p, spk_p, T1, T2, u2, deN, minfo, sinfo, xd,
-                   dxd, ddxd, k1s, k2s, k3s, k4s, tmp):
-    """nsub RK4 steps of h (s) of the analytic plant (`harness.plant.analytic.plant_accel`: its packed
-    params mpk_p, spk_p, the forces model.F it feels (1)) from time t, in place on state (16,).  The
-    commands T1 (2,), T2 (6,) are held over the steps (zero-order hold) unless `continuous`: then both
-    laws (model's nominal params, F (4,) the forces they get) are evaluated on every RK4 stage's state (no
-    noise), writing T1, T2, u2, deN, minfo, sinfo, xd, dxd, ddxd.  k1s..k4s, tmp (16,): work.
-    Returns ST_OK, ST_NONFINITE or a law's status."""
+                   dxd, ddxd, ks, tmp):
+    """nsub classical RK4 steps of h (s) of the analytic plant (`harness.plant.analytic.plant_accel`, its
+    packed params mpk_p, spk_p, the forces model.F it feels (1)) from time t, in place on state (16,).
+    T1 (2,), T2 (6,) are held (zero-order hold) unless `continuous`: then both laws (nominal params, F (4,)
+    the forces they get) run on every stage's state without noise, writing T1, T2, u2, deN, minfo, sinfo,
+    xd, dxd, ddxd.  ks (4, 16), tmp (16,): work.  Returns ST_OK, ST_NONFINITE or the laws' status."""
     mpk_c, spk_c, nodes, weights, gains, spec, Fp, traj, _s0 = model
     for j in range(nsub):
         ts = t + j * h
-        # RK4 stage 1
-        if continuous:
-            desired(traj, ts, xd, dxd, ddxd)
-            st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, state, xd, dxd, ddxd, F,
-                              T1, T2, u2, deN, minfo, sinfo)
-            if st != 0:
-                return st
-        if not plant_accel(mpk_p, spk_p, nodes, weights, state, T1, T2, Fp, k1s):
-            return ST_NONFINITE
+        for s in range(4):
+            x = state if s == 0 else tmp
+            if continuous:
+                desired(traj, ts + RK4_T[s] * h, xd, dxd, ddxd)
+                st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, x, xd, dxd, ddxd, F, T1, T2, u2,
+                                  deN, minfo, sinfo)
+                if s == 0 and st != 0:
+                    return st
+            if not plant_accel(mpk_p, spk_p, nodes, weights, x, T1, T2, Fp, ks[s]):
+                return ST_NONFINITE
+            if s < 3:
+                c = RK4_T[s + 1]
+                for i in range(16):
+                    tmp[i] = state[i] + c * h * ks[s, i]
         for i in range(16):
-            tmp[i] = state[i] + 0.5 * h * k1s[i]
-        if continuous:
-            desired(traj, ts + 0.5 * h, xd, dxd, ddxd)
-            control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
-                         T1, T2, u2, deN, minfo, sinfo)
-        if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k2s):
-            return ST_NONFINITE
-        for i in range(16):
-            tmp[i] = state[i] + 0.5 * h * k2s[i]
-        if continuous:
-            control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
-                         T1, T2, u2, deN, minfo, sinfo)
-        if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k3s):
-            return ST_NONFINITE
-        for i in range(16):
-            tmp[i] = state[i] + h * k3s[i]
-        if continuous:
-            desired(traj, ts + h, xd, dxd, ddxd)
-            control_laws(mpk_c, spk_c, nodes, weights, gains, spec, tmp, xd, dxd, ddxd, F,
-                         T1, T2, u2, deN, minfo, sinfo)
-        if not plant_accel(mpk_p, spk_p, nodes, weights, tmp, T1, T2, Fp, k4s):
-            return ST_NONFINITE
-        for i in range(16):
-            state[i] += h / 6.0 * (k1s[i] + 2.0 * k2s[i] + 2.0 * k3s[i] + k4s[i])
+            state[i] += h / 6.0 * (ks[0, i] + 2.0 * ks[1, i] + 2.0 * ks[2, i] + ks[3, i])
     return ST_OK
 
 
-def analytic_chunk(k0, k1, model, plant, data):
-    """Run control steps k0..k1-1 of the closed loop on the analytic plant, in place on the state.
+def plant_sense(k, i, state, row, plant):
+    """A plant's sensing in `loop_chunk` (bound per plant): the true state (16,) of step k and the row's
+    interaction columns (F_sensed: the forces the laws get); returns a status."""
+    raise NotImplementedError
 
-    model: the run's `harness.loop.common.RunModel` (the controller's nominal packed params mpk_c, spk_c,
-    quadrature, gains, sub-task, Fp (4,) the interaction forces the plant feels (1), desired trajectory);
-    plant: (dt control period (s), nsub, continuous, mpk_p, spk_p: the plant's own packed params);
-    data: (state (16,), noise, noise_scale, F (4,) = [F1, F2] the laws get (13), (17), rows of this chunk,
-    cmdbuf (delay + 1, 8): the ring of [T1, T2] commands, delay: the actuation delay in control steps).
-    Zero-order hold of the commands over the control step (nsub RK4 steps of dt/nsub) unless
-    `continuous`, where both laws are evaluated in every RK4 stage on the true state (no noise; delay 0).
-    With a delay the plant gets the commands of step k - delay (of step 0 while k < delay), as on the
-    MuJoCo plant.  Returns (status, number of completed steps)."""
-    mpk_c, spk_c, nodes, weights, gains, spec, Fp, traj, _s0 = model
-    dt, nsub, continuous, mpk_p, spk_p = plant
-    state, noise, noise_scale, F, rows, cmdbuf, delay = data
-    nb = delay + 1
-    T1h = scratch_zeros(2)
-    T2h = scratch_zeros(6)
-    # the control step's arrays: made here, not by a shared helper (a scratch array lives in the frame that
-    # makes it: a helper would hand back arrays over its finished frame)
+
+def plant_command(slot, T1, T2, u2, sensed, plant):
+    """A plant's command map in `loop_chunk` (bound per plant): the step's commands into its ring slot."""
+    raise NotImplementedError
+
+
+def plant_advance(k, i, st, use, state, law, plant):
+    """A plant's step in `loop_chunk` (bound per plant): over the control step with the ring slot `use` of
+    step k - delay; st != 0: the step failed and is not advanced.  Returns a status."""
+    raise NotImplementedError
+
+
+def loop_chunk(k0, k1, model, data, plant):
+    """Control steps k0..k1-1 of a compiled loop: the per-step sequence every compiled loop shares,
+    `plant_sense` -> `control_step` (x_d, noise, both laws, record row) -> status 4 on a runaway row ->
+    `plant_command` into the ring slot of step k -> `plant_advance` with the slot of step k - delay.
+    The plant kernels are bound per plant (`bind`: `analytic_loop`, `mujoco_kernels.mujoco_loop`); plant:
+    their constants and buffers.  data: (state (16,), noise, noise_scale, rows of this chunk, cmdbuf
+    (delay + 1, w), delay, dt (s)).  Returns (status, completed steps)."""
+    mpk_c, spk_c, nodes, weights, gains, spec, _F, traj, _s0 = model
+    state, noise, noise_scale, rows, cmdbuf, delay, dt = data
+    # the step's arrays are made here, not by a helper: a scratch array lives in the frame that makes it
     T1 = scratch_zeros(2)
     T2 = scratch_zeros(6)
     u2 = scratch_zeros(6)
@@ -303,42 +289,147 @@ def analytic_chunk(k0, k1, model, plant, data):
     xd = scratch(2)
     dxd = scratch(2)
     ddxd = scratch(2)
-    k1s = scratch(16)
-    k2s = scratch(16)
-    k3s = scratch(16)
-    k4s = scratch(16)
-    tmp = scratch(16)
-    h = dt / nsub
+    law = (T1, T2, u2, deN, minfo, sinfo, xd, dxd, ddxd)
     for k in range(k0, k1):
-        t = k * dt
-        st = control_step(t, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, weights, gains, spec, F,
-                          xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, rows[k - k0])
-        if st != 0:
-            return st, k - k0 + 1
-        slot = cmdbuf[k % nb]  # the plant gets the commands of step k - delay (the ring cmdbuf)
-        for i in range(2):
-            slot[i] = T1[i]
-        for i in range(6):
-            slot[2 + i] = T2[i]
-        use = cmdbuf[(k - delay) % nb] if k >= delay else cmdbuf[0]
-        for i in range(2):
-            T1h[i] = use[i]
-        for i in range(6):
-            T2h[i] = use[2 + i]
-        st = plant_substeps(state, t, h, nsub, continuous, model, F, mpk_p, spk_p, T1h, T2h, u2, deN, minfo,
-                            sinfo, xd, dxd, ddxd, k1s, k2s, k3s, k4s, tmp)
+        i = k - k0
+        r = rows[i]
+        st = plant_sense(k, i, state, r, plant)
         if st != ST_OK:
-            return st, k - k0 + 1
-        for i in range(16):
-            if not np.isfinite(state[i]):
-                return ST_NONFINITE, k - k0 + 1
-        if section_collapsed(state):
-            return ST_SECTION_LENGTH, k - k0 + 1
-        if runaway(rows[k - k0]):
-            return ST_RUNAWAY, k - k0 + 1
+            return st, i
+        st = control_step(k * dt, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, weights, gains,
+                          spec, r[R_FS:R_FS + 4], xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, r)
+        if st == 0 and runaway(r):
+            st = ST_RUNAWAY
+        if st == 0:
+            plant_command(cmdbuf[k % (delay + 1)], T1, T2, u2, sensed, plant)
+        st = plant_advance(k, i, st, cmdbuf[ring_index(k, delay)], state, law, plant)
+        if st != ST_OK:
+            return st, i + 1
     return ST_OK, k1 - k0
 
 
-KERNELS = ("runaway", "section_collapsed", "servo_reference_step", "plant_substeps", "add_noise",
-           "add_noise_channel", "sense_state", "record_row", "record_row_info", "control_step", "desired",
-           "analytic_chunk")
+def bind(fn, name, **kernels):
+    """`fn` with the global names `kernels` bound to those kernels, as the kernel `name` (a loop body of one
+    plant; `harness.loop.fast` compiles it with the compiled kernels bound)."""
+    out = types.FunctionType(fn.__code__, {**fn.__globals__, **kernels}, name)
+    out.__qualname__ = name
+    out.bound = kernels
+    return out
+
+
+def analytic_sense(k, i, state, row, plant):
+    """The analytic plant's state is the loop's; its force columns are constant (set by the driver)."""
+    return ST_OK
+
+
+def analytic_command(slot, T1, T2, u2, sensed, plant):
+    """slot (8,) <- [T1, T2]."""
+    for i in range(2):
+        slot[i] = T1[i]
+    for i in range(6):
+        slot[2 + i] = T2[i]
+
+
+def analytic_advance(k, i, st, use, state, law, plant):
+    """nsub RK4 steps of the analytic plant with the commands use = [T1, T2] held (or, `continuous`, the
+    laws in every stage); status 1 on a non-finite state, 5 on a section length <= 0."""
+    if st != 0:
+        return st
+    model, F, dt, nsub, continuous, mpk_p, spk_p, ks, tmp = plant
+    T1, T2, u2, deN, minfo, sinfo, xd, dxd, ddxd = law
+    st = plant_substeps(state, k * dt, dt / nsub, nsub, continuous, model, F, mpk_p, spk_p, use[0:2],
+                        use[2:8], u2, deN, minfo, sinfo, xd, dxd, ddxd, ks, tmp)
+    if st != ST_OK:
+        return st
+    for j in range(16):
+        if not np.isfinite(state[j]):
+            return ST_NONFINITE
+    return ST_SECTION_LENGTH if section_collapsed(state) else ST_OK
+
+
+def analytic_chunk(k0, k1, model, plant, data):
+    """Control steps k0..k1-1 on the analytic plant (`loop_chunk`, `analytic_loop`), in place on the state.
+    plant: (dt (s), nsub, continuous, mpk_p, spk_p: the plant's own packed params); data: (state (16,),
+    noise, noise_scale, F (4,) the laws get, rows of this chunk (F_sensed = F), cmdbuf (delay + 1, 8) the
+    ring of [T1, T2], delay).  Returns (status, completed steps)."""
+    dt, nsub, continuous, mpk_p, spk_p = plant
+    state, noise, noise_scale, F, rows, cmdbuf, delay = data
+    ks = scratch((4, 16))
+    tmp = scratch(16)
+    return analytic_loop(k0, k1, model, (state, noise, noise_scale, rows, cmdbuf, delay, dt),
+                         (model, F, dt, nsub, continuous, mpk_p, spk_p, ks, tmp))
+
+
+analytic_loop = bind(loop_chunk, "analytic_loop", plant_sense=analytic_sense, plant_command=analytic_command,
+                     plant_advance=analytic_advance)
+
+
+# --- the Python-stepped loop's glue (`harness.loop.stepped_loop.Stepper`) ----------------------------
+def stepped_state_check(state, exploding, Ftrue, Fctl, ignored):
+    """Status of the true state (16,): 8 if non-finite or |state| > exploding, 5 if a section length
+    <= 0, else 0; then Fctl (4,) N <- 0 if ignored else Ftrue (4,)."""
+    total = 0.0
+    for i in range(state.shape[0]):
+        total += state[i] * state[i]
+    if not math.isfinite(total) or total > exploding * exploding:
+        return ST_PLANT_STATE
+    if section_collapsed(state):
+        return ST_SECTION_LENGTH
+    for i in range(Fctl.shape[0]):
+        Fctl[i] = 0.0 if ignored else Ftrue[i]
+    return 0
+
+
+def stepped_after_control(st, T1, T2, u2, row, Ftrue, Fsens, cinfo, i_F, i_Fs, i_C, ref_mode, ext_ref, ref,
+                          dt, sensed, cmd):
+    """After the controller's step (status st): the row's F_true, F_sensed (N) and contact columns (at
+    i_F, i_Fs, i_C); status 1 if T1, T2 or u2 is not finite, 4 on a runaway row.  If still 0: the servo
+    reference ref (12,) = [q2_ref, dq2_ref] steps (ref_mode 1: `servo_reference_step`; 2: ref <- ext_ref,
+    the controller's own; 0: unchanged) and cmd (26,) <- [T1, T2, ref, sensed q2].  Returns the status."""
+    for i in range(4):
+        row[i_F + i] = Ftrue[i]
+        row[i_Fs + i] = Fsens[i]
+    for i in range(5):
+        row[i_C + i] = cinfo[i]
+    for v in (T1, T2, u2):
+        for i in range(v.shape[0]):
+            if st == 0 and not math.isfinite(v[i]):
+                st = ST_NONFINITE
+    if st == 0 and runaway(row):
+        st = ST_RUNAWAY
+    if st != 0:
+        return st
+    if ref_mode == 1:
+        servo_reference_step(ref, u2, dt)
+    elif ref_mode == 2:
+        for i in range(12):
+            ref[i] = ext_ref[i]
+    cmd[0] = T1[0]
+    cmd[1] = T1[1]
+    for i in range(6):
+        cmd[2 + i] = T2[i]
+    for i in range(12):
+        cmd[8 + i] = ref[i]
+    for i in range(6):
+        cmd[20 + i] = sensed[4 + i]
+    return 0
+
+
+def stepped_paper_step(state, exploding, Ftrue, ignored, t, traj, noise, k, scale, mpk_c, spk_c, nodes,
+                       weights, gains, spec, F, xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, row,
+                       cinfo, i_F, i_Fs, i_C, ref_mode, ref, dt, cmd):
+    """The paper's law in the stepped loop: `stepped_state_check`, `control_step`, `stepped_after_control`
+    in one call.  Returns (state status, step status); a non-zero state status: nothing recorded."""
+    s0 = stepped_state_check(state, exploding, Ftrue, F, ignored)
+    if s0 != 0:
+        return s0, 0
+    st = control_step(t, state, traj, noise, k, scale, mpk_c, spk_c, nodes, weights, gains, spec, F, xd, dxd,
+                      ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, row)
+    return 0, stepped_after_control(st, T1, T2, u2, row, Ftrue, F, cinfo, i_F, i_Fs, i_C, ref_mode, ref, ref,
+                                    dt, sensed, cmd)
+
+
+KERNELS = ("runaway", "section_collapsed", "servo_reference_step", "ring_index", "plant_substeps",
+           "add_noise", "add_noise_channel", "sense_state", "record_row", "record_row_info", "control_step",
+           "desired", "analytic_loop", "analytic_sense", "analytic_command", "analytic_advance",
+           "analytic_chunk", "stepped_state_check", "stepped_after_control", "stepped_paper_step")

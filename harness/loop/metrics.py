@@ -1,9 +1,6 @@
-"""Summary metrics of a run (what bounds files, sweeps and `metrics.json` use).
-
-Errors are Euclidean norms of the task-space vectors, in metres, taken after `scn.transient`
-seconds: RMS = sqrt(mean |e|^2), max = max |e|.  beta_min is over the whole run.  A run that stopped
-before the transient ended reports NaN (JSON null) for the after-transient metrics.
-"""
+"""Summary metrics of a run (bounds files, sweeps, `metrics.json`): Euclidean norms of the task-space
+errors (m) after `scn.transient` s, RMS = sqrt(mean |e|^2) and max; NaN (JSON null) after the transient
+for a run that stopped before it."""
 
 from __future__ import annotations
 

@@ -1,13 +1,7 @@
-"""MuJoCo's warning text, captured per run, also when several runs share the process.
-
-MuJoCo has one process-wide warning callback (`mujoco.set_mju_user_warning`).  A run that set its own
-callback would collect the warnings of every other run stepping at the same time (a sweep's thread
-executor, `harness.studies.executor`), and the first run to finish would switch the capture off for the
-others.  Here one dispatcher is installed while any run captures, and it hands each warning to the run
-whose thread raised it (MuJoCo calls the callback in the thread that steps).
-
-The warning *counts* never needed this: they live in each run's own `MjData` (`d.warning`).
-"""
+"""MuJoCo's warning text captured per run, also when runs share the process (a sweep's threads): MuJoCo has
+one process-wide warning callback, so one dispatcher is installed while any run captures and hands each
+warning to the run whose thread raised it (MuJoCo calls it in the stepping thread).  The warning counts
+live in each run's own `MjData`."""
 
 from __future__ import annotations
 
@@ -24,13 +18,12 @@ def _dispatch(msg) -> None:
     sink = _sinks.get(threading.get_ident())
     if sink is not None:
         sink.append(str(msg))
-    else:  # a thread that runs no loop (user code stepping MuJoCo during a sweep): as MuJoCo's default
+    else:  # a thread that runs no loop: as MuJoCo's default
         sys.stderr.write(f"WARNING: {msg}\n")
 
 
 class WarningSink:
-    """The warning text MuJoCo raises in this thread until `close`.
-    `text`: list of messages, in order.  Use as a context manager, or call `close` in a `finally`."""
+    """The warning text (`text`, in order) MuJoCo raises in this thread until `close` (a context manager)."""
 
     def __init__(self) -> None:
         self.text: list[str] = []

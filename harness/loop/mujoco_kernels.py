@@ -1,18 +1,14 @@
-"""MuJoCo-plant loop kernels (numba-compatible; compiled by `harness.loop.fast`): the whole control
-loop of the MuJoCo plant in one kernel that calls MuJoCo's C functions by address (`harness.loop.native`),
-plus the sensing and command maps it uses and the recording-geometry helpers.  Status codes:
-`harness.loop.kernels`.
-"""
+"""MuJoCo-plant loop kernels (numba-compatible; compiled by `harness.loop.fast`): the whole control loop in
+one kernel, its sensing and command maps, and the recording-geometry helpers."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from controllers.cc import backbone_points
-from controllers.control import MASTER_INFO, SLAVE_INFO
 from controllers.master import master_kernel
 from controllers.scratch import scratch, scratch_zeros
-from controllers.status import ST_MUJOCO_STATE, ST_MUJOCO_WARNING, ST_OK, ST_RUNAWAY, ST_SECTION_LENGTH
+from controllers.status import ST_MUJOCO_STATE, ST_MUJOCO_WARNING, ST_OK, ST_SECTION_LENGTH
 from harness.loop.force_kernels import (
     CONTACT_INFO,
     operator_advance,
@@ -21,7 +17,16 @@ from harness.loop.force_kernels import (
     read_contact,
     sense_forces,
 )
-from harness.loop.kernels import ROW_W, control_step, runaway, section_collapsed, servo_reference_step
+from harness.loop.kernels import (
+    R_CI,
+    R_FS,
+    R_FT,
+    R_HAND,
+    bind,
+    loop_chunk,
+    section_collapsed,
+    servo_reference_step,
+)
 from harness.loop.native import MJ_KINEMATICS_FN, MJ_STEP_FN, copy_geometry, mj_call
 from harness.plant.chain_map import (
     chain_elastic_correction,
@@ -33,10 +38,6 @@ from harness.plant.chain_map import (
 )
 
 
-# =============================================================================================
-# MuJoCo plant: the whole control loop compiled, calling MuJoCo's C functions by address
-# (`harness.loop.native`: the addresses and the calls)
-# =============================================================================================
 def sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state):
     """True (noise-free) state (16,) [q1, dq1, q2, dq2] from MuJoCo joints; qc, vc (n_chain,) work."""
     for i in range(2):
@@ -60,24 +61,18 @@ def mujoco_state_status(state):
 
 
 def mujoco_commands(servo, feedforward, dt, q2s, T2, u2, ref, C, R, L0, kv_over_kp, muscle, cmd):
-    """Command vector cmd = [master torque (2), chain ctrl (n), chain feedforward force (n)] after the servo
-    reference ref (12,) = [q_ref, dq_ref] took the step dt with u2 (servo actuation; `chain_commands`).
-    Returns `chain_commands`' count of saturated muscle groups."""
+    """`chain_commands` after the servo reference ref (12,) took the step dt with u2 (servo actuation)."""
     if servo:
         servo_reference_step(ref, u2, dt)
     return chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, muscle, cmd)
 
 
 def chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, muscle, cmd):
-    """The chain's part of cmd = [master torque (2), chain ctrl (n), chain feedforward force (n)]; returns
-    the number of muscle groups whose command lies outside [0, F_max] (0 for the other actuations).
-
-    Torque actuation: chain ctrl = virtual-work map of T2 at the sensed q2s (motors).
-    Servo actuation: ctrl = joints(q_ref) + (kv/kp) A(q_ref) dq_ref (position servo with velocity
-    feed-forward folded into the target), feed-forward = virtual-work map of T2 at q_ref (if enabled).
-    Muscle actuation (muscle = (radius (3,), max_force (3,)), empty arrays otherwise): the first 6 entries
-    of the chain ctrl are the force commands of the muscle groups realizing T2 at q2s
-    (`chain_map.muscle_commands`, clipped to [0, F_max] by MuJoCo's ctrlrange); no feed-forward."""
+    """The chain's part of cmd = [master torque (2), chain ctrl (n), chain feed-forward force (n)]; returns
+    the number of muscle groups commanded outside [0, F_max].  Torque: ctrl = virtual-work map of T2 at the
+    sensed q2s.  Servo: ctrl = joints(q_ref) + (kv/kp) A(q_ref) dq_ref, feed-forward = the map of T2 at
+    q_ref (if enabled).  Muscle (muscle = (radius (3,), max_force (3,)), else empty arrays): ctrl[0:6] =
+    the group forces realizing T2 at q2s (`chain_map.muscle_commands`); no feed-forward."""
     n = C.shape[0]
     radius, max_force = muscle
     if radius.shape[0] > 0:
@@ -99,13 +94,6 @@ def chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, muscl
     return 0
 
 
-# record-row columns after the control step's (harness.loop.trajectory.ROW_FIELDS)
-R_FT = ROW_W
-R_FS = R_FT + 4
-R_CI = R_FS + 4
-R_HAND = R_CI + CONTACT_INFO
-
-
 def master_tip_state(mpk, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1):
     """Master tip position xm and velocity vm = J1 dq1 (task frame) of the plant master (packed mpk)
     from MuJoCo's joints; J1 (2, 2) is left for J1^T F."""
@@ -117,157 +105,154 @@ def master_tip_state(mpk, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, 
         vm[i] = J1[i, 0] * dq1[0] + J1[i, 1] * dq1[1]
 
 
-def mujoco_chunk(k0, k1, model, plant, data, fargs):
-    """Control steps k0..k1-1 on the MuJoCo plant.
+def master_grip(master, operator):
+    """The plant master's tip state (its J1 for J1^T F1) and, with the operator, the grip force F1op."""
+    qpos, qvel, m_qadr, m_dadr, mpk_p, q1, dq1, xm, vm, J1, Jd1, M1, N1 = master
+    op_on, op, targets, hand, target, F1op = operator
+    master_tip_state(mpk_p, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1)
+    if op_on:
+        operator_force(op, hand, xm, vm, F1op)
 
-    model: the run's `harness.loop.common.RunModel` (mpk_c, spk_c, nodes, weights, gains, spec, F, traj,
-    s0);
-    plant: the MuJoCo plant's constants (mptr, dptr: mjModel*, mjData* addresses; mjfn = MJ_FUNCS; substeps;
-    dt: control period (s); m_qadr, m_dadr, m_act: master joint qpos/dof addresses and actuators; c_qadr,
-    c_dadr, c_act: the chain's; R, C, L0, eargs (ChainMap.elastic_args): the chain map; servo, feedforward,
-    kv_over_kp (n,), muscle ((radius, max_force) or two empty arrays): the actuation; c_act: the muscle
-    actuators under muscle actuation);
-    data: the run's buffers (qpos, qvel, ctrl, qfrc: numpy views of the MjData; noise, noise_scale;
-    ref (12,); cmdbuf; delay; rows, qpos_hist, cmd_log: this chunk's rows; geo_in, geo_out; wnum; nsat (1,):
-    the run's count of saturated muscle group-steps, added to).
-    Per step: sense -> noise -> both laws -> record -> commands (delayed by `delay` control steps through
-    the ring buffer cmdbuf (delay+1, 2+2n)) -> `substeps` x (elastic correction + mj_step).
-    cmd_log (rows, nu + nv): if it has rows ((k1 - k0) * substeps), row (k - k0) * substeps + s receives
-    [ctrl, qfrc] exactly as applied before that mj_step (for a raw-MuJoCo replay); 0 rows = off.
-    Recording geometry: qpos_hist (k1 - k0, nq) receives qpos at the start of each step (0 rows = off),
-    or, if geo_out = (body_pos, body_quat, master_pos, tip) has rows, `copy_geometry` fills them from the
-    kinematics MuJoCo computed inside the first mj_step of the step (the start state: valid for the
-    single-stage integrators, not RK4), geo_in = (xpos, xquat, site_xpos, xanchor, bodies, gids).
-    wnum: MuJoCo's warning counters (a view of mjData.warning.number), checked after every mj_step.
-    fargs = (sensordata, cadr (ContactMap.adr or empty), Fconst (4,) constant tip forces (F2 is applied by
-    the caller through xfrc_applied, F1 here through qfrc_applied = J1^T F1), fmode, fnoise, fstd, falpha,
-    fdelay, fbuf, ffilt (`sense_forces`), op_on, op, targets, hand (4,), target (2,) (operator, see
-    `harness.loop.force_kernels`), mpk_p (plant master, packed), cpts (k1 - k0, np, 6) contact points or
-    0 rows): the laws get the sensed F (`sense_forces`) instead of F (kept in the signature).
-    Returns (status, completed steps); status 6 = non-finite or exploding MuJoCo state, 7 = a MuJoCo
-    warning was raised during the last completed step (whose row is recorded)."""
-    mpk_c, spk_c, nodes, weights, gains, spec, F, traj, _s0 = model
+
+def master_handle_force(master, operator, Fconst, qfrc):
+    """qfrc at the master's dofs <- J1^T (F1 + grip F1op), the constant and the operator's force on the
+    handle (J1 of the last `master_grip`)."""
+    m_dadr, J1, F1op = master[3], master[9], operator[5]
+    for j in range(2):
+        qfrc[m_dadr[j]] = J1[0, j] * (Fconst[0] + F1op[0]) + J1[1, j] * (Fconst[1] + F1op[1])
+
+
+def mujoco_sense(k, i, state, r, p):
+    """The true state from MuJoCo's joints (status 6, 5), the contact and operator forces, the sensed F
+    into the row, the qpos history."""
+    mj, master, chain, sensing, operator, rec, act = p
+    qpos, qvel, m_qadr, m_dadr = master[0], master[1], master[2], master[3]
+    c_qadr, c_dadr, R, C, L0, eargs, qc, vc, corr = chain
+    (sensordata, cadr, cpts, nopts, Fconst, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, F2c,
+     Ftrue) = sensing
+    F1op, hand, qpos_hist = operator[5], operator[3], rec[0]
+    sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state)
+    st = mujoco_state_status(state)
+    if st != ST_OK:
+        return st
+    read_contact(sensordata, cadr, F2c, r[R_CI:R_CI + CONTACT_INFO], cpts[i] if cpts.shape[0] > 0 else nopts)
+    if operator[0]:
+        master_grip(master, operator)
+    for j in range(2):
+        Ftrue[j] = Fconst[j] + F1op[j]
+        Ftrue[2 + j] = Fconst[2 + j] + F2c[j]
+    sense_forces(Ftrue, k, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, r[R_FS:R_FS + 4])
+    for j in range(4):
+        r[R_FT + j] = Ftrue[j]
+    r[R_HAND] = hand[0]
+    r[R_HAND + 1] = hand[1]
+    if qpos_hist.shape[0] > 0:
+        for j in range(qpos.shape[0]):
+            qpos_hist[i, j] = qpos[j]
+    return ST_OK
+
+
+def mujoco_command(slot, T1, T2, u2, sensed, p):
+    """The step's command vector into its ring slot (`mujoco_commands` at the sensed q2)."""
+    servo, feedforward, dt, C, R, L0, kv_over_kp, muscle, ref, nsat = p[6]
+    slot[0] = T1[0]
+    slot[1] = T1[1]
+    nsat[0] += mujoco_commands(servo, feedforward, dt, sensed[4:10], T2, u2, ref, C, R, L0, kv_over_kp,
+                               muscle, slot)
+
+
+def mujoco_advance(k, i, st, use, state, law, p):
+    """`substeps` x (operator and F1 forces, elastic correction, mj_step) with the commands `use`; a failed
+    step (st != 0) is not stepped (its geometry row from its kinematics).  Status 7 on a MuJoCo warning."""
+    mj, master, chain, sensing, operator, rec, act = p
+    mptr, dptr, mjfn, substeps, dt, ctrl, qfrc, m_act, c_act, wnum = mj
+    c_qadr, c_dadr, R, C, L0, eargs, qc, vc, corr = chain
+    op_on, op, targets, hand, target, F1op = operator
+    qpos_hist, cmd_log, geo_in, geo_out = rec
+    qpos, Fconst = master[0], sensing[4]
+    live = geo_out[0].shape[0] > 0
+    if st != 0:
+        if live:
+            mj_call(mjfn[MJ_KINEMATICS_FN], mptr, dptr)
+            copy_geometry(geo_in, i, geo_out)
+        return st
+    n = C.shape[0]
+    nu = ctrl.shape[0]
+    for j in range(2):
+        ctrl[m_act[j]] = use[j]
+    for c in range(c_act.shape[0]):
+        ctrl[c_act[c]] = use[2 + c]
+    apply1 = op_on or Fconst[0] != 0.0 or Fconst[1] != 0.0
+    hphys = dt / substeps
+    for s in range(substeps):
+        if apply1:  # operator's grip (+ constant F1) on the master handle, J1^T F1
+            if s > 0 or not op_on:  # at s = 0 with the operator: J1 and F1op are the step's own
+                master_grip(master, operator)
+            if op_on:
+                operator_target(targets, k * dt + s * hphys, target)
+                operator_advance(op, hand, target, F1op, hphys)
+            master_handle_force(master, operator, Fconst, qfrc)
+        for c in range(n):
+            qc[c] = qpos[c_qadr[c]]
+        chain_elastic_correction(qc, *eargs, corr)
+        for c in range(n):
+            qfrc[c_dadr[c]] = use[2 + n + c] + corr[c]
+        if cmd_log.shape[0] > 0:
+            lr = cmd_log[i * substeps + s]
+            for j in range(nu):
+                lr[j] = ctrl[j]
+            for j in range(qfrc.shape[0]):
+                lr[nu + j] = qfrc[j]
+        mj_call(mjfn[MJ_STEP_FN], mptr, dptr)
+        if live and s == 0:
+            copy_geometry(geo_in, i, geo_out)
+        for w in range(wnum.shape[0]):
+            if wnum[w] != 0:  # any MuJoCo warning stops the run: it must never pass silently
+                return ST_MUJOCO_WARNING
+    return ST_OK
+
+
+def mujoco_chunk(k0, k1, model, plant, data, fargs):
+    """Control steps k0..k1-1 on the MuJoCo plant (`loop_chunk` with `mujoco_sense`, `mujoco_command`,
+    `mujoco_advance`: `mujoco_loop`).
+
+    model: the run's `RunModel`; plant: the constants (mptr, dptr: mjModel*, mjData*; mjfn = MJ_FUNCS;
+    substeps; dt (s); master qpos / dof addresses and actuators; the chain's, then R, C, L0, eargs (the
+    `ChainMap`); servo, feedforward, kv_over_kp (n,), muscle: the actuation); data: the run's buffers
+    (MjData views qpos, qvel, ctrl, qfrc; noise, noise_scale; ref (12,); cmdbuf (delay + 1, 2 + 2n); delay;
+    this chunk's rows, qpos_hist (0 rows: off) and cmd_log ((k1 - k0) * substeps, nu + nv): [ctrl, qfrc]
+    as applied before each mj_step, 0 rows: off; geo_in, geo_out (`copy_geometry`, filled from the
+    kinematics of the first mj_step of each step when geo_out has rows); wnum: mjData.warning.number; nsat
+    (1,): saturated muscle group-steps, added to); fargs: the forces (`harness.loop.force_args.ForceArgs`;
+    the laws get the sensed F).  Returns (status, completed steps); 6: non-finite or exploding MuJoCo
+    state, 7: a MuJoCo warning in the last completed step (whose row is recorded)."""
     (mptr, dptr, mjfn, substeps, dt, m_qadr, m_dadr, m_act, c_qadr, c_dadr, c_act, R, C, L0, eargs, servo,
      feedforward, kv_over_kp, muscle) = plant
     (qpos, qvel, ctrl, qfrc, noise, noise_scale, ref, cmdbuf, delay, rows, qpos_hist, cmd_log, geo_in,
      geo_out, wnum, nsat) = data
     (sensordata, cadr, Fconst, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, op_on, op, targets, hand,
      target, mpk_p, cpts) = fargs
-    F2c = scratch_zeros(2)
-    F1op = scratch_zeros(2)
-    Ftrue = scratch_zeros(4)
-    q1 = scratch(2)
-    dq1 = scratch(2)
-    xm = scratch(2)
-    vm = scratch(2)
-    J1 = scratch((2, 2))
-    Jd1 = scratch((2, 2))
-    M1 = scratch((2, 2))
-    N1 = scratch(2)
-    nopts = scratch_zeros((0, 6))
-    apply1 = op_on or Fconst[0] != 0.0 or Fconst[1] != 0.0
-    hphys = dt / substeps
     n = C.shape[0]
-    state = scratch(16)
-    sensed = scratch(16)
-    qc = np.empty(n)
-    vc = np.empty(n)
-    corr = np.empty(n)
-    # the control step's arrays: made here, not by a shared helper (a scratch array lives in the frame that
-    # makes it: a helper would hand back arrays over its finished frame)
-    T1 = scratch_zeros(2)
-    T2 = scratch_zeros(6)
-    u2 = scratch_zeros(6)
-    deN = scratch_zeros(6)
-    minfo = scratch(MASTER_INFO)
-    sinfo = scratch(SLAVE_INFO)
-    xd = scratch(2)
-    dxd = scratch(2)
-    ddxd = scratch(2)
-    nb = delay + 1
-    log = cmd_log.shape[0] > 0
-    hist = qpos_hist.shape[0] > 0
-    live = geo_out[0].shape[0] > 0
-    nu = ctrl.shape[0]
-    nv = qfrc.shape[0]
-    for k in range(k0, k1):
-        sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state)
-        st = mujoco_state_status(state)
-        if st != ST_OK:
-            return st, k - k0
-        t = k * dt
-        r = rows[k - k0]
-        read_contact(sensordata, cadr, F2c, r[R_CI:R_CI + CONTACT_INFO], cpts[k - k0] if cpts.shape[0] > 0
-                     else nopts)
-        if op_on:
-            master_tip_state(mpk_p, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1)
-            operator_force(op, hand, xm, vm, F1op)
-        for i in range(2):
-            Ftrue[i] = Fconst[i] + F1op[i]
-            Ftrue[2 + i] = Fconst[2 + i] + F2c[i]
-        sense_forces(Ftrue, k, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, r[R_FS:R_FS + 4])
-        for i in range(4):
-            r[R_FT + i] = Ftrue[i]
-        r[R_HAND] = hand[0]
-        r[R_HAND + 1] = hand[1]
-        st = control_step(t, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, weights, gains, spec,
-                          r[R_FS:R_FS + 4], xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, r)
-        if hist:
-            for i in range(qpos.shape[0]):
-                qpos_hist[k - k0, i] = qpos[i]
-        if st == 0 and runaway(r):
-            st = ST_RUNAWAY
-        if st != 0:  # the last recorded step is not stepped: its geometry row from its kinematics
-            if live:
-                mj_call(mjfn[MJ_KINEMATICS_FN], mptr, dptr)
-                copy_geometry(geo_in, k - k0, geo_out)
-            return st, k - k0 + 1
-        slot = k % nb
-        cmd = cmdbuf[slot]
-        cmd[0] = T1[0]
-        cmd[1] = T1[1]
-        nsat[0] += mujoco_commands(servo, feedforward, dt, sensed[4:10], T2, u2, ref, C, R, L0, kv_over_kp,
-                                   muscle, cmd)
-        use = cmdbuf[(k - delay) % nb] if k >= delay else cmdbuf[0]
-        for i in range(2):
-            ctrl[m_act[i]] = use[i]
-        for c in range(c_act.shape[0]):
-            ctrl[c_act[c]] = use[2 + c]
-        for s in range(substeps):
-            if apply1:  # operator's grip (+ constant F1) on the master handle, J1^T F1
-                if s > 0 or not op_on:  # at s = 0 with the operator: J1 and F1op are the step's own
-                    master_tip_state(mpk_p, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1)
-                    if op_on:
-                        operator_force(op, hand, xm, vm, F1op)
-                if op_on:
-                    operator_target(targets, t + s * hphys, target)
-                    operator_advance(op, hand, target, F1op, hphys)
-                for i in range(2):
-                    qfrc[m_dadr[i]] = (J1[0, i] * (Fconst[0] + F1op[0])
-                                       + J1[1, i] * (Fconst[1] + F1op[1]))
-            for c in range(n):
-                qc[c] = qpos[c_qadr[c]]
-            chain_elastic_correction(qc, *eargs, corr)
-            for c in range(n):
-                qfrc[c_dadr[c]] = use[2 + n + c] + corr[c]
-            if log:
-                lr = cmd_log[(k - k0) * substeps + s]
-                for i in range(nu):
-                    lr[i] = ctrl[i]
-                for i in range(nv):
-                    lr[nu + i] = qfrc[i]
-            mj_call(mjfn[MJ_STEP_FN], mptr, dptr)
-            if live and s == 0:
-                copy_geometry(geo_in, k - k0, geo_out)
-            for w in range(wnum.shape[0]):
-                if wnum[w] != 0:  # any MuJoCo warning stops the run: it must never pass silently
-                    return ST_MUJOCO_WARNING, k - k0 + 1
-    return ST_OK, k1 - k0
+    mj = (mptr, dptr, mjfn, substeps, dt, ctrl, qfrc, m_act, c_act, wnum)
+    # + the master tip's work: q1, dq1, xm, vm, J1, Jd1, M1, N1
+    master = (qpos, qvel, m_qadr, m_dadr, mpk_p, scratch(2), scratch(2), scratch(2), scratch(2),
+              scratch((2, 2)), scratch((2, 2)), scratch((2, 2)), scratch(2))
+    chain = (c_qadr, c_dadr, R, C, L0, eargs, np.empty(n), np.empty(n), np.empty(n))  # + qc, vc, corr
+    # + no contact points, then the contact force F2c and the true forces Ftrue
+    sensing = (sensordata, cadr, cpts, scratch_zeros((0, 6)), Fconst, fmode, fnoise, fstd, falpha, fdelay,
+               fbuf, ffilt, scratch_zeros(2), scratch_zeros(4))
+    operator = (op_on, op, targets, hand, target, scratch_zeros(2))  # + the grip force F1op
+    act = (servo, feedforward, dt, C, R, L0, kv_over_kp, muscle, ref, nsat)
+    return mujoco_loop(k0, k1, model, (scratch(16), noise, noise_scale, rows, cmdbuf, delay, dt),
+                       (mj, master, chain, sensing, operator, (qpos_hist, cmd_log, geo_in, geo_out), act))
+
+
+mujoco_loop = bind(loop_chunk, "mujoco_loop", plant_sense=mujoco_sense, plant_command=mujoco_command,
+                   plant_advance=mujoco_advance)
 
 
 def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):
-    """Raw MuJoCo: for each row of cmd_log (rows, nu + nv) copy [ctrl, qfrc_applied] in and mj_step
-    (the same physics steps as a logged `mujoco_chunk` run, without the harness)."""
+    """Raw MuJoCo: for each row of cmd_log (rows, nu + nv), [ctrl, qfrc_applied] <- row, mj_step."""
     nu = ctrl.shape[0]
     nv = qfrc.shape[0]
     for r in range(cmd_log.shape[0]):
@@ -281,15 +266,13 @@ def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):
 # the kernels that allocate on the heap (run-time sizes), compiled with numba's runtime (harness.loop.fast)
 HEAP_KERNELS = ("mujoco_chunk", "backbone_world")
 KERNELS = ("sense_mujoco", "mujoco_state_status", "mujoco_commands", "chain_commands", "master_tip_state",
-           "mujoco_chunk", "replay_commands")
+           "master_grip", "master_handle_force", "mujoco_sense", "mujoco_command", "mujoco_advance",
+           "mujoco_loop", "mujoco_chunk", "replay_commands")
 
 
-# =============================================================================================
-# Recording geometry, after the loop: MuJoCo kinematics replay and analytic backbone, compiled
-# =============================================================================================
+# --- recording geometry after the loop ---------------------------------------------------------------
 def kinematics_replay(mptr, dptr, mjfn, qpos, qpos_hist, geo_in, geo_out):
-    """For each row of qpos_hist (n, nq): qpos <- row, MuJoCo's C mj_kinematics, `copy_geometry`
-    (qpos and geo_in views of the MjData at dptr)."""
+    """For each row of qpos_hist (n, nq): qpos <- row, mj_kinematics, `copy_geometry`."""
     nq = qpos.shape[0]
     for k in range(qpos_hist.shape[0]):
         for i in range(nq):
@@ -299,8 +282,8 @@ def kinematics_replay(mptr, dptr, mjfn, qpos, qpos_hist, geo_in, geo_out):
 
 
 def backbone_world(q2, n_per_section, base, out):
-    """Analytic backbone (controllers.cc.backbone_points) of every row of q2 (n, 6) in world
-    coordinates: out (n, 3 P + 1, 3) = (base_x + X, base_y, base_z + Z)."""
+    """Analytic backbone (`controllers.cc.backbone_points`) of every row of q2 (n, 6), world frame:
+    out (n, 3 P + 1, 3) = (base_x + X, base_y, base_z + Z)."""
     npts = 3 * n_per_section + 1
     pts = np.empty((npts, 2))
     for k in range(q2.shape[0]):

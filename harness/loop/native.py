@@ -1,23 +1,18 @@
-"""Native calls from the compiled MuJoCo loop: MuJoCo's C functions by address (numba-compatible; compiled by
-`harness.loop.fast` with the other kernels).
+"""Native calls of the compiled kernels: MuJoCo's C functions by address (`mj_call`) and the kernels'
+working arrays on their stack frames (`scratch_intrinsics`, the compiled `controllers.scratch`).  Each
+has a plain-Python form (TELEOP_NO_JIT=1); the compiled forms are registered by `harness.loop.fast`
+(importing this module does not import numba).
 
-Each helper below is plain Python (interpreted kernels, TELEOP_NO_JIT=1) and has a compiled form registered
-by `register_numba_extensions` (called by `harness.loop.fast.kernels` before compiling; importing this module
-does not import numba).  `scratch_intrinsics` gives the compiled form of `controllers.scratch` (the kernels'
-working arrays on their stack frames).
+The addresses MJ_FUNCS = [mj_step, mj_kinematics] are passed as an argument, never used as a global in a
+kernel: a ctypes global would bake this process' addresses into the code and make it uncacheable.
 """
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
-# =============================================================================================
-# MuJoCo's C functions by address
-# =============================================================================================
-# The C functions `void f(const mjModel*, mjData*)` are called through a function pointer passed as
-# an argument (`mjfn` = MJ_FUNCS: [mj_step, mj_kinematics] addresses of this process), not through a ctypes
-# object, so that numba can cache the compiled loop on disk (a ctypes global would bake this process'
-# addresses into the code and make it uncacheable: ~3 s of compilation in every process).
 MJ_STEP_FN, MJ_KINEMATICS_FN = 0, 1
 
 
@@ -40,8 +35,7 @@ MJ_FUNCS = _mj_addresses()  # pass to the kernels below; never use as a global i
 
 
 def mj_call(fn, mptr, dptr):
-    """Call the MuJoCo C function at address fn with (mjModel*, mjData*) (interpreted: ctypes;
-    compiled: a direct indirect call, see the numba overload below)."""
+    """Call the MuJoCo C function at address fn with (mjModel*, mjData*) (ctypes; compiled: a direct call)."""
     import ctypes
 
     if fn == 0:  # pragma: no cover
@@ -49,16 +43,9 @@ def mj_call(fn, mptr, dptr):
     ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p)(int(fn))(mptr, dptr)
 
 
-_registered = False
-
-
+@functools.cache
 def register_numba_extensions() -> None:
-    """The compiled form of mj_call (called by `harness.loop.fast.kernels` before compiling: importing
-    this module does not import numba)."""
-    global _registered
-    if _registered:
-        return
-    _registered = True
+    """The compiled form of mj_call (`harness.loop.fast` calls this before compiling)."""
     from llvmlite import ir as _ir
     from numba import types as _nbt
     from numba.extending import intrinsic as _intrinsic
@@ -97,16 +84,11 @@ def _literal_dims(shape):
     return None
 
 
+@functools.cache
 def scratch_intrinsics() -> dict:
-    """The compiled form of `controllers.scratch`, by name, for the namespace `harness.loop.fast` compiles the
-    kernels in (where each replaces the numpy function of that name): an array over a block of the calling
-    kernel's stack frame (an `alloca` in its entry block, emitted into the kernel itself, so a call in a
-    loop reuses one block), with no meminfo (nothing to count or free), zero-filled at each call for the
-    `_zeros` / `_cz` forms.  A shape that is not made of literals is a typing error (compile time), never a
-    heap array in disguise."""
-    global _SCRATCH
-    if _SCRATCH is not None:
-        return _SCRATCH
+    """The compiled `controllers.scratch` functions by name (for `harness.loop.fast`'s namespace): an array
+    over an `alloca` block of the calling kernel's entry frame (a call in a loop reuses it), no meminfo,
+    zero-filled for the `_zeros` / `_cz` forms.  A shape not made of literals is a typing error."""
     from numba import types as _nbt
     from numba.core import cgutils as _cgutils
     from numba.extending import intrinsic as _intrinsic
@@ -146,18 +128,14 @@ def scratch_intrinsics() -> dict:
         stack_array.__name__ = f"stack_{dtype_name}{'_zeros' if zero else ''}"
         return _intrinsic(stack_array)
 
-    _SCRATCH = {fn.__name__: make(dtype_name, zero) for fn, dtype_name, zero in SCRATCH_FORMS}
-    return _SCRATCH
-
-
-_SCRATCH: dict | None = None
+    return {fn.__name__: make(dtype_name, zero) for fn, dtype_name, zero in SCRATCH_FORMS}
 
 
 def copy_geometry(geo_in, row, geo_out):
-    """Row `row` of the recording geometry from MuJoCo's current kinematics: geo_in = (xpos, xquat,
-    site_xpos, xanchor (views of the MjData), bodies (nb,) chain body ids, gids = [elbow body, shoulder
-    joint, master tip site, slave tip site]); geo_out = (body_pos (n, nb, 3), body_quat (n, nb, 4) wxyz,
-    master_pos (n, 3, 3) = shoulder anchor, elbow, master tip; tip (n, 3) slave tip site)."""
+    """Row `row` of the recording geometry from MuJoCo's kinematics: geo_in = (xpos, xquat, site_xpos,
+    xanchor (MjData views), bodies (nb,), gids = [elbow body, shoulder joint, master tip site, slave tip
+    site]); geo_out = (body_pos (n, nb, 3), body_quat (n, nb, 4) wxyz, master_pos (n, 3, 3) shoulder,
+    elbow, master tip; tip (n, 3))."""
     xpos, xquat, site_xpos, xanchor, bodies, gids = geo_in
     body_pos, body_quat, master_pos, tip = geo_out
     for b in range(bodies.shape[0]):

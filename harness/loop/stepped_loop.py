@@ -1,37 +1,21 @@
 """The one Python-level closed loop: any controller on any plant stepped from Python (protocol
-`harness.plant.stepped.SteppedPlant`).
+`harness.plant.stepped.SteppedPlant`: the Cosserat rod, the adapters of `harness.loop.stepped_plants`).
 
-Plants: the Cosserat rod (`harness.plant.cosserat_plant`) and the Python-stepped adapters of the MuJoCo
-and analytic plants (`harness.loop.stepped_plants`).  Controllers: any `controllers.interface.Controller`
-(through `harness.loop.interface_adapter.InterfaceController`); the paper's law under its registered
-name "paper" takes its compiled fast path (one compiled call per step,
-`harness.loop.stepped_kernels.stepped_paper_step`).  The paper's law on the MuJoCo / analytic plants
-runs in the compiled loops instead (`harness.loop.simulate`).
-The loop over control steps is Python, and each step is a few compiled calls.  Per control step k
-(t = k control_dt):
+Per control step k (t = k control_dt), `Stepper.step`:
 
-    status = plant.true_state(state)            noise-free [q1, dq1, q2, dq2] (16,); plant checks
-    x_d(t), eq. (40)                            K.desired
-    sensed = state + AWGN                       K.add_noise, the seeded table of noise_table (as the
-                                                other loops: same seed -> same noise)
-    action = controller.step(observation)       T1, T2, u2, deN (and a servo reference); "paper": the
-                                                compiled laws (12)-(13), (17)-(33) (as the compiled loops)
-    record row of the true state                K.record_row (ROW layout of harness.loop.trajectory)
-    servo reference                             dq2_ref += u2 dt, q2_ref += dq2_ref dt (semi-implicit
-                                                Euler, as harness.loop.mujoco_kernels.mujoco_commands),
-                                                or the controller's own (Action.use_ref)
-    plant.command(T1, T2, q2_ref, dq2_ref, q2s) through a ring buffer of plant.actuation_delay; q2s
-                                                the sensed q2 of the commanding step (MuJoCo torque map)
+    status = plant.true_state(state)     noise-free [q1, dq1, q2, dq2] (16,); state checks (8, 5)
+    x_d(t) (40), sensed = state + AWGN   the seeded table of `noise_table` (same seed -> same noise)
+    controller step                      "paper": its compiled laws (12)-(13), (17)-(33) in one call
+                                         (`K.stepped_paper_step`); else a `controllers.interface.Controller`
+                                         through `harness.loop.interface_adapter.InterfaceController`
+    record row, command checks (1, 4)    `harness.loop.kernels.stepped_after_control`
+    servo reference                      dq2_ref += u2 dt, q2_ref += dq2_ref dt, or the controller's own
+    plant.command(...)                   the commands of step k - actuation delay (ring of slots)
     status = plant.advance(control_dt)
 
-Statuses are those of `controllers.status.Status` (1 non-finite command, 2/3 singular, 4
-runaway, 5 section length <= 0, 8 non-finite or exploding plant state, ...); the run stops at the
-first non-zero one, keeps every recorded row and says why (`set_outcome`).  `harness.loop.common.STOP`
-interrupts between steps.  Per-step buffers are preallocated; the glue around the plant and the
-controller (state checks, sensed force, record columns, command checks, servo reference, delay ring) is
-two compiled calls (`harness.loop.stepped_kernels`); a plant with `record(k)` / `finish(traj, done)` (the
-Cosserat rod, the MuJoCo adapter) keeps its own recording, otherwise the plant geometry is copied into
-(n, ...) arrays (`plant.geometry()` returns the same arrays every call).
+The run stops at the first non-zero status (`controllers.status.Status`), keeps every recorded row and
+says why; `harness.loop.common.STOP` interrupts between steps.  The same `Stepper` is the closed-loop map
+of `harness.studies.stability`.
 """
 
 from __future__ import annotations
@@ -45,12 +29,12 @@ from harness.config.scenario import Scenario
 from harness.loop.common import (
     CHUNK,
     STOP,
+    ChunkRun,
     RunModel,
     compile_model,
     noise_table,
+    part_trajectory,
     progress_bar,
-    run_meta,
-    set_outcome,
 )
 from harness.loop.fast import K
 from harness.loop.interface_adapter import ControllerFailure, InterfaceController, is_compiled
@@ -58,30 +42,104 @@ from harness.loop.trajectory import ROW_SLICES, ROW_WIDTH, Trajectory
 from harness.plant.stepped import SteppedPlant
 
 EXPLODING = 1e6  # |state| above this is a diverged plant (status 8)
+_I_F, _I_FS, _I_C = (ROW_SLICES[n].start for n in ("F_true", "F_sensed", "contact"))
+_NO_REF = np.zeros(0)
+
+
+class Stepper:
+    """One control step of the closed loop on a stepped plant, with the run's buffers.
+
+    ctrl: an `InterfaceController`, or None for the paper's compiled law; noise: (table, scale) of
+    `noise_table` (default: none); record(k): called once step k's row is recorded (the plant geometry).
+    Loop state (what `harness.studies.stability` perturbs): `ref` (12,) = [q2_ref, dq2_ref], the servo
+    reference, and `cmdbuf` (delay + 1, 26), the actuation-delay ring of [T1, T2, q2_ref, dq2_ref, sensed q2].
+    """
+
+    def __init__(self, scn: Scenario, plant: SteppedPlant, model: RunModel,
+                 ctrl: InterfaceController | None = None, noise: tuple[np.ndarray, float] | None = None,
+                 record=None) -> None:
+        self.plant, self.model, self.ctrl, self.record = plant, model, ctrl, record
+        self.dt = scn.control_dt
+        self.noise, self.scale = noise if noise is not None else (np.zeros((1, 16)), 0.0)
+        self.state, self.sensed = np.zeros(16), np.zeros(16)
+        # true tip forces: a plant with `forces(F, contact)` (the rod's contact) gives them each step, else
+        # the constant ones; the controller reads the sensed F (F_true, or zeros when ignored)
+        self.forces = getattr(plant, "forces", None)
+        self.Ftrue, self.cinfo = model.F.copy(), np.zeros(5)
+        self.Fsens = model.F.copy() if ctrl is None else ctrl.F
+        self.ignored = scn.sensing.force.mode == "ignored"
+        self.xd, self.dxd, self.ddxd = np.zeros(2), np.zeros(2), np.zeros(2)
+        self.T1, self.T2, self.u2, self.deN = np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6)
+        self.minfo, self.sinfo = np.empty(MASTER_INFO), np.empty(SLAVE_INFO)
+        self.servo = plant.actuation == "servo"
+        self.ref = np.concatenate([model.s0[4:10], model.s0[10:16]])
+        self.delay = int(round(scn.plant.actuation_delay / self.dt))
+        self.cmdbuf = np.zeros((self.delay + 1, 26))
+        self.cmdbuf[:, 8:20] = self.ref
+        self.views = [(c[0:2], c[2:8], c[8:14], c[14:20], c[20:26]) for c in self.cmdbuf]
+        self.done = 0  # rows recorded
+        m = model  # the paper's one compiled call: its arguments around t, k, row and the ring slot
+        law = (self.scale, m.mpk_c, m.spk_c, m.nodes, m.weights, m.gains, m.spec, self.Fsens, self.xd,
+               self.dxd, self.ddxd, self.sensed, self.T1, self.T2, self.u2, self.deN, self.minfo, self.sinfo)
+        self._args = ((self.state, EXPLODING, self.Ftrue, self.ignored), (m.traj, self.noise), law,
+                      (self.cinfo, _I_F, _I_FS, _I_C, 1 if self.servo else 0, self.ref, self.dt))
+
+    def step(self, k: int, row: np.ndarray) -> int:
+        """Control step k, its record row into row (ROW_WIDTH,); `done` becomes k + 1 once it is recorded.
+        Returns the status; the plant is advanced only when it is 0."""
+        a, ctrl, state, dt = self.model, self.ctrl, self.state, self.dt
+        t = k * dt
+        st = self.plant.true_state(state)
+        if st:
+            return int(st)
+        if self.forces is not None:
+            self.forces(self.Ftrue, self.cinfo)
+        slot = self.cmdbuf[k % (self.delay + 1)]
+        if ctrl is None:  # the paper's law: check, laws, row and glue in one compiled call
+            A, B, C, D = self._args
+            s0, st = K.stepped_paper_step(*A, t, *B, k, *C, row, *D, slot)
+            if s0:
+                return s0
+        else:
+            st = K.stepped_state_check(state, EXPLODING, self.Ftrue, self.Fsens, self.ignored)
+            if st:
+                return st
+            K.desired(a.traj, t, self.xd, self.dxd, self.ddxd)
+            K.sense_state(state, self.noise, k, self.scale, self.sensed)
+            st = int(ctrl.step(t, self.sensed, self.xd, self.dxd, self.ddxd, self.T1, self.T2, self.u2,
+                               self.deN))
+            K.record_row(t, state, self.xd, self.dxd, a.mpk_c, a.gains, a.spec, self.T1, self.T2, self.u2,
+                         self.deN, row)
+            ext, ref_mode = _NO_REF, 1 if self.servo else 0
+            if self.servo and ctrl.use_ref:
+                ext, ref_mode = ctrl.ref, 2
+            st = K.stepped_after_control(st, self.T1, self.T2, self.u2, row, self.Ftrue, self.Fsens,
+                                         self.cinfo, _I_F, _I_FS, _I_C, ref_mode, ext, self.ref, dt,
+                                         self.sensed, slot)
+        if self.record is not None:
+            self.record(k)
+        self.done = k + 1
+        if st:
+            return int(st)
+        self.plant.command(*self.views[K.ring_index(k, self.delay)])
+        return int(self.plant.advance(dt) or 0)
 
 
 def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
                      on_chunk=None, model: RunModel | None = None) -> Trajectory:
-    """Run the scenario on a stepped plant; returns the Trajectory (possibly cut short).
-    The controller is the scenario's (`scn.controller`); model: the scenario's `RunModel` (default: compiled
-    here).
+    """Run the scenario (its controller) on a stepped plant; returns the Trajectory (possibly cut short).
     on_chunk: optional callable receiving every CHUNK steps as a `Trajectory` (time series only).
-
-    traj.x2_plant: the plant's own slave tip (n, 2); traj.master_pos: (n, 3, 3) if the plant's
-    geometry has "master"; every other geometry array goes to traj.meta["geometry"][name] (n, ...).
-    A plant with `record(k)` / `finish(traj, done)` (the MuJoCo adapter, the Cosserat rod) records its own
-    geometry instead.
-    Timings: meta "build_time" (controller and plant reset), "wall_time" (the loop)."""
+    A plant with `record(k)` / `finish(traj, done)` records its own geometry; otherwise traj.x2_plant
+    (n, 2) is its `slave_tip()`, traj.master_pos (n, 3, 3) its geometry's "master" and
+    traj.meta["geometry"][name] (n, ...) the rest.  meta: "build_time" (controller and plant reset),
+    "wall_time" (the loop)."""
     tb = time.perf_counter()
     n = scn.n_steps
-    dt = scn.control_dt
     model = model if model is not None else compile_model(scn)
-    s0 = model.s0
-    fast = is_compiled(scn)  # the paper's law: its compiled one-call step
-    ctrl = None if fast else InterfaceController(scn, model)
+    ctrl = None if is_compiled(scn) else InterfaceController(scn, model)
     cname = scn.controller.name
     error, failed = "", False
-    plant.reset(s0)
+    plant.reset(model.s0)
     if hasattr(plant, "stop"):  # a plant with long inner loops (the rod) checks the stop flag itself
         plant.stop = STOP
     if ctrl is not None:
@@ -90,119 +148,41 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
         except ControllerFailure as exc:
             error, failed, n = str(exc), True, 0
     build_time = time.perf_counter() - tb
-    noise, scale = noise_table(scn, scn.n_steps)
-    a = model
-    traj_p, mpk, gains, spec = a.traj, a.mpk_c, a.gains, a.spec
     rows = np.zeros((n, ROW_WIDTH))
     own_geo = hasattr(plant, "finish")
     tips = np.zeros((0 if own_geo else n, 2))
     geo = {} if own_geo else {name: np.zeros((n, *np.shape(v))) for name, v in plant.geometry().items()}
-    state, sensed = np.zeros(16), np.zeros(16)
-    # interaction forces: a plant with `forces(F (4,), contact (5,))` (the Cosserat plant's contact) gives
-    # the true tip forces each step, else the constant ones; the paper controller (its `F`) gets them in
-    # `exact` sensing mode, zeros in `ignored` ("sensed" needs the MuJoCo plant: config check)
-    plant_forces = getattr(plant, "forces", None)
-    Ftrue, cinfo = a.F.copy(), np.zeros(5)
-    ignored = scn.sensing.force.mode == "ignored"
-    # every controller reads the sensed F (F_true, or zeros when ignored), written by the check kernel each
-    # step: the paper's law from its own array, an interface controller in its observation (obs.F)
-    Fsens = model.F.copy() if fast else ctrl.F
-    iF, iFs, iC = ROW_SLICES["F_true"].start, ROW_SLICES["F_sensed"].start, ROW_SLICES["contact"].start
-    xd, dxd, ddxd = np.zeros(2), np.zeros(2), np.zeros(2)
-    T1, T2, u2, deN = np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6)
-    ref = np.concatenate([s0[4:10], s0[10:16]])  # servo reference [q2_ref, dq2_ref]
-    servo = plant.actuation == "servo"
-    delay = int(round(scn.plant.actuation_delay / dt))
-    cmdbuf = np.zeros((delay + 1, 26))  # [T1, T2, q2_ref, dq2_ref, sensed q2] per slot
-    cmdbuf[:, 8:20] = ref
-    # the plant.command arguments of each slot, as views made once
-    views = [(c[0:2], c[2:8], c[8:14], c[14:20], c[20:26]) for c in cmdbuf]
-    command, advance, true_state = plant.command, plant.advance, plant.true_state
-    record = plant.record if own_geo else None
-    check, after = K.stepped_state_check, K.stepped_after_control
-    no_ref = np.zeros(0)
-    ref_mode = 1 if servo else 0
-    slots = delay + 1
-    # the paper's law: check, laws and the glue of `after` in one compiled call
-    one = K.stepped_paper_step if fast else None
-    minfo, sinfo = np.empty(MASTER_INFO), np.empty(SLAVE_INFO)
-    bar = progress_bar(progress, n, f"{plant.kind} plant ({plant.actuation}), controller {cname}")
-    status, done = 0, 0
-    interrupted = False
-    t0 = time.perf_counter()
+
+    def copy_geometry(k: int) -> None:
+        tips[k] = plant.slave_tip()
+        for name, v in plant.geometry().items():
+            geo[name][k] = v
+
+    stepper = Stepper(scn, plant, model, ctrl, noise_table(scn, scn.n_steps),
+                      plant.record if own_geo else copy_geometry)
+
+    def steps(k0: int, k1: int) -> tuple[int, int]:
+        for k in range(k0, k1):
+            status = stepper.step(k, rows[k])
+            if status:
+                return status, stepper.done - k0
+        return 0, k1 - k0
+
+    part = None if on_chunk is None else (lambda k, done: on_chunk(part_trajectory(scn, rows[k:done])))
+    run = ChunkRun(n, CHUNK, progress_bar(progress, n, f"{plant.kind} plant ({plant.actuation}), controller "
+                                          f"{cname}"), part)
     try:
-        for k in range(n):
-            t = k * dt
-            st = true_state(state)
-            if st:
-                status = int(st)
-                break
-            if plant_forces is not None:
-                plant_forces(Ftrue, cinfo)
-            row = rows[k]
-            if one is not None:  # the paper's controller: check, laws, row, glue in one compiled call
-                s0, st = one(state, EXPLODING, Ftrue, ignored, t, traj_p, noise, k, scale, a.mpk_c, a.spk_c,
-                             a.nodes, a.weights, a.gains, a.spec, Fsens, xd, dxd, ddxd, sensed, T1, T2, u2,
-                             deN, minfo, sinfo, row, cinfo, iF, iFs, iC, ref_mode, ref, dt, cmdbuf[k % slots])
-                if s0:
-                    status = s0
-                    break
-            else:
-                st = check(state, EXPLODING, Ftrue, Fsens, ignored)  # status 8 / 5; Fsens <- the sensed F
-                if st:
-                    status = st
-                    break
-                K.desired(traj_p, t, xd, dxd, ddxd)
-                K.sense_state(state, noise, k, scale, sensed)
-                st = int(ctrl.step(t, sensed, xd, dxd, ddxd, T1, T2, u2, deN))
-                K.record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row)
-                ext = no_ref
-                if servo and ctrl.use_ref:
-                    ext, ref_mode = ctrl.ref, 2
-                elif servo:
-                    ref_mode = 1
-                # row's F / contact columns, status 1 / 4, the servo reference, the command slot of step k
-                st = after(st, T1, T2, u2, row, Ftrue, Fsens, cinfo, iF, iFs, iC, ref_mode, ext, ref, dt,
-                           sensed, cmdbuf[k % slots])
-            if record is not None:
-                record(k)
-            else:
-                tips[k] = plant.slave_tip()
-                for name, v in plant.geometry().items():
-                    geo[name][k] = v
-            done = k + 1
-            if st != 0:
-                status = int(st)
-                break
-            command(*views[(k - delay) % slots if k >= delay else 0])
-            st = advance(dt)
-            if st != 0:
-                status = int(st)
-                break
-            if (k + 1) % CHUNK == 0:
-                if bar is not None:
-                    bar.update(CHUNK)
-                if on_chunk is not None:
-                    part = Trajectory.from_rows(rows[k + 1 - CHUNK:k + 1])
-                    part.meta.update(run_meta(scn, 0.0))
-                    on_chunk(part)
-                if STOP.is_set():
-                    interrupted = True
-                    break
-    except KeyboardInterrupt:
-        interrupted = True
-    except ControllerFailure as exc:  # one line naming the controller, the step and the time
-        error, failed = str(exc), True
-    except Exception as exc:  # keep what was computed; report the cause
-        error = f"{type(exc).__name__}: {exc}"
+        run.run(steps)
     finally:
-        if bar is not None:
-            bar.close()
+        run.done = stepper.done  # also after an exception inside a step
         if ctrl is not None:
             ctrl.close()
-    wall = time.perf_counter() - t0
-    traj = Trajectory.from_rows(rows[:done])
-    traj.meta.update(run_meta(scn, wall))
+    failed = failed or isinstance(run.exc, ControllerFailure)
+    if failed:
+        error = error or str(run.exc)
+        run.error = ""
+    done, status = run.done, run.status
+    traj = run.trajectory(scn, rows)
     traj.meta["build_time"] = build_time
     traj.meta["controller"] = cname
     if own_geo:
@@ -215,9 +195,7 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
         traj.meta.update(getattr(plant, "meta", lambda: {})())
     if status == -1:  # a controller gave up (ControllerDiverged without a status code)
         traj.status, traj.message = "diverged", ctrl.diverged or "controller gave up"
-    elif failed:
+    elif failed:  # one line naming the controller, the step and the time
         traj.status, traj.message = "error", error
         traj.meta["failed_controller"] = cname
-    else:
-        set_outcome(traj, status, interrupted, error)
     return traj

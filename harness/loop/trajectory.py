@@ -1,9 +1,6 @@
-"""In-memory result of one run: what loggers, plots, metrics and bounds checks consume.
-
-All arrays share the first axis (control steps, length n = number of steps actually completed;
-a run that stopped early has shorter arrays and `status != "ok"`).  Task-space vectors are [X, Z] in
-metres, each relative to its own robot base.
-"""
+"""In-memory result of one run (what loggers, plots, metrics and bounds checks consume).  All arrays share
+the first axis: the n control steps completed (a run that stopped early has `status != "ok"`).
+Task-space vectors are [X, Z] in metres, each relative to its own robot base."""
 
 from __future__ import annotations
 
@@ -11,8 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-# Layout of the per-step record row written by the compiled control step (harness.loop.common).
-# name -> (start column, width)
+# the per-step record row of the loops (`harness.loop.kernels.record_row`): name -> width
 ROW_FIELDS: dict[str, int] = {
     "t": 1,
     "q1": 2, "dq1": 2, "q2": 6, "dq2": 6,  # true plant state (sensed, before noise)
@@ -87,13 +83,9 @@ class Trajectory:
 
     @classmethod
     def from_rows(cls, rows: np.ndarray, **extra) -> Trajectory:
-        """Build from the (n, ROW_WIDTH) record of the compiled loop (copies the data)."""
-        kw = {}
-        for k, s in ROW_SLICES.items():
-            v = np.array(rows[:, s], dtype=float)
-            kw[k] = v[:, 0] if ROW_FIELDS[k] == 1 else v
-        kw.update(extra)
-        return cls(**kw)
+        """From the (n, ROW_WIDTH) record of a loop (copies the data); extra: other fields."""
+        kw = {k: np.array(rows[:, s], dtype=float) for k, s in ROW_SLICES.items()}
+        return cls(**{k: v[:, 0] if ROW_FIELDS[k] == 1 else v for k, v in kw.items()}, **extra)
 
     def __len__(self) -> int:
         return int(self.t.shape[0])

@@ -1,8 +1,5 @@
-"""The analytic plant: the paper's models (1) themselves as the "true" plant, with the plant's own
-parameters (which may differ from the controller's nominal ones).  `plant_accel` is the forward
-dynamics kernel (numba-compatible; compiled by `harness.loop.fast`) that the RK4 loop of
-`harness.loop.analytic_loop` integrates.
-"""
+"""The analytic plant: the paper's models (1) with the plant's own parameters; `plant_accel` is its forward
+dynamics kernel (numba-compatible), integrated by `harness.loop.kernels.plant_substeps`."""
 
 from __future__ import annotations
 
@@ -18,8 +15,7 @@ from controllers.tip import tip_kinematics
 
 
 def cholesky_solve(A, b, out, L, y):
-    """Solve A x = b for symmetric positive definite A (n,n) by Cholesky into out (n,); returns False if not
-    SPD.  Work arrays: L (n, n) (its lower triangle receives the factor; the upper is never read), y (n,)."""
+    """Solve A x = b (A (n, n) SPD) by Cholesky into out (n,); False if not SPD.  Work: L (n, n), y (n,)."""
     n = A.shape[0]
     for i in range(n):
         for j in range(i + 1):

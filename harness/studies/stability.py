@@ -2,7 +2,8 @@
 
 The loop over one control period T is a map x_{k+1} = Phi_k(x_k), x = [plant state, servo reference
 (servo actuation), actuation-delay ring]; `linearize(scn, t)` runs the scenario to t (paper law, noise
-off) and differentiates the whole one-period map by central finite differences.  Plant coordinates:
+off) with the stepped loop's `Stepper` and differentiates the whole one-period map by central finite
+differences.  Plant coordinates:
 analytic [q1, dq1, q2, dq2]; mujoco qpos, qvel, act (the rest of MuJoCo's state restored from the point
 of linearization); cosserat the master [q1, dq1], then node X, Z (without the clamped base node), element
 angles about Y and their rates.  Verdict: "unstable" if rho = max |lambda| > 1 + T / SLOW_S, "marginal"
@@ -16,12 +17,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controllers.control import MASTER_INFO, SLAVE_INFO
 from controllers.status import Status
 from harness.config.scenario import Scenario
 
 SLOW_S = 1.0  # s: modes e-folding slower than this are "marginal" (slow drift), not "unstable"
-EXPLODING = 1e6  # as harness.loop.stepped_loop
 Q2_NAMES = ("d1", "d2", "d3", "k1", "k2", "k3")
 
 
@@ -29,240 +28,94 @@ class LinearizationError(RuntimeError):
     """The scenario cannot be linearized (unsupported controller, or the run failed before t)."""
 
 
-# --- plant state get / set (what the loop should expose as plant.get_state() / set_state()) ---------------
-class _AnalyticState:
-    def __init__(self, plant) -> None:
-        self.p = plant
-        self.names = ["q1[0]", "q1[1]", "dq1[0]", "dq1[1]", *Q2_NAMES, *("d" + n + "/dt" for n in Q2_NAMES)]
-        self.positions_idx = np.r_[0:2, 4:10]
-
-    def anchor(self) -> None:
-        """Nothing besides the state to keep."""
-
-    def get(self) -> np.ndarray:
-        return self.p.state.copy()
-
-    def set(self, x: np.ndarray) -> None:
-        self.p.state[:] = x
-
-    def restore(self, x: np.ndarray) -> None:
-        self.set(x)
-
-    def positions(self, x: np.ndarray, slave) -> np.ndarray:
-        """Slave backbone [X, Z] (m, base first) of state x."""
+def _positions(plant) -> tuple[np.ndarray, object]:
+    """(indices of the position components of the plant state, x -> the slave's points [X, Z] (m, base
+    first) at plant state x), for the mode shapes."""
+    if plant.kind == "analytic":
         from controllers.slave import backbone
 
-        return backbone(slave, x[4:10], 20)
-
-
-class _MujocoState:
-    def __init__(self, plant) -> None:
+        return np.r_[0:2, 4:10], lambda x, slave: backbone(slave, x[4:10], 20)
+    if plant.kind == "mujoco":
         import mujoco
 
-        self.mj = mujoco
-        self.p = plant
         m = plant.m
-        if m.nq != m.nv:
-            raise LinearizationError("plant: the MuJoCo model has ball or free joints (nq != nv); "
-                                     "only hinge and slide joints are supported")
-        self.nq, self.nv, self.na = m.nq, m.nv, m.na
-        self.spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-        self.full = np.empty(mujoco.mj_stateSize(m, self.spec))
-        jn = {int(m.jnt_qposadr[j]): mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint{j}"
-              for j in range(m.njnt)}
-        qn = [jn.get(i, f"qpos[{i}]") for i in range(self.nq)]
-        self.names = qn + [f"{n} (rate)" for n in qn] + [f"act[{i}]" for i in range(self.na)]
-        self.positions_idx = np.arange(self.nq)
-        self.bodies = [b for b in range(m.nbody)
-                       if (mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b) or "").startswith("octarm_s")]
+        bodies = [b for b in range(m.nbody) if m.body(b).name.startswith("octarm_s")]
+        base = plant.cmap.octarm_base_pos
 
-    def anchor(self) -> None:
-        """Keep MuJoCo's whole physics state (time, warm start, ...) of the point of linearization."""
-        self.mj.mj_getState(self.p.m, self.p.d, self.full, self.spec)
+        def points(x, slave):  # noqa: ARG001 - the chain's segment bodies at state x
+            d = mujoco.MjData(m)
+            d.qpos[:] = x[:m.nq]
+            mujoco.mj_kinematics(m, d)
+            return np.array([[d.xpos[b][0] - base[0], d.xpos[b][2] - base[2]] for b in bodies])
 
-    def get(self) -> np.ndarray:
-        d = self.p.d
-        return np.concatenate([d.qpos, d.qvel, d.act])
-
-    def set(self, x: np.ndarray) -> None:
-        """Restore the physics state kept by `anchor`, then x."""
-        d = self.p.d
-        self.mj.mj_setState(self.p.m, d, self.full, self.spec)
-        d.qpos[:] = x[:self.nq]
-        d.qvel[:] = x[self.nq:self.nq + self.nv]
-        d.act[:] = x[self.nq + self.nv:]
-        self.mj.mj_forward(self.p.m, d)
-
-    restore = set
-
-    def positions(self, x: np.ndarray, slave) -> np.ndarray:  # noqa: ARG002
-        """[X, Z] (m) of the chain's segment bodies (MuJoCo body order, base first) at state x."""
-        m, d = self.p.m, self.mj.MjData(self.p.m)
-        d.qpos[:] = x[:self.nq]
-        self.mj.mj_kinematics(m, d)
-        base = self.p.cmap.octarm_base_pos
-        return np.array([[d.xpos[b][0] - base[0], d.xpos[b][2] - base[2]] for b in self.bodies])
-
-
-class _CosseratState:
-    """Planar rod coordinates without the clamped base node 0 (held by the rod's boundary condition: zero
-    velocity, zero net force, so a perturbation of it would be a neutral mode of no physical meaning)."""
-
-    def __init__(self, plant) -> None:
-        self.p = plant
-        b = plant.slave._b
-        self.nn, self.ne = b.position_collection.shape[1], b.director_collection.shape[2]
-        npe = plant.slave.n
-        node = [f"node{j}" for j in range(1, self.nn)]
-        elem = [f"s{j // npe}_el{j % npe}" for j in range(self.ne)]
-        pos = [f"{n}.X" for n in node] + [f"{n}.Z" for n in node] + [f"{e}.angle" for e in elem]
-        self.names = ["q1[0]", "q1[1]", "dq1[0]", "dq1[1]", *pos, *(f"{n} (rate)" for n in pos)]
-        self.positions_idx = np.r_[0:2, 4:4 + len(pos)]
-
-    def anchor(self) -> None:
-        """Keep the directors, the clamped base node and the rod's clock of the point of linearization."""
-        b = self.p.slave._b
-        self._dirs = b.director_collection.copy()
-        self._a0 = np.arctan2(self._dirs[2, 0], self._dirs[0, 0])
-        self._base = b.position_collection[:, 0].copy()
-        self._time, self._steps = self.p.slave.time, self.p.slave._steps
-
-    def get(self) -> np.ndarray:
-        b = self.p.slave._b
-        D = b.director_collection
-        P, V = b.position_collection, b.velocity_collection
-        ang = np.arctan2(D[2, 0], D[0, 0])
-        return np.concatenate([self.p._m, P[0, 1:], P[2, 1:], ang, V[0, 1:], V[2, 1:], b.omega_collection[1]])
-
-    def set(self, x: np.ndarray) -> None:
-        p, s = self.p, self.p.slave
-        b, m, ne = s._b, self.nn - 1, self.ne
-        p._m[:] = x[0:4]
-        i = 4
-        b.position_collection[:, 0] = self._base
-        b.position_collection[0, 1:] = x[i:i + m]
-        b.position_collection[2, 1:] = x[i + m:i + 2 * m]
-        ang = x[i + 2 * m:i + 2 * m + ne]
-        i += 2 * m + ne
-        b.velocity_collection[:, 0] = 0.0
-        b.velocity_collection[0, 1:] = x[i:i + m]
-        b.velocity_collection[2, 1:] = x[i + m:i + 2 * m]
-        b.omega_collection[1] = x[i + 2 * m:i + 2 * m + ne]
-        # rotate the stored directors about Y by the change of angle; D has rows d1, d2, d3 in lab
-        # coordinates and row r -> (r_x c + r_z s, r_y, -r_x s + r_z c) takes _rot_y(a) to _rot_y(a + da)
-        # (harness.plant.cosserat)
-        da = ang - self._a0
-        c, sn = np.cos(da), np.sin(da)
-        D = self._dirs
-        out = D.copy()
-        for r in range(3):
-            out[r, 0] = D[r, 0] * c + D[r, 2] * sn
-            out[r, 2] = -D[r, 0] * sn + D[r, 2] * c
-        b.director_collection[:] = out
-        s._fit_valid = False
-        s.time, s._steps = self._time, self._steps
-
-    restore = set
-
-    def positions(self, x: np.ndarray, slave) -> np.ndarray:  # noqa: ARG002
-        """Rod nodes [X, Z] (m), base first."""
-        m = self.nn - 1
-        pts = np.stack([x[4:4 + m], x[4 + m:4 + 2 * m]], axis=1)
-        return np.vstack([[self._base[0], self._base[2]], pts])
+        return np.arange(m.nq), points
+    n = plant.slave._b.position_collection.shape[1] - 1  # the rod's nodes without the clamped base node
+    base = plant.slave._b.position_collection[[0, 2], 0].copy()
+    npos = 2 * n + plant.slave._b.director_collection.shape[2]
+    return np.r_[0:2, 4:4 + npos], lambda x, slave: np.vstack([base, np.stack([x[4:4 + n],
+                                                                                x[4 + n:4 + 2 * n]], 1)])
 
 
 # --- the one-period closed-loop map -----------------------------------------------------------------------
 class ClosedLoopMap:
-    """The closed loop of `scn` (paper law, no sensing noise) as a map over one control period.
+    """The closed loop of `scn` (paper law, no sensing noise) as a map over one control period: the
+    stepped loop's `Stepper` on the scenario's plant.
 
     `run_to(n)` steps it from t = 0 to step n; `x()` / `set_x(x)` read / write the loop state
-    [plant state, servo reference [q2_ref, dq2_ref] (12, servo only), delay ring (delay x 26)];
-    `phi(x, k)` is the state one control period after state x at step k (the loop is left there; `set_x`
-    goes back)."""
+    [plant state (`get_state`), servo reference [q2_ref, dq2_ref] (12, servo only), delay ring
+    (delay x 26)]; `phi(x, k)` is the state one control period after state x at step k."""
 
     def __init__(self, scn: Scenario) -> None:
         if scn.controller.name != "paper":
             raise LinearizationError(f"controller.name: {scn.controller.name!r} cannot be linearized; only "
                                      "'paper' (the harness sees its whole state)")
         from harness.loop.common import compile_model
-        from harness.loop.fast import K
+        from harness.loop.stepped_loop import Stepper
         from harness.loop.stepped_plants import stepped_plant
+        from harness.loop.trajectory import ROW_WIDTH
         from harness.plant import build_plant
 
-        self.scn, self.K = scn, K
-        self.model = compile_model(scn)
-        self.plant = stepped_plant(scn, self.model, build_plant(scn))
-        self.plant.reset(self.model.s0)
-        kind = scn.plant.kind
-        states = {"analytic": _AnalyticState, "mujoco": _MujocoState, "cosserat": _CosseratState}
-        self.ps = states[kind](self.plant)
+        model = compile_model(scn)
         self.dt = scn.control_dt
-        self.servo = self.plant.actuation == "servo"
-        self.delay = int(round(scn.plant.actuation_delay / self.dt))
-        self.slots = self.delay + 1
-        s0 = self.model.s0
-        self.ref = np.concatenate([s0[4:10], s0[10:16]])
-        self.cmdbuf = np.zeros((self.slots, 26))
-        self.cmdbuf[:, 8:20] = self.ref
-        self.views = [(c[0:2], c[2:8], c[8:14], c[14:20], c[20:26]) for c in self.cmdbuf]
-        self.state, self.sensed = np.zeros(16), np.zeros(16)
-        self.Ftrue, self.cinfo = self.model.F.copy(), np.zeros(5)
-        self.Fsens = self.model.F.copy()
-        self.ignored = scn.sensing.force.mode == "ignored"
-        self.noise = np.zeros((1, 16))
-        self.bufs = [np.zeros(2) for _ in range(3)] + [np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6)]
-        self.minfo, self.sinfo = np.empty(MASTER_INFO), np.empty(SLAVE_INFO)
-        self.row = np.zeros(_row_width())
-        from harness.loop.trajectory import ROW_SLICES
-
-        self.iF, self.iFs, self.iC = (ROW_SLICES[n].start for n in ("F_true", "F_sensed", "contact"))
-        self.forces = getattr(self.plant, "forces", None)
+        self.plant = stepped_plant(scn, model, build_plant(scn))
+        self.plant.reset(model.s0)
+        self.stepper = Stepper(scn, self.plant, model)
+        self.row = np.zeros(ROW_WIDTH)
         self.k = 0
-        self.names = list(self.ps.names)
+        try:
+            self.names = list(self.plant.state_names)
+        except NotImplementedError as exc:
+            raise LinearizationError(str(exc)) from None
+        self.n_plant = len(self.names)
+        self.servo, self.delay = self.stepper.servo, self.stepper.delay
         if self.servo:
             self.names += [f"{n}_ref" for n in Q2_NAMES] + [f"d{n}/dt_ref" for n in Q2_NAMES]
-        self.names += [f"ring[{s}][{j}]" for s in range(self.slots if self.delay else 0) for j in range(26)]
-        self.n_plant = len(self.ps.names)
+        ring = range(self.delay + 1 if self.delay else 0)
+        self.names += [f"ring[{s}][{j}]" for s in ring for j in range(26)]
 
-    # loop state
     def x(self) -> np.ndarray:
-        parts = [self.ps.get()]
+        parts = [self.plant.get_state()]
         if self.servo:
-            parts.append(self.ref.copy())
+            parts.append(self.stepper.ref.copy())
         if self.delay:
-            parts.append(self.cmdbuf.ravel().copy())
+            parts.append(self.stepper.cmdbuf.ravel().copy())
         return np.concatenate(parts)
 
     def set_x(self, x: np.ndarray) -> None:
         i = self.n_plant
-        self.ps.set(x[:i])
+        self.plant.set_state(x[:i])
         if self.servo:
-            self.ref[:] = x[i:i + 12]
+            self.stepper.ref[:] = x[i:i + 12]
             i += 12
         if self.delay:
-            self.cmdbuf.ravel()[:] = x[i:]
+            self.stepper.cmdbuf.ravel()[:] = x[i:]
 
     def step(self) -> int:
-        """One control step k -> k + 1 (the per-step body of `harness.loop.stepped_loop`, noise-free).
-        Returns a `controllers.status.Status` code (0 = ok)."""
-        K, a, k, dt = self.K, self.model, self.k, self.dt
-        st = self.plant.true_state(self.state)
-        if st:
-            return int(st)
-        if self.forces is not None:
-            self.forces(self.Ftrue, self.cinfo)
-        xd, dxd, ddxd, T1, T2, u2, deN = self.bufs
-        s0, st = K.stepped_paper_step(
-            self.state, EXPLODING, self.Ftrue, self.ignored, k * dt, a.traj, self.noise, k, 0.0, a.mpk_c,
-            a.spk_c, a.nodes, a.weights, a.gains, a.spec, self.Fsens, xd, dxd, ddxd, self.sensed, T1, T2, u2,
-            deN, self.minfo, self.sinfo, self.row, self.cinfo, self.iF, self.iFs, self.iC,
-            1 if self.servo else 0, self.ref, dt, self.cmdbuf[k % self.slots])
-        if s0 or st:
-            return int(s0 or st)
-        self.plant.command(*self.views[(k - self.delay) % self.slots if k >= self.delay else 0])
-        st = self.plant.advance(dt)
-        self.k += 1
-        return int(st or 0)
+        """One control step k -> k + 1; a `controllers.status.Status` code (0 = ok)."""
+        st = self.stepper.step(self.k, self.row)
+        if not st:
+            self.k += 1
+        return st
 
     def run_to(self, n: int) -> None:
         while self.k < n:
@@ -286,12 +139,6 @@ class ClosedLoopMap:
         if st:
             raise LinearizationError(f"a perturbed step failed (status {st}); use a smaller step h")
         return self.x()
-
-
-def _row_width() -> int:
-    from harness.loop.trajectory import ROW_WIDTH
-
-    return ROW_WIDTH
 
 
 # --- linearization and modes ---------------------------------------------------------------------------
@@ -374,7 +221,7 @@ def linearize(scn: Scenario, t: float, h: float | None = None,
     lp.run_to(n)
     if h is None:
         h = 1e-6 if scn.plant.kind == "analytic" else 1e-7
-    lp.ps.anchor()
+    lp.plant.get_state(keep=True)
     x0 = lp.x()
     k = lp.k
     N = len(x0)
@@ -394,8 +241,8 @@ def linearize(scn: Scenario, t: float, h: float | None = None,
     order = np.lexsort((-ev.imag, -np.round(np.abs(ev), 12)))
     res = Stability(scenario=scn, t=k * scn.control_dt, T=scn.control_dt, A=A, eigenvalues=ev[order],
                     eigenvectors=V[:, order], names=lp.names, x0=x0, n_plant=lp.n_plant, h=h)
-    res.positions_idx = lp.ps.positions_idx
-    res.shapes = {"positions": lp.ps.positions, "slave": scn.plant_slave}
+    res.positions_idx, points = _positions(lp.plant)
+    res.shapes = {"positions": points, "slave": scn.plant_slave}
     return res
 
 

@@ -278,6 +278,53 @@ class CosseratPlant:
         traj.meta["geometry"] = {"centreline": cl, "sections": cl.take(self.slave.section_nodes, axis=1)}
         traj.meta.update(self.meta())
 
+    # --- the plant's state coordinates (SteppedPlant.get_state / set_state) ----------------------------
+    # The rod in its plane without the clamped base node 0 (held by the boundary condition): node X, Z
+    # (n_nodes - 1 each), element angle about Y, node velocities X, Z, element angular rate about Y.
+    @property
+    def state_names(self) -> list[str]:
+        """[q1, dq1] (4), then the rod's planar coordinates and their rates (`get_state`)."""
+        nn, ne, npe = self.slave.n * 3 + 1, self.slave.n * 3, self.slave.n
+        node = [f"node{j}" for j in range(1, nn)]
+        pos = [f"{n}.X" for n in node] + [f"{n}.Z" for n in node] + [f"s{j // npe}_el{j % npe}.angle"
+                                                                       for j in range(ne)]
+        return ["q1[0]", "q1[1]", "dq1[0]", "dq1[1]", *pos, *(f"{n} (rate)" for n in pos)]
+
+    def get_state(self, keep: bool = False) -> np.ndarray:
+        """[q1, dq1, node X, node Z, element angle, their rates]; keep: also the directors, the clamped
+        base node and the rod's clock."""
+        b = self.slave._b
+        D, P, V = b.director_collection, b.position_collection, b.velocity_collection
+        if keep or not hasattr(self, "_kept"):
+            self._kept = (D.copy(), np.arctan2(D[2, 0], D[0, 0]), P[:, 0].copy(), self.slave.time,
+                          self.slave._steps)
+        ang = np.arctan2(D[2, 0], D[0, 0])
+        return np.concatenate([self._m, P[0, 1:], P[2, 1:], ang, V[0, 1:], V[2, 1:], b.omega_collection[1]])
+
+    def set_state(self, x: np.ndarray) -> None:
+        s = self.slave
+        b, m, ne = s._b, s._b.position_collection.shape[1] - 1, s._b.director_collection.shape[2]
+        dirs, a0, base, s.time, s._steps = self._kept
+        self._m[:] = x[0:4]
+        b.position_collection[:, 0] = base
+        b.position_collection[0, 1:] = x[4:4 + m]
+        b.position_collection[2, 1:] = x[4 + m:4 + 2 * m]
+        i = 4 + 2 * m + ne
+        b.velocity_collection[:, 0] = 0.0
+        b.velocity_collection[0, 1:] = x[i:i + m]
+        b.velocity_collection[2, 1:] = x[i + m:i + 2 * m]
+        b.omega_collection[1] = x[i + 2 * m:i + 2 * m + ne]
+        # the kept directors rotated about Y by the change of angle: row r of D (d1, d2, d3 in lab
+        # coordinates) -> (r_x c + r_z s, r_y, -r_x s + r_z c)
+        da = x[4 + 2 * m:i] - a0
+        c, sn = np.cos(da), np.sin(da)
+        out = dirs.copy()
+        for r in range(3):
+            out[r, 0] = dirs[r, 0] * c + dirs[r, 2] * sn
+            out[r, 2] = -dirs[r, 0] * sn + dirs[r, 2] * c
+        b.director_collection[:] = out
+        s._fit_valid = False
+
     def meta(self) -> dict:
         """Plant description for the recording and metrics.json."""
         s = self.slave
