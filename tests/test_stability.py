@@ -172,3 +172,27 @@ def test_cli_times_along_one_run(tmp_path, capsys):
     summary = json.loads((tmp_path / "stability.json").read_text())
     radii = [float(ln.split()[1]) for ln in lines[1:4]]
     assert summary["spectral_radius"] == pytest.approx(max(radii), abs=1e-6)
+
+
+@pytest.mark.parametrize("sets", [
+    ["plant.kind=analytic", "sensing.dq2_cutoff=200", "plant.actuation_delay=0.002"],
+    pytest.param(["plant.kind=cosserat", "plant.actuation=muscle", "gains.kn=10"], marks=pytest.mark.slow),
+], ids=["analytic_filter_delay", "rod_muscle"])
+def test_loop_state_holds_every_state_of_the_loop(sets):
+    """x() is the whole state of the one-period map: restoring x(k) after stepping on reproduces the same
+    steps bit for bit (it fails if the sensed-dq2 filter, the delay ring or the rod's muscle forces were
+    left out of x)."""
+    from harness.studies.stability import ClosedLoopMap
+
+    lp = ClosedLoopMap(load_scenario(None, [*sets, "snr_db=none", "duration=0.1"]))
+    lp.run_to(20)
+    lp.plant.get_state(keep=True)
+    x0, k0 = lp.x(), lp.k
+    lp.run_to(k0 + 10)
+    first = lp.x()
+    assert not np.array_equal(first, x0)
+    lp.set_x(x0)
+    lp.k = k0
+    lp.run_to(k0 + 10)
+    np.testing.assert_array_equal(lp.x(), first)
+    assert any(n.endswith(("_filtered", ".force")) for n in lp.names)

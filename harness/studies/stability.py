@@ -12,6 +12,7 @@ if 1 < rho <= 1 + T / SLOW_S (a slow drift such as the null-space positions), el
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -63,13 +64,14 @@ class ClosedLoopMap:
 
     `run_to(n)` steps it from t = 0 to step n; `x()` / `set_x(x)` read / write the loop state
     [plant state (`get_state`), servo reference [q2_ref, dq2_ref] (12, servo only), delay ring
-    (delay x 26)]; `phi(x, k)` is the state one control period after state x at step k."""
+    (delay x 26), filtered dq2 (6, with sensing.dq2_cutoff)]; `phi(x, k)` is the state one control
+    period after state x at step k."""
 
     def __init__(self, scn: Scenario) -> None:
         if scn.controller.name != "paper":
             raise LinearizationError(f"controller.name: {scn.controller.name!r} cannot be linearized; only "
                                      "'paper' (the harness sees its whole state)")
-        from harness.loop.common import compile_model
+        from harness.loop.common import compile_model, noise_table
         from harness.loop.stepped_loop import Stepper
         from harness.loop.stepped_plants import stepped_plant
         from harness.loop.trajectory import ROW_WIDTH
@@ -79,7 +81,10 @@ class ClosedLoopMap:
         self.dt = scn.control_dt
         self.plant = stepped_plant(scn, model, build_plant(scn))
         self.plant.reset(model.s0)
-        self.stepper = Stepper(scn, self.plant, model)
+        # noise off; the sensed-dq2 filter's columns of the table (gain, filtered dq2) when it is on
+        table, _ = noise_table(dataclasses.replace(scn, snr_db=None), 1)
+        self.stepper = Stepper(scn, self.plant, model, noise=(table, 0.0))
+        self.filt = table[0, -6:] if scn.sensing.dq2_cutoff is not None else None  # a view: the filter state
         self.row = np.zeros(ROW_WIDTH)
         self.k = 0
         try:
@@ -92,6 +97,8 @@ class ClosedLoopMap:
             self.names += [f"{n}_ref" for n in Q2_NAMES] + [f"d{n}/dt_ref" for n in Q2_NAMES]
         ring = range(self.delay + 1 if self.delay else 0)
         self.names += [f"ring[{s}][{j}]" for s in ring for j in range(26)]
+        if self.filt is not None:
+            self.names += [f"d{n}/dt_filtered" for n in Q2_NAMES]
 
     def x(self) -> np.ndarray:
         parts = [self.plant.get_state()]
@@ -99,6 +106,8 @@ class ClosedLoopMap:
             parts.append(self.stepper.ref.copy())
         if self.delay:
             parts.append(self.stepper.cmdbuf.ravel().copy())
+        if self.filt is not None:
+            parts.append(self.filt.copy())
         return np.concatenate(parts)
 
     def set_x(self, x: np.ndarray) -> None:
@@ -108,7 +117,11 @@ class ClosedLoopMap:
             self.stepper.ref[:] = x[i:i + 12]
             i += 12
         if self.delay:
-            self.stepper.cmdbuf.ravel()[:] = x[i:]
+            n = self.stepper.cmdbuf.size
+            self.stepper.cmdbuf.ravel()[:] = x[i:i + n]
+            i += n
+        if self.filt is not None:
+            self.filt[:] = x[i:i + 6]
 
     def step(self) -> int:
         """One control step k -> k + 1; a `controllers.status.Status` code (0 = ok)."""

@@ -288,18 +288,21 @@ class CosseratPlant:
         node = [f"node{j}" for j in range(1, nn)]
         pos = [f"{n}.X" for n in node] + [f"{n}.Z" for n in node] + [f"s{j // npe}_el{j % npe}.angle"
                                                                        for j in range(ne)]
-        return ["q1[0]", "q1[1]", "dq1[0]", "dq1[1]", *pos, *(f"{n} (rate)" for n in pos)]
+        muscle = [f"s{j // 2}_muscle{j % 2}.force" for j in range(6)] if self.actuation == "muscle" else []
+        return ["q1[0]", "q1[1]", "dq1[0]", "dq1[1]", *pos, *(f"{n} (rate)" for n in pos), *muscle]
 
     def get_state(self, keep: bool = False) -> np.ndarray:
-        """[q1, dq1, node X, node Z, element angle, their rates]; keep: also the directors, the clamped
-        base node and the rod's clock."""
+        """[q1, dq1, node X, node Z, element angle, their rates (, muscle group forces (6,) N under muscle
+        actuation)]; keep: also the directors, the clamped base node and the rod's clock."""
         b = self.slave._b
         D, P, V = b.director_collection, b.position_collection, b.velocity_collection
         if keep or not hasattr(self, "_kept"):
             self._kept = (D.copy(), np.arctan2(D[2, 0], D[0, 0]), P[:, 0].copy(), self.slave.time,
                           self.slave._steps)
         ang = np.arctan2(D[2, 0], D[0, 0])
-        return np.concatenate([self._m, P[0, 1:], P[2, 1:], ang, V[0, 1:], V[2, 1:], b.omega_collection[1]])
+        act = self.muscle_force if self.actuation == "muscle" else ()
+        return np.concatenate([self._m, P[0, 1:], P[2, 1:], ang, V[0, 1:], V[2, 1:], b.omega_collection[1],
+                               act])
 
     def set_state(self, x: np.ndarray) -> None:
         s = self.slave
@@ -314,6 +317,8 @@ class CosseratPlant:
         b.velocity_collection[0, 1:] = x[i:i + m]
         b.velocity_collection[2, 1:] = x[i + m:i + 2 * m]
         b.omega_collection[1] = x[i + 2 * m:i + 2 * m + ne]
+        if self.actuation == "muscle":
+            self.muscle_force[:] = x[i + 2 * m + ne:i + 2 * m + ne + 6]
         # the kept directors rotated about Y by the change of angle: row r of D (d1, d2, d3 in lab
         # coordinates) -> (r_x c + r_z s, r_y, -r_x s + r_z c)
         da = x[4 + 2 * m:i] - a0
