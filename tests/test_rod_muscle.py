@@ -121,3 +121,22 @@ def test_paper_scenario_on_the_muscle_rod_meets_its_bounds():
                             ["plant.kind=cosserat", "plant.actuation=muscle", *extra])
         violations = check_bounds(compute_metrics(simulate(scn), scn), bounds)
         assert (not violations) == ok, "\n".join(map(str, violations))
+
+
+@pytest.mark.slow
+def test_paper_scenario_on_the_torque_rod_meets_its_bounds():
+    """bounds/paper_cosserat_torque.toml (seed 0, 20 s, k_n = 100): the rod runs the paper's gains in
+    torque mode, where the free MuJoCo chain diverges; 1.5x the slave mass fails them."""
+    from pathlib import Path
+
+    from harness.config.bounds import check_bounds, load_bounds
+    from harness.loop import simulate
+    from harness.loop.metrics import compute_metrics
+
+    root = Path(__file__).resolve().parents[1]
+    bounds = load_bounds(root / "bounds" / "paper_cosserat_torque.toml")
+    for extra, ok in (((), True), (("plant.slave.masses=[1.5,1.05,0.6]",), False)):
+        scn = load_scenario(root / "scenarios" / "paper.toml",
+                            ["plant.kind=cosserat", "plant.actuation=torque", *extra])
+        violations = check_bounds(compute_metrics(simulate(scn), scn), bounds)
+        assert (not violations) == ok, "\n".join(map(str, violations))
