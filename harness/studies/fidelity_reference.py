@@ -1,19 +1,9 @@
 """Fidelity against a continuum-mechanics reference (`teleop fidelity --reference cosserat`): the analytic
-CC model and the MuJoCo chain (CC equalities on and off, N segments per section) against the Cosserat rod.
-
-All three are *passive* rods with rest shape the commanded q2c = [d, k], the same mass distribution,
-gravity, material damping (eta_b, eta_a) and linear elastic energy per section
-1/2 Kb (k d - k_c d_c)^2 / L0 + 1/2 Ke (d - d_c)^2: the rod as `CosseratSlave(elastic_law="linear",
-actuation="servo")`; the chain with torque actuation, zero commands and its joint springs at rest at
-joints_from_q2(q2c) (`PassiveChain`); the CC model on its 6 coordinates (`cc_gradient`, `cc_static`,
-`cc_modes`: K phi = w^2 M phi, modal damping from D = diag(eta_a / L0, eta_b L0)).
-
-(a) Statics (`static_comparison`): 5 commanded shapes x 2 loads (gravity; + 1 N tip force along +X), each
-body settled with raised damping until its tip moves slower than SETTLE_V_TOL over two successive
-windows.  (b) Small motion (`modal_comparison`): the straight arm released from a 1 N tip deflection;
-first-mode frequency and damping ratio by `fit_decay`.  (c) Worst-case discretization tip error over
-the in-range q2 box (`worst_tip_error`): multi-start bounded Nelder-Mead.  The report (`main_reference`)
-adds the paper scenario's closed loop on each plant (`closed_loop_rows`).
+CC model (`cc_static`, `cc_modes`), the MuJoCo chain (`PassiveChain`, CC on / off, N segments per section)
+and the Cosserat rod (`elastic_law="linear"`) as passive rods at rest at the commanded q2c, same mass,
+gravity, damping and elastic energy 1/2 Kb (k d - k_c d_c)^2 / L0 + 1/2 Ke (d - d_c)^2 per section.
+Statics (`static_comparison`), small motion (`modal_comparison`), worst-case discretization tip error
+(`worst_tip_error`) and the paper scenario's closed loop on each plant (`closed_loop_rows`).
 """
 
 from __future__ import annotations
