@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -161,8 +161,8 @@ class Stability:
     x0: np.ndarray
     n_plant: int
     h: float
-    positions_idx: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
-    shapes: dict = field(default_factory=dict)
+    positions_idx: np.ndarray  # indices of the plant state's position components
+    shapes: dict  # {"positions": x, slave -> the slave's points (m, 2), "slave": SlaveParams}
     stopped: str = ""  # linearized along a run (`least_stable_along`): why the run ended early, if it did
 
     @property
@@ -239,11 +239,10 @@ def linearize(scn: Scenario, t: float, h: float | None = None,
     lp.k = k
     ev, V = np.linalg.eig(A)
     order = np.lexsort((-ev.imag, -np.round(np.abs(ev), 12)))
-    res = Stability(scenario=scn, t=k * scn.control_dt, T=scn.control_dt, A=A, eigenvalues=ev[order],
-                    eigenvectors=V[:, order], names=lp.names, x0=x0, n_plant=lp.n_plant, h=h)
-    res.positions_idx, points = _positions(lp.plant)
-    res.shapes = {"positions": points, "slave": scn.plant_slave}
-    return res
+    idx, points = _positions(lp.plant)
+    return Stability(scenario=scn, t=k * scn.control_dt, T=scn.control_dt, A=A, eigenvalues=ev[order],
+                     eigenvectors=V[:, order], names=lp.names, x0=x0, n_plant=lp.n_plant, h=h,
+                     positions_idx=idx, shapes={"positions": points, "slave": scn.plant_slave})
 
 
 __all__ = ["ClosedLoopMap", "LinearizationError", "SLOW_S", "Stability", "linearize"]
