@@ -237,7 +237,6 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
             run_cases(runner, case_fn, todo, study.metrics, False, on_result, time_limit=case_timeout)
             bar.close()
             lap("cases")
-            lap("summary")
             if study.record and result.complete:
                 try:
                     result.recordings = _record_worst(study, result, runner, case_fn, case_timeout)
