@@ -164,7 +164,7 @@ def _load(study: Study, overrides: Sequence[str], context: str, check=None) -> S
     ConfigError (or a model's ParameterError) in `context`.  Python controllers named anywhere run only if
     the study allows them; relative controller files resolve against the study file's folder."""
     try:
-        scn = load_scenario(study.scenario_source, list(overrides), allow_code=study.allow_code,
+        scn = load_scenario(study.scenario, list(overrides), allow_code=study.allow_code,
                             code_dir=study.base_dir)
         return scn if check is None else check(scn)
     except ValueError as e:

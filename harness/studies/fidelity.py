@@ -170,12 +170,11 @@ def observed_orders(Ns, errs) -> np.ndarray:
         return np.log(errs[:-1] / errs[1:]) / np.log(Ns[1:] / Ns[:-1])
 
 
-def fidelity_study(Ns=(4, 8, 16, 32), n_samples: int = 20, seed: int = 0,
-                   master: MasterParams | None = None, slave: SlaveParams | None = None,
+def fidelity_study(Ns=(4, 8, 16, 32), n_samples: int = 20, seed: int = 0, slave: SlaveParams | None = None,
                    plant: PlantConfig | None = None) -> FidelityTable:
     """MuJoCo models with N segments per section against the analytic models (module docstring).
     plant: template config (actuation, armature_fraction, ...); its `segments` is replaced by each N."""
-    master = MasterParams() if master is None else master
+    master = MasterParams()
     slave = SlaveParams() if slave is None else slave
     plant = PlantConfig() if plant is None else plant
     Ns = tuple(int(n) for n in Ns)
@@ -253,8 +252,7 @@ def _held_bend(m: mujoco.MjModel, cm: ChainMap, slave: SlaveParams, q2: np.ndarr
 
 
 def cc_study(Ns=(4, 8, 16, 32), n_samples: int = 4, seed: int = 0, settle_steps: int = 1500,
-             loop_duration: float = 2.0, master: MasterParams | None = None, slave: SlaveParams | None = None,
-             plant: PlantConfig | None = None) -> list[dict]:
+             loop_duration: float = 2.0, plant: PlantConfig | None = None) -> list[dict]:
     """Constrained vs free chain (module docstring), servo actuation.  Rows (one per N and enforce_cc):
     N, enforce_cc, us_per_step (best of 3 compiled replays of the held commands), tip_dev_mm and
     hinge_dev_mrad (max over n_samples bent q2; nan if a hold went unstable), closed_loop (status of the
@@ -264,8 +262,7 @@ def cc_study(Ns=(4, 8, 16, 32), n_samples: int = 4, seed: int = 0, settle_steps:
     from harness.loop.mujoco_loop import simulate_mujoco
     from harness.loop.native import MJ_FUNCS
 
-    master = MasterParams() if master is None else master
-    slave = SlaveParams() if slave is None else slave
+    master, slave = MasterParams(), SlaveParams()
     plant = PlantConfig() if plant is None else plant
     q2s = sample_q2(slave, n_samples, seed)
     rows = []
@@ -312,7 +309,7 @@ def worst_case_markdown(segments, seed: int = 0) -> str:
     L = float(np.sum(slave.rest_lengths))
     cells = []
     for N in segments:
-        e, q = worst_tip_error(int(N), slave, seed=seed)
+        e, q = worst_tip_error(int(N), seed=seed)
         cells.append([str(int(N)), f"{e:.3e}", f"{e * L * 1e3:.2f}", str(np.round(q[:3], 3).tolist()),
                       str(np.round(q[3:] * q[:3], 3).tolist())])
     head = ["N", "worst tip error (rel.)", "mm", "at d (m)", "at k d (rad)"]

@@ -1,25 +1,14 @@
 """Fidelity against a continuum-mechanics reference (`teleop fidelity --reference cosserat`): the analytic
-CC model and the MuJoCo chain (CC equalities on and off, N segments per section) against the Cosserat rod.
-
-All three are *passive* rods with rest shape the commanded q2c = [d, k], the same mass distribution,
-gravity, material damping (eta_b, eta_a) and linear elastic energy per section
-1/2 Kb (k d - k_c d_c)^2 / L0 + 1/2 Ke (d - d_c)^2: the rod as `CosseratSlave(elastic_law="linear",
-actuation="servo")`; the chain with torque actuation, zero commands and its joint springs at rest at
-joints_from_q2(q2c) (`PassiveChain`); the CC model on its 6 coordinates (`cc_gradient`, `cc_static`,
-`cc_modes`: K phi = w^2 M phi, modal damping from D = diag(eta_a / L0, eta_b L0)).
-
-(a) Statics (`static_comparison`): 5 commanded shapes x 2 loads (gravity; + 1 N tip force along +X), each
-body settled with raised damping until its tip moves slower than SETTLE_V_TOL over two successive
-windows.  (b) Small motion (`modal_comparison`): the straight arm released from a 1 N tip deflection;
-first-mode frequency and damping ratio by `fit_decay`.  (c) Worst-case discretization tip error over
-the in-range q2 box (`worst_tip_error`): multi-start bounded Nelder-Mead.  The report (`main_reference`)
-adds the paper scenario's closed loop on each plant (`closed_loop_rows`).
+CC model (`cc_static`, `cc_modes`), the MuJoCo chain (`PassiveChain`, CC on / off, N segments per section)
+and the Cosserat rod (`elastic_law="linear"`) as passive rods at rest at the commanded q2c, same mass,
+gravity, damping and elastic energy 1/2 Kb (k d - k_c d_c)^2 / L0 + 1/2 Ke (d - d_c)^2 per section.
+Statics (`static_comparison`), small motion (`modal_comparison`), worst-case discretization tip error
+(`worst_tip_error`) and the paper scenario's closed loop on each plant (`closed_loop_rows`).
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 from pathlib import Path
 
 import mujoco
@@ -194,12 +183,11 @@ def _rod_settled(slave, q2c, F, eta_b, eta_a, t_max=SETTLE_MAX):
 
 
 # --- (a) statics, (b) small motion ---------------------------------------------------------------------
-def static_comparison(slave: SlaveParams | None = None, Ns=(4, 8, 16, 32), eta_b=0.01, eta_a=0.3,
-                      settle: float = SETTLE_MAX, say=lambda s: None) -> list[dict]:
+def static_comparison(Ns=(4, 8, 16, 32), settle: float = SETTLE_MAX, say=lambda s: None) -> list[dict]:
     """Rows: model, N, enforce_cc, tip_err_mm (max over shapes x loads of |tip - rod tip|), cc_dev_mm
     (max |tip - CC tip of the body's sensed q2|), worst (shape / load of the max tip error, with "not
-    converged" where a body did not settle within `settle` s)."""
-    slave = SlaveParams() if slave is None else slave
+    converged" where a body did not settle within `settle` s); paper slave, eta_b 0.01, eta_a 0.3."""
+    slave, eta_b, eta_a = SlaveParams(), 0.01, 0.3
     shapes = static_shapes(slave)
     ref = {}
     rod_dev, rod_note = 0.0, ""
@@ -270,11 +258,11 @@ def fit_decay(t: np.ndarray, x: np.ndarray, x_eq: float, skip: float = 0.5) -> t
     return 1.0 / period, float(delta / np.sqrt(4 * np.pi**2 + delta**2))
 
 
-def modal_comparison(slave: SlaveParams | None = None, Ns=(4, 8, 16, 32), eta_b=0.01, eta_a=0.3,
-                     release_time: float = 4.0, settle: float = SETTLE_MAX, say=lambda s: None) -> list[dict]:
+def modal_comparison(Ns=(4, 8, 16, 32), release_time: float = 4.0, settle: float = SETTLE_MAX,
+                     say=lambda s: None) -> list[dict]:
     """Rows: model, N, enforce_cc, f1_hz, zeta1 (first bending mode, released 1 N tip deflection of the
-    straight arm at rest length; the analytic CC row is its linearization)."""
-    slave = SlaveParams() if slave is None else slave
+    straight arm at rest length; the analytic CC row is its linearization); as `static_comparison`."""
+    slave, eta_b, eta_a = SlaveParams(), 0.01, 0.3
     q2c = static_shapes(slave)["straight"]
     # rod: equilibrium under the load with raised damping, copied into a rod with the default damping
     r0 = _rod_settled(slave, q2c, TIP_LOAD, eta_b, eta_a, settle)
@@ -311,16 +299,14 @@ def modal_comparison(slave: SlaveParams | None = None, Ns=(4, 8, 16, 32), eta_b=
 
 
 # --- (c) worst-case discretization error by optimization ------------------------------------------------
-def worst_tip_error(N: int, slave: SlaveParams | None = None, n_random: int = 32, n_refine: int = 6,
-                    seed: int = 0, plant: PlantConfig | None = None) -> tuple[float, np.ndarray]:
+def worst_tip_error(N: int, n_random: int = 32, n_refine: int = 6, seed: int = 0) -> tuple[float, np.ndarray]:
     """Largest relative tip error |tip_MuJoCo - tip_CC| / sum(L0) over the in-range q2 box, the chain on
     the CC manifold: the 64 corners (each length and bend at an end of its range) and n_random random
     points, the n_refine best refined by scipy's bounded Nelder-Mead in (d, k d).  Returns (error, q2)."""
     from scipy.optimize import minimize
 
-    slave = SlaveParams() if slave is None else slave
-    plant = PlantConfig(actuation="torque") if plant is None else plant
-    m, cm = build_model(MasterParams(), slave, replace(plant, segments=int(N)))
+    slave = SlaveParams()
+    m, cm = build_model(MasterParams(), slave, PlantConfig(actuation="torque", segments=int(N)))
     d = mujoco.MjData(m)
     lo_d, hi_d = slave.length_range
     lo = np.concatenate([lo_d, [-slave.max_bend] * 3])

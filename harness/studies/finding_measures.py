@@ -193,13 +193,10 @@ def _measure_flip(scn, traj) -> dict[str, float]:
     res = linearize(scn, float(traj.t[-1]) if len(traj) else 0.0)
     j = res.most_negative()
     top = [name for name, _ in res.dominant(j, 2)]
-    if scn.plant.kind == "cosserat":
-        n = scn.plant.cosserat.elements_per_section
-        junction = {f"s{i}_el{n - 1}.angle" for i in range(2)} | {f"s{i}_el0.angle" for i in (1, 2)}
-    else:
-        n = scn.plant.segments
-        junction = ({f"octarm_s{i}_seg{n - 1}_hinge" for i in range(2)}
-                    | {f"octarm_s{i}_seg0_hinge" for i in (1, 2)})
+    rod = scn.plant.kind == "cosserat"
+    n = scn.plant.cosserat.elements_per_section if rod else scn.plant.segments
+    pattern = "s{}_el{}.angle" if rod else "octarm_s{}_seg{}_hinge"
+    junction = {pattern.format(i, n - 1) for i in range(2)} | {pattern.format(i, 0) for i in (1, 2)}
     return {"radius": res.radius, "flip": float(-res.eigenvalues[j].real),
             "flip_on_junction": float(all(any(name.startswith(x) for x in junction) for name in top))}
 

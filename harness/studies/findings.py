@@ -184,10 +184,6 @@ class FindingResult:
         return not self.error and bool(self.checks) and all(c.holds for c in self.checks)
 
 
-def _limit_key(q: str) -> str:
-    return q.replace(".", "_")
-
-
 def _num(v: Any) -> float | None:
     v = v.item() if hasattr(v, "item") else v
     return None if isinstance(v, bool) or not isinstance(v, (int, float)) else float(v)
@@ -244,7 +240,7 @@ def _run(f: Finding, scenarios: list, res: FindingResult, keep_trajectories: boo
     for name, (a, b) in f.ratios.items():
         na, nb = _num(res.values.get(a)), _num(res.values.get(b))
         res.values[name] = na / nb if na is not None and nb not in (None, 0.0) else None
-    by_key = {_limit_key(q): q for q in res.values}
+    by_key = {q.replace(".", "_"): q for q in res.values}
     for key, rel, lim in f.limits.values():
         q = by_key.get(key, key)
         v = _num(res.values.get(q))
@@ -360,5 +356,4 @@ def write_outputs(results: Sequence[FindingResult], table: Path, figures: Path,
 
 
 __all__ = ["MEASURES", "Finding", "FindingResult", "available", "finding_scenarios", "findings_dir",
-           "findings_table",
-           "load_finding", "report_text", "run_finding", "run_findings", "write_outputs"]
+           "findings_table", "load_finding", "report_text", "run_finding", "run_findings", "write_outputs"]

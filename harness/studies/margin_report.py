@@ -7,17 +7,12 @@ import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
 
-from harness.studies.figures import save_figure
+from harness.studies.figures import pyplot, save_figure
 from harness.studies.margin import Margin, param_of
 
 
 def plot_edge(rows: list[dict], pair: tuple[str, str], path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(4.6, 4.2))
+    fig, ax = pyplot().subplots(figsize=(4.6, 4.2))
     closed = [*rows, rows[0]]
     ax.plot([r["p1"] for r in closed], [r["p2"] for r in closed], "g.-", label="last passing point")
     fails = [r for r in rows if r["fail_p1"] is not None]
@@ -69,13 +64,8 @@ def margins_markdown(rows: Sequence[Margin], tol_text: str = "") -> str:
 
 def plot_margins(rows: Sequence[Margin], path) -> Path:
     """Margins as bars around the nominal point: one row per parameter, log axis for scale factors."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     rows = [r for r in rows if not r.note]
-    fig, axes = plt.subplots(len(rows), 1, figsize=(6.5, 0.9 + 0.75 * len(rows)), squeeze=False)
+    fig, axes = pyplot().subplots(len(rows), 1, figsize=(6.5, 0.9 + 0.75 * len(rows)), squeeze=False)
     for ax, r in zip(axes[:, 0], rows, strict=True):
         p = param_of(r.param)
         lo, hi = r.sides["lower"]["margin"], r.sides["upper"]["margin"]

@@ -1,20 +1,14 @@
-"""Linear stability of the sampled-data closed loop around a point of a scenario (docs/stability.md).
-
-The loop over one control period T is a map x_{k+1} = Phi_k(x_k), x = [plant state, servo reference
-(servo actuation), actuation-delay ring]; `linearize(scn, t)` runs the scenario to t (paper law, noise
-off) with the stepped loop's `Stepper` and differentiates the whole one-period map by central finite
-differences.  Plant coordinates:
-analytic [q1, dq1, q2, dq2]; mujoco qpos, qvel, act (the rest of MuJoCo's state restored from the point
-of linearization); cosserat the master [q1, dq1], then node X, Z (without the clamped base node), element
-angles about Y and their rates.  Verdict: "unstable" if rho = max |lambda| > 1 + T / SLOW_S, "marginal"
-if 1 < rho <= 1 + T / SLOW_S (a slow drift such as the null-space positions), else "stable".
+"""Linear stability of the sampled-data closed loop around a point of a scenario (docs/stability.md):
+`linearize(scn, t)` differentiates the one-period map x_{k+1} = Phi_k(x_k) (`ClosedLoopMap`) by central
+differences.  Verdict: "unstable" if rho = max |lambda| > 1 + T / SLOW_S, "marginal" if
+1 < rho <= 1 + T / SLOW_S (a slow drift such as the null-space positions), else "stable".
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -59,13 +53,10 @@ def _positions(plant) -> tuple[np.ndarray, object]:
 
 # --- the one-period closed-loop map -----------------------------------------------------------------------
 class ClosedLoopMap:
-    """The closed loop of `scn` (paper law, no sensing noise) as a map over one control period: the
-    stepped loop's `Stepper` on the scenario's plant.
-
-    `run_to(n)` steps it from t = 0 to step n; `x()` / `set_x(x)` read / write the loop state
-    [plant state (`get_state`), servo reference [q2_ref, dq2_ref] (12, servo only), delay ring
-    (delay x 26), filtered dq2 (6, with sensing.dq2_cutoff)]; `phi(x, k)` is the state one control
-    period after state x at step k."""
+    """The closed loop of `scn` (paper law, no sensing noise; the stepped loop's `Stepper`) over one control
+    period.  Loop state x = [plant state (`get_state`: analytic [q1, dq1, q2, dq2]; mujoco qpos, qvel,
+    act; cosserat [q1, dq1], node X, Z without the base, element angles about Y, their rates), servo
+    reference (12, servo only), delay ring (delay x 26), filtered dq2 (6, with sensing.dq2_cutoff)]."""
 
     def __init__(self, scn: Scenario) -> None:
         if scn.controller.name != "paper":
@@ -170,8 +161,8 @@ class Stability:
     x0: np.ndarray
     n_plant: int
     h: float
-    positions_idx: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
-    shapes: dict = field(default_factory=dict)
+    positions_idx: np.ndarray  # indices of the plant state's position components
+    shapes: dict  # {"positions": x, slave -> the slave's points (m, 2), "slave": SlaveParams}
     stopped: str = ""  # linearized along a run (`least_stable_along`): why the run ended early, if it did
 
     @property
@@ -213,8 +204,7 @@ class Stability:
         c = self.verdict_class
         return (f"{c}: spectral radius {self.radius:.6f} at t = {self.t:g} s (T = {self.T:g} s), "
                 f"least stable mode lambda = {lam.real:+.6f}{lam.imag:+.6f}j, {self.frequency(0):.2f} Hz, "
-                f"growth "
-                f"{self.growth_rate(0):+.3g} 1/s, on {dom}")
+                f"growth {self.growth_rate(0):+.3g} 1/s, on {dom}")
 
     def spectrum_rows(self) -> list[dict]:
         return [{"index": j, "real": float(e.real), "imag": float(e.imag), "modulus": float(abs(e)),
@@ -241,22 +231,18 @@ def linearize(scn: Scenario, t: float, h: float | None = None,
     A = np.zeros((N, N))
     for i in range(N):
         hi = h * max(1.0, abs(x0[i]))
-        xp = x0.copy()
+        xp, xm = x0.copy(), x0.copy()
         xp[i] += hi
-        fp = lp.phi(xp, k)
-        xm = x0.copy()
         xm[i] -= hi
-        fm = lp.phi(xm, k)
-        A[:, i] = (fp - fm) / (2 * hi)
+        A[:, i] = (lp.phi(xp, k) - lp.phi(xm, k)) / (2 * hi)
     lp.set_x(x0)
     lp.k = k
     ev, V = np.linalg.eig(A)
     order = np.lexsort((-ev.imag, -np.round(np.abs(ev), 12)))
-    res = Stability(scenario=scn, t=k * scn.control_dt, T=scn.control_dt, A=A, eigenvalues=ev[order],
-                    eigenvectors=V[:, order], names=lp.names, x0=x0, n_plant=lp.n_plant, h=h)
-    res.positions_idx, points = _positions(lp.plant)
-    res.shapes = {"positions": points, "slave": scn.plant_slave}
-    return res
+    idx, points = _positions(lp.plant)
+    return Stability(scenario=scn, t=k * scn.control_dt, T=scn.control_dt, A=A, eigenvalues=ev[order],
+                     eigenvectors=V[:, order], names=lp.names, x0=x0, n_plant=lp.n_plant, h=h,
+                     positions_idx=idx, shapes={"positions": points, "slave": scn.plant_slave})
 
 
 __all__ = ["ClosedLoopMap", "LinearizationError", "SLOW_S", "Stability", "linearize"]

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from harness.config.scenario import Scenario
-from harness.studies.figures import save_figure
+from harness.studies.figures import pyplot, save_csv, save_figure
 from harness.studies.stability import ClosedLoopMap, LinearizationError, Stability, linearize
 from harness.studies.stability_map import grid_lines
 
@@ -35,12 +35,7 @@ def mode_shape(res: Stability, j: int = 0) -> tuple[np.ndarray, np.ndarray, floa
 def plot_stability(res: Stability, path, n_modes: int = 2) -> Path:
     """Figure: the spectrum against the unit circle (left) and the shapes of the n_modes least stable modes
     on the slave (right)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 1 + n_modes, figsize=(4.2 * (1 + n_modes), 4.0))
+    fig, axes = pyplot().subplots(1, 1 + n_modes, figsize=(4.2 * (1 + n_modes), 4.0))
     ax = axes[0]
     th = np.linspace(0, 2 * np.pi, 400)
     ax.plot(np.cos(th), np.sin(th), "k-", lw=0.6)
@@ -77,25 +72,18 @@ def _next_distinct(res: Stability, j: int) -> int:
 def write_stability(res: Stability, out) -> list[Path]:
     """spectrum.csv (every eigenvalue: real, imag, modulus, angle, frequency, growth, dominant states),
     stability.json (verdict, radius, least stable mode, t, T, h) and stability.png in folder `out`."""
-    import csv
-    import io
     import json
 
     from harness.config.textio import jsonable, write_atomic
 
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     rows = res.spectrum_rows()
-    buf = io.StringIO(newline="")
-    w = csv.DictWriter(buf, fieldnames=list(rows[0]))
-    w.writeheader()
-    w.writerows(rows)
     summary = {"verdict": res.verdict(), "class": res.verdict_class, "spectral_radius": res.radius,
                "t": res.t, "control_dt": res.T, "fd_step": res.h, "n_states": len(res.names),
                "least_stable": rows[0], "dominant": res.dominant(0, 6),
                "most_negative": rows[res.most_negative()],
                "plant": res.scenario.plant.kind, "actuation": res.scenario.plant.actuation}
-    return [write_atomic(out / "spectrum.csv", buf.getvalue()),
+    return [save_csv(out / "spectrum.csv", rows),
             write_atomic(out / "stability.json", json.dumps(jsonable(summary), indent=2) + "\n"),
             plot_stability(res, out / "stability.png")]
 

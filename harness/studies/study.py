@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import itertools
 import json
-import logging
 import math
 import os
 import re
@@ -29,9 +28,6 @@ from harness.config.study import (  # noqa: F401 - DEFAULT_MAX_CASES, METRIC_NAM
     StudyFile,
 )
 from harness.config.textio import read_toml
-
-log = logging.getLogger(__name__)
-
 
 LOWER_IS_WORSE = frozenset({"beta_min"})
 METRIC_LABELS = {k: f"{k} [{u}]" for k, u in METRIC_UNITS.items()} | {
@@ -84,10 +80,6 @@ class Study:
     max_cases: int = 10000  # DEFAULT_MAX_CASES
     allow_code: bool = False  # the study may name Python controllers (--allow-code; a dict: the caller's)
     base_dir: Path | None = None  # the study file's folder: its relative paths resolve against it
-
-    @property
-    def scenario_source(self) -> Path | dict | None:
-        return self.scenario  # None = load_scenario's built-in defaults (the paper scenario)
 
 
 @dataclass(frozen=True)

@@ -56,9 +56,6 @@ def _nan_stats(values) -> tuple[float, float, float]:
     return (np.nan, np.nan, np.nan) if a.size == 0 else (a.mean(), a.min(), a.max())
 
 
-_DPI = 110
-
-
 def _groups(rows: Sequence[dict], names: Sequence[str]) -> dict[str, list[dict]]:
     """Rows grouped by their values of the factors `names` ("a=1, b=2" labels)."""
     out: dict[str, list[dict]] = {}
@@ -78,13 +75,13 @@ def _plots(study: Study, rows: Sequence[dict], out: Path) -> list[Path]:
     paths = []
 
     def figure():
-        fig = Figure(figsize=(4.6 * ncol, 3.4 * nrow), dpi=_DPI, layout="constrained")
+        fig = Figure(figsize=(4.6 * ncol, 3.4 * nrow), dpi=110, layout="constrained")
         return fig, fig.subplots(nrow, ncol, squeeze=False).ravel()
 
     def finish(fig, axes, name):
         for ax in axes[len(metrics):]:
             ax.set_visible(False)
-        paths.append(save_figure(fig, out / name, _DPI))
+        paths.append(save_figure(fig, out / name))
 
     sampled = study.mode == "random"
     grid_factors = [f for f in study.factors if not f.is_random and not sampled]

@@ -1,14 +1,7 @@
 """Mismatch sweeps (`teleop sweep`): run every case of a study (`harness.studies.study`) through an executor
-(`harness.studies.executor`), append each row as it finishes, resume, and write the summary.
-
-Outputs in the folder `out` (default runs/sweeps/<name>/; user guide: docs/guide/sweeps.md):
-`results.jsonl`, one fsynced JSON row per finished case (`results.make_row`: case_id, params, status
-"ok" | "diverged" | "error", message, metrics (non-finite as null), wall_time (s, in the worker),
-traceback); a re-run skips every case id already there.  case_id: the first 12 hex digits of the SHA-256
-of the case's resolved scenario without its name (`cases.scenario_id`).  `study.toml`, the resolved study
-(re-runnable, same ids); `summary.csv` and the plots (`summary.write_summary`); `recordings/<case_id>.rrd`
-of the worst cases (re-run after the sweep; the worker returns the bytes, so a remote Dask cluster needs
-no shared file system); `.lock` while a sweep runs.
+(`harness.studies.executor`), append each row as it finishes, resume, and write the summary.  Outputs in
+`out` (default runs/sweeps/<name>/; docs/guide/sweeps.md): results.jsonl (`results.make_row`), study.toml
+(the resolved study), summary.csv and plots, recordings/<case_id>.rrd of the worst cases, .lock.
 """
 
 from __future__ import annotations
@@ -244,7 +237,6 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
             run_cases(runner, case_fn, todo, study.metrics, False, on_result, time_limit=case_timeout)
             bar.close()
             lap("cases")
-            lap("summary")
             if study.record and result.complete:
                 try:
                     result.recordings = _record_worst(study, result, runner, case_fn, case_timeout)
