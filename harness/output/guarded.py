@@ -16,8 +16,8 @@ import signal
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 from harness.config.textio import TMP_MARK, OutputError, describe_os_error
@@ -166,29 +166,16 @@ class ChildWriter:
                     tmp.unlink()
 
 
-@dataclass
-class _InProcess:
-    """`start_in_child` where fork does not exist (Windows): the writer has already run."""
-
-    path: Path
-
-    def wait(self) -> Path:
-        return self.path
-
-    def kill(self) -> None:
-        pass
-
-
 def start_in_child(fn: Callable[[], Any], path: str | Path, *, stall_timeout: float | None = STALL_TIMEOUT,
-                   others: Sequence[str | Path] = ()) -> ChildWriter | _InProcess:
+                   others: Sequence[str | Path] = ()) -> ChildWriter | SimpleNamespace:
     """Start `fn()` (which writes `path` through `atomic_path`) in a forked child and return at once.
     stall_timeout None: no progress check (writers that compute long before writing, e.g. figures).
     others: further files the writer writes atomically (their temporary files are removed if it fails)."""
     path = Path(path)
     try:
         multiprocessing.get_context("fork")
-    except ValueError:  # no fork (Windows): in-process
+    except ValueError:  # no fork (Windows): the writer runs here, wait() and kill() have nothing to do
         fn()
-        return _InProcess(path)
+        return SimpleNamespace(wait=lambda: path, kill=lambda: None)
     return ChildWriter(fn, path, stall_timeout, tuple(Path(o) for o in others))
 
