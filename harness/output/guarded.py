@@ -1,10 +1,7 @@
 """Run an output writer in a forked child that the parent can always stop (docs: Outputs and their
-guarantees).  A writer blocked in native code (Rerun's file sink on a full disk) cannot be interrupted
-by Ctrl-C, and a sink's write error shows only at the flush; so the parent polls the child: an error
-comes back as one `OutputError` line, a write error Rerun logs on the child's stderr stops it at once,
-a child whose temporary file stops growing for `stall_timeout` s is killed, and Ctrl-C kills it and
-removes its temporary file.  Without `fork` the writer runs in-process (same atomic rename).
-"""
+guarantees): its error comes back as one `OutputError` line; a write error Rerun logs on its stderr, no
+growth of its temporary file for `stall_timeout` s, or Ctrl-C kill it and remove its temporary files.
+Without `fork` the writer runs in-process (same atomic rename)."""
 
 from __future__ import annotations
 
