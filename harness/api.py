@@ -152,12 +152,9 @@ def clear_run_outputs(out: Path) -> None:
 def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False, *, plant: Any = None,
                  handle_signals: bool = False, on_chunk: Callable | None = None,
                  record_rate: float | None = None) -> RunResult:
-    """Simulate, compute metrics and (if `out`) write every output that can be written.
-
-    The output folder protocol is the docs' "Outputs and their guarantees": previous outputs removed,
-    config.toml before simulating, then run.rrd and the figures, metrics.json last (listing what was
-    written and what failed); each file renamed into place when complete.  Raises OutputError if the
-    folder cannot be cleared or config.toml cannot be written (nothing ran).  handle_signals:
+    """Simulate, compute metrics and (if `out`) write every output that can be written, in the order of the
+    docs' "Outputs and their guarantees".  Raises OutputError if the folder cannot be cleared or
+    config.toml cannot be written (nothing ran).  handle_signals:
     SIGINT/SIGTERM stop the simulation cleanly; on_chunk: `harness.loop.simulate`'s (live viewing);
     record_rate: Hz of the 3-D geometry in run.rrd (None = record.DEFAULT_GEOMETRY_RATE, math.inf =
     every step)."""
@@ -309,12 +306,9 @@ def margins(scenario: Source = None, overrides: Iterable[str] = (), *, bounds,
             out: str | os.PathLike | None = None, workers: int | None = None, scheduler: str | None = None,
             executor: str = "processes", pair: tuple[str, str] | None = None, n_rays: int = 8,
             say: Callable[[str], None] = lambda s: None):
-    """Robustness margins of a scenario against a bounds file (path, table or `Bounds`): per mismatch
-    parameter (default `harness.studies.margin.DEFAULT_PARAMS`), the largest deviation each way that still
-    passes, bracketed and bisected to `rtol`, with `probes` points per side to detect a non-monotone edge.
-    Runs go through the sweep executor; with `out`, journaled in out/results.jsonl (a repeated call
-    resumes) and written to margins.md / .json / .png.  pair: also the 2-D edge of two scale parameters
-    along n_rays rays (edge.json, edge.png).  Returns (rows, edge rows or None).  Raises `ConfigError`
+    """Robustness margins of a scenario against a bounds file (path, table or `Bounds`), as `teleop margin`
+    (its --help gives the method and the outputs in `out`); params default to
+    `harness.studies.margin.DEFAULT_PARAMS`.  Returns (rows, edge rows or None).  Raises `ConfigError`
     for bad input or a nominal scenario that fails the bounds."""
     from harness.config.bounds import Bounds, load_bounds
     from harness.config.load import scenario_to_dict

@@ -437,9 +437,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def prepare_process() -> None:
-    """What `teleop` sets up before `main()` (benchmarks/bench_core.py too): the collector thresholds
-    (`harness.config.runtime.GC_THRESHOLDS`) and MuJoCo's OpenGL off unless MUJOCO_GL says otherwise (the
-    harness draws with Rerun and matplotlib; `import mujoco` then skips GLFW).  Call before MuJoCo loads."""
+    """What `teleop` sets up before `main()` and before MuJoCo loads: `GC_THRESHOLDS` and MuJoCo's OpenGL
+    off unless MUJOCO_GL says otherwise (the harness draws with Rerun and matplotlib)."""
     os.environ.setdefault("MUJOCO_GL", "disable")
     set_gc_thresholds()
 

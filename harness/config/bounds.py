@@ -6,6 +6,7 @@ None, NaN) or is not a finite number violates its bound.
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
@@ -121,10 +122,8 @@ def _measured(metrics: Mapping, name: str) -> Any:
     """metrics[name] as a plain Python value; None when absent, None or NaN (= not measured)."""
     v = metrics.get(name)
     if hasattr(v, "item") and callable(v.item):  # numpy scalar
-        try:
+        with contextlib.suppress(ValueError, TypeError):
             v = v.item()
-        except (ValueError, TypeError):
-            pass
     if isinstance(v, float) and math.isnan(v):
         return None
     return v

@@ -65,10 +65,8 @@ def _check_reach(scn: Scenario) -> None:
     off = scn.initial.master_offset
     x0 = (tr.center[0] + off[0], tr.center[1] + tr.amplitude[1] + off[1])  # x_d(0) + offset
     r0 = math.hypot(*x0)
-    masters = [("nominal master (master.lengths)", scn.master)]
-    if scn.plant.master is not None:
-        masters.append(("plant master (plant.master.lengths)", scn.plant.master))
-    for label, m in masters:
+    for label, m in (("nominal master (master.lengths)", scn.master),
+                     ("plant master (plant.master.lengths)", scn.plant_master)):
         l1, l2 = m.lengths
         lo, hi = abs(l1 - l2) + REACH_MARGIN, l1 + l2 - REACH_MARGIN
         if not (lo <= rmin and rmax <= hi):
@@ -83,10 +81,7 @@ def _check_reach(scn: Scenario) -> None:
                 f"initial.master_offset = {list(scn.initial.master_offset)}: the initial master tip "
                 f"x_d(0) + offset = [{x0[0]:.6g}, {x0[1]:.6g}] (|x| = {r0:.6g} m) is outside the reachable "
                 f"annulus [{lo:.6g}, {hi:.6g}] m of the {label}", path="initial.master_offset")
-    slaves = [("nominal slave (slave)", scn.slave)]
-    if scn.plant.slave is not None:
-        slaves.append(("plant slave (plant.slave)", scn.plant.slave))
-    for label, s in slaves:
+    for label, s in (("nominal slave (slave)", scn.slave), ("plant slave (plant.slave)", scn.plant_slave)):
         reach = s.max_extension * sum(s.rest_lengths)
         if rmax > reach - REACH_MARGIN:
             raise ConfigError(

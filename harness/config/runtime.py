@@ -121,12 +121,9 @@ def provenance() -> dict[str, str]:
     out: dict[str, str] = {}
     root = Path(__file__).resolve().parents[2]  # the checkout, or site-packages
     try:
-        v = _checkout_version(root) or _wheel_version(root)
-        if v is None:
-            from importlib.metadata import version
+        from importlib.metadata import version
 
-            v = version(DIST_NAME)
-        out["version"] = v
+        out["version"] = _checkout_version(root) or version(DIST_NAME)
     except Exception:  # noqa: BLE001 - not installed and not a checkout: no version
         pass
     try:
@@ -149,45 +146,26 @@ def _checkout_version(root: Path) -> str | None:
     return str(project["version"]) if project.get("name") == DIST_NAME and "version" in project else None
 
 
-def _wheel_version(site: Path) -> str | None:
-    """Version in the name of this package's .dist-info folder next to the installed code."""
-    stem = DIST_NAME.replace("-", "_") + "-"
-    for d in site.glob(stem + "*.dist-info"):
-        return d.name[len(stem):-len(".dist-info")]
-    return None
-
-
 def _git_revision(root: Path) -> str | None:
     """The commit of HEAD of the checkout at `root` (a .git folder, or a .git file of a worktree)."""
-    dot = root / ".git"
-    if dot.is_file():  # worktree or submodule: "gitdir: <path>"
-        text = dot.read_text(encoding="utf-8").strip()
+    gitdir = root / ".git"
+    if gitdir.is_file():  # worktree or submodule: "gitdir: <path>"
+        text = gitdir.read_text(encoding="utf-8").strip()
         if not text.startswith("gitdir:"):
             return None
         gitdir = (root / text[len("gitdir:"):].strip()).resolve()
-    elif dot.is_dir():
-        gitdir = dot
-    else:
+    elif not gitdir.is_dir():
         return None
     head = (gitdir / "HEAD").read_text(encoding="utf-8").strip()
-    if not head.startswith("ref:"):
-        return head if re.fullmatch(r"[0-9a-f]{40,64}", head) else None
-    ref = head[len("ref:"):].strip()
-    common = gitdir
+    ref, common = head.removeprefix("ref:").strip(), gitdir
     if (gitdir / "commondir").is_file():  # a worktree keeps its refs in the main repository
         common = (gitdir / (gitdir / "commondir").read_text(encoding="utf-8").strip()).resolve()
-    for folder in (gitdir, common):
-        f = folder / ref
-        if f.is_file():
-            sha = f.read_text(encoding="utf-8").strip()
-            return sha if re.fullmatch(r"[0-9a-f]{40,64}", sha) else None
-    packed = common / "packed-refs"
-    if packed.is_file():
-        for line in packed.read_text(encoding="utf-8").splitlines():
-            parts = line.split()
-            if len(parts) == 2 and parts[1] == ref and re.fullmatch(r"[0-9a-f]{40,64}", parts[0]):
-                return parts[0]
-    return None
+    found = [head] if ref == head else [f.read_text(encoding="utf-8").strip()
+                                        for f in (gitdir / ref, common / ref) if f.is_file()]
+    if not found and (common / "packed-refs").is_file():
+        lines = (common / "packed-refs").read_text(encoding="utf-8").splitlines()
+        found = [parts[0] for parts in map(str.split, lines) if parts[1:] == [ref]]
+    return found[0] if found and re.fullmatch(r"[0-9a-f]{40,64}", found[0]) else None
 
 
 @functools.cache

@@ -44,20 +44,20 @@ def loads_toml(text: str, what: str) -> dict:
 
 def _open_regular(path: Path, what: str):
     """`path` opened for reading if it is a regular file (checked on the descriptor), else ConfigError."""
+    irregular = ConfigError(f"{what} {path}: not a regular file (a named pipe, device or socket is not "
+                            "read)", path=str(path))
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     except OSError as e:
         if e.errno == errno.ENXIO:  # a socket (or a device without its driver): no file to read
-            raise ConfigError(f"{what} {path}: not a regular file (a named pipe, device or socket is "
-                              "not read)", path=str(path)) from None
+            raise irregular from None
         raise
     try:
         st = os.fstat(fd)
         if stat.S_ISDIR(st.st_mode):
             raise IsADirectoryError(errno.EISDIR, "Is a directory", str(path))
         if not stat.S_ISREG(st.st_mode):
-            raise ConfigError(f"{what} {path}: not a regular file (a named pipe, device or socket is "
-                              "not read)", path=str(path))
+            raise irregular
         if hasattr(os, "set_blocking"):
             os.set_blocking(fd, True)
         return os.fdopen(fd, "rb")

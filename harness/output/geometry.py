@@ -27,11 +27,7 @@ def world_base(meta: dict, key: str) -> np.ndarray:
 def task_to_world(x: np.ndarray, base: np.ndarray) -> np.ndarray:
     """Task-space [X, Z] (..., 2), relative to `base`, to world (..., 3): (b_x + X, b_y, b_z + Z)."""
     x = np.asarray(x, dtype=float)
-    out = np.empty(x.shape[:-1] + (3,))
-    out[..., 0] = base[0] + x[..., 0]
-    out[..., 1] = base[1]
-    out[..., 2] = base[2] + x[..., 1]
-    return out
+    return np.stack([base[0] + x[..., 0], np.full(x.shape[:-1], base[1]), base[2] + x[..., 1]], axis=-1)
 
 
 def master_points(q1: np.ndarray, lengths, base: np.ndarray) -> np.ndarray:

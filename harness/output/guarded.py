@@ -1,10 +1,7 @@
 """Run an output writer in a forked child that the parent can always stop (docs: Outputs and their
-guarantees).  A writer blocked in native code (Rerun's file sink on a full disk) cannot be interrupted
-by Ctrl-C, and a sink's write error shows only at the flush; so the parent polls the child: an error
-comes back as one `OutputError` line, a write error Rerun logs on the child's stderr stops it at once,
-a child whose temporary file stops growing for `stall_timeout` s is killed, and Ctrl-C kills it and
-removes its temporary file.  Without `fork` the writer runs in-process (same atomic rename).
-"""
+guarantees): its error comes back as one `OutputError` line; a write error Rerun logs on its stderr, no
+growth of its temporary file for `stall_timeout` s, or Ctrl-C kill it and remove its temporary files.
+Without `fork` the writer runs in-process (same atomic rename)."""
 
 from __future__ import annotations
 
@@ -16,8 +13,8 @@ import signal
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 from harness.config.textio import TMP_MARK, OutputError, describe_os_error
@@ -166,29 +163,16 @@ class ChildWriter:
                     tmp.unlink()
 
 
-@dataclass
-class _InProcess:
-    """`start_in_child` where fork does not exist (Windows): the writer has already run."""
-
-    path: Path
-
-    def wait(self) -> Path:
-        return self.path
-
-    def kill(self) -> None:
-        pass
-
-
 def start_in_child(fn: Callable[[], Any], path: str | Path, *, stall_timeout: float | None = STALL_TIMEOUT,
-                   others: Sequence[str | Path] = ()) -> ChildWriter | _InProcess:
+                   others: Sequence[str | Path] = ()) -> ChildWriter | SimpleNamespace:
     """Start `fn()` (which writes `path` through `atomic_path`) in a forked child and return at once.
     stall_timeout None: no progress check (writers that compute long before writing, e.g. figures).
     others: further files the writer writes atomically (their temporary files are removed if it fails)."""
     path = Path(path)
     try:
         multiprocessing.get_context("fork")
-    except ValueError:  # no fork (Windows): in-process
+    except ValueError:  # no fork (Windows): the writer runs here, wait() and kill() have nothing to do
         fn()
-        return _InProcess(path)
+        return SimpleNamespace(wait=lambda: path, kill=lambda: None)
     return ChildWriter(fn, path, stall_timeout, tuple(Path(o) for o in others))
 

@@ -295,10 +295,7 @@ def log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, ever
                 static=True)
         centers, quat = _f32(bpos), None
         if traj.body_quat is not None:
-            wxyz = np.asarray(traj.body_quat, dtype=float)[idx]
-            quat = np.empty(wxyz.shape, dtype=np.float32)  # wxyz -> xyzw (Rerun stores float32)
-            quat[..., :3] = wxyz[..., 1:]
-            quat[..., 3] = wxyz[..., 0]
+            quat = _f32(np.asarray(traj.body_quat, dtype=float)[idx][..., [1, 2, 3, 0]])  # wxyz -> xyzw
 
         def boxes(sl):
             q = None if quat is None else quat[sl].reshape(-1, 4)

@@ -157,11 +157,8 @@ def box_half_size(bpos: np.ndarray, meta: dict) -> np.ndarray:
         if h.shape == (nb, 3):
             return h
         return np.tile(h.reshape(3), (nb, 1))
-    if nb >= 2:
-        gaps = np.linalg.norm(np.diff(bpos[0], axis=0), axis=-1)
-        gaps = gaps[np.isfinite(gaps) & (gaps > 0)]
-        s = float(np.median(gaps)) if gaps.size else 0.04
-    else:
-        s = 0.04
+    gaps = np.linalg.norm(np.diff(bpos[0], axis=0), axis=-1)  # empty for one body
+    gaps = gaps[np.isfinite(gaps) & (gaps > 0)]
+    s = float(np.median(gaps)) if gaps.size else 0.04
     return np.tile(np.array([0.3, 0.15, 0.45]) * s, (nb, 1))
 
