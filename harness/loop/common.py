@@ -53,10 +53,9 @@ def initial_state(scn: Scenario) -> np.ndarray:
 
 
 def noise_table(scn: Scenario, n: int) -> tuple[np.ndarray, float]:
-    """Seeded standard normals and the SNR scale 10^(-SNR/20) (0: no noise): (n, 16) per vector; (n, 32)
-    per channel (columns 16:32 of row 0: the running sums of `kernels.add_noise_channel`).  With
-    ``sensing.dq2_cutoff``, DQ2_FILTER more columns: row 0 holds the filter gain
-    (`force_kernels.filter_alpha`) and the filtered dq2 (`kernels.sense_state`)."""
+    """Seeded standard normals and the SNR scale 10^(-SNR/20) (0: no noise): (n, 16) per vector, (n, 32)
+    per channel (`kernels.add_noise_channel`), + DQ2_FILTER columns with ``sensing.dq2_cutoff``
+    (`kernels.sense_state`)."""
     if scn.snr_db is None:
         normals, scale = np.zeros((1, 16)), 0.0
     else:
@@ -71,18 +70,16 @@ def noise_table(scn: Scenario, n: int) -> tuple[np.ndarray, float]:
 
 
 class ChunkRun:
-    """Drives a loop over a run's n control steps in calls of `size` steps (`run`), keeping status, done
-    (steps recorded), interrupted, error (an exception's text), exc (the exception) and wall (s) up to
-    date; the progress bar `bar` is closed at the end."""
+    """Drives a run's n control steps in calls of `size` steps, keeping status, done (steps recorded),
+    interrupted, error / exc (an exception) and wall (s); closes the progress bar `bar` at the end."""
 
     def __init__(self, n: int, size: int, bar=None, on_part=None):
         self.n, self.size, self.bar, self.on_part = n, size, bar, on_part
         self.status, self.done, self.interrupted, self.error, self.exc, self.wall = 0, 0, False, "", None, 0.0
 
     def run(self, call) -> None:
-        """call(k, k1) -> (status, steps done) runs steps k..k1-1 (and may advance `done` as it goes).  After
-        each call: the bar, on_part(k, done) when steps were done; stops at a non-zero status, on STOP, a
-        KeyboardInterrupt (interrupted) or an exception (kept in error / exc)."""
+        """call(k, k1) -> (status, steps done) runs steps k..k1-1; then the bar and on_part(k, done).  Stops
+        at a non-zero status, on STOP or a KeyboardInterrupt (interrupted) or an exception (error / exc)."""
         t0 = time.perf_counter()
         try:
             k = 0
@@ -110,8 +107,8 @@ class ChunkRun:
             self.wall = time.perf_counter() - t0
 
     def trajectory(self, scn: Scenario, rows: np.ndarray, detail: str = "") -> Trajectory:
-        """The run's Trajectory from rows[:done] and its meta; status / message from the run's end: an
-        exception's text, a status code (`controllers.status`, plus `detail`), an interrupt, or "ok"."""
+        """The Trajectory of rows[:done]; status / message: an exception, a status code (+ `detail`), an
+        interrupt, or "ok"."""
         traj = Trajectory.from_rows(rows[:self.done])
         traj.meta.update(run_meta(scn, self.wall))
         if self.error:
@@ -145,10 +142,9 @@ def progress_bar(enabled: bool, total: int, desc: str):
 
 
 class RunModel(NamedTuple):
-    """A scenario compiled once per run (frozen, like Pinocchio's / MuJoCo's model); per-run buffers are
-    made by each run.  mpk_c, spk_c: the controller's packed master / slave params; nodes, weights:
-    Gauss-Legendre on [0, 1]; gains: packed gains + [e2_sign, null_space_scale]; spec: packed sub-task;
-    F (4,) N: constant tip forces [F1, F2]; traj (5,): desired trajectory; s0 (16,): state at t = 0."""
+    """A scenario compiled once per run (frozen model; each run makes its buffers).  mpk_c, spk_c: the
+    controller's packed params; nodes, weights: Gauss-Legendre on [0, 1]; gains: packed + [e2_sign,
+    null_space_scale]; spec: packed sub-task; F (4,) N; traj (5,): x_d (40); s0 (16,): state at t = 0."""
 
     mpk_c: np.ndarray
     spk_c: np.ndarray

@@ -1,14 +1,8 @@
-"""A `controllers.interface.Controller` (``reset(ctx)``, ``step(obs) -> Action``) as the controller of the
-Python-level loop (`harness.loop.stepped_loop`): fills the `Observation`, calls the controller, checks the
-`Action` and copies T1 (2,) N m, T2 (6,), u2 (6,), deN (6,) into the loop's buffers (with ``use_ref`` on
-a servo plant, its q2_ref / dq2_ref replace the loop's reference).
-
-Failures are one line naming the controller, the phase and for a step its index and time: anything the
-controller raises (`SystemExit`, `KeyboardInterrupt` included), None, a wrong shape or dtype, NaN / inf,
-or a call past `controller.step_timeout` -> `ControllerFailure` (status "error"); the user's Ctrl-C /
-SIGTERM -> `HarnessInterrupt` (status "interrupted"); `ControllerDiverged` -> its status code (or -1,
-`diverged` holding the message), the step's row recorded with the controller's last action.
-"""
+"""A `controllers.interface.Controller` as the controller of `harness.loop.stepped_loop`: fills the
+`Observation`, checks the `Action` and copies T1 (2,) N m, T2 (6,), u2 (6,), deN (6,) (and, with
+``use_ref`` on a servo plant, q2_ref / dq2_ref) into the loop's buffers.  Anything the controller raises,
+an unusable action or a call past `controller.step_timeout` -> `ControllerFailure` (one line; status
+"error"); Ctrl-C / SIGTERM -> `HarnessInterrupt`; `ControllerDiverged` -> its status code (else -1)."""
 
 from __future__ import annotations
 
@@ -51,10 +45,6 @@ class ControllerFailure(RuntimeError):
 
 class _Timeout(BaseException):
     """Raised by the alarm handler inside a controller call that ran past its limit."""
-
-
-def _line(e: BaseException) -> str:
-    return " ".join(str(e).split())
 
 
 def _on_alarm(signum, frame):  # noqa: ARG001
@@ -202,7 +192,8 @@ class InterfaceController:
             act = self._call(f"at step {k} (t = {t:.3f} s)", limit, self.ctrl.step, obs)
         except ControllerDiverged as e:
             code = e.code if e.code in STATUS_CODES and e.code != 0 else -1
-            self.diverged = f"controller {name!r} stopped: {_line(e)} at step {k} (t = {t:.3f} s)"
+            why = " ".join(str(e).split())
+            self.diverged = f"controller {name!r} stopped: {why} at step {k} (t = {t:.3f} s)"
             act = getattr(self.ctrl, "action", None)
             if act is None:
                 raise ControllerFailure(self.diverged) from None

@@ -1,13 +1,8 @@
-"""Closed loop on the MuJoCo plant: the paper's law on the nominal models, MuJoCo simulating the plant of
-Scenario.plant.  One compiled kernel per chunk of steps (`harness.loop.mujoco_kernels.mujoco_chunk`, which
-calls MuJoCo's C `mj_step`); MuJoCo's auto-reset is off, so a bad state is detected (status 6) and every
-MuJoCo warning stops the run and is reported.
-
-Recording geometry (tip site x2_plant, slave body poses, master base/elbow/tip): the single-stage
-integrators leave the step's start kinematics in MjData, copied after the first mj_step of each step; with
-RK4 the qpos history is replayed through `mj_kinematics` after the loop.  meta: "build_time" (plant),
-"kernel_load_time" (loading the compiled loop), "wall_time" (the loop), "geometry_time" (after it).
-"""
+"""Closed loop on the MuJoCo plant: the paper's law on the nominal models, one compiled kernel per chunk of
+steps (`mujoco_kernels.mujoco_chunk`, calling MuJoCo's C `mj_step`).  Auto-reset is off: a bad state is
+status 6 and any MuJoCo warning stops the run (7).  Recording geometry is copied after each step's first
+mj_step (single-stage integrators) or replayed with `mj_kinematics` after the loop (RK4).  meta:
+build_time, kernel_load_time, wall_time, geometry_time (s)."""
 
 from __future__ import annotations
 
@@ -75,11 +70,9 @@ def make_plant(scn: Scenario, plant: MujocoPlant | None = None, s0: np.ndarray |
 def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray | None = None,
                     plant: MujocoPlant | None = None, on_chunk=None, model: RunModel | None = None
                     ) -> Trajectory:
-    """The paper's law on the MuJoCo plant; returns the Trajectory (possibly cut short).
-    cmd_log: optional (n_steps * substeps, nu + nv) array receiving the [ctrl, qfrc_applied] applied before
-    every mj_step (a raw-MuJoCo replay); on_chunk: optional callable receiving each finished chunk of steps
-    as a `Trajectory` (with the plant geometry under the single-stage integrators); model: the scenario's
-    `RunModel` (default: compiled here)."""
+    """The paper's law on the MuJoCo plant; returns the Trajectory (possibly cut short).  cmd_log: optional
+    (n_steps * substeps, nu + nv) array receiving [ctrl, qfrc_applied] before every mj_step (a raw-MuJoCo
+    replay); on_chunk: called with each finished chunk as a `Trajectory`; model: default compiled here."""
     a = model if model is not None else compile_model(scn)
     s0 = a.s0
     tb = time.perf_counter()

@@ -1,12 +1,6 @@
-"""The MuJoCo and analytic plants as `harness.plant.stepped.SteppedPlant`s for the Python-level loop
-(`harness.loop.stepped_loop`).  Each does what its compiled loop does around the law, with the same
-kernels, so the paper's law through the interface gives the compiled loop's numbers bit for bit:
-
-* `MujocoStepped`: `sense_mujoco` and its state checks (status 6, 5), the command maps of
-  `chain_commands` at the commanding step's sensed q2, per substep the elastic correction and
-  `mujoco.mj_step`, MuJoCo warnings (status 7); its own recording (`record`, `finish`).
-* `AnalyticStepped`: the RK4 of `harness.loop.kernels.plant_substeps`, commands held over the step.
-"""
+"""The MuJoCo and analytic plants as `harness.plant.stepped.SteppedPlant`s for `harness.loop.stepped_loop`,
+with the kernels of their compiled loops (the paper's law through the interface gives the compiled loop's
+numbers bit for bit)."""
 
 from __future__ import annotations
 
@@ -164,10 +158,11 @@ class AnalyticStepped:
         self.spk = plant.slave.packed()
         self.physics_dt = scn.control_dt / max(1, scn.substeps)
         self.state = model.s0.copy()
-        self.T1, self.T2 = np.zeros(2), np.zeros(6)
-        # the laws' buffers of `plant_substeps` (unused: the commands are held) and its RK4 work arrays
-        self.work = (np.zeros(4), np.zeros(6), np.zeros(6), np.zeros(MASTER_INFO), np.zeros(SLAVE_INFO),
-                     np.zeros(2), np.zeros(2), np.zeros(2), np.empty((4, 16)), np.empty(16))
+        self.cmd = np.zeros(8)  # [T1, T2], held over the step
+        # `analytic_advance`'s law buffers (unused: the commands are held) and RK4 work arrays
+        self.law = (np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6), np.zeros(MASTER_INFO),
+                    np.zeros(SLAVE_INFO), np.zeros(2), np.zeros(2), np.zeros(2))
+        self.work = (np.zeros(4), np.empty((4, 16)), np.empty(16))
 
     def reset(self, state0: np.ndarray) -> None:
         self.state[:] = state0
@@ -183,20 +178,14 @@ class AnalyticStepped:
         return 0
 
     def command(self, T1, T2, q2_ref, dq2_ref, q2_sensed) -> None:
-        self.T1[:] = T1
-        self.T2[:] = T2
+        self.cmd[0:2] = T1
+        self.cmd[2:8] = T2
 
     def advance(self, dt: float) -> int:
-        s = self.state
         nsub = max(1, round(dt / self.physics_dt))
-        F, u2, deN, minfo, sinfo, xd, dxd, ddxd, ks, tmp = self.work
-        st = K.plant_substeps(s, 0.0, dt / nsub, nsub, False, self.model, F, self.mpk, self.spk, self.T1,
-                              self.T2, u2, deN, minfo, sinfo, xd, dxd, ddxd, ks, tmp)
-        if st != Status.OK:
-            return Status(st)
-        if not np.all(np.isfinite(s)):
-            return Status.NONFINITE
-        return Status.SECTION_LENGTH if np.any(s[4:7] <= 0.0) else 0
+        F, ks, tmp = self.work
+        plant = (self.model, F, dt, nsub, False, self.mpk, self.spk, ks, tmp)
+        return Status(K.analytic_advance(0, 0, 0, self.cmd, self.state, self.law, plant))
 
     def record(self, k: int) -> None:
         """No plant geometry beyond the state."""
