@@ -84,8 +84,7 @@ def check_action(act, name: str, k: int, t: float, servo: bool) -> str:
 
 class InterfaceController:
     """The scenario's controller as the loop's: ``reset(model)``, ``step(t, sensed, xd, dxd, ddxd, T1, T2,
-    u2, deN) -> status``, ``close()`` (restores the signal handlers).  A failed construction is raised by
-    `reset`."""
+    u2, deN) -> status``, ``close()``.  A failed construction is raised by `reset`."""
 
     def __init__(self, scn: Scenario, model: RunModel) -> None:
         self.name = scn.controller.name
@@ -107,8 +106,7 @@ class InterfaceController:
         self.k = 0
 
     def _install(self) -> None:
-        """On the main thread: the time limit's alarm handler, and Ctrl-C marked as the user's when Python's
-        default handler is in place."""
+        """On the main thread: the time limit's alarm handler; default Ctrl-C marked as the user's."""
         if self._saved is not None or not self.main:
             return
         self._saved = {}
@@ -135,9 +133,8 @@ class InterfaceController:
         return ControllerFailure(f"controller {self.name!r} raised {describe_exception(e)} {phase}")
 
     def _call(self, where: str, limit: float | None, fn, *args):
-        """Call controller code under the time limit (s, None: none); `where` names the phase ("in reset",
-        "at step 3 (t = 0.003 s)").  `HarnessInterrupt` and `ControllerDiverged` pass; anything else raised,
-        or running past the limit, is a `ControllerFailure`.  The timer stays armed (`close` disarms it)."""
+        """Call controller code under the time limit (s, None: none; `where` names the phase): anything
+        raised but `HarnessInterrupt` / `ControllerDiverged`, or past the limit: `ControllerFailure`."""
         if self._saved is None:
             self._install()
         armed = self.main and limit is not None and _TIMER
@@ -212,8 +209,7 @@ class InterfaceController:
 
 
 def make_controller(scn: Scenario, model: RunModel | None = None, construct: bool = True):
-    """(instance, the context its `reset` receives); construct=False: (the class, context).  model: the
-    scenario's `RunModel` (default: compiled here)."""
+    """(instance, the context its `reset` receives); construct=False: (the class, context)."""
     cfg = scn.controller
     cls = load_class(cfg.name)
     params = parse_params(cls, cfg.params, cfg.name)

@@ -36,9 +36,8 @@ def warning_counts(numbers: np.ndarray) -> dict[str, int]:
 
 
 def actuation_args(cmap: ChainMap, servo: bool) -> tuple[np.ndarray, np.ndarray, tuple]:
-    """(the chain's actuators in command order: the muscle groups under muscle actuation, else one per
-    joint; kv / kp (n,) of the servos (zeros unless servo); muscle = (radius (3,), max_force (3,)), or
-    two empty arrays without muscles) (`harness.loop.mujoco_kernels.chain_commands`)."""
+    """(the chain's actuators in command order, kv / kp (n,) of the servos (zeros unless servo), muscle =
+    (radius (3,), max_force (3,)) or two empty arrays) for `mujoco_kernels.chain_commands`."""
     n = cmap.n_chain
     kv_over_kp = (np.divide(cmap.servo_kv, cmap.servo_kp, out=np.zeros(n), where=cmap.servo_kp > 0) if servo
                   else np.zeros(n))
@@ -50,8 +49,7 @@ def actuation_args(cmap: ChainMap, servo: bool) -> tuple[np.ndarray, np.ndarray,
 
 def make_plant(scn: Scenario, plant: MujocoPlant | None = None, s0: np.ndarray | None = None
                ) -> tuple[mujoco.MjModel, mujoco.MjData, ChainMap]:
-    """Compiled plant model, data at the initial state s0 (16,) (default: the scenario's), ChainMap.
-    plant: an already built `MujocoPlant` of this scenario (default: built here)."""
+    """(mjModel, MjData at the initial state s0 (16,) (default: the scenario's), ChainMap) of `plant`."""
     if plant is None:
         plant = MujocoPlant.build(scn)
     m, cmap = plant.model, plant.cmap
@@ -149,9 +147,8 @@ def chain_body_ids(m: mujoco.MjModel, cmap: ChainMap) -> list[int]:
 
 
 class Geometry:
-    """The plant's recording geometry per control step: chain body poses, master base/elbow/tip, slave tip
-    site.  `live`: filled by the loop from the kinematics inside mj_step; else the loop keeps the qpos
-    history (`qpos_hist`) and `finish` replays MuJoCo's C mj_kinematics (compiled)."""
+    """The plant's recording geometry per control step (chain body poses, master base/elbow/tip, slave tip
+    site): `live`, filled by the loop inside mj_step; else `finish` replays the qpos history."""
 
     def __init__(self, m: mujoco.MjModel, d: mujoco.MjData, cmap: ChainMap, n: int, live: bool):
         self.m, self.cmap, self.live, self.ready = m, cmap, live, live
@@ -177,8 +174,8 @@ class Geometry:
         return self.body_pos[k0:k1], self.body_quat[k0:k1], self.master_pos[k0:k1], self.tip[k0:k1]
 
     def fill(self, traj: Trajectory, k0: int, k1: int) -> None:
-        """traj's plant geometry of steps k0..k1 (x2_plant (m, relative to the slave base), body poses,
-        master points; when it exists: live, or after `finish`) and the bases' meta."""
+        """traj's plant geometry of steps k0..k1 (x2_plant (m, from the slave base), body poses, master
+        points; once it exists) and the bases' meta."""
         traj.meta.update(self.meta)
         if self.ready:
             tip = self.tip[k0:k1]
@@ -187,8 +184,7 @@ class Geometry:
             traj.master_pos = self.master_pos[k0:k1]
 
     def finish(self, traj: Trajectory, done: int, warned: dict[str, int], saturated: int) -> None:
-        """The recording's geometry of steps 0..done-1 (after an mj_kinematics replay without live
-        geometry), the analytic backbone of the sensed q2 (world frame) and the plant's meta."""
+        """The geometry of steps 0..done-1, the analytic backbone of the sensed q2 (world) and the meta."""
         m = self.m
         if not self.live:
             A.kinematics_replay(m._address, self.d._address, MJ_FUNCS, self.d.qpos, self.qpos_hist[:done],
@@ -206,9 +202,8 @@ class Geometry:
 
 
 def body_half_sizes(m: mujoco.MjModel, bodies: np.ndarray) -> np.ndarray:
-    """(nb, 3) half extents (body frame, m) of a box standing for each body's first capsule geom (radius,
-    radius, half length: consecutive boxes tile the chain); a body without one gets a cube of the smallest
-    capsule radius."""
+    """(nb, 3) half extents (body frame, m) of a box for each body's first capsule (r, r, half length); a
+    body without one gets a cube of the smallest capsule radius."""
     out = np.zeros((len(bodies), 3))
     radii = []
     for k, b in enumerate(bodies):

@@ -62,8 +62,8 @@ class MujocoStepped:
         self.warned: dict[str, int] = {}
         self.full = None  # the physics state kept by get_state(keep=True)
 
-    def reset(self, state0: np.ndarray) -> None:
-        """Nothing: `make_plant` put the plant at the initial state."""
+    def reset(self, state0: np.ndarray) -> None:  # `make_plant` put the plant at the initial state
+        pass
 
     def true_state(self, state: np.ndarray) -> int:
         d, c = self.d, self.cmap
@@ -98,8 +98,7 @@ class MujocoStepped:
         return 0
 
     def forces(self, F: np.ndarray, contact: np.ndarray) -> None:
-        """The true forces (4,) ON the robots, constant + the contact force on the tip body, and the contact
-        summary (5,) (`read_contact`)."""
+        """The true forces (4,) ON the robots (constant + contact on the tip body), contact summary (5,)."""
         Fc = self.fa.Fconst
         K.read_contact(self.fa.sensordata, self.fa.cadr, self.F2c, contact, self.nopts)
         for i in range(2):
@@ -195,8 +194,7 @@ class AnalyticStepped:
 
 
 def stepped_plant(scn: Scenario, model: RunModel, plant=None):
-    """The scenario's plant as a `SteppedPlant`: `plant` itself if it is one (the Cosserat rod), else the
-    Python-stepped adapter of the analytic or MuJoCo plant."""
+    """The scenario's plant as a `SteppedPlant`: `plant` if it is one (the rod), else its adapter."""
     if plant is not None and hasattr(plant, "advance"):
         return plant
     if scn.plant.kind == "analytic":
