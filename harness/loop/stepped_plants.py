@@ -36,7 +36,6 @@ class MujocoStepped:
         plant = plant if plant is not None else MujocoPlant.build(scn)
         self.m, self.d, self.cmap = make_plant(scn, plant, model.s0)  # at the initial state
         d, c = self.d, self.cmap
-        # the constant forces (F2 applied here) and the contact sensors, as the compiled loop
         self.fa = ForceArgs(scn, self.m, d, c, plant.contact, 0, model.s0, model.F)
         # `mujoco_kernels.master_grip`'s groups: + q1, dq1, xm, vm, J1, Jd1, M1, N1; the operator off
         self.master = (d.qpos, d.qvel, c.master_qpos_adr, c.master_dof_adr, self.fa.mpk_p, np.zeros(2),
