@@ -21,8 +21,7 @@ from harness.loop.fast import K
 from harness.loop.force_kernels import filter_alpha
 from harness.loop.kernels import DQ2_FILTER
 from harness.loop.trajectory import Trajectory
-from harness.plant.initial import InitialStateError
-from harness.plant.initial import initial_state as _initial_state
+from harness.plant.initial import InitialStateError, initial_state
 
 STOP = threading.Event()  # set from a signal handler to stop a run cleanly
 CHUNK = 250  # control steps between progress and interrupt checks
@@ -41,15 +40,6 @@ def desired_at(scn: Scenario, t: float) -> tuple[np.ndarray, np.ndarray, np.ndar
     xd, dxd, ddxd = np.empty(2), np.empty(2), np.empty(2)
     K.desired(trajectory_params(scn), float(t), xd, dxd, ddxd)
     return xd, dxd, ddxd
-
-
-def initial_state(scn: Scenario) -> np.ndarray:
-    """[q1, dq1, q2, dq2] (16,) at t = 0, both arms at rest (`harness.plant.initial.initial_state`);
-    raises SimulationError when the start is impossible."""
-    try:
-        return _initial_state(scn)
-    except InitialStateError as exc:
-        raise SimulationError(str(exc)) from None
 
 
 def noise_table(scn: Scenario, n: int) -> tuple[np.ndarray, float]:
@@ -159,12 +149,16 @@ class RunModel(NamedTuple):
 
 def compile_model(scn: Scenario) -> RunModel:
     """The `RunModel` of `scn` (raises SimulationError when the start is impossible)."""
+    try:
+        s0 = initial_state(scn)  # both arms at rest
+    except InitialStateError as exc:
+        raise SimulationError(str(exc)) from None
     nodes, weights = gauss_legendre01(scn.slave.n_quad)
     F = np.array([*scn.interaction_forces[0], *scn.interaction_forces[1]], dtype=float)
     return RunModel(
         mpk_c=master_model.packed(scn.master), spk_c=scn.slave.packed(), nodes=nodes, weights=weights,
         gains=np.concatenate([scn.gains.packed(), [float(scn.faults.e2_sign), scn.faults.null_space_scale]]),
-        spec=pack_subtask(scn.subtask, scn.slave), F=F, traj=trajectory_params(scn), s0=initial_state(scn))
+        spec=pack_subtask(scn.subtask, scn.slave), F=F, traj=trajectory_params(scn), s0=s0)
 
 
 def run_meta(scn: Scenario, wall: float) -> dict:
