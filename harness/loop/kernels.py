@@ -221,34 +221,6 @@ def desired(traj, t, xd, dxd, ddxd):
 RK4_T = (0.0, 0.5, 0.5, 1.0)  # the classical RK4's stage times (fractions of the step)
 
 
-def plant_substeps(state, t, h, nsub, continuous, model, F, mpk_p, spk_p, T1, T2, u2, deN, minfo, sinfo, xd,
-                   dxd, ddxd, ks, tmp):
-    """nsub classical RK4 steps of h (s) of the analytic plant (`plant_accel`, packed params mpk_p, spk_p,
-    forces model.F (1)) from time t, in place on state (16,).  T1 (2,), T2 (6,) held unless `continuous`:
-    then both laws (F (4,) the forces they get) run on every stage's state without noise.  ks (4, 16),
-    tmp (16,): work.  Returns ST_OK, ST_NONFINITE or the laws' status."""
-    mpk_c, spk_c, nodes, weights, gains, spec, Fp, traj, _s0 = model
-    for j in range(nsub):
-        ts = t + j * h
-        for s in range(4):
-            x = state if s == 0 else tmp
-            if continuous:
-                desired(traj, ts + RK4_T[s] * h, xd, dxd, ddxd)
-                st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, x, xd, dxd, ddxd, F, T1, T2, u2,
-                                  deN, minfo, sinfo)
-                if s == 0 and st != 0:
-                    return st
-            if not plant_accel(mpk_p, spk_p, nodes, weights, x, T1, T2, Fp, ks[s]):
-                return ST_NONFINITE
-            if s < 3:
-                c = RK4_T[s + 1]
-                for i in range(16):
-                    tmp[i] = state[i] + c * h * ks[s, i]
-        for i in range(16):
-            state[i] += h / 6.0 * (ks[0, i] + 2.0 * ks[1, i] + 2.0 * ks[2, i] + ks[3, i])
-    return ST_OK
-
-
 def plant_sense(k, i, state, row, plant):
     """Bound per plant: the true state (16,) of step k and the row's interaction columns; a status."""
     raise NotImplementedError
@@ -325,18 +297,39 @@ def analytic_command(slot, T1, T2, u2, sensed, plant):
 
 
 def analytic_advance(k, i, st, use, state, law, plant):
-    """nsub RK4 steps of the analytic plant with the commands use = [T1, T2] held (or, `continuous`, the
-    laws in every stage); status 1 on a non-finite state, 5 on a section length <= 0."""
+    """nsub classical RK4 steps h = dt / nsub of the analytic plant (`plant_accel`, its packed params
+    mpk_p, spk_p, the forces model.F (1)) with the commands use = [T1, T2] held, or, `continuous`, both laws
+    (F (4,) the forces they get) on every stage's state without noise.  ks (4, 16), tmp (16,): work.
+    Status: the laws', 1 on a non-finite state, 5 on a section length <= 0."""
     if st != 0:
         return st
     model, F, dt, nsub, continuous, mpk_p, spk_p, ks, tmp = plant
-    T1, T2, u2, deN, minfo, sinfo, xd, dxd, ddxd = law
-    st = plant_substeps(state, k * dt, dt / nsub, nsub, continuous, model, F, mpk_p, spk_p, use[0:2],
-                        use[2:8], u2, deN, minfo, sinfo, xd, dxd, ddxd, ks, tmp)
-    if st != ST_OK:
-        return st
-    for j in range(16):
-        if not np.isfinite(state[j]):
+    _T1, _T2, u2, deN, minfo, sinfo, xd, dxd, ddxd = law
+    mpk_c, spk_c, nodes, weights, gains, spec, Fp, traj, _s0 = model
+    T1 = use[0:2]
+    T2 = use[2:8]
+    t = k * dt
+    h = dt / nsub
+    for j in range(nsub):
+        ts = t + j * h
+        for s in range(4):
+            x = state if s == 0 else tmp
+            if continuous:
+                desired(traj, ts + RK4_T[s] * h, xd, dxd, ddxd)
+                st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, x, xd, dxd, ddxd, F, T1, T2, u2,
+                                  deN, minfo, sinfo)
+                if s == 0 and st != 0:
+                    return st
+            if not plant_accel(mpk_p, spk_p, nodes, weights, x, T1, T2, Fp, ks[s]):
+                return ST_NONFINITE
+            if s < 3:
+                c = RK4_T[s + 1]
+                for a in range(16):
+                    tmp[a] = state[a] + c * h * ks[s, a]
+        for a in range(16):
+            state[a] += h / 6.0 * (ks[0, a] + 2.0 * ks[1, a] + 2.0 * ks[2, a] + ks[3, a])
+    for a in range(16):
+        if not np.isfinite(state[a]):
             return ST_NONFINITE
     return ST_SECTION_LENGTH if section_collapsed(state) else ST_OK
 
@@ -422,8 +415,8 @@ def stepped_paper_step(state, exploding, Ftrue, ignored, t, traj, noise, k, scal
                                     dt, sensed, cmd)
 
 
-KERNELS = ("runaway", "section_collapsed", "servo_reference_step", "ring_index", "plant_substeps",
-           "add_noise", "add_noise_channel", "sense_state", "record_row", "record_row_info",
-           "record_commands", "control_step", "desired", "analytic_loop", "analytic_sense",
-           "analytic_command", "analytic_advance", "analytic_chunk", "stepped_state_check",
-           "stepped_after_control", "stepped_paper_step")
+KERNELS = ("runaway", "section_collapsed", "servo_reference_step", "ring_index", "add_noise",
+           "add_noise_channel", "sense_state", "record_row", "record_row_info", "record_commands",
+           "control_step", "desired", "analytic_loop", "analytic_sense", "analytic_command",
+           "analytic_advance", "analytic_chunk", "stepped_state_check", "stepped_after_control",
+           "stepped_paper_step")
