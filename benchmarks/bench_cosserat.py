@@ -41,8 +41,8 @@ import numpy as np
 
 from harness.config.load import load_scenario
 from harness.loop import simulate
-from harness.loop.common import initial_state
 from harness.plant import build_plant
+from harness.plant.initial import initial_state
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_loop import _pin  # noqa: E402 - one CPU-pinning helper for every benchmark

@@ -45,12 +45,13 @@ import numpy as np
 from controllers.control import MASTER_INFO, SLAVE_INFO
 from harness.config.scenario import PlantConfig, Scenario
 from harness.loop.analytic_loop import simulate_analytic
-from harness.loop.common import compile_model, initial_state, noise_table
+from harness.loop.common import compile_model, noise_table
 from harness.loop.fast import K
 from harness.loop.mujoco_loop import make_plant, simulate_mujoco
 from harness.loop.native import MJ_FUNCS
 from harness.loop.trajectory import ROW_WIDTH
 from harness.output.record import write_recording
+from harness.plant.initial import initial_state
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -101,7 +101,7 @@ _NO_ALLOCATION_SCRIPT = textwrap.dedent("""
     import numpy as np
     from numba.core.runtime import rtsys
     from harness.config.scenario import Scenario
-    from harness.loop.common import compile_model, initial_state, noise_table
+    from harness.loop.common import compile_model, noise_table
     from harness.loop.fast import kernels
     from harness.loop.trajectory import ROW_WIDTH
     from controllers import master
@@ -118,11 +118,11 @@ _NO_ALLOCATION_SCRIPT = textwrap.dedent("""
         ring = np.zeros((1, 8))  # the actuation-delay ring (no delay)
         return K.analytic_chunk(k0, k1, model, plant, (state, noise, scale, model.F, rows, ring, 0))
 
-    run(0, 1, initial_state(scn))  # compile or load
+    run(0, 1, model.s0.copy())  # compile or load
     counts = []
     for steps in (1, n):
         before = rtsys.get_allocation_stats()
-        st, done = run(0, steps, initial_state(scn))
+        st, done = run(0, steps, model.s0.copy())
         after = rtsys.get_allocation_stats()
         assert st == 0 and done == steps, (st, done)
         counts.append(after.alloc - before.alloc)

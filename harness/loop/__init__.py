@@ -1,11 +1,6 @@
-"""The closed loop: a controller (on the nominal analytic models) driving a plant.
-
-`simulate(scn, plant=None)` compiles the scenario once (`harness.loop.common.compile_model`) and returns the
-in-memory `Trajectory`.  The paper's law on the analytic and MuJoCo plants runs in the compiled loops
-(`analytic_loop`, `mujoco_loop`); any other controller, and any plant stepped from Python (the Cosserat
-rod), in the one Python-level loop (`stepped_loop`, plants: `stepped_plants`).  Kernels: `kernels`,
-`mujoco_kernels`, compiled by `fast`.  The loop knows nothing of files, recordings or sweeps.
-"""
+"""The closed loop: a controller (on the nominal analytic models) driving a plant.  `simulate(scn)` runs
+the paper's law on the analytic and MuJoCo plants in compiled loops (`analytic_loop`, `mujoco_loop`),
+anything else in the Python-level loop (`stepped_loop`).  It knows nothing of files or sweeps."""
 
 from __future__ import annotations
 

@@ -1,16 +1,9 @@
-"""Ahead-of-time compiled loop entry kernels: a run that never loads numba (which costs each process
-about 1.2-1.5 s: `benchmarks/bench_core.py`).
-
-The entry kernels called once per chunk of steps (`ENTRIES`) are compiled with `numba.pycc`, from the
-very function the JIT compiles and for the call's argument types (read in pure Python: `type_key`), into
-`<cache root>/aot-<digest>-<recipe>/octarm_<entry>_<types>.so` (`aot_dir`); later processes import it
-and call it like the jitted kernel (same numbers; its wrapper releases the GIL).  A missing module is
-built on first use (20-60 s, one line on stderr) under a file lock.
-
-Fallback: if the module cannot be built or loaded (no C compiler, a numba without pycc, ...), the jitted
-kernel runs (same numbers) and the reason is written to `<module>.failed` (delete it to retry) and logged
-once.  TELEOP_NO_AOT=1: always the jitted kernels; TELEOP_NO_JIT=1: the interpreted ones.
-"""
+"""Ahead-of-time compiled loop entry kernels (`ENTRIES`): a run that never loads numba (~1.2-1.5 s per
+process, `benchmarks/bench_core.py`).  Each is built with `numba.pycc` from the jitted function, for the
+call's argument types (`type_key`), into `aot_dir()/octarm_<entry>_<types>.so` on first use (20-60 s,
+under a file lock; same numbers, GIL released).  Fallback: when it cannot be built or loaded, the jitted
+kernel runs and the reason goes to `<module>.failed` (delete it to retry).  TELEOP_NO_AOT=1: always the
+jitted kernels; TELEOP_NO_JIT=1: the interpreted ones."""
 
 from __future__ import annotations
 

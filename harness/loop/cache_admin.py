@@ -1,7 +1,6 @@
-"""The compiled-kernel cache on disk (`teleop cache`): its folders numba-<digest> (`harness.loop.fast`) and
-aot-<digest>-<recipe> (`harness.loop.aot`), one per kernel-source version (5-60 MB each; a code change or
-upgrade starts new ones), and removing those this installation no longer uses.  Nothing else in the root
-is listed or removed."""
+"""The compiled-kernel cache on disk (`teleop cache`): its folders numba-<digest> (`fast`) and
+aot-<digest>-<recipe> (`aot`), one per kernel-source version (5-60 MB each), and removing those this
+installation no longer uses.  Nothing else in the root is listed or removed."""
 
 from __future__ import annotations
 

@@ -21,8 +21,7 @@ from harness.loop.fast import K
 from harness.loop.force_kernels import filter_alpha
 from harness.loop.kernels import DQ2_FILTER
 from harness.loop.trajectory import Trajectory
-from harness.plant.initial import InitialStateError
-from harness.plant.initial import initial_state as _initial_state
+from harness.plant.initial import InitialStateError, initial_state
 
 STOP = threading.Event()  # set from a signal handler to stop a run cleanly
 CHUNK = 250  # control steps between progress and interrupt checks
@@ -43,20 +42,10 @@ def desired_at(scn: Scenario, t: float) -> tuple[np.ndarray, np.ndarray, np.ndar
     return xd, dxd, ddxd
 
 
-def initial_state(scn: Scenario) -> np.ndarray:
-    """[q1, dq1, q2, dq2] (16,) at t = 0, both arms at rest (`harness.plant.initial.initial_state`);
-    raises SimulationError when the start is impossible."""
-    try:
-        return _initial_state(scn)
-    except InitialStateError as exc:
-        raise SimulationError(str(exc)) from None
-
-
 def noise_table(scn: Scenario, n: int) -> tuple[np.ndarray, float]:
-    """Seeded standard normals and the SNR scale 10^(-SNR/20) (0: no noise): (n, 16) per vector; (n, 32)
-    per channel (columns 16:32 of row 0: the running sums of `kernels.add_noise_channel`).  With
-    ``sensing.dq2_cutoff``, DQ2_FILTER more columns: row 0 holds the filter gain
-    (`force_kernels.filter_alpha`) and the filtered dq2 (`kernels.sense_state`)."""
+    """Seeded standard normals and the SNR scale 10^(-SNR/20) (0: no noise): (n, 16) per vector, (n, 32)
+    per channel (`kernels.add_noise_channel`), + DQ2_FILTER columns with ``sensing.dq2_cutoff``
+    (`kernels.sense_state`)."""
     if scn.snr_db is None:
         normals, scale = np.zeros((1, 16)), 0.0
     else:
@@ -71,18 +60,16 @@ def noise_table(scn: Scenario, n: int) -> tuple[np.ndarray, float]:
 
 
 class ChunkRun:
-    """Drives a loop over a run's n control steps in calls of `size` steps (`run`), keeping status, done
-    (steps recorded), interrupted, error (an exception's text), exc (the exception) and wall (s) up to
-    date; the progress bar `bar` is closed at the end."""
+    """Drives a run's n control steps in calls of `size` steps, keeping status, done (steps recorded),
+    interrupted, error / exc (an exception) and wall (s); closes the progress bar `bar` at the end."""
 
     def __init__(self, n: int, size: int, bar=None, on_part=None):
         self.n, self.size, self.bar, self.on_part = n, size, bar, on_part
         self.status, self.done, self.interrupted, self.error, self.exc, self.wall = 0, 0, False, "", None, 0.0
 
     def run(self, call) -> None:
-        """call(k, k1) -> (status, steps done) runs steps k..k1-1 (and may advance `done` as it goes).  After
-        each call: the bar, on_part(k, done) when steps were done; stops at a non-zero status, on STOP, a
-        KeyboardInterrupt (interrupted) or an exception (kept in error / exc)."""
+        """call(k, k1) -> (status, steps done) runs steps k..k1-1; then the bar and on_part(k, done).  Stops
+        at a non-zero status, on STOP or a KeyboardInterrupt (interrupted) or an exception (error / exc)."""
         t0 = time.perf_counter()
         try:
             k = 0
@@ -110,8 +97,8 @@ class ChunkRun:
             self.wall = time.perf_counter() - t0
 
     def trajectory(self, scn: Scenario, rows: np.ndarray, detail: str = "") -> Trajectory:
-        """The run's Trajectory from rows[:done] and its meta; status / message from the run's end: an
-        exception's text, a status code (`controllers.status`, plus `detail`), an interrupt, or "ok"."""
+        """The Trajectory of rows[:done]; status / message: an exception, a status code (+ `detail`), an
+        interrupt, or "ok"."""
         traj = Trajectory.from_rows(rows[:self.done])
         traj.meta.update(run_meta(scn, self.wall))
         if self.error:
@@ -145,10 +132,9 @@ def progress_bar(enabled: bool, total: int, desc: str):
 
 
 class RunModel(NamedTuple):
-    """A scenario compiled once per run (frozen, like Pinocchio's / MuJoCo's model); per-run buffers are
-    made by each run.  mpk_c, spk_c: the controller's packed master / slave params; nodes, weights:
-    Gauss-Legendre on [0, 1]; gains: packed gains + [e2_sign, null_space_scale]; spec: packed sub-task;
-    F (4,) N: constant tip forces [F1, F2]; traj (5,): desired trajectory; s0 (16,): state at t = 0."""
+    """A scenario compiled once per run (frozen model; each run makes its buffers).  mpk_c, spk_c: the
+    controller's packed params; nodes, weights: Gauss-Legendre on [0, 1]; gains: packed + [e2_sign,
+    null_space_scale]; spec: packed sub-task; F (4,) N; traj (5,): x_d (40); s0 (16,): state at t = 0."""
 
     mpk_c: np.ndarray
     spk_c: np.ndarray
@@ -163,12 +149,16 @@ class RunModel(NamedTuple):
 
 def compile_model(scn: Scenario) -> RunModel:
     """The `RunModel` of `scn` (raises SimulationError when the start is impossible)."""
+    try:
+        s0 = initial_state(scn)  # both arms at rest
+    except InitialStateError as exc:
+        raise SimulationError(str(exc)) from None
     nodes, weights = gauss_legendre01(scn.slave.n_quad)
     F = np.array([*scn.interaction_forces[0], *scn.interaction_forces[1]], dtype=float)
     return RunModel(
         mpk_c=master_model.packed(scn.master), spk_c=scn.slave.packed(), nodes=nodes, weights=weights,
         gains=np.concatenate([scn.gains.packed(), [float(scn.faults.e2_sign), scn.faults.null_space_scale]]),
-        spec=pack_subtask(scn.subtask, scn.slave), F=F, traj=trajectory_params(scn), s0=initial_state(scn))
+        spec=pack_subtask(scn.subtask, scn.slave), F=F, traj=trajectory_params(scn), s0=s0)
 
 
 def run_meta(scn: Scenario, wall: float) -> dict:

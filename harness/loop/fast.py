@@ -1,17 +1,9 @@
-"""Compiled versions of the numba-compatible kernels of `controllers/` and of harness' plant and loop
-kernel modules (each lists its kernels in KERNELS).
-
-Each kernel is cloned into one namespace in which every kernel name refers to its compiled counterpart,
-then wrapped in `numba.njit(cache=True, nogil=True)`, so calls between kernels stay in machine code.
-Working arrays (`controllers.scratch`) live on the kernels' stack frames (`harness.loop.native`), so only
-the kernels listed in a module's HEAP_KERNELS are compiled with numba's runtime.  Usage:
-`from harness.loop.fast import K; K.name(...)`; with TELEOP_NO_JIT=1 (or without numba) K holds the
-interpreted functions (same maths).
-
-On-disk cache: folder keyed by a hash of every kernel module's source, this module and the numba / numpy
-/ Python versions (numba's own cache would keep a stale callee); location $TELEOP_CACHE_DIR, else
-$XDG_CACHE_HOME/octarm-teleop, else ~/.cache/octarm-teleop.
-"""
+"""Compiled versions of the numba-compatible kernels of `controllers/` and harness' kernel modules (each
+lists them in KERNELS): `from harness.loop.fast import K; K.name(...)`.  Every kernel is cloned into one
+namespace of compiled kernels and wrapped in `numba.njit(cache=True, nogil=True)` (calls stay in machine
+code; only HEAP_KERNELS use numba's runtime).  TELEOP_NO_JIT=1 (or no numba): the interpreted functions.
+Cache: a folder keyed by the kernel sources and numba / numpy / Python versions under $TELEOP_CACHE_DIR,
+else $XDG_CACHE_HOME/octarm-teleop, else ~/.cache/octarm-teleop."""
 
 from __future__ import annotations
 

@@ -14,15 +14,6 @@ from harness.plant.environment import N_POINTS, ContactMap
 
 FORCE_NOISE_STREAM = 1  # the force noise uses its own seeded stream: default_rng([seed, 1])
 
-
-def force_noise(scn: Scenario, n: int) -> np.ndarray:
-    """Standard-normal force-sensor noise (n, 4) of its own seeded stream; (1, 4) zeros when unused."""
-    fs = scn.sensing.force
-    if fs.mode != "sensed" or fs.noise_std <= 0.0:
-        return np.zeros((1, 4))
-    return np.random.default_rng([scn.seed, FORCE_NOISE_STREAM]).standard_normal((n, 4))
-
-
 class ForceArgs:
     """Arrays of one run; `args(k0, k1)`: the `fargs` of a chunk.  Applies the constant slave tip force F2
     through d.xfrc_applied on the tip body."""
@@ -38,7 +29,9 @@ class ForceArgs:
             d.xfrc_applied[tip, 0] = self.Fconst[2]
             d.xfrc_applied[tip, 2] = self.Fconst[3]
         self.mode = FORCE_MODES[fs.mode]
-        self.noise = force_noise(scn, n)
+        self.noise = np.zeros((1, 4))  # standard normals (n, 4) of the force sensor, when used
+        if fs.mode == "sensed" and fs.noise_std > 0.0:
+            self.noise = np.random.default_rng([scn.seed, FORCE_NOISE_STREAM]).standard_normal((n, 4))
         self.std = float(fs.noise_std)
         self.alpha = filter_alpha(fs.cutoff, scn.control_dt)
         self.delay = int(round(fs.delay / scn.control_dt))

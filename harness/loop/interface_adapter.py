@@ -1,14 +1,8 @@
-"""A `controllers.interface.Controller` (``reset(ctx)``, ``step(obs) -> Action``) as the controller of the
-Python-level loop (`harness.loop.stepped_loop`): fills the `Observation`, calls the controller, checks the
-`Action` and copies T1 (2,) N m, T2 (6,), u2 (6,), deN (6,) into the loop's buffers (with ``use_ref`` on
-a servo plant, its q2_ref / dq2_ref replace the loop's reference).
-
-Failures are one line naming the controller, the phase and for a step its index and time: anything the
-controller raises (`SystemExit`, `KeyboardInterrupt` included), None, a wrong shape or dtype, NaN / inf,
-or a call past `controller.step_timeout` -> `ControllerFailure` (status "error"); the user's Ctrl-C /
-SIGTERM -> `HarnessInterrupt` (status "interrupted"); `ControllerDiverged` -> its status code (or -1,
-`diverged` holding the message), the step's row recorded with the controller's last action.
-"""
+"""A `controllers.interface.Controller` as the controller of `harness.loop.stepped_loop`: fills the
+`Observation`, checks the `Action` and copies T1 (2,) N m, T2 (6,), u2 (6,), deN (6,) (and, with
+``use_ref`` on a servo plant, q2_ref / dq2_ref) into the loop's buffers.  Anything the controller raises,
+an unusable action or a call past `controller.step_timeout` -> `ControllerFailure` (one line; status
+"error"); Ctrl-C / SIGTERM -> `HarnessInterrupt`; `ControllerDiverged` -> its status code (else -1)."""
 
 from __future__ import annotations
 
@@ -53,10 +47,6 @@ class _Timeout(BaseException):
     """Raised by the alarm handler inside a controller call that ran past its limit."""
 
 
-def _line(e: BaseException) -> str:
-    return " ".join(str(e).split())
-
-
 def _on_alarm(signum, frame):  # noqa: ARG001
     if USER_CODE[0]:
         raise _Timeout
@@ -94,8 +84,7 @@ def check_action(act, name: str, k: int, t: float, servo: bool) -> str:
 
 class InterfaceController:
     """The scenario's controller as the loop's: ``reset(model)``, ``step(t, sensed, xd, dxd, ddxd, T1, T2,
-    u2, deN) -> status``, ``close()`` (restores the signal handlers).  A failed construction is raised by
-    `reset`."""
+    u2, deN) -> status``, ``close()``.  A failed construction is raised by `reset`."""
 
     def __init__(self, scn: Scenario, model: RunModel) -> None:
         self.name = scn.controller.name
@@ -117,8 +106,7 @@ class InterfaceController:
         self.k = 0
 
     def _install(self) -> None:
-        """On the main thread: the time limit's alarm handler, and Ctrl-C marked as the user's when Python's
-        default handler is in place."""
+        """On the main thread: the time limit's alarm handler; default Ctrl-C marked as the user's."""
         if self._saved is not None or not self.main:
             return
         self._saved = {}
@@ -145,9 +133,8 @@ class InterfaceController:
         return ControllerFailure(f"controller {self.name!r} raised {describe_exception(e)} {phase}")
 
     def _call(self, where: str, limit: float | None, fn, *args):
-        """Call controller code under the time limit (s, None: none); `where` names the phase ("in reset",
-        "at step 3 (t = 0.003 s)").  `HarnessInterrupt` and `ControllerDiverged` pass; anything else raised,
-        or running past the limit, is a `ControllerFailure`.  The timer stays armed (`close` disarms it)."""
+        """Call controller code under the time limit (s, None: none; `where` names the phase): anything
+        raised but `HarnessInterrupt` / `ControllerDiverged`, or past the limit: `ControllerFailure`."""
         if self._saved is None:
             self._install()
         armed = self.main and limit is not None and _TIMER
@@ -202,7 +189,8 @@ class InterfaceController:
             act = self._call(f"at step {k} (t = {t:.3f} s)", limit, self.ctrl.step, obs)
         except ControllerDiverged as e:
             code = e.code if e.code in STATUS_CODES and e.code != 0 else -1
-            self.diverged = f"controller {name!r} stopped: {_line(e)} at step {k} (t = {t:.3f} s)"
+            why = " ".join(str(e).split())
+            self.diverged = f"controller {name!r} stopped: {why} at step {k} (t = {t:.3f} s)"
             act = getattr(self.ctrl, "action", None)
             if act is None:
                 raise ControllerFailure(self.diverged) from None
@@ -221,8 +209,7 @@ class InterfaceController:
 
 
 def make_controller(scn: Scenario, model: RunModel | None = None, construct: bool = True):
-    """(instance, the context its `reset` receives); construct=False: (the class, context).  model: the
-    scenario's `RunModel` (default: compiled here)."""
+    """(instance, the context its `reset` receives); construct=False: (the class, context)."""
     cfg = scn.controller
     cls = load_class(cfg.name)
     params = parse_params(cls, cfg.params, cfg.name)

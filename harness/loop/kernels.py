@@ -1,7 +1,6 @@
-"""Per-step loop kernels (numba-compatible; compiled by `harness.loop.fast` with controllers/): sensing
-noise, both laws, the record row, the checks, the analytic plant's RK4 loop and the Python-stepped loop's
-glue.  Statuses: `controllers.status`.
-"""
+"""Per-step loop kernels (numba-compatible; compiled by `harness.loop.fast`): sensing noise, both laws,
+the record row, the checks, the one loop body `loop_chunk`, the analytic plant's RK4 and the Python-stepped
+loop's glue.  Statuses: `controllers.status`."""
 
 from __future__ import annotations
 
@@ -40,9 +39,6 @@ R_FS = R_FT + 4
 R_CI = R_FS + 4
 R_HAND = R_CI + CONTACT_INFO
 RUNAWAY = 1.0  # m: |e1| or |e2| beyond this is a runaway (the workspace is ~1 m)
-
-
-# --- the per-step glue every loop shares (the compiled loops and the Python-stepped loop) ---------------
 DQ2_FILTER = 7  # noise-table columns of the sensed-dq2 filter: gain, filtered dq2 (6)
 
 
@@ -124,7 +120,6 @@ def record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row):
         row[R_E2 + i] = x1[i] - x2[i]
         row[R_DE1 + i] = dxd[i] - dx1
         row[R_DE2 + i] = dx1 - dx2
-        row[R_T1 + i] = T1[i]
     A00 = 0.0
     A01 = 0.0
     A11 = 0.0
@@ -141,10 +136,7 @@ def record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row):
         beta += spec[1] * limits_kernel(spec, q2, scratch_zeros(6), g, gd)
     row[R_BETA] = bm
     row[R_YA] = np.exp(-gains[4] * beta)
-    for a in range(6):
-        row[R_DEN + a] = deN[a]
-        row[R_T2 + a] = T2[a]
-        row[R_U2 + a] = u2[a]
+    record_commands(T1, T2, u2, deN, row)
 
 
 def record_row_info(t, state, xd, dxd, minfo, sinfo, T1, T2, u2, deN, row):
@@ -161,9 +153,15 @@ def record_row_info(t, state, xd, dxd, minfo, sinfo, T1, T2, u2, deN, row):
         row[R_E2 + i] = sinfo[SI_E2 + i]
         row[R_DE1 + i] = minfo[MI_DE1 + i]
         row[R_DE2 + i] = sinfo[SI_DE2 + i]
-        row[R_T1 + i] = T1[i]
     row[R_BETA] = sinfo[SI_BM]
     row[R_YA] = sinfo[SI_YA]
+    record_commands(T1, T2, u2, deN, row)
+
+
+def record_commands(T1, T2, u2, deN, row):
+    """The record row's command columns T1 (2,), T2, u2, deN (6,)."""
+    for i in range(2):
+        row[R_T1 + i] = T1[i]
     for a in range(6):
         row[R_DEN + a] = deN[a]
         row[R_T2 + a] = T2[a]
@@ -223,59 +221,27 @@ def desired(traj, t, xd, dxd, ddxd):
 RK4_T = (0.0, 0.5, 0.5, 1.0)  # the classical RK4's stage times (fractions of the step)
 
 
-def plant_substeps(state, t, h, nsub, continuous, model, F, mpk_p, spk_p, T1, T2, u2, deN, minfo, sinfo, xd,
-                   dxd, ddxd, ks, tmp):
-    """nsub classical RK4 steps of h (s) of the analytic plant (`harness.plant.analytic.plant_accel`, its
-    packed params mpk_p, spk_p, the forces model.F it feels (1)) from time t, in place on state (16,).
-    T1 (2,), T2 (6,) are held (zero-order hold) unless `continuous`: then both laws (nominal params, F (4,)
-    the forces they get) run on every stage's state without noise, writing T1, T2, u2, deN, minfo, sinfo,
-    xd, dxd, ddxd.  ks (4, 16), tmp (16,): work.  Returns ST_OK, ST_NONFINITE or the laws' status."""
-    mpk_c, spk_c, nodes, weights, gains, spec, Fp, traj, _s0 = model
-    for j in range(nsub):
-        ts = t + j * h
-        for s in range(4):
-            x = state if s == 0 else tmp
-            if continuous:
-                desired(traj, ts + RK4_T[s] * h, xd, dxd, ddxd)
-                st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, x, xd, dxd, ddxd, F, T1, T2, u2,
-                                  deN, minfo, sinfo)
-                if s == 0 and st != 0:
-                    return st
-            if not plant_accel(mpk_p, spk_p, nodes, weights, x, T1, T2, Fp, ks[s]):
-                return ST_NONFINITE
-            if s < 3:
-                c = RK4_T[s + 1]
-                for i in range(16):
-                    tmp[i] = state[i] + c * h * ks[s, i]
-        for i in range(16):
-            state[i] += h / 6.0 * (ks[0, i] + 2.0 * ks[1, i] + 2.0 * ks[2, i] + ks[3, i])
-    return ST_OK
-
-
 def plant_sense(k, i, state, row, plant):
-    """A plant's sensing in `loop_chunk` (bound per plant): the true state (16,) of step k and the row's
-    interaction columns (F_sensed: the forces the laws get); returns a status."""
+    """Bound per plant: the true state (16,) of step k and the row's interaction columns; a status."""
     raise NotImplementedError
 
 
 def plant_command(slot, T1, T2, u2, sensed, plant):
-    """A plant's command map in `loop_chunk` (bound per plant): the step's commands into its ring slot."""
+    """Bound per plant: the step's commands into its ring slot."""
     raise NotImplementedError
 
 
 def plant_advance(k, i, st, use, state, law, plant):
-    """A plant's step in `loop_chunk` (bound per plant): over the control step with the ring slot `use` of
-    step k - delay; st != 0: the step failed and is not advanced.  Returns a status."""
+    """Bound per plant: the step with the ring slot `use` of step k - delay (not when st != 0); a status."""
     raise NotImplementedError
 
 
 def loop_chunk(k0, k1, model, data, plant):
-    """Control steps k0..k1-1 of a compiled loop: the per-step sequence every compiled loop shares,
-    `plant_sense` -> `control_step` (x_d, noise, both laws, record row) -> status 4 on a runaway row ->
-    `plant_command` into the ring slot of step k -> `plant_advance` with the slot of step k - delay.
-    The plant kernels are bound per plant (`bind`: `analytic_loop`, `mujoco_kernels.mujoco_loop`); plant:
-    their constants and buffers.  data: (state (16,), noise, noise_scale, rows of this chunk, cmdbuf
-    (delay + 1, w), delay, dt (s)).  Returns (status, completed steps)."""
+    """Control steps k0..k1-1 of a compiled loop: `plant_sense` -> `control_step` -> status 4 on a runaway
+    row -> `plant_command` into the ring slot of step k -> `plant_advance` with the slot of step k - delay.
+    The plant kernels are bound per plant (`bind`); plant: their constants and buffers.  data: (state (16,),
+    noise, noise_scale, this chunk's rows, cmdbuf (delay + 1, w), delay, dt (s)).  Returns (status,
+    completed steps)."""
     mpk_c, spk_c, nodes, weights, gains, spec, _F, traj, _s0 = model
     state, noise, noise_scale, rows, cmdbuf, delay, dt = data
     # the step's arrays are made here, not by a helper: a scratch array lives in the frame that makes it
@@ -331,27 +297,47 @@ def analytic_command(slot, T1, T2, u2, sensed, plant):
 
 
 def analytic_advance(k, i, st, use, state, law, plant):
-    """nsub RK4 steps of the analytic plant with the commands use = [T1, T2] held (or, `continuous`, the
-    laws in every stage); status 1 on a non-finite state, 5 on a section length <= 0."""
+    """nsub classical RK4 steps h = dt / nsub of the analytic plant (`plant_accel`, its packed params
+    mpk_p, spk_p, the forces model.F (1)) with the commands use = [T1, T2] held, or, `continuous`, both laws
+    (F (4,) the forces they get) on every stage's state without noise.  ks (4, 16), tmp (16,): work.
+    Status: the laws', 1 on a non-finite state, 5 on a section length <= 0."""
     if st != 0:
         return st
     model, F, dt, nsub, continuous, mpk_p, spk_p, ks, tmp = plant
-    T1, T2, u2, deN, minfo, sinfo, xd, dxd, ddxd = law
-    st = plant_substeps(state, k * dt, dt / nsub, nsub, continuous, model, F, mpk_p, spk_p, use[0:2],
-                        use[2:8], u2, deN, minfo, sinfo, xd, dxd, ddxd, ks, tmp)
-    if st != ST_OK:
-        return st
-    for j in range(16):
-        if not np.isfinite(state[j]):
+    _T1, _T2, u2, deN, minfo, sinfo, xd, dxd, ddxd = law
+    mpk_c, spk_c, nodes, weights, gains, spec, Fp, traj, _s0 = model
+    T1 = use[0:2]
+    T2 = use[2:8]
+    t = k * dt
+    h = dt / nsub
+    for j in range(nsub):
+        ts = t + j * h
+        for s in range(4):
+            x = state if s == 0 else tmp
+            if continuous:
+                desired(traj, ts + RK4_T[s] * h, xd, dxd, ddxd)
+                st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, x, xd, dxd, ddxd, F, T1, T2, u2,
+                                  deN, minfo, sinfo)
+                if s == 0 and st != 0:
+                    return st
+            if not plant_accel(mpk_p, spk_p, nodes, weights, x, T1, T2, Fp, ks[s]):
+                return ST_NONFINITE
+            if s < 3:
+                c = RK4_T[s + 1]
+                for a in range(16):
+                    tmp[a] = state[a] + c * h * ks[s, a]
+        for a in range(16):
+            state[a] += h / 6.0 * (ks[0, a] + 2.0 * ks[1, a] + 2.0 * ks[2, a] + ks[3, a])
+    for a in range(16):
+        if not np.isfinite(state[a]):
             return ST_NONFINITE
     return ST_SECTION_LENGTH if section_collapsed(state) else ST_OK
 
 
 def analytic_chunk(k0, k1, model, plant, data):
-    """Control steps k0..k1-1 on the analytic plant (`loop_chunk`, `analytic_loop`), in place on the state.
-    plant: (dt (s), nsub, continuous, mpk_p, spk_p: the plant's own packed params); data: (state (16,),
-    noise, noise_scale, F (4,) the laws get, rows of this chunk (F_sensed = F), cmdbuf (delay + 1, 8) the
-    ring of [T1, T2], delay).  Returns (status, completed steps)."""
+    """Control steps k0..k1-1 on the analytic plant (`analytic_loop`), in place on the state.  plant: (dt
+    (s), nsub, continuous, the plant's packed params mpk_p, spk_p); data: (state (16,), noise, noise_scale,
+    F (4,) the laws get, this chunk's rows, cmdbuf (delay + 1, 8) of [T1, T2], delay)."""
     dt, nsub, continuous, mpk_p, spk_p = plant
     state, noise, noise_scale, F, rows, cmdbuf, delay = data
     ks = scratch((4, 16))
@@ -382,10 +368,10 @@ def stepped_state_check(state, exploding, Ftrue, Fctl, ignored):
 
 def stepped_after_control(st, T1, T2, u2, row, Ftrue, Fsens, cinfo, i_F, i_Fs, i_C, ref_mode, ext_ref, ref,
                           dt, sensed, cmd):
-    """After the controller's step (status st): the row's F_true, F_sensed (N) and contact columns (at
-    i_F, i_Fs, i_C); status 1 if T1, T2 or u2 is not finite, 4 on a runaway row.  If still 0: the servo
-    reference ref (12,) = [q2_ref, dq2_ref] steps (ref_mode 1: `servo_reference_step`; 2: ref <- ext_ref,
-    the controller's own; 0: unchanged) and cmd (26,) <- [T1, T2, ref, sensed q2].  Returns the status."""
+    """After the controller's step (status st): the row's F_true, F_sensed (N) and contact columns; status 1
+    if T1, T2 or u2 is not finite, 4 on a runaway row.  If still 0: the servo reference ref (12,) steps
+    (ref_mode 1: `servo_reference_step`; 2: ref <- ext_ref; 0: unchanged) and cmd (26,) <- [T1, T2, ref,
+    sensed q2].  Returns the status."""
     for i in range(4):
         row[i_F + i] = Ftrue[i]
         row[i_Fs + i] = Fsens[i]
@@ -418,8 +404,8 @@ def stepped_after_control(st, T1, T2, u2, row, Ftrue, Fsens, cinfo, i_F, i_Fs, i
 def stepped_paper_step(state, exploding, Ftrue, ignored, t, traj, noise, k, scale, mpk_c, spk_c, nodes,
                        weights, gains, spec, F, xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, row,
                        cinfo, i_F, i_Fs, i_C, ref_mode, ref, dt, cmd):
-    """The paper's law in the stepped loop: `stepped_state_check`, `control_step`, `stepped_after_control`
-    in one call.  Returns (state status, step status); a non-zero state status: nothing recorded."""
+    """`stepped_state_check`, `control_step`, `stepped_after_control` in one call: (state status, step
+    status); a non-zero state status: nothing recorded."""
     s0 = stepped_state_check(state, exploding, Ftrue, F, ignored)
     if s0 != 0:
         return s0, 0
@@ -429,7 +415,8 @@ def stepped_paper_step(state, exploding, Ftrue, ignored, t, traj, noise, k, scal
                                     dt, sensed, cmd)
 
 
-KERNELS = ("runaway", "section_collapsed", "servo_reference_step", "ring_index", "plant_substeps",
-           "add_noise", "add_noise_channel", "sense_state", "record_row", "record_row_info", "control_step",
-           "desired", "analytic_loop", "analytic_sense", "analytic_command", "analytic_advance",
-           "analytic_chunk", "stepped_state_check", "stepped_after_control", "stepped_paper_step")
+KERNELS = ("runaway", "section_collapsed", "servo_reference_step", "ring_index", "add_noise",
+           "add_noise_channel", "sense_state", "record_row", "record_row_info", "record_commands",
+           "control_step", "desired", "analytic_loop", "analytic_sense", "analytic_command",
+           "analytic_advance", "analytic_chunk", "stepped_state_check", "stepped_after_control",
+           "stepped_paper_step")

@@ -21,11 +21,9 @@ def _rms_max(e: np.ndarray | None, mask: np.ndarray) -> tuple[float, float]:
 
 
 def contact_metrics(traj: Trajectory, scn: Scenario, mask: np.ndarray) -> dict:
-    """Contact and force-sensing metrics: contact_force_peak (max |true F2|, whole run, N),
-    contact_force_rms (RMS |true F2| after the transient, N), penetration_max (max penetration of any arm
-    geom into any object, whole run, m), contact_time (s with any arm contact), body_contact_time (s with
-    an arm contact away from the tip body), force_tracking_rms (RMS |sensed F2 - true F2| after the
-    transient, N).  Zeros without interaction; NaN after-transient values for runs cut short."""
+    """contact_force_peak (max |true F2|, N), contact_force_rms (after the transient, N), penetration_max
+    (any arm geom into any object, m), contact_time / body_contact_time (s with an arm contact / one away
+    from the tip body), force_tracking_rms (|sensed F2 - true F2| after the transient, N)."""
     n = len(traj)
     if not n or traj.F_true is None:
         return {k: math.nan for k in ("contact_force_peak", "contact_force_rms", "penetration_max",

@@ -1,7 +1,5 @@
-"""MuJoCo's warning text captured per run, also when runs share the process (a sweep's threads): MuJoCo has
-one process-wide warning callback, so one dispatcher is installed while any run captures and hands each
-warning to the run whose thread raised it (MuJoCo calls it in the stepping thread).  The warning counts
-live in each run's own `MjData`."""
+"""MuJoCo's warning text captured per run, also for runs sharing the process (a sweep's threads): one
+process-wide callback hands each warning to the run whose thread raised it (counts: each run's `MjData`)."""
 
 from __future__ import annotations
 

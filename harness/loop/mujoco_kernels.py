@@ -60,13 +60,6 @@ def mujoco_state_status(state):
     return ST_OK
 
 
-def mujoco_commands(servo, feedforward, dt, q2s, T2, u2, ref, C, R, L0, kv_over_kp, muscle, cmd):
-    """`chain_commands` after the servo reference ref (12,) took the step dt with u2 (servo actuation)."""
-    if servo:
-        servo_reference_step(ref, u2, dt)
-    return chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, muscle, cmd)
-
-
 def chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, muscle, cmd):
     """The chain's part of cmd = [master torque (2), chain ctrl (n), chain feed-forward force (n)]; returns
     the number of muscle groups commanded outside [0, F_max].  Torque: ctrl = virtual-work map of T2 at the
@@ -94,22 +87,17 @@ def chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, muscl
     return 0
 
 
-def master_tip_state(mpk, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1):
-    """Master tip position xm and velocity vm = J1 dq1 (task frame) of the plant master (packed mpk)
-    from MuJoCo's joints; J1 (2, 2) is left for J1^T F."""
+def master_grip(master, operator):
+    """The plant master's tip xm, vm = J1 dq1 (task frame; J1 kept for J1^T F1) from MuJoCo's joints and,
+    with the operator, the grip force F1op."""
+    qpos, qvel, m_qadr, m_dadr, mpk_p, q1, dq1, xm, vm, J1, Jd1, M1, N1 = master
+    op_on, op, targets, hand, target, F1op = operator
     for i in range(2):
         q1[i] = qpos[m_qadr[i]]
         dq1[i] = qvel[m_dadr[i]]
-    master_kernel(mpk, q1, dq1, xm, J1, Jd1, M1, N1)
+    master_kernel(mpk_p, q1, dq1, xm, J1, Jd1, M1, N1)
     for i in range(2):
         vm[i] = J1[i, 0] * dq1[0] + J1[i, 1] * dq1[1]
-
-
-def master_grip(master, operator):
-    """The plant master's tip state (its J1 for J1^T F1) and, with the operator, the grip force F1op."""
-    qpos, qvel, m_qadr, m_dadr, mpk_p, q1, dq1, xm, vm, J1, Jd1, M1, N1 = master
-    op_on, op, targets, hand, target, F1op = operator
-    master_tip_state(mpk_p, qpos, qvel, m_qadr, m_dadr, q1, dq1, xm, vm, J1, Jd1, M1, N1)
     if op_on:
         operator_force(op, hand, xm, vm, F1op)
 
@@ -153,12 +141,14 @@ def mujoco_sense(k, i, state, r, p):
 
 
 def mujoco_command(slot, T1, T2, u2, sensed, p):
-    """The step's command vector into its ring slot (`mujoco_commands` at the sensed q2)."""
+    """The step's command vector into its ring slot (`chain_commands` at the sensed q2, after the servo
+    reference's step)."""
     servo, feedforward, dt, C, R, L0, kv_over_kp, muscle, ref, nsat = p[6]
     slot[0] = T1[0]
     slot[1] = T1[1]
-    nsat[0] += mujoco_commands(servo, feedforward, dt, sensed[4:10], T2, u2, ref, C, R, L0, kv_over_kp,
-                               muscle, slot)
+    if servo:
+        servo_reference_step(ref, u2, dt)
+    nsat[0] += chain_commands(servo, feedforward, sensed[4:10], T2, ref, C, R, L0, kv_over_kp, muscle, slot)
 
 
 def mujoco_advance(k, i, st, use, state, law, p):
@@ -213,19 +203,11 @@ def mujoco_advance(k, i, st, use, state, law, p):
 
 
 def mujoco_chunk(k0, k1, model, plant, data, fargs):
-    """Control steps k0..k1-1 on the MuJoCo plant (`loop_chunk` with `mujoco_sense`, `mujoco_command`,
-    `mujoco_advance`: `mujoco_loop`).
-
-    model: the run's `RunModel`; plant: the constants (mptr, dptr: mjModel*, mjData*; mjfn = MJ_FUNCS;
-    substeps; dt (s); master qpos / dof addresses and actuators; the chain's, then R, C, L0, eargs (the
-    `ChainMap`); servo, feedforward, kv_over_kp (n,), muscle: the actuation); data: the run's buffers
-    (MjData views qpos, qvel, ctrl, qfrc; noise, noise_scale; ref (12,); cmdbuf (delay + 1, 2 + 2n); delay;
-    this chunk's rows, qpos_hist (0 rows: off) and cmd_log ((k1 - k0) * substeps, nu + nv): [ctrl, qfrc]
-    as applied before each mj_step, 0 rows: off; geo_in, geo_out (`copy_geometry`, filled from the
-    kinematics of the first mj_step of each step when geo_out has rows); wnum: mjData.warning.number; nsat
-    (1,): saturated muscle group-steps, added to); fargs: the forces (`harness.loop.force_args.ForceArgs`;
-    the laws get the sensed F).  Returns (status, completed steps); 6: non-finite or exploding MuJoCo
-    state, 7: a MuJoCo warning in the last completed step (whose row is recorded)."""
+    """Control steps k0..k1-1 on the MuJoCo plant (`mujoco_loop`).  plant: the constants (mjModel*,
+    mjData*, MJ_FUNCS, substeps, dt (s), `ChainMap` addresses and maps, actuation); data: the run's buffers
+    (MjData views, noise, servo ref (12,), delay ring, this chunk's rows; qpos_hist, cmd_log (rows:
+    [ctrl, qfrc] before each mj_step) and geo_out off with 0 rows; nsat (1,) saturated muscle
+    group-steps); fargs: `force_args.ForceArgs.args`.  Returns (status, completed steps)."""
     (mptr, dptr, mjfn, substeps, dt, m_qadr, m_dadr, m_act, c_qadr, c_dadr, c_act, R, C, L0, eargs, servo,
      feedforward, kv_over_kp, muscle) = plant
     (qpos, qvel, ctrl, qfrc, noise, noise_scale, ref, cmdbuf, delay, rows, qpos_hist, cmd_log, geo_in,
@@ -265,9 +247,9 @@ def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):
 
 # the kernels that allocate on the heap (run-time sizes), compiled with numba's runtime (harness.loop.fast)
 HEAP_KERNELS = ("mujoco_chunk", "backbone_world")
-KERNELS = ("sense_mujoco", "mujoco_state_status", "mujoco_commands", "chain_commands", "master_tip_state",
-           "master_grip", "master_handle_force", "mujoco_sense", "mujoco_command", "mujoco_advance",
-           "mujoco_loop", "mujoco_chunk", "replay_commands")
+KERNELS = ("sense_mujoco", "mujoco_state_status", "chain_commands", "master_grip", "master_handle_force",
+           "mujoco_sense", "mujoco_command", "mujoco_advance", "mujoco_loop", "mujoco_chunk",
+           "replay_commands", "kinematics_replay", "backbone_world")
 
 
 # --- recording geometry after the loop ---------------------------------------------------------------
@@ -293,5 +275,3 @@ def backbone_world(q2, n_per_section, base, out):
             out[k, r, 1] = base[1]
             out[k, r, 2] = base[2] + pts[r, 1]
 
-
-KERNELS = KERNELS + ("kinematics_replay", "backbone_world")

@@ -1,13 +1,8 @@
-"""Closed loop on the MuJoCo plant: the paper's law on the nominal models, MuJoCo simulating the plant of
-Scenario.plant.  One compiled kernel per chunk of steps (`harness.loop.mujoco_kernels.mujoco_chunk`, which
-calls MuJoCo's C `mj_step`); MuJoCo's auto-reset is off, so a bad state is detected (status 6) and every
-MuJoCo warning stops the run and is reported.
-
-Recording geometry (tip site x2_plant, slave body poses, master base/elbow/tip): the single-stage
-integrators leave the step's start kinematics in MjData, copied after the first mj_step of each step; with
-RK4 the qpos history is replayed through `mj_kinematics` after the loop.  meta: "build_time" (plant),
-"kernel_load_time" (loading the compiled loop), "wall_time" (the loop), "geometry_time" (after it).
-"""
+"""Closed loop on the MuJoCo plant: the paper's law on the nominal models, one compiled kernel per chunk of
+steps (`mujoco_kernels.mujoco_chunk`, calling MuJoCo's C `mj_step`).  Auto-reset is off: a bad state is
+status 6 and any MuJoCo warning stops the run (7).  Recording geometry is copied after each step's first
+mj_step (single-stage integrators) or replayed with `mj_kinematics` after the loop (RK4).  meta:
+build_time, kernel_load_time, wall_time, geometry_time (s)."""
 
 from __future__ import annotations
 
@@ -41,9 +36,8 @@ def warning_counts(numbers: np.ndarray) -> dict[str, int]:
 
 
 def actuation_args(cmap: ChainMap, servo: bool) -> tuple[np.ndarray, np.ndarray, tuple]:
-    """(the chain's actuators in command order: the muscle groups under muscle actuation, else one per
-    joint; kv / kp (n,) of the servos (zeros unless servo); muscle = (radius (3,), max_force (3,)), or
-    two empty arrays without muscles) (`harness.loop.mujoco_kernels.chain_commands`)."""
+    """(the chain's actuators in command order, kv / kp (n,) of the servos (zeros unless servo), muscle =
+    (radius (3,), max_force (3,)) or two empty arrays) for `mujoco_kernels.chain_commands`."""
     n = cmap.n_chain
     kv_over_kp = (np.divide(cmap.servo_kv, cmap.servo_kp, out=np.zeros(n), where=cmap.servo_kp > 0) if servo
                   else np.zeros(n))
@@ -55,8 +49,7 @@ def actuation_args(cmap: ChainMap, servo: bool) -> tuple[np.ndarray, np.ndarray,
 
 def make_plant(scn: Scenario, plant: MujocoPlant | None = None, s0: np.ndarray | None = None
                ) -> tuple[mujoco.MjModel, mujoco.MjData, ChainMap]:
-    """Compiled plant model, data at the initial state s0 (16,) (default: the scenario's), ChainMap.
-    plant: an already built `MujocoPlant` of this scenario (default: built here)."""
+    """(mjModel, MjData at the initial state s0 (16,) (default: the scenario's), ChainMap) of `plant`."""
     if plant is None:
         plant = MujocoPlant.build(scn)
     m, cmap = plant.model, plant.cmap
@@ -75,11 +68,9 @@ def make_plant(scn: Scenario, plant: MujocoPlant | None = None, s0: np.ndarray |
 def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray | None = None,
                     plant: MujocoPlant | None = None, on_chunk=None, model: RunModel | None = None
                     ) -> Trajectory:
-    """The paper's law on the MuJoCo plant; returns the Trajectory (possibly cut short).
-    cmd_log: optional (n_steps * substeps, nu + nv) array receiving the [ctrl, qfrc_applied] applied before
-    every mj_step (a raw-MuJoCo replay); on_chunk: optional callable receiving each finished chunk of steps
-    as a `Trajectory` (with the plant geometry under the single-stage integrators); model: the scenario's
-    `RunModel` (default: compiled here)."""
+    """The paper's law on the MuJoCo plant; returns the Trajectory (possibly cut short).  cmd_log: optional
+    (n_steps * substeps, nu + nv) array receiving [ctrl, qfrc_applied] before every mj_step (a raw-MuJoCo
+    replay); on_chunk: called with each finished chunk as a `Trajectory`; model: default compiled here."""
     a = model if model is not None else compile_model(scn)
     s0 = a.s0
     tb = time.perf_counter()
@@ -156,9 +147,8 @@ def chain_body_ids(m: mujoco.MjModel, cmap: ChainMap) -> list[int]:
 
 
 class Geometry:
-    """The plant's recording geometry per control step: chain body poses, master base/elbow/tip, slave tip
-    site.  `live`: filled by the loop from the kinematics inside mj_step; else the loop keeps the qpos
-    history (`qpos_hist`) and `finish` replays MuJoCo's C mj_kinematics (compiled)."""
+    """The plant's recording geometry per control step (chain body poses, master base/elbow/tip, slave tip
+    site): `live`, filled by the loop inside mj_step; else `finish` replays the qpos history."""
 
     def __init__(self, m: mujoco.MjModel, d: mujoco.MjData, cmap: ChainMap, n: int, live: bool):
         self.m, self.cmap, self.live, self.ready = m, cmap, live, live
@@ -184,8 +174,8 @@ class Geometry:
         return self.body_pos[k0:k1], self.body_quat[k0:k1], self.master_pos[k0:k1], self.tip[k0:k1]
 
     def fill(self, traj: Trajectory, k0: int, k1: int) -> None:
-        """traj's plant geometry of steps k0..k1 (x2_plant (m, relative to the slave base), body poses,
-        master points; when it exists: live, or after `finish`) and the bases' meta."""
+        """traj's plant geometry of steps k0..k1 (x2_plant (m, from the slave base), body poses, master
+        points; once it exists) and the bases' meta."""
         traj.meta.update(self.meta)
         if self.ready:
             tip = self.tip[k0:k1]
@@ -194,8 +184,7 @@ class Geometry:
             traj.master_pos = self.master_pos[k0:k1]
 
     def finish(self, traj: Trajectory, done: int, warned: dict[str, int], saturated: int) -> None:
-        """The recording's geometry of steps 0..done-1 (after an mj_kinematics replay without live
-        geometry), the analytic backbone of the sensed q2 (world frame) and the plant's meta."""
+        """The geometry of steps 0..done-1, the analytic backbone of the sensed q2 (world) and the meta."""
         m = self.m
         if not self.live:
             A.kinematics_replay(m._address, self.d._address, MJ_FUNCS, self.d.qpos, self.qpos_hist[:done],
@@ -213,9 +202,8 @@ class Geometry:
 
 
 def body_half_sizes(m: mujoco.MjModel, bodies: np.ndarray) -> np.ndarray:
-    """(nb, 3) half extents (body frame, m) of a box standing for each body's first capsule geom (radius,
-    radius, half length: consecutive boxes tile the chain); a body without one gets a cube of the smallest
-    capsule radius."""
+    """(nb, 3) half extents (body frame, m) of a box for each body's first capsule (r, r, half length); a
+    body without one gets a cube of the smallest capsule radius."""
     out = np.zeros((len(bodies), 3))
     radii = []
     for k, b in enumerate(bodies):

@@ -1,22 +1,11 @@
-"""The one Python-level closed loop: any controller on any plant stepped from Python (protocol
-`harness.plant.stepped.SteppedPlant`: the Cosserat rod, the adapters of `harness.loop.stepped_plants`).
-
-Per control step k (t = k control_dt), `Stepper.step`:
-
-    status = plant.true_state(state)     noise-free [q1, dq1, q2, dq2] (16,); state checks (8, 5)
-    x_d(t) (40), sensed = state + AWGN   the seeded table of `noise_table` (same seed -> same noise)
-    controller step                      "paper": its compiled laws (12)-(13), (17)-(33) in one call
-                                         (`K.stepped_paper_step`); else a `controllers.interface.Controller`
-                                         through `harness.loop.interface_adapter.InterfaceController`
-    record row, command checks (1, 4)    `harness.loop.kernels.stepped_after_control`
-    servo reference                      dq2_ref += u2 dt, q2_ref += dq2_ref dt, or the controller's own
-    plant.command(...)                   the commands of step k - actuation delay (ring of slots)
-    status = plant.advance(control_dt)
-
-The run stops at the first non-zero status (`controllers.status.Status`), keeps every recorded row and
-says why; `harness.loop.common.STOP` interrupts between steps.  The same `Stepper` is the closed-loop map
-of `harness.studies.stability`.
-"""
+"""The one Python-level closed loop: any controller on any plant stepped from Python
+(`harness.plant.stepped.SteppedPlant`).  Per control step k, `Stepper.step`: the plant's true state and
+checks (8, 5), x_d(t) (40), the sensed state (noise table), the controller (the paper's compiled law,
+or a `controllers.interface.Controller` through `interface_adapter`), the record row and command checks
+(1, 4), the servo reference, then `plant.command` with the commands of step k - delay and
+`plant.advance`.  The run stops at the first non-zero status (`controllers.status.Status`) and keeps every
+recorded row; `common.STOP` interrupts between steps.  `Stepper` is also the closed-loop map of
+`harness.studies.stability`."""
 
 from __future__ import annotations
 
@@ -47,13 +36,11 @@ _NO_REF = np.zeros(0)
 
 
 class Stepper:
-    """One control step of the closed loop on a stepped plant, with the run's buffers.
-
-    ctrl: an `InterfaceController`, or None for the paper's compiled law; noise: (table, scale) of
-    `noise_table` (default: none); record(k): called once step k's row is recorded (the plant geometry).
-    Loop state (what `harness.studies.stability` perturbs): `ref` (12,) = [q2_ref, dq2_ref], the servo
-    reference, and `cmdbuf` (delay + 1, 26), the actuation-delay ring of [T1, T2, q2_ref, dq2_ref, sensed q2].
-    """
+    """One control step of the closed loop on a stepped plant, with the run's buffers.  ctrl: an
+    `InterfaceController`, or None for the paper's compiled law; noise: `noise_table`'s (default: none);
+    record(k): called once step k is recorded.  Loop state (perturbed by `harness.studies.stability`):
+    `ref` (12,) servo reference [q2_ref, dq2_ref], `cmdbuf` (delay + 1, 26) the actuation-delay ring of
+    [T1, T2, q2_ref, dq2_ref, sensed q2]."""
 
     def __init__(self, scn: Scenario, plant: SteppedPlant, model: RunModel,
                  ctrl: InterfaceController | None = None, noise: tuple[np.ndarray, float] | None = None,
@@ -128,11 +115,9 @@ class Stepper:
 def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
                      on_chunk=None, model: RunModel | None = None) -> Trajectory:
     """Run the scenario (its controller) on a stepped plant; returns the Trajectory (possibly cut short).
-    on_chunk: optional callable receiving every CHUNK steps as a `Trajectory` (time series only).
-    A plant with `record(k)` / `finish(traj, done)` records its own geometry; otherwise traj.x2_plant
-    (n, 2) is its `slave_tip()`, traj.master_pos (n, 3, 3) its geometry's "master" and
-    traj.meta["geometry"][name] (n, ...) the rest.  meta: "build_time" (controller and plant reset),
-    "wall_time" (the loop)."""
+    on_chunk: called with every CHUNK steps as a `Trajectory`.  Without the plant's own `record` / `finish`:
+    traj.x2_plant (n, 2) = `slave_tip()`, master_pos (n, 3, 3) = geometry()["master"],
+    meta["geometry"] the rest.  meta: build_time, wall_time (s)."""
     tb = time.perf_counter()
     n = scn.n_steps
     model = model if model is not None else compile_model(scn)

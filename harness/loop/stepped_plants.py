@@ -1,12 +1,6 @@
-"""The MuJoCo and analytic plants as `harness.plant.stepped.SteppedPlant`s for the Python-level loop
-(`harness.loop.stepped_loop`).  Each does what its compiled loop does around the law, with the same
-kernels, so the paper's law through the interface gives the compiled loop's numbers bit for bit:
-
-* `MujocoStepped`: `sense_mujoco` and its state checks (status 6, 5), the command maps of
-  `chain_commands` at the commanding step's sensed q2, per substep the elastic correction and
-  `mujoco.mj_step`, MuJoCo warnings (status 7); its own recording (`record`, `finish`).
-* `AnalyticStepped`: the RK4 of `harness.loop.kernels.plant_substeps`, commands held over the step.
-"""
+"""The MuJoCo and analytic plants as `harness.plant.stepped.SteppedPlant`s for `harness.loop.stepped_loop`,
+with the kernels of their compiled loops (the paper's law through the interface gives the compiled loop's
+numbers bit for bit)."""
 
 from __future__ import annotations
 
@@ -42,7 +36,6 @@ class MujocoStepped:
         plant = plant if plant is not None else MujocoPlant.build(scn)
         self.m, self.d, self.cmap = make_plant(scn, plant, model.s0)  # at the initial state
         d, c = self.d, self.cmap
-        # the constant forces (F2 applied here) and the contact sensors, as the compiled loop
         self.fa = ForceArgs(scn, self.m, d, c, plant.contact, 0, model.s0, model.F)
         # `mujoco_kernels.master_grip`'s groups: + q1, dq1, xm, vm, J1, Jd1, M1, N1; the operator off
         self.master = (d.qpos, d.qvel, c.master_qpos_adr, c.master_dof_adr, self.fa.mpk_p, np.zeros(2),
@@ -68,8 +61,8 @@ class MujocoStepped:
         self.warned: dict[str, int] = {}
         self.full = None  # the physics state kept by get_state(keep=True)
 
-    def reset(self, state0: np.ndarray) -> None:
-        """Nothing: `make_plant` put the plant at the initial state."""
+    def reset(self, state0: np.ndarray) -> None:  # `make_plant` put the plant at the initial state
+        pass
 
     def true_state(self, state: np.ndarray) -> int:
         d, c = self.d, self.cmap
@@ -104,8 +97,7 @@ class MujocoStepped:
         return 0
 
     def forces(self, F: np.ndarray, contact: np.ndarray) -> None:
-        """The true forces (4,) ON the robots, constant + the contact force on the tip body, and the contact
-        summary (5,) (`read_contact`)."""
+        """The true forces (4,) ON the robots (constant + contact on the tip body), contact summary (5,)."""
         Fc = self.fa.Fconst
         K.read_contact(self.fa.sensordata, self.fa.cadr, self.F2c, contact, self.nopts)
         for i in range(2):
@@ -164,10 +156,11 @@ class AnalyticStepped:
         self.spk = plant.slave.packed()
         self.physics_dt = scn.control_dt / max(1, scn.substeps)
         self.state = model.s0.copy()
-        self.T1, self.T2 = np.zeros(2), np.zeros(6)
-        # the laws' buffers of `plant_substeps` (unused: the commands are held) and its RK4 work arrays
-        self.work = (np.zeros(4), np.zeros(6), np.zeros(6), np.zeros(MASTER_INFO), np.zeros(SLAVE_INFO),
-                     np.zeros(2), np.zeros(2), np.zeros(2), np.empty((4, 16)), np.empty(16))
+        self.cmd = np.zeros(8)  # [T1, T2], held over the step
+        # `analytic_advance`'s law buffers (unused: the commands are held) and RK4 work arrays
+        self.law = (np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6), np.zeros(MASTER_INFO),
+                    np.zeros(SLAVE_INFO), np.zeros(2), np.zeros(2), np.zeros(2))
+        self.work = (np.zeros(4), np.empty((4, 16)), np.empty(16))
 
     def reset(self, state0: np.ndarray) -> None:
         self.state[:] = state0
@@ -183,20 +176,14 @@ class AnalyticStepped:
         return 0
 
     def command(self, T1, T2, q2_ref, dq2_ref, q2_sensed) -> None:
-        self.T1[:] = T1
-        self.T2[:] = T2
+        self.cmd[0:2] = T1
+        self.cmd[2:8] = T2
 
     def advance(self, dt: float) -> int:
-        s = self.state
         nsub = max(1, round(dt / self.physics_dt))
-        F, u2, deN, minfo, sinfo, xd, dxd, ddxd, ks, tmp = self.work
-        st = K.plant_substeps(s, 0.0, dt / nsub, nsub, False, self.model, F, self.mpk, self.spk, self.T1,
-                              self.T2, u2, deN, minfo, sinfo, xd, dxd, ddxd, ks, tmp)
-        if st != Status.OK:
-            return Status(st)
-        if not np.all(np.isfinite(s)):
-            return Status.NONFINITE
-        return Status.SECTION_LENGTH if np.any(s[4:7] <= 0.0) else 0
+        F, ks, tmp = self.work
+        plant = (self.model, F, dt, nsub, False, self.mpk, self.spk, ks, tmp)
+        return Status(K.analytic_advance(0, 0, 0, self.cmd, self.state, self.law, plant))
 
     def record(self, k: int) -> None:
         """No plant geometry beyond the state."""
@@ -206,8 +193,7 @@ class AnalyticStepped:
 
 
 def stepped_plant(scn: Scenario, model: RunModel, plant=None):
-    """The scenario's plant as a `SteppedPlant`: `plant` itself if it is one (the Cosserat rod), else the
-    Python-stepped adapter of the analytic or MuJoCo plant."""
+    """The scenario's plant as a `SteppedPlant`: `plant` if it is one (the rod), else its adapter."""
     if plant is not None and hasattr(plant, "advance"):
         return plant
     if scn.plant.kind == "analytic":

@@ -33,10 +33,8 @@ class Trajectory:
 
     t: (n,) s | q1, dq1: (n, 2) rad, rad/s | q2, dq2: (n, 6) [d (m), k (1/m)] and rates
     xd, x1, x2: (n, 2) m | e1 = xd - x1, e2 = x1 - x2: (n, 2) m (eq. 11, 16), x2 analytic of sensed q2
-    beta: (n,) manipulability (41), the quantity of the paper's Fig. 4 | ya: (n,) eq. (29),
-      y_a = exp(-k_y beta_s) of the sub-task function the controller uses, beta_s = sum of weight x
-      part (default: manipulability + 0.05 x limits, controllers.subtasks), so ya != exp(-k_y beta)
-      when the limits part is on; beta_s < 0 (ya > 1) only outside the length/bend ranges
+    beta: (n,) manipulability (41) (the paper's Fig. 4) | ya: (n,) y_a = exp(-k_y beta_s) (29) of the
+      controller's sub-task function beta_s (`controllers.subtasks`; != beta with the limits part on)
     deN: (n, 6) null-space velocity error (23)
     T1: (n, 2) N m | T2: (n, 6) generalized forces [N, N m^2] | u2: (n, 6) slave auxiliary input (18)
     F_true: (n, 4) N, interaction forces ON the robots at the tips [F1x, F1z, F2x, F2z] (operator at the

@@ -1,5 +1,5 @@
 """The analytic plant: the paper's models (1) with the plant's own parameters; `plant_accel` is its forward
-dynamics kernel (numba-compatible), integrated by `harness.loop.kernels.plant_substeps`."""
+dynamics kernel (numba-compatible), integrated by `harness.loop.kernels.analytic_advance`."""
 
 from __future__ import annotations
 

@@ -1,25 +1,15 @@
-"""The protocol of plants stepped from Python by the one Python-level loop (`harness.loop.stepped_loop`).
+"""The protocol of plants stepped by `harness.loop.stepped_loop` (the Cosserat rod, the adapters of
+`harness.loop.stepped_plants`).  Per control step: `true_state`, then (after the controller) `record(k)`,
+`command` (the commands of step k - actuation delay) and `advance(control_dt)`.
 
-A stepped plant simulates both arms; the controller sees only its sensed state.  Implementations: the
-Cosserat rod (`harness.plant.cosserat.plant`) and the MuJoCo and analytic adapters
-(`harness.loop.stepped_plants`).  Per control step of length control_dt the loop (`Stepper.step`) calls
-`true_state`, then (after the controller) `record(k)`, `command` (the commands of step k - actuation delay)
-and `advance(control_dt)`.
+Optional members: `record(k)` / `finish(traj, done)` (the plant records its own geometry; else
+`slave_tip()` [X, Z] (2,) m and `geometry()` (world-frame arrays, "master" (3, 3)) are copied each step);
+`forces(F (4,), contact (5,))` (the true forces, else the constant ones); `stop` (the run's stop flag);
+`state_names`, `get_state(keep=False) -> (n,)`, `set_state(x)` (for `harness.studies.stability`;
+keep=True also keeps the rest of the physics state, restored by every later `set_state`).
 
-Optional members:
-* `record(k)` / `finish(traj, done)`: the plant keeps its recording geometry of step k and writes it into
-  traj at the end; without them it gives `slave_tip()` (its own slave tip [X, Z] (2,), m) and `geometry()`
-  (arrays such as "centreline" (n, 3), "sections" (4, 3), "master" (3, 3), world frame), copied each step;
-* `forces(F (4,), contact (5,))`: the true interaction forces of the step (else the scenario's constant
-  ones); `stop`: the run's stop flag, for plants with long inner loops;
-* `state_names`, `get_state(keep=False) -> (n,)`, `set_state(x)`: the plant's state coordinates (the
-  closed-loop map of `harness.studies.stability`); keep=True also keeps the rest of its physics state
-  (e.g. MuJoCo's warm start and time), which every later `set_state` restores.
-
-Units: q1 (rad), dq1 (rad/s), q2 = [d1, d2, d3 (m), k1, k2, k3 (1/m)] and rates; T1 (N m) master torques
-(eq. 13); T2 = [T_d (N), T_k (N m^2)] slave generalized forces (eq. 18).  Servo plants track q2_ref /
-dq2_ref and may add T2 as feed-forward; torque plants apply T2.  Statuses: `controllers.status.Status`.
-"""
+Units: q1 rad, q2 = [d (m), k (1/m)]; T1 N m (13); T2 = [T_d (N), T_k (N m^2)] (18).  Statuses:
+`controllers.status.Status`."""
 
 from __future__ import annotations
 
