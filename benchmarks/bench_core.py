@@ -136,7 +136,7 @@ def main() -> int:
         print(text, flush=True)
         lines.append(text)
 
-    say(f"# bench_core: {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {os.cpu_count()} CPUs, "
+    say(f"# bench_core: {os.cpu_count()} CPUs, "
         f"load average {os.getloadavg()[0]:.2f}, --reps {args.reps} --cases {args.cases}")
     loops, raws, binding, loops_b = loop_and_raw(args.reps)
     raw_med = float(np.median(raws))

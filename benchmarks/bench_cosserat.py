@@ -22,7 +22,7 @@ repetitions (the machine is noisy).  Rows, all on the paper scenario (40 dB, ser
   mujoco default    harness.loop.simulate, plant.kind = "mujoco", N = 8: the default plant (free chain,
                     material damping)
   mujoco CC on      the same with plant.enforce_cc = true
-and the stepped loop's overhead: loop / bare (issue 14 asks <= 1.25).
+and the stepped loop's overhead: loop / bare (the goal: <= 1.25).
 Prints a markdown table and replaces benchmarks/results/bench_cosserat.md with it (unless --no-write).
 This is a benchmark, not a test: it asserts nothing.
 """
@@ -30,7 +30,6 @@ This is a benchmark, not a test: it asserts nothing.
 from __future__ import annotations
 
 import argparse
-import datetime
 import os
 import platform
 import sys
@@ -151,7 +150,7 @@ def main() -> None:
     lines = [
         f"# Cosserat plant speed (`benchmarks/bench_cosserat.py --duration {T:g} --reps {args.reps}"
         f"{' --clock cpu' if args.clock == 'cpu' else ''}`)", "",
-        f"{datetime.date.today()}, {platform.processor() or platform.machine()}, clock: {args.clock}, Python "
+        f"{platform.processor() or platform.machine()}, clock: {args.clock}, Python "
         f"{sys.version.split()[0]}, {pin}, os.getloadavg() = {tuple(round(x, 1) for x in os.getloadavg())}.",
         f"Paper scenario, {T:g} s simulated ({n} control steps of {c['scn'].control_dt * 1e3:g} ms), 40 dB, "
         f"servo, seed 0. Rod: {c['elements']} elements per section, dt = {c['rod_dt'] * 1e6:.1f} us "
@@ -163,7 +162,7 @@ def main() -> None:
     for name, wall, status in rows:
         lines.append(f"| {name} | {wall:.3f} | {T / wall:.3f} | {wall / n * 1e6:.0f} | {status} |")
     lines += ["", f"Stepped-loop overhead: loop / bare stepping = {c['loop'] / c['bare']:.3f} "
-              f"(loop / (bare + CC fit) = {c['loop'] / c['bare_fit']:.3f}); issue 14 asks <= 1.25.", ""]
+              f"(loop / (bare + CC fit) = {c['loop'] / c['bare_fit']:.3f}); goal <= 1.25.", ""]
     text = "\n".join(lines)
     print(text)
     if not args.no_write:

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import datetime
 import os
 import platform
 import subprocess
@@ -418,7 +417,7 @@ def main() -> None:
         simulate_mujoco(dataclasses.replace(base, duration=0.05, plant=PlantConfig(actuation=act)))
     simulate_analytic(dataclasses.replace(base, duration=0.05, plant=PlantConfig(kind="analytic")))
 
-    out(f"# Harness speed vs raw MuJoCo ({datetime.date.today().isoformat()})\n")
+    out("# Harness speed vs raw MuJoCo\n")
     out(f"Machine: {_machine()}; benchmark process {pinned} (one core for everything, including Rerun's "
         f"writer thread); {args.reps} interleaved repetitions.\n")
     out(f"Paper scenario: {dur:g} s at 1 kHz (1 ms physics = control step), N = {base.plant.segments} "

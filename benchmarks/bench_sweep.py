@@ -20,7 +20,6 @@ line above the table says how the workers start (fork or spawn, `harness.studies
 from __future__ import annotations
 
 import argparse
-import datetime
 import importlib
 import os
 import platform
@@ -129,7 +128,7 @@ def main(argv=None) -> int:
         importlib.import_module(name)
 
     lines = [f"`bench_sweep.py {' '.join(sys.argv[1:] if argv is None else argv)}`, "
-             f"{datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC, load average "
+             f"load average "
              f"{os.getloadavg()[0]:.2f}, {platform.processor() or platform.machine()}, "
              f"os.cpu_count() = {ncpu}", ""]
     for n in n_cases:
