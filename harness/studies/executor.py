@@ -1,7 +1,6 @@
-"""Executors of a sweep: the worker function (`run_case`); a process pool (the default: a crashing case
-takes only its worker, which is isolated and blamed, and the pool is recreated), threads of this process
-(the compiled loops release the GIL, `harness.loop.releases_gil`) or a Dask client; and `run_cases`, which
-keeps cases in flight and hands each result to the parent as it finishes."""
+"""Executors of a sweep: the worker (`run_case`); a process pool (a crashing case is isolated and blamed),
+threads (the compiled loops release the GIL) or a Dask client; `run_cases` keeps cases in flight and hands
+each result to the parent as it finishes."""
 
 from __future__ import annotations
 
@@ -48,10 +47,10 @@ class CaseTimeout(RuntimeError):
 
 
 def _error_result(e: BaseException | None = None, message: str = "") -> dict:
-    if e is None:
-        return {"status": "error", "message": message, "traceback": ""}
-    return {"status": "error", "message": f"{type(e).__name__}: {e}",
-            "traceback": "".join(traceback.format_exception(e))}
+    if e is not None:
+        message = f"{type(e).__name__}: {e}"
+    return {"status": "error", "message": message,
+            "traceback": "".join(traceback.format_exception(e)) if e is not None else ""}
 
 
 def _timeout_result(limit: float) -> dict:
@@ -70,12 +69,10 @@ def check_case_timeout(value) -> float | None:
 
 
 def run_case(case: dict) -> dict:
-    """Worker: simulate one case and compute its metrics.  Never raises (an exception gives status "error"
-    with the message and traceback); a diverged run keeps the Trajectory's status.
-
-    case: {"case_id", "scenario": Scenario, "metrics": [names], "record": bool, "time_limit": s or None};
-    past the time limit the loop stops at its next chunk of steps (`CaseTimeout`).  Returns {"case_id",
-    "status", "message", "metrics", "wall_time", "traceback"} (+ "recording": the .rrd bytes if "record")."""
+    """Worker: simulate one case and compute its metrics; never raises (an exception gives status "error").
+    case: {"case_id", "scenario", "metrics": [names], "record": bool, "time_limit": s or None (`CaseTimeout`
+    at the next chunk of steps)}.  Returns {"case_id", "status", "message", "metrics", "wall_time",
+    "traceback"} (+ "recording": the .rrd bytes if "record")."""
     t0 = time.perf_counter()
     out = {"case_id": case.get("case_id"), "metrics": {}, "traceback": ""}
     limit = case.get("time_limit")
@@ -128,20 +125,17 @@ def _watch_parent(parent: int) -> None:
 def _worker_init() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the process group: the parent reacts
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the parent's clean-stop handler (inherited by fork)
-    # registered last, so run first at exit: no interpreter teardown (~0.7 s with numba and MuJoCo) for
-    # the pool's shutdown to wait for; every result has been sent by then
+    # run first at exit: no interpreter teardown (~0.7 s) for the pool's shutdown to wait for
     atexit.register(end_process, 0)
     set_gc_thresholds()
-    # a killed main process cannot stop its pool: Linux kills each worker when its parent ends (it works
-    # while a case blocks holding the GIL); elsewhere each worker ends itself within PARENT_POLL s
+    # a killed main process cannot stop its pool: Linux kills each worker with it, else the watchdog
     die_with_parent(signal.SIGKILL)
     threading.Thread(target=_watch_parent, args=(os.getppid(),), name="parent-watchdog", daemon=True).start()
 
 
 def start_method() -> str:
     """How pool workers start: "fork" on Linux when this process runs no other Python thread (the workers
-    inherit the imported harness, numpy and MuJoCo: no interpreter start-up or imports); else "spawn"
-    (fresh interpreters: safe beside threads, and they see the current environment)."""
+    inherit the imported modules), else "spawn"."""
     return "fork" if sys.platform.startswith("linux") and threading.active_count() == 1 else "spawn"
 
 
@@ -157,9 +151,8 @@ def _process_pool(workers: int) -> cf.ProcessPoolExecutor:
 
 
 def _stop(ex: cf.Executor, cancel: bool) -> None:
-    """Shut an executor down; cancel: drop the pending cases and stop the running ones (pool workers are
-    terminated; threads stop at their next chunk of steps, `harness.loop.common.STOP`, and come back
-    "interrupted"; either way they re-run on resume)."""
+    """Shut an executor down; cancel: drop the pending cases and stop the running ones (workers terminated;
+    threads stop at their next chunk, `harness.loop.common.STOP`, "interrupted": both re-run on resume)."""
     if not cancel or not isinstance(ex, cf.ProcessPoolExecutor | cf.ThreadPoolExecutor):
         ex.shutdown(wait=not cancel)
     elif isinstance(ex, cf.ThreadPoolExecutor):
@@ -259,11 +252,10 @@ class Runner:
 
 def run_cases(runner: Runner, case_fn: Callable, cases: Sequence[Case], metrics: Sequence[str],
               record: bool, on_result: Callable[[Case, dict], None], time_limit: float | None = None) -> None:
-    """Run cases through the runner, calling on_result(case, result) in the parent as each finishes.  An
-    exception of case_fn is the case's result (status "error"); a dead process pool re-runs the cases that
-    were in flight one by one to find the one that kills its worker.  time_limit: seconds per case; on the
-    process pool a case still running HARD_LIMIT_GRACE s past it (blocked inside a step) gets an error
-    row, the workers are stopped and the other cases in flight run again."""
+    """Run cases, calling on_result(case, result) in the parent as each finishes (an exception of case_fn:
+    status "error").  A dead process pool re-runs the cases in flight one by one to blame one.  time_limit:
+    s per case; on the pool a case still running HARD_LIMIT_GRACE s past it gets an error row and the
+    workers are stopped (the other cases in flight run again)."""
     def payload(case: Case) -> dict:
         return {"case_id": case.case_id, "scenario": case.scenario, "metrics": list(metrics),
                 "record": record, "time_limit": time_limit}
@@ -331,9 +323,8 @@ def run_cases(runner: Runner, case_fn: Callable, cases: Sequence[Case], metrics:
 
 
 def _isolated(case_fn: Callable, payload: dict, hard: float | None = None) -> dict:
-    """Run one case alone in a fresh 1-process pool whose worker has first run a no-op, so that a dead
-    worker is this case's doing (else SweepError: workers that cannot start).  hard: seconds after which a
-    case that has not returned is an error row (its worker is stopped)."""
+    """Run one case alone in a fresh 1-process pool after a no-op (SweepError if that fails), so that a dead
+    worker is this case's doing.  hard: s after which the case is an error row."""
     ex = _process_pool(1)
     try:
         try:

@@ -1,17 +1,6 @@
-"""Fidelity of the MuJoCo plant against the analytic models (`teleop fidelity`).
-
-Slave: at seeded random in-range q2 the chain is put on the constant-curvature (CC) manifold and compared
-with `controllers.slave` through A = d qpos_chain / d q2: the tip site vs `tip_position`; mj_jacSite
-(x, z rows) A vs `jacobian`; A^T M_chain A vs `mass_matrix` with the joint armature removed ("mass") and
-the armature's own share A^T diag(armature) A ("armature"); A^T qfrc_bias at rest vs `gravity_force`;
--A^T (qfrc_spring + elastic correction) vs `elastic_force`.  Errors are relative, in the coordinate
-scales s = [L0, max_bend / L0] (spectral norms of matrices, 2-norms of vectors; the tip: |dx| / sum(L0)),
-maximised over the samples; observed order between resolutions N < N': log(e_N / e_N') / log(N' / N).
-Master: MuJoCo inertia, bias, tip and Jacobian vs `controllers.master` (absolute; exact to rounding).
-CC enforced or not (`cc_study`): the servo chain with and without the CC equality constraints holding
-seeded bent q2 under gravity (static feed-forward + elastic correction), its departure from the CC chain
-at the sensed q2, the mj_step cost and the paper scenario's closed loop on it.
-"""
+"""Fidelity of the MuJoCo plant against the analytic models (`teleop fidelity`): slave quantities through
+A = d qpos_chain / d q2 on the CC manifold, the master, and the chain with and without the CC constraints.
+docs/plants.md, fidelity studies."""
 
 from __future__ import annotations
 
@@ -63,7 +52,9 @@ def _rel(err: np.ndarray, ref: np.ndarray) -> float:
 
 def slave_errors(m: mujoco.MjModel, cm: ChainMap, slave: SlaveParams, q2: np.ndarray,
                  d: mujoco.MjData | None = None) -> dict[str, float]:
-    """Relative errors (module docstring) of the MuJoCo chain at one q2 (6,) on the CC manifold."""
+    """Relative errors of the MuJoCo chain at one q2 (6,) on the CC manifold vs `controllers.slave`, in the
+    coordinate scales s (`q2_scales`; spectral norms of matrices, 2-norms of vectors; tip: |dx| / sum(L0)).
+    mass: armature removed; armature: its own share A^T diag(armature) A; elastic: with the correction."""
     d = mujoco.MjData(m) if d is None else d
     d.qpos[:] = m.qpos0
     d.qvel[:] = 0.0
@@ -172,8 +163,8 @@ def observed_orders(Ns, errs) -> np.ndarray:
 
 def fidelity_study(Ns=(4, 8, 16, 32), n_samples: int = 20, seed: int = 0, slave: SlaveParams | None = None,
                    plant: PlantConfig | None = None) -> FidelityTable:
-    """MuJoCo models with N segments per section against the analytic models (module docstring).
-    plant: template config (actuation, armature_fraction, ...); its `segments` is replaced by each N."""
+    """`slave_errors` (max over n_samples q2) and `master_errors` per N segments per section; plant: template
+    config whose `segments` is replaced by each N."""
     master = MasterParams()
     slave = SlaveParams() if slave is None else slave
     plant = PlantConfig() if plant is None else plant
@@ -226,9 +217,8 @@ def plot_fidelity(table: FidelityTable, path) -> Path:
 
 def _held_bend(m: mujoco.MjModel, cm: ChainMap, slave: SlaveParams, q2: np.ndarray,
                settle_steps: int) -> tuple[float, float, np.ndarray]:
-    """Servos hold q2 under gravity (static feed-forward + elastic correction every step): (tip departure
-    from the CC chain at the sensed q2 (m), largest hinge departure (rad); nan if the hold went unstable)
-    and the held commands (settle_steps, nu + nv) for timing."""
+    """Servos hold q2 under gravity (static feed-forward + elastic correction): (tip, largest hinge departure
+    from the CC chain at the sensed q2 (m, rad; nan if unstable), held commands (steps, nu + nv))."""
     d = mujoco.MjData(m)
     cm.set_q2(d, q2)
     d.ctrl[np.asarray(cm.chain_actuator_ids)] = cm.joints_from_q2(q2)
@@ -253,10 +243,9 @@ def _held_bend(m: mujoco.MjModel, cm: ChainMap, slave: SlaveParams, q2: np.ndarr
 
 def cc_study(Ns=(4, 8, 16, 32), n_samples: int = 4, seed: int = 0, settle_steps: int = 1500,
              loop_duration: float = 2.0, plant: PlantConfig | None = None) -> list[dict]:
-    """Constrained vs free chain (module docstring), servo actuation.  Rows (one per N and enforce_cc):
-    N, enforce_cc, us_per_step (best of 3 compiled replays of the held commands), tip_dev_mm and
-    hinge_dev_mrad (max over n_samples bent q2; nan if a hold went unstable), closed_loop (status of the
-    paper scenario on that plant for loop_duration s, with the time if it diverged)."""
+    """The servo chain with and without the CC constraints: rows per N and enforce_cc: us_per_step (best of
+    3 compiled replays of the held commands), tip_dev_mm, hinge_dev_mrad (max over n_samples `_held_bend`),
+    closed_loop (the paper scenario on that plant for loop_duration s: status, time if it diverged)."""
     from harness.config.scenario import Scenario
     from harness.loop.fast import K
     from harness.loop.mujoco_loop import simulate_mujoco
@@ -301,8 +290,7 @@ def cc_markdown(rows: list[dict], n_samples: int, settle_steps: int, loop_durati
 
 
 def worst_case_markdown(segments, seed: int = 0) -> str:
-    """Table of the worst-case relative tip error over the in-range q2 box by optimization
-    (`fidelity_reference.worst_tip_error`) for each N: error, in mm of sum(L0), and where."""
+    """Table of `fidelity_reference.worst_tip_error` for each N: error, in mm of sum(L0), and where."""
     from harness.studies.fidelity_reference import worst_tip_error
 
     slave = SlaveParams()

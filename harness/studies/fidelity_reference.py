@@ -1,10 +1,6 @@
-"""Fidelity against a continuum-mechanics reference (`teleop fidelity --reference cosserat`): the analytic
-CC model (`cc_static`, `cc_modes`), the MuJoCo chain (`PassiveChain`, CC on / off, N segments per section)
-and the Cosserat rod (`elastic_law="linear"`) as passive rods at rest at the commanded q2c, same mass,
-gravity, damping and elastic energy 1/2 Kb (k d - k_c d_c)^2 / L0 + 1/2 Ke (d - d_c)^2 per section.
-Statics (`static_comparison`), small motion (`modal_comparison`), worst-case discretization tip error
-(`worst_tip_error`) and the paper scenario's closed loop on each plant (`closed_loop_rows`).
-"""
+"""Fidelity against the Cosserat rod (`teleop fidelity --reference cosserat`): the analytic CC model, the
+MuJoCo chain (CC on / off) and the rod (`linear` law) as passive rods at rest at a commanded q2c: statics,
+small motion, worst-case discretization tip error and the paper scenario's closed loop on each plant."""
 
 from __future__ import annotations
 
@@ -240,10 +236,9 @@ def upward_crossings(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
 
 def fit_decay(t: np.ndarray, x: np.ndarray, x_eq: float, skip: float = 0.5) -> tuple[float, float]:
-    """(frequency Hz, damping ratio) of the dominant oscillation of x(t) about x_eq after t >= skip (s):
-    frequency from the mean spacing of upward zero crossings; damping from the logarithmic decrement
-    delta = -slope of a least-squares line through log(positive peak) vs peak index,
-    zeta = delta / sqrt(4 pi^2 + delta^2).  nan when fewer than two periods are seen."""
+    """(frequency Hz, damping ratio) of the oscillation of x(t) about x_eq after t >= skip (s): mean spacing
+    of upward zero crossings; zeta = delta / sqrt(4 pi^2 + delta^2), delta the log decrement of the positive
+    peaks (least squares).  nan when fewer than two periods are seen."""
     y = np.asarray(x, float) - x_eq
     keep = t >= skip
     t, y = t[keep], y[keep]
@@ -335,15 +330,11 @@ METRICS_MM = {"e2_rms_mm": "e2_rms", "e2_max_mm": "e2_max", "beta_min": "beta_mi
 
 
 def closed_loop_rows(N: int = 8, duration: float = 20.0, seed: int = 0, say=lambda s: None) -> list[dict]:
-    """The paper scenario (servo) on each plant: analytic, MuJoCo chain CC on / off at N, and the Cosserat
-    rod when the harness has `plant.kind = "cosserat"` (else a row saying it is missing)."""
-    from harness.config.scenario import PLANTS
-
+    """The paper scenario (servo) on each plant: analytic, MuJoCo chain CC on / off at N, Cosserat rod."""
     cases = [("analytic CC (RK4)", ["plant.kind=analytic"]),
              (f"MuJoCo chain N = {N}, CC on", [f"plant.segments={N}", "plant.enforce_cc=true"]),
-             (f"MuJoCo chain N = {N}, CC off (default)", [f"plant.segments={N}", "plant.enforce_cc=false"])]
-    if "cosserat" in PLANTS:
-        cases.append(("Cosserat rod", ["plant.kind=cosserat"]))
+             (f"MuJoCo chain N = {N}, CC off (default)", [f"plant.segments={N}", "plant.enforce_cc=false"]),
+             ("Cosserat rod", ["plant.kind=cosserat"])]
     rows = []
     for name, sets in cases:
         tr, m = run_paper([*sets, f"duration={duration}", f"seed={seed}"])
@@ -351,9 +342,6 @@ def closed_loop_rows(N: int = 8, duration: float = 20.0, seed: int = 0, say=lamb
         values = {c: (1e3 if c.endswith("_mm") else 1) * m.get(k, np.nan) for c, k in METRICS_MM.items()}
         rows.append({"plant": name, "status": status, **values})
         say(f"closed loop {name}: {rows[-1]['status']}")
-    if "cosserat" not in PLANTS:
-        rows.append({"plant": "Cosserat rod", "status": "not available: plant.kind = cosserat is not in this "
-                     "build", **dict.fromkeys(METRICS_MM, np.nan)})
     return rows
 
 
@@ -394,9 +382,7 @@ def plot_reference(static_rows, modal_rows, path) -> Path:
 
 
 def main_reference(segments, out, progress: bool = True, seed: int = 0, loop_duration: float = 20.0) -> int:
-    """`teleop fidelity --reference cosserat`: statics, small motion and closed loop of the analytic CC
-    model and the MuJoCo chain (CC on / off, each N) against the Cosserat rod; writes
-    fidelity_reference.md, fidelity_reference.json and fidelity_reference.png into `out`."""
+    """`teleop fidelity --reference cosserat`: fidelity_reference.md, .json and .png in `out`."""
     out, say = Path(out), printer(progress)
     Ns = tuple(int(n) for n in segments)
     st = static_comparison(Ns=Ns, say=say)

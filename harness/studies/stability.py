@@ -1,8 +1,6 @@
-"""Linear stability of the sampled-data closed loop around a point of a scenario (docs/stability.md):
-`linearize(scn, t)` differentiates the one-period map x_{k+1} = Phi_k(x_k) (`ClosedLoopMap`) by central
-differences.  Verdict: "unstable" if rho = max |lambda| > 1 + T / SLOW_S, "marginal" if
-1 < rho <= 1 + T / SLOW_S (a slow drift such as the null-space positions), else "stable".
-"""
+"""Linear stability of the sampled-data closed loop at a point of a scenario (docs/stability.md): `linearize`
+differentiates the one-period map x_{k+1} = Phi_k(x_k) (`ClosedLoopMap`).  Verdict: "unstable" if
+rho = max |lambda| > 1 + T / SLOW_S, "marginal" if 1 < rho (a slow drift), else "stable"."""
 
 from __future__ import annotations
 
@@ -83,36 +81,24 @@ class ClosedLoopMap:
         except NotImplementedError as exc:
             raise LinearizationError(str(exc)) from None
         self.n_plant = len(self.names)
-        self.servo, self.delay = self.stepper.servo, self.stepper.delay
-        if self.servo:
-            self.names += [f"{n}_ref" for n in Q2_NAMES] + [f"d{n}/dt_ref" for n in Q2_NAMES]
-        ring = range(self.delay + 1 if self.delay else 0)
-        self.names += [f"ring[{s}][{j}]" for s in ring for j in range(26)]
-        if self.filt is not None:
-            self.names += [f"d{n}/dt_filtered" for n in Q2_NAMES]
+        st = self.stepper
+        ring = range(st.delay + 1 if st.delay else 0)
+        # the loop state after the plant's: views of the servo reference, delay ring and filtered dq2
+        extra = ((st.ref, [f"{n}_ref" for n in Q2_NAMES] + [f"d{n}/dt_ref" for n in Q2_NAMES], st.servo),
+                 (st.cmdbuf.reshape(-1), [f"ring[{s}][{j}]" for s in ring for j in range(26)], st.delay),
+                 (self.filt, [f"d{n}/dt_filtered" for n in Q2_NAMES], self.filt is not None))
+        self.extra = [a for a, _, on in extra if on]
+        self.names += [n for _, names, on in extra if on for n in names]
 
     def x(self) -> np.ndarray:
-        parts = [self.plant.get_state()]
-        if self.servo:
-            parts.append(self.stepper.ref.copy())
-        if self.delay:
-            parts.append(self.stepper.cmdbuf.ravel().copy())
-        if self.filt is not None:
-            parts.append(self.filt.copy())
-        return np.concatenate(parts)
+        return np.concatenate([self.plant.get_state(), *self.extra])
 
     def set_x(self, x: np.ndarray) -> None:
         i = self.n_plant
         self.plant.set_state(x[:i])
-        if self.servo:
-            self.stepper.ref[:] = x[i:i + 12]
-            i += 12
-        if self.delay:
-            n = self.stepper.cmdbuf.size
-            self.stepper.cmdbuf.ravel()[:] = x[i:i + n]
-            i += n
-        if self.filt is not None:
-            self.filt[:] = x[i:i + 6]
+        for a in self.extra:
+            a[:] = x[i:i + a.size]
+            i += a.size
 
     def step(self) -> int:
         """One control step k -> k + 1; a `controllers.status.Status` code (0 = ok)."""
@@ -126,14 +112,13 @@ class ClosedLoopMap:
             try:
                 st = self.step()
             except Exception as exc:  # a plant that raises instead of returning a status: one line
-                t = self.k * self.dt
-                raise LinearizationError(f"the run stopped before the point of linearization: "
-                                         f"{type(exc).__name__}: {exc} at t = {t:.4f} s") from None
-            if st:
-                t = self.k * self.dt
-                text = Status(st).text if st in Status._value2member_map_ else f"status {st}"
-                raise LinearizationError(f"the run stopped before the point of linearization: {text} at "
-                                         f"t = {t:.4f} s")
+                why = f"{type(exc).__name__}: {exc}"
+            else:
+                if not st:
+                    continue
+                why = Status(st).text if st in Status._value2member_map_ else f"status {st}"
+            raise LinearizationError(f"the run stopped before the point of linearization: {why} at "
+                                     f"t = {self.k * self.dt:.4f} s") from None
 
     def phi(self, x: np.ndarray, k: int) -> np.ndarray:
         """Phi_k(x): the loop state one control period after state x at step k."""

@@ -1,8 +1,6 @@
-"""Mismatch sweeps (`teleop sweep`): run every case of a study (`harness.studies.study`) through an executor
-(`harness.studies.executor`), append each row as it finishes, resume, and write the summary.  Outputs in
-`out` (default runs/sweeps/<name>/; docs/guide/sweeps.md): results.jsonl (`results.make_row`), study.toml
-(the resolved study), summary.csv and plots, recordings/<case_id>.rrd of the worst cases, .lock.
-"""
+"""Mismatch sweeps (`teleop sweep`): run every case of a study through an executor, append each row as it
+finishes, resume, write the summary.  Outputs (docs/guide/sweeps.md): results.jsonl, study.toml (the resolved
+study), summary.csv and plots, recordings/<case_id>.rrd of the worst cases, .lock."""
 
 from __future__ import annotations
 
@@ -187,10 +185,8 @@ def run_sweep(study: str | os.PathLike | dict | Study, out: str | os.PathLike | 
         log.warning(hidden_warning(hidden))
     runner = Runner(workers, scheduler, pick_executor(executor, scheduler, cases))
     runner.connect()  # a bad or unreachable scheduler is input: found before anything is written
-    if out is not None:
-        out = prepare_out_dir(Path(out), "--out")
-    else:
-        out = prepare_out_dir(DEFAULT_OUT_ROOT / study.name, "sweep output folder (default)")
+    where = "--out" if out is not None else "sweep output folder (default)"
+    out = prepare_out_dir(Path(out) if out is not None else DEFAULT_OUT_ROOT / study.name, where)
     lock = OutputLock(out)
     in_main = threading.current_thread() is threading.main_thread()
     old_term = signal.signal(signal.SIGTERM, _raise_interrupt) if in_main else None
