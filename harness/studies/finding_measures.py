@@ -1,6 +1,5 @@
-"""Derived measurements of the findings (`harness.studies.findings`): f(scenario, trajectory) ->
-{key: value}, registered by name in MEASURES for a finding file's `measure = [...]`; units of their
-keys in MEASURE_UNITS.  `trajectory` is None for a run with `simulate = false`."""
+"""Derived measurements of the findings: f(scenario, trajectory or None if `simulate = false`) -> {key:
+value}, by name in MEASURES (a finding file's `measure = [...]`), units in MEASURE_UNITS."""
 
 from __future__ import annotations
 
@@ -18,10 +17,9 @@ def _measure_diverged(scn, traj) -> dict[str, float]:
 
 
 def _measure_eq28(scn, traj) -> dict[str, float]:
-    """The null-space error's dynamics (28) from the recorded de_N: central differences of de_N over
-    the first 30 control steps against the corrected right-hand side -k_n P de_N - J2^+ dJ2 de_N and
-    the printed +k_n P de_N - J2^+ dJ2 de_N, each as the largest residual relative to |k_n P de_N|
-    (P, J2^+, dJ2 from the analytic model at the recorded q2, dq2)."""
+    """(28) from the recorded de_N: its central differences over the first 30 steps against the corrected
+    -k_n P de_N - J2^+ dJ2 de_N and the printed +k_n P de_N - J2^+ dJ2 de_N, each as the largest residual
+    relative to |k_n P de_N| (model terms at the recorded q2, dq2)."""
     from controllers import slave as slave_model
 
     kn = scn.gains.kn
@@ -100,9 +98,8 @@ def _arc_departure(p: np.ndarray) -> float:
 
 
 def _settled_rod(scn, law: str):
-    """The rod (plant slave, elastic law `law`, 10 elements per section) servoed to the fidelity study's
-    "alternating max" shape, settled under gravity (eta_b 0.3 N m^2 s, eta_a 3 N s) to ROD_SETTLED_SPEED
-    per ROD_SETTLE_CHECK.  Returns (rod, settle time s, tip after 3 s, converged)."""
+    """The rod (elastic law `law`) servoed to the "alternating max" shape, settled under gravity (eta_b
+    0.3 N m^2 s, eta_a 3 N s) to ROD_SETTLED_SPEED: returns (rod, settle time s, tip at 3 s, converged)."""
     from harness.plant.cosserat import CosseratSlave
     from harness.studies.fidelity_reference import static_shapes
 
@@ -173,9 +170,8 @@ def _settled_chain(scn, enforce_cc: bool):
 
 
 def _measure_chain_vs_rod(scn, traj) -> dict[str, float]:
-    """Tip distances (mm) at equilibrium between the rod of `_settled_rod` (`linear` law) and the chains
-    of `_settled_chain`: free_chain_error (no CC constraints) and cc_chain_error (CC enforced); nan for
-    a body that did not settle."""
+    """Tip distances (mm) at equilibrium of `_settled_rod` (`linear` law) to `_settled_chain` without
+    (free_chain_error) and with the CC constraints (cc_chain_error); nan for a body that did not settle."""
     rod, _, _, ok = _settled_rod(scn, "linear")
     out = {}
     for key, cc in (("free_chain_error", False), ("cc_chain_error", True)):
@@ -228,9 +224,8 @@ MARGIN_BOUNDS = {"analytic": "paper_analytic", "mujoco": "paper_mujoco", "cosser
 
 
 def _measure_margins(scn, traj) -> dict[str, float]:
-    """`margin.margins` against the plant's paper bounds (MARGIN_BOUNDS) over slave_mass and master_mass
-    (rtol 0.05, no probes, one thread): <p>_lower, <p>_upper and <p>_lower_fail, <p>_upper_fail (nan at
-    a range end), scale factors."""
+    """`margin.margins` against the plant's paper bounds over slave_mass and master_mass (no probes, one
+    thread): <p>_lower, <p>_upper, <p>_lower_fail, <p>_upper_fail (nan at a range end), scale factors."""
     import tempfile
     from pathlib import Path
 

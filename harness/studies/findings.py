@@ -1,7 +1,5 @@
-"""Findings: the harness's scientific results as small runnable files (`findings/`, package data
-`harness._data.findings`), rerun by `teleop findings`.  File format: docs/findings.md.  `run_findings`
-returns one `FindingResult` each; `findings_table` renders the docs' markdown table.  Deterministic.
-"""
+"""Findings: the harness's scientific results as small runnable files (`findings/`, file format in
+docs/findings.md), rerun by `teleop findings`; `findings_table` renders the docs' markdown table."""
 
 from __future__ import annotations
 
@@ -23,10 +21,6 @@ from harness.studies.finding_measures import MEASURE_UNITS, MEASURES
 def findings_dir() -> Path:
     """Folder of the shipped finding files (package data, else the checkout's `findings/`)."""
     return asset_dir("findings")
-
-
-# --------------------------------------------------------------------------------------------------
-# the file format
 
 
 @dataclass(frozen=True)
@@ -156,10 +150,6 @@ def available() -> list[str]:
     return sorted(p.stem for p in findings_dir().glob("*.toml"))
 
 
-# --------------------------------------------------------------------------------------------------
-# running
-
-
 @dataclass
 class Check:
     quantity: str
@@ -207,9 +197,8 @@ def finding_scenarios(f: Finding) -> list:
 
 
 def run_finding(f: Finding, keep_trajectories: bool = False, scenarios: list | None = None) -> FindingResult:
-    """Run every run of a finding and check its claim.  A bad scenario override raises ConfigError
-    before anything runs; an exception while running is the result's `error` (the finding then does
-    not hold)."""
+    """Run every run of a finding and check its claim.  A bad override raises ConfigError before anything
+    runs; an exception while running is the result's `error` (the finding does not hold)."""
     res = FindingResult(f)
     t0 = time.perf_counter()
     scenarios = finding_scenarios(f) if scenarios is None else scenarios
@@ -276,10 +265,6 @@ def run_findings(names: Iterable[str] = (), keep_trajectories: bool = False,
     return out
 
 
-# --------------------------------------------------------------------------------------------------
-# reporting
-
-
 def fmt(v: Any) -> str:
     """A measured value in 4 significant digits (strings and None as they are)."""
     n = _num(v)
@@ -334,8 +319,7 @@ def findings_table(results: Sequence[FindingResult]) -> str:
 def write_outputs(results: Sequence[FindingResult], table: Path, figures: Path,
                   combined: bool = True) -> list[Path]:
     """Write the findings table (also `<table stem>-<finding>.md` per finding; combined=False: only those)
-    and the paper's Figs 2-4 of the runs a finding names, `<figures>/<finding>-<run>-fig{2,3,4}.png`
-    (each file atomically).  Returns the paths."""
+    and Figs 2-4 of the runs a finding names, `<figures>/<finding>-<run>-fig{2,3,4}.png` (returned)."""
     from harness.config.textio import write_atomic
     from harness.output.plots import fig_beta, fig_e1, fig_e2
 

@@ -1,9 +1,6 @@
-"""Robustness margins (`teleop margin`, `harness.api.margins`): for each mismatch parameter (`PARAMS`, or a
-scenario key as a scale factor) the largest deviation from the nominal scenario in each direction that
-still passes a bounds file, by bracketing (x2 steps) and bisection to a tolerance, then probes inside the
-margin (a failing probe marks the edge non-monotone).  Runs go through the sweep executor; each finished
-run is a line of `results.jsonl`, keyed by its scenario's hash, so a rerun resumes.  docs/stability.md.
-"""
+"""Robustness margins (`teleop margin`; method in docs/stability.md): per mismatch parameter the largest
+deviation from the nominal scenario each way that passes a bounds file (bracketing, bisection, probes).
+Runs go through the sweep executor and are journaled in `results.jsonl` (a rerun resumes)."""
 
 from __future__ import annotations
 
@@ -77,9 +74,7 @@ def param_of(name: str) -> Param:
 
 
 def servo_note(scn: Scenario, names: Sequence[str]) -> str:
-    """One line when a margin over the slave's inertia (slave_mass, plant.slave.masses,
-    plant.slave.slice_inertia) runs on the servo-actuated MuJoCo chain (the rod's rest-strain servo feels
-    the inertia: docs/stability.md), else ''."""
+    """One line when a margin over the slave's inertia runs on the servo-actuated MuJoCo chain, else ''."""
     hidden = sorted(n for n in names if n == "slave_mass" or n.startswith(("plant.slave.masses",
                                                                            "plant.slave.slice_inertia")))
     if scn.plant.actuation != "servo" or scn.plant.kind != "mujoco" or not hidden:
@@ -135,9 +130,8 @@ def applies(scn: Scenario, p: Param) -> str:
 # --- one search along a ray ------------------------------------------------------------------------------
 @dataclass
 class Search:
-    """Bracketing, bisection and probes from the nominal level towards `limit` (the range end of one
-    direction) for one parameter.  `next_levels()` gives the levels to run; `feed(level, passed)` takes
-    their outcomes; `done` when the edge is within tolerance and the probes are run."""
+    """Bracketing (x2 steps), bisection and probes from the nominal level towards `limit` (one range end):
+    `next_levels()` to run, `feed(level, passed)` their outcomes, `done` when the edge and probes are."""
 
     param: Param
     nominal: float
@@ -179,10 +173,7 @@ class Search:
         return abs(b - a) <= self.atol
 
     def next_levels(self) -> list[float]:
-        if self.state == "bracket":
-            if self.last_pass == self.limit:
-                self.state = "probe"
-                return self.next_levels()
+        if self.state == "bracket" and self.last_pass != self.limit:
             u = self._u(self.last_pass)
             sign = 1.0 if self.limit > self.nominal else -1.0
             if self.log:  # x2 per step
@@ -196,25 +187,18 @@ class Search:
             if (nxt - self.limit) * sign >= 0 or nxt == self.last_pass:
                 nxt = self.limit
             return [nxt]
-        if self.state == "bisect":
-            if self._narrow():
-                self.state = "probe"
-                return self.next_levels()
+        if self.state == "bisect" and not self._narrow():
             mid = self._level(0.5 * (self._u(self.last_pass) + self._u(self.first_fail)))
-            if mid in (self.last_pass, self.first_fail):
-                self.state = "probe"
-                return self.next_levels()
-            return [mid]
-        if self.state == "probe":
-            ue = self._u(self.last_pass)
-            levels = sorted({self._level(ue * (i + 1) / (self.probes + 1)) for i in range(self.probes)}
-                            - {self.nominal, self.last_pass})
-            self.probe_levels = levels
-            self.state = "probing"
-            if not levels:
-                self.state = "done"
-            return levels
-        return []
+            if mid not in (self.last_pass, self.first_fail):
+                return [mid]
+        if self.state not in ("bracket", "bisect"):
+            return []
+        # the edge is found: probes inside the margin
+        ue = self._u(self.last_pass)
+        self.probe_levels = sorted({self._level(ue * (i + 1) / (self.probes + 1)) for i in range(self.probes)}
+                                   - {self.nominal, self.last_pass})
+        self.state = "probing" if self.probe_levels else "done"
+        return self.probe_levels
 
     def feed(self, level: float, passed: bool) -> None:
         if self.state == "probing":
