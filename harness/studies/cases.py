@@ -1,6 +1,5 @@
-"""Case expansion of a study (`harness.studies.study`): the levels of every factor (lists or seeded random
-draws; grid or random sampling), one resolved `Scenario` per case (base scenario + `set` + one override per
-varied field) and its id (a hash of the resolved scenario)."""
+"""Case expansion of a study: the levels of every factor (lists or seeded draws; grid or random sampling),
+one resolved `Scenario` per case (base + `set` + one override per varied field), its id (a hash of it)."""
 
 from __future__ import annotations
 
@@ -160,9 +159,8 @@ def scenario_id(scn: Scenario) -> str:
 
 
 def _load(study: Study, overrides: Sequence[str], context: str, check=None) -> Scenario:
-    """The study's base scenario with `overrides`, then check(scenario) (a scenario-returning step);
-    ConfigError (or a model's ParameterError) in `context`.  Python controllers named anywhere run only if
-    the study allows them; relative controller files resolve against the study file's folder."""
+    """The study's base scenario with `overrides`, then check(scenario) (returns a scenario); errors as a
+    ConfigError in `context`.  Python controllers only if the study allows them (paths: its folder)."""
     try:
         scn = load_scenario(study.scenario, list(overrides), allow_code=study.allow_code,
                             code_dir=study.base_dir)

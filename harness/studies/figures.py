@@ -1,6 +1,5 @@
-"""What the studies' reports share: the paper scenario run with overrides (`run_paper`), progress lines
-(`printer`), and their files (figures, CSV, Markdown tables, text), each written under a temporary name
-and renamed into place when complete (`harness.config.textio.write_atomic`)."""
+"""What the studies' reports share: `run_paper`, progress lines (`printer`), and their files (figures, CSV,
+Markdown tables, text), each written atomically (`harness.config.textio.write_atomic`)."""
 
 from __future__ import annotations
 
@@ -46,8 +45,7 @@ def pyplot():
 
 
 def save_figure(fig, path, dpi: int = 110) -> Path:
-    """Write a matplotlib figure (format from the suffix, PNG by default) with `save`, close it (pyplot's)
-    and return the path."""
+    """Write a matplotlib figure with `save` (format from the suffix, PNG by default) and close it."""
     path = Path(path)
     try:
         return save(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format=path.suffix[1:] or "png"))

@@ -1,5 +1,5 @@
-"""The results folder of a sweep: the append-only `results.jsonl` (one fsynced line per case), its reader
-(a torn tail ignored) and the folder lock; nothing is read or written through a symbolic link."""
+"""A sweep's append-only `results.jsonl` (one fsynced line per case), its reader (a torn tail ignored) and
+the folder lock; nothing is read or written through a symbolic link."""
 
 from __future__ import annotations
 
@@ -84,8 +84,7 @@ def make_row(case: Case, result: dict) -> dict:
 
 
 class OutputLock:
-    """Exclusive lock on the output folder: two sweeps must not append to the same table (no lock where
-    the system has no fcntl)."""
+    """Exclusive lock on the output folder (none where the system has no fcntl)."""
 
     def __init__(self, out: Path):
         self._fh = os.fdopen(open_no_follow(out / ".lock", os.O_WRONLY | os.O_CREAT), "w")

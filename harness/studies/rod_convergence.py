@@ -4,15 +4,8 @@ rotary-inertia radius, and what each setting costs in rod steps per control step
 
     python -m harness.studies.rod_convergence [--out docs/rod-convergence.md] [--quick]
 
-Reference (`beam_fe`): the three sections as a clamped planar cantilever of Timoshenko elements (exact
-static element stiffness, Phi = 12 EI / (GA l^2); consistent translational and rotary mass), 120 per
-section, with the rod's material (`harness.plant.cosserat.limits._material`); GA -> infinity and rho I = 0
-give the Euler-Bernoulli (EB) cantilever the CC model and the MuJoCo chain assume.  On the rod: the first
-mode without gravity or damping, released from the beam's mode shape (tip 1 mm), from the upward zero
-crossings of the tip X over PERIODS periods; the static tip under a transverse gravity G_STATIC, settled
-until every node is slower than V_TOL; the cost (rod step, steps and wall time per 1 ms control step);
-the paper scenario's closed loop with the candidate settings.
-"""
+Reference (`beam_fe`): a clamped Timoshenko cantilever with the rod's material; the method is stated on
+the generated page."""
 
 from __future__ import annotations
 
@@ -39,9 +32,10 @@ MAX_SETTLE = 30.0  # s, give up settling after this (reported)
 # --- independent reference: Timoshenko / Euler-Bernoulli cantilever by finite elements -----------------
 def beam_fe(slave: SlaveParams, shear_factor: float | None, rotary_radius: float,
             per_section: int = FE_ELEMENTS) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(K, M, q, s): stiffness and mass (2 nn - 2 square, dofs [w_1, theta_1, ..., w_n, theta_n] of the
-    free nodes), the consistent load vector of a unit transverse acceleration (N per m/s^2) and the node
-    arc lengths s (nn,) of the clamped beam.  shear_factor None = shear rigid (Euler-Bernoulli)."""
+    """(K, M, q, s) of the clamped beam, FE_ELEMENTS Timoshenko elements per section (exact static stiffness,
+    Phi = 12 EI / (GA l^2); consistent translational and rotary mass): stiffness and mass (2 nn - 2 square,
+    dofs [w_1, theta_1, ...] of the free nodes), the load of a unit transverse acceleration (N per m/s^2),
+    node arc lengths s (nn,).  shear_factor None = shear rigid (Euler-Bernoulli)."""
     L0, EI, EA, GA, rhoA, rhoI = _material(slave, 1.0 if shear_factor is None else shear_factor,
                                            rotary_radius)
     ne = 3 * per_section
@@ -167,9 +161,9 @@ def study(elements=(5, 10, 20, 40), settings=((10.0, 0.04), (100.0, 0.04)),
           shear_factors=(10.0, 30.0, 100.0, 300.0, 1000.0), rotary_radii=(0.01, 0.02, 0.04),
           loop_settings=((10.0, 0.04), (100.0, 0.04), (100.0, 0.02)), loop_duration: float = 20.0,
           base_n: int = 10, say=lambda s: None) -> dict:
-    """Every number of the page, paper slave parameters: the convergence in the elements per section for
-    each (shear factor, rotary radius) of `settings`, the first mode and cost at `base_n` elements for
-    every shear factor x rotary radius, and the closed loop for each of `loop_settings`."""
+    """Every number of the page (paper slave): convergence in the elements per section for each (shear
+    factor, rotary radius) of `settings`; first mode and cost at `base_n` elements for every shear factor
+    x rotary radius; the closed loop for each of `loop_settings`."""
     p = SlaveParams()
     p0 = replace(p, gravity=(0.0, 0.0))
     out = {"f_eb": beam_first_mode(p0, None, 0.0)[0], "d_eb": beam_static_tip(p, None, G_STATIC),

@@ -1,6 +1,5 @@
-"""Gains x damping stability map (`teleop stability-map`): survival time of the paper scenario over a grid
-of the null-space gain k_n (eq. 27-28) and the bending viscosity eta_b (`plant.bending_viscosity`,
-N m^2 s, the same in every section; the chain's hinge damping is eta_b / h), for the plants of MAPS."""
+"""Gains x damping stability map (`teleop stability-map`): survival time of the paper scenario over the
+null-space gain k_n (27-28) x the bending viscosity eta_b (N m^2 s, every section), for the plants of MAPS."""
 
 from __future__ import annotations
 
@@ -80,8 +79,7 @@ def plot_stability_map(maps: dict[str, list[dict]], duration: float, path) -> Pa
 
 
 def main(out="runs/stability_map", duration: float = 3.0) -> int:
-    """`teleop stability-map [--out OUT] [--duration S]`: the maps of MAPS over KNS x ETAS, written to
-    stability_map.md and stability_map.png in OUT."""
+    """`teleop stability-map`: the maps of MAPS over KNS x ETAS, stability_map.md and .png in `out`."""
     maps, text, say = {}, [], printer(True)
     for name, ov in MAPS.items():
         maps[name] = stability_map(KNS, ETAS, ov, duration, say=lambda s, n=name: say(f"{n} {s}"))

@@ -1,6 +1,5 @@
-"""Outputs of the linear stability analysis (`harness.studies.stability`): mode shapes drawn on the arm,
-the spectrum files, and the stability map predicted from the spectral radius next to the simulated one
-(`harness.studies.stability_map`)."""
+"""Outputs of the linear stability analysis: mode shapes on the arm, the spectrum files, and the stability
+map predicted from the spectral radius next to the simulated one (`harness.studies.stability_map`)."""
 
 from __future__ import annotations
 
@@ -17,8 +16,7 @@ from harness.studies.stability_map import grid_lines
 
 def mode_shape(res: Stability, j: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
     """(rest (m, 2), displaced (m, 2), scale): the slave's points [X, Z] (m) at the point of linearization
-    and displaced along the real part of mode j (phase chosen to maximise it), scaled so that the largest
-    point displacement is 5 % of the arm's length."""
+    and along the real part of mode j (phase maximising it), largest displacement 5 % of the arm's length."""
     v = res.eigenvectors[: res.n_plant, j]
     phase = np.exp(-0.5j * np.angle(np.sum(v * v))) if np.any(v) else 1.0
     vr = np.real(v * phase)
@@ -106,9 +104,8 @@ def _along(scn: Scenario, times, h=None, on_point=lambda res: None) -> tuple[Sta
 
 # --- predicted stability map -------------------------------------------------------------------------
 def radius_along(scn: Scenario, times) -> dict:
-    """The least stable linearization along one run of `scn` (`_along`): {radius, t, class, frequency_hz,
-    dominant, reached (the last time linearized), stopped, flip (a real negative mode)}; radius nan and
-    class "not reached" if not even the first time was reached."""
+    """The least stable linearization along one run of `scn`: {radius, t, class, frequency_hz, dominant,
+    reached (last time linearized), stopped, flip}; class "not reached" if the first time was not."""
     reached = []
     res, stopped = _along(scn, times, on_point=lambda r: reached.append(r.t))
     if res is None:
@@ -121,9 +118,8 @@ def radius_along(scn: Scenario, times) -> dict:
 
 
 def predicted_map(kns, etas, overrides=(), times=(0.0,), say=lambda s: None) -> list[dict]:
-    """Spectral radius over the k_n x eta_b grid of `harness.studies.stability_map` (same overrides, same
-    keys), sensing without noise, the largest over the linearization points `times` (s) of each cell's run
-    (`radius_along`): rows {kn, eta_b, radius, t, class, frequency_hz, dominant, reached, stopped}."""
+    """`radius_along` over the k_n x eta_b grid of `harness.studies.stability_map` (same overrides and keys),
+    sensing without noise: rows {kn, eta_b, radius, t, class, frequency_hz, dominant, reached, stopped}."""
     from harness.config.load import load_scenario
 
     rows = []
@@ -173,9 +169,9 @@ def print_modes(res, modes: int) -> None:
 
 
 def least_stable_along(scn, times, h, out):
-    """`teleop stability --at T1,T2,...`: one run linearized at each time (a table printed), the least
-    stable point's files written to `out`; returns it with `.stopped` = why the run ended early ("" if
-    it did not).  Raises LinearizationError when not even the first time could be linearized."""
+    """`teleop stability --at T1,T2,...`: one run linearized at each time (a table printed), the least stable
+    point's files in `out`; returns it with `.stopped` (why the run ended early, or "").  Raises
+    LinearizationError when not even the first time could be linearized."""
     def row(res) -> None:
         dom = ", ".join(n for n, _ in res.dominant(0, 3))
         print(f"{res.t:6.3f}  {res.radius:.6f}  {res.verdict_class:8s}  {res.frequency(0):7.2f}  {dom}")

@@ -107,9 +107,7 @@ def _study_document(study: Study, base: Scenario) -> dict:
     return {"study": st, "sampling": sampling, "factor": factors, "scenario": scenario_to_dict(base)}
 
 
-# slave dynamics parameters whose effect a servo-actuated plant hides: its stiff position servos track the
-# integrated command, so the slave's inertia and damping hardly enter (docs/plants.md, actuations).  The
-# rod's servo is a rest-strain servo that feels the mass (docs/stability.md, rod margins): no warning there.
+# slave dynamics parameters the stiff position servos of the MuJoCo chain hide (docs/plants.md, actuations)
 HIDDEN_BY_SERVO = ("plant.slave.masses", "plant.slave.slice_inertia", "plant.slave.extension_damping",
                    "plant.slave.bending_damping", "plant.extension_viscosity", "plant.bending_viscosity")
 
