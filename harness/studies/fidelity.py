@@ -4,6 +4,7 @@ docs/plants.md, fidelity studies."""
 
 from __future__ import annotations
 
+import itertools
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -255,26 +256,25 @@ def cc_study(Ns=(4, 8, 16, 32), n_samples: int = 4, seed: int = 0, settle_steps:
     plant = PlantConfig() if plant is None else plant
     q2s = sample_q2(slave, n_samples, seed)
     rows = []
-    for N in Ns:
-        for cc in (True, False):
-            p = replace(plant, segments=int(N), enforce_cc=cc, actuation="servo")
-            m, cm = build_model(master, slave, p)
-            held = [_held_bend(m, cm, slave, q2, settle_steps) for q2 in q2s]
-            tip_dev, hinge_dev = (max(h[i] for h in held) for i in (0, 1))
-            if not all(np.isfinite(h[0]) for h in held):
-                tip_dev = hinge_dev = float("nan")
-            log = held[-1][2]
-            best = np.inf
-            for _ in range(3):
-                d = mujoco.MjData(m)
-                cm.set_q2(d, q2s[-1])
-                t0 = time.perf_counter()
-                K.replay_commands(m._address, d._address, MJ_FUNCS, d.ctrl, d.qfrc_applied, log)
-                best = min(best, time.perf_counter() - t0)
-            tr = simulate_mujoco(Scenario(duration=loop_duration, plant=p, master=master, slave=slave))
-            loop = "ok" if tr.status == "ok" else f"{tr.status} at t = {tr.t[-1]:.3f} s"
-            rows.append({"N": int(N), "enforce_cc": cc, "us_per_step": best / len(log) * 1e6,
-                         "tip_dev_mm": tip_dev * 1e3, "hinge_dev_mrad": hinge_dev * 1e3, "closed_loop": loop})
+    for N, cc in itertools.product(Ns, (True, False)):
+        p = replace(plant, segments=int(N), enforce_cc=cc, actuation="servo")
+        m, cm = build_model(master, slave, p)
+        held = [_held_bend(m, cm, slave, q2, settle_steps) for q2 in q2s]
+        tip_dev, hinge_dev = (max(h[i] for h in held) for i in (0, 1))
+        if not all(np.isfinite(h[0]) for h in held):
+            tip_dev = hinge_dev = float("nan")
+        log = held[-1][2]
+        best = np.inf
+        for _ in range(3):
+            d = mujoco.MjData(m)
+            cm.set_q2(d, q2s[-1])
+            t0 = time.perf_counter()
+            K.replay_commands(m._address, d._address, MJ_FUNCS, d.ctrl, d.qfrc_applied, log)
+            best = min(best, time.perf_counter() - t0)
+        tr = simulate_mujoco(Scenario(duration=loop_duration, plant=p, master=master, slave=slave))
+        loop = "ok" if tr.status == "ok" else f"{tr.status} at t = {tr.t[-1]:.3f} s"
+        rows.append({"N": int(N), "enforce_cc": cc, "us_per_step": best / len(log) * 1e6,
+                     "tip_dev_mm": tip_dev * 1e3, "hinge_dev_mrad": hinge_dev * 1e3, "closed_loop": loop})
     return rows
 
 

@@ -4,6 +4,7 @@ small motion, worst-case discretization tip error and the paper scenario's close
 
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 
@@ -206,26 +207,25 @@ def static_comparison(Ns=(4, 8, 16, 32), settle: float = SETTLE_MAX, say=lambda 
             err, worst = e, f"{sn} / {ln}"
     rows.append({"model": "analytic CC", "N": 0, "enforce_cc": True, "tip_err_mm": err * 1e3,
                  "cc_dev_mm": 0.0, "worst": worst})
-    for N in Ns:
-        for cc in (True, False):
-            ch = PassiveChain(slave, N, cc, eta_b, eta_a)
-            err, dev, worst, note = 0.0, 0.0, "", ""
-            for (sn, ln), tip in ref.items():
-                ch.reset(shapes[sn])
-                ch.force(LOADS[ln])
-                converged = ch.settle(settle)
-                if not ch.ok():
-                    err, worst = float("nan"), f"{sn} / {ln}: diverged"
-                    break
-                if not converged:
-                    note = f"; {sn} / {ln}: not converged"
-                e = float(np.linalg.norm(ch.tip() - tip))
-                dev = max(dev, float(np.linalg.norm(ch.tip() - slave_model.tip_position(slave, ch.sense()))))
-                if e > err:
-                    err, worst = e, f"{sn} / {ln}"
-            rows.append({"model": "MuJoCo chain", "N": int(N), "enforce_cc": cc, "tip_err_mm": err * 1e3,
-                         "cc_dev_mm": dev * 1e3, "worst": worst + note})
-            say(f"statics N = {N} cc = {cc}: {err * 1e3:.2f} mm")
+    for N, cc in itertools.product(Ns, (True, False)):
+        ch = PassiveChain(slave, N, cc, eta_b, eta_a)
+        err, dev, worst, note = 0.0, 0.0, "", ""
+        for (sn, ln), tip in ref.items():
+            ch.reset(shapes[sn])
+            ch.force(LOADS[ln])
+            converged = ch.settle(settle)
+            if not ch.ok():
+                err, worst = float("nan"), f"{sn} / {ln}: diverged"
+                break
+            if not converged:
+                note = f"; {sn} / {ln}: not converged"
+            e = float(np.linalg.norm(ch.tip() - tip))
+            dev = max(dev, float(np.linalg.norm(ch.tip() - slave_model.tip_position(slave, ch.sense()))))
+            if e > err:
+                err, worst = e, f"{sn} / {ln}"
+        rows.append({"model": "MuJoCo chain", "N": int(N), "enforce_cc": cc, "tip_err_mm": err * 1e3,
+                     "cc_dev_mm": dev * 1e3, "worst": worst + note})
+        say(f"statics N = {N} cc = {cc}: {err * 1e3:.2f} mm")
     return rows
 
 
@@ -277,19 +277,18 @@ def modal_comparison(Ns=(4, 8, 16, 32), release_time: float = 4.0, settle: float
     rows = [{"model": "Cosserat rod (reference)", "N": 10, "enforce_cc": False, "f1_hz": f, "zeta1": z},
             {"model": "analytic CC", "N": 0, "enforce_cc": True, "f1_hz": float(fcc[0]),
              "zeta1": float(zcc[0])}]
-    for N in Ns:
-        for cc in (True, False):
-            ch = PassiveChain(slave, N, cc, eta_b, eta_a)
-            ch.reset(q2c)
-            ch.settle(settle)
-            x_eq = ch.tip()[0]
-            ch.force(TIP_LOAD)
-            ch.settle(settle)
-            ch.force((0.0, 0.0))
-            xs = ch.run(release_time, 1.0, sample=True)
-            f, z = fit_decay(np.arange(1, len(xs) + 1) * ch.m.opt.timestep, xs[:, 0], x_eq)
-            rows.append({"model": "MuJoCo chain", "N": int(N), "enforce_cc": cc, "f1_hz": f, "zeta1": z})
-            say(f"release N = {N} cc = {cc}: {f:.3f} Hz, zeta {z:.4f}")
+    for N, cc in itertools.product(Ns, (True, False)):
+        ch = PassiveChain(slave, N, cc, eta_b, eta_a)
+        ch.reset(q2c)
+        ch.settle(settle)
+        x_eq = ch.tip()[0]
+        ch.force(TIP_LOAD)
+        ch.settle(settle)
+        ch.force((0.0, 0.0))
+        xs = ch.run(release_time, 1.0, sample=True)
+        f, z = fit_decay(np.arange(1, len(xs) + 1) * ch.m.opt.timestep, xs[:, 0], x_eq)
+        rows.append({"model": "MuJoCo chain", "N": int(N), "enforce_cc": cc, "f1_hz": f, "zeta1": z})
+        say(f"release N = {N} cc = {cc}: {f:.3f} Hz, zeta {z:.4f}")
     return rows
 
 

@@ -10,6 +10,7 @@ the generated page."""
 from __future__ import annotations
 
 import argparse
+import itertools
 import math
 import time
 from dataclasses import replace
@@ -178,14 +179,13 @@ def study(elements=(5, 10, 20, 40), settings=((10.0, 0.04), (100.0, 0.04)),
                                     "tip_beam": d_ref, "settle": ts})
             say(f"n = {n}, shear {sf:g}, r {r:g}: f1 {f:.5f} Hz (beam {f_ref:.5f}), tip {d * 1e3:.5f} mm "
                 f"(beam {d_ref * 1e3:.5f})")
-    for sf in shear_factors:
-        for r in rotary_radii:
-            f = rod_first_mode(p, base_n, sf, r)
-            f_ref = beam_first_mode(p0, sf, r)[0]
-            dt, m, us = rod_cost(p, base_n, sf, r)
-            out["shear"].append({"shear_factor": sf, "r": r, "f1": f, "f1_beam": f_ref, "dt": dt,
-                                 "steps": m, "us": us})
-            say(f"shear {sf:g}, r {r:g}: f1 {f:.5f} Hz (beam {f_ref:.5f}), {m} steps, {us:.0f} us")
+    for sf, r in itertools.product(shear_factors, rotary_radii):
+        f = rod_first_mode(p, base_n, sf, r)
+        f_ref = beam_first_mode(p0, sf, r)[0]
+        dt, m, us = rod_cost(p, base_n, sf, r)
+        out["shear"].append({"shear_factor": sf, "r": r, "f1": f, "f1_beam": f_ref, "dt": dt,
+                             "steps": m, "us": us})
+        say(f"shear {sf:g}, r {r:g}: f1 {f:.5f} Hz (beam {f_ref:.5f}), {m} steps, {us:.0f} us")
     for sf, r in loop_settings:
         out["loop"].append(closed_loop(sf, r, loop_duration))
         say(f"paper scenario, shear {sf:g}, r {r:g}: {out['loop'][-1]['status']}")

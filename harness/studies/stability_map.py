@@ -3,6 +3,7 @@ null-space gain k_n (27-28) x the bending viscosity eta_b (N m^2 s, every sectio
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -23,15 +24,14 @@ def stability_map(kns, etas, overrides=(), duration: float = 3.0, say=lambda s: 
     """Rows {kn, eta_b, status, t_end (s, time reached), message, e2_rms (m; nan if diverged or shorter
     than the transient, duration / 2)} over the k_n x eta_b grid, the other fields from `overrides`."""
     rows = []
-    for kn in kns:
-        for eta in etas:
-            tr, m = run_paper([*overrides, f"duration={duration}", f"transient={duration / 2}",
-                               f"gains.kn={kn}", f"plant.bending_viscosity=[{eta},{eta},{eta}]"])
-            t_end = float(tr.t[-1]) + float(tr.t[1] - tr.t[0]) if len(tr.t) > 1 else 0.0
-            rows.append({"kn": float(kn), "eta_b": float(eta), "status": tr.status,
-                         "t_end": min(t_end, duration), "message": tr.message,
-                         "e2_rms": float(m.get("e2_rms", np.nan))})
-            say(f"kn = {kn:g}, eta_b = {eta:g}: {tr.status} at {rows[-1]['t_end']:.3f} s")
+    for kn, eta in itertools.product(kns, etas):
+        tr, m = run_paper([*overrides, f"duration={duration}", f"transient={duration / 2}",
+                           f"gains.kn={kn}", f"plant.bending_viscosity=[{eta},{eta},{eta}]"])
+        t_end = float(tr.t[-1]) + float(tr.t[1] - tr.t[0]) if len(tr.t) > 1 else 0.0
+        rows.append({"kn": float(kn), "eta_b": float(eta), "status": tr.status,
+                     "t_end": min(t_end, duration), "message": tr.message,
+                     "e2_rms": float(m.get("e2_rms", np.nan))})
+        say(f"kn = {kn:g}, eta_b = {eta:g}: {tr.status} at {rows[-1]['t_end']:.3f} s")
     return rows
 
 

@@ -3,6 +3,7 @@ map predicted from the spectral radius next to the simulated one (`harness.studi
 
 from __future__ import annotations
 
+import itertools
 import math
 from pathlib import Path
 
@@ -123,14 +124,13 @@ def predicted_map(kns, etas, overrides=(), times=(0.0,), say=lambda s: None) -> 
     from harness.config.load import load_scenario
 
     rows = []
-    for kn in kns:
-        for eta in etas:
-            eta_s = f"[{eta},{eta},{eta}]"
-            sets = [*overrides, "snr_db=none", f"gains.kn={kn}", f"plant.bending_viscosity={eta_s}"]
-            row = {"kn": float(kn), "eta_b": float(eta), **radius_along(load_scenario(None, sets), times)}
-            rows.append(row)
-            say(f"kn = {kn:g}, eta_b = {eta:g}: rho = {row['radius']:.6f} at t = {row['t']:g} s "
-                f"({row['class']}, {row['frequency_hz']:.1f} Hz)")
+    for kn, eta in itertools.product(kns, etas):
+        eta_s = f"[{eta},{eta},{eta}]"
+        sets = [*overrides, "snr_db=none", f"gains.kn={kn}", f"plant.bending_viscosity={eta_s}"]
+        row = {"kn": float(kn), "eta_b": float(eta), **radius_along(load_scenario(None, sets), times)}
+        rows.append(row)
+        say(f"kn = {kn:g}, eta_b = {eta:g}: rho = {row['radius']:.6f} at t = {row['t']:g} s "
+            f"({row['class']}, {row['frequency_hz']:.1f} Hz)")
     return rows
 
 
