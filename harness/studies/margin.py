@@ -35,31 +35,21 @@ class Param:
     integer: bool = False
     plants: tuple[str, ...] | None = None
     unit: str = "x"
-    description: str = ""
     exponents: tuple[float, ...] | None = None  # scale mode: key i is scaled by level ** exponents[i]
 
 
 PARAMS: dict[str, Param] = {p.name: p for p in (
-    Param("slave_mass", ("plant.slave.masses",), "scale", 0.05, 20.0,
-          description="mass of every slave section (x nominal)"),
-    Param("bending_stiffness", ("plant.slave.bending_stiffness",), "scale", 0.05, 20.0,
-          description="bending stiffness Kb of every section (x nominal)"),
-    Param("extension_stiffness", ("plant.slave.extension_stiffness",), "scale", 0.05, 20.0,
-          description="extension stiffness Ke of every section (x nominal)"),
+    Param("slave_mass", ("plant.slave.masses",), "scale", 0.05, 20.0),  # every slave section's mass
+    Param("bending_stiffness", ("plant.slave.bending_stiffness",), "scale", 0.05, 20.0),  # Kb
+    Param("extension_stiffness", ("plant.slave.extension_stiffness",), "scale", 0.05, 20.0),  # Ke
     Param("material_damping", ("plant.bending_viscosity", "plant.extension_viscosity"), "scale", 0.01, 100.0,
-          plants=("mujoco", "cosserat"), description="material damping eta_b, eta_a of the chain / rod"),
-    Param("segments", ("plant.segments",), "value", 1, 64, integer=True, plants=("mujoco",), unit="",
-          description="rigid segments per section"),
-    Param("control_rate", ("control_dt", "plant.physics_dt"), "rate", 0.1, 10.0,
-          description="control rate (x nominal; control_dt and physics_dt divided by it)"),
-    # the analytic plant's compiled loop does not apply plant.actuation_delay (the MuJoCo loop and the
-    # Python-stepped loop do): searching it there would report a margin of a parameter that is not applied
-    Param("delay", ("plant.actuation_delay",), "value", 0.0, 0.1, unit="s", plants=("mujoco", "cosserat"),
-          description="pure actuation delay (s, multiples of control_dt)"),
-    Param("noise_snr", ("snr_db",), "value", 0.0, 200.0, unit="dB",
-          description="SNR of the sensing noise (dB; lower = noisier)"),
-    Param("master_mass", ("plant.master.masses",), "scale", 0.05, 20.0,
-          description="mass of both master links (x nominal)"),
+          plants=("mujoco", "cosserat")),  # eta_b, eta_a of the chain / rod
+    Param("segments", ("plant.segments",), "value", 1, 64, integer=True, plants=("mujoco",), unit=""),
+    Param("control_rate", ("control_dt", "plant.physics_dt"), "rate", 0.1, 10.0),  # both divided by it
+    # not on the analytic plant: its compiled loop does not apply plant.actuation_delay
+    Param("delay", ("plant.actuation_delay",), "value", 0.0, 0.1, unit="s", plants=("mujoco", "cosserat")),
+    Param("noise_snr", ("snr_db",), "value", 0.0, 200.0, unit="dB"),  # sensing noise; lower = noisier
+    Param("master_mass", ("plant.master.masses",), "scale", 0.05, 20.0),  # both master links
 )}
 DEFAULT_PARAMS = tuple(PARAMS)
 
@@ -69,7 +59,7 @@ def param_of(name: str) -> Param:
     if name in PARAMS:
         return PARAMS[name]
     if "." in name or name in ("control_dt", "duration"):
-        return Param(name, (name,), "scale", 0.05, 20.0, description=f"{name} (x scenario value)")
+        return Param(name, (name,), "scale", 0.05, 20.0)
     raise ConfigError.field("--param", name, f"expected one of {', '.join(PARAMS)} or a dotted scenario key")
 
 
@@ -233,12 +223,6 @@ class Outcome:
     metrics: dict
 
 
-def _metric_names(bounds: Bounds) -> list[str]:
-    names = [limit_of(f.name)[0] for f in dataclasses.fields(bounds)
-             if f.name.endswith(("_max", "_min")) and getattr(bounds, f.name) is not None]
-    return sorted({*names, "mujoco_warnings", "status"})
-
-
 def _outcome(row: dict, bounds: Bounds) -> Outcome:
     metrics = dict(row.get("metrics") or {})
     metrics.setdefault("status", row.get("status"))
@@ -268,13 +252,6 @@ class Journal:
             self.writer.close()
 
 
-def _case(base_source, base_set: Sequence[str], scn: Scenario, p: Param, level: float) -> Case:
-    ovr = overrides_at(scn, p, level)
-    s = resolve_controller(load_scenario(base_source, [*base_set, *ovr]))
-    cid = scenario_id(s)
-    return Case(cid, {p.name: level}, tuple(ovr), dataclasses.replace(s, name=f"margin-{cid}"))
-
-
 def run_levels(requests: list[tuple[Param, float]], ctx: dict) -> dict[tuple[str, float], Outcome]:
     """Outcome of each (param, level), from the journal or run through the executor in one batch."""
     from harness.studies.executor import run_case, run_cases
@@ -284,7 +261,10 @@ def run_levels(requests: list[tuple[Param, float]], ctx: dict) -> dict[tuple[str
     bounds: Bounds = ctx["bounds"]
     cases, keys = [], {}
     for p, level in requests:
-        c = _case(ctx["source"], ctx["set"], ctx["scn"], p, level)
+        ovr = overrides_at(ctx["scn"], p, level)
+        s = resolve_controller(load_scenario(ctx["source"], [*ctx["set"], *ovr]))
+        cid = scenario_id(s)
+        c = Case(cid, {p.name: level}, tuple(ovr), dataclasses.replace(s, name=f"margin-{cid}"))
         keys[p.name, level] = c.case_id
         if c.case_id not in journal.rows and all(x.case_id != c.case_id for x in cases):
             cases.append(c)
@@ -338,10 +318,13 @@ def margins(scn: Scenario, bounds: Bounds, params: Sequence[str | Param] = DEFAU
     if not (0 < rtol < 1):
         raise ConfigError.field("rtol", rtol, "expected a relative tolerance in (0, 1)")
     plist = [n if isinstance(n, Param) else param_of(n) for n in params]
+    limits = [limit_of(f.name)[0] for f in dataclasses.fields(bounds)
+              if f.name.endswith(("_max", "_min")) and getattr(bounds, f.name) is not None]
     journal = Journal(out)
     runner = Runner(workers, scheduler, "dask" if scheduler else executor)
     ctx = {"journal": journal, "bounds": bounds, "source": source, "set": list(base_set), "scn": scn,
-           "runner": runner, "metrics": _metric_names(bounds), "say": say, "case_fn": case_fn}
+           "runner": runner, "metrics": sorted({*limits, "mujoco_warnings", "status"}), "say": say,
+           "case_fn": case_fn}
     try:
         rows: dict[str, Margin] = {}
         searches: list[Search] = []
