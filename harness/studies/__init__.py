@@ -1,2 +1,2 @@
-"""Studies made of many runs: mismatch sweeps (`study` file and case expansion, `executor`, `results`,
-`summary`, `sweep`) and the plant-fidelity study (`fidelity`)."""
+"""Studies made of many runs: mismatch sweeps (`study` file, `cases`, `executor`, `summary`, `sweep`),
+margins, stability, fidelity and the findings."""

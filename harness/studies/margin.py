@@ -236,7 +236,7 @@ class Journal:
     """The runs of a margin search: results.jsonl rows by case id (the scenario hash), resumable."""
 
     def __init__(self, out: Path | None):
-        from harness.studies.results import RESULTS, ResultsWriter, read_results
+        from harness.studies.sweep import RESULTS, ResultsWriter, read_results
 
         path = None if out is None else Path(out) / RESULTS
         self.rows: dict[str, dict] = {} if path is None else read_results(path)
@@ -255,7 +255,7 @@ class Journal:
 def run_levels(requests: list[tuple[Param, float]], ctx: dict) -> dict[tuple[str, float], Outcome]:
     """Outcome of each (param, level), from the journal or run through the executor in one batch."""
     from harness.studies.executor import run_case, run_cases
-    from harness.studies.results import make_row
+    from harness.studies.sweep import make_row
 
     journal: Journal = ctx["journal"]
     bounds: Bounds = ctx["bounds"]
