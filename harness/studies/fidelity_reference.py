@@ -40,7 +40,6 @@ def static_shapes(slave: SlaveParams) -> dict[str, np.ndarray]:
             "alternating max": q(slave.max_extension * L0, [b, -b, b])}
 
 
-# --- the analytic CC model with the linear law, rest at q2c ---------------------------------------------
 def cc_gradient(slave: SlaveParams, q2, q2c, F=(0.0, 0.0)) -> np.ndarray:
     """dV/dq2 (6,) of V = gravity + 1/2 Kb (k d - k_c d_c)^2 / L0 + 1/2 Ke (d - d_c)^2 - F . tip."""
     q2, q2c = np.asarray(q2, float), np.asarray(q2c, float)
@@ -97,7 +96,6 @@ def cc_modes(slave: SlaveParams, q2c, eta_b, eta_a) -> tuple[np.ndarray, np.ndar
     return w / (2 * np.pi), zeta
 
 
-# --- the bodies ----------------------------------------------------------------------------------------
 def _settle(advance, tip, t_max: float) -> bool:
     """advance() by SETTLE_WINDOW until the tip speed is below SETTLE_V_TOL in two successive windows
     (True), or t_max s have passed (False)."""
@@ -179,7 +177,6 @@ def _rod_settled(slave, q2c, F, eta_b, eta_a, t_max=SETTLE_MAX):
     return r
 
 
-# --- (a) statics, (b) small motion ---------------------------------------------------------------------
 def static_comparison(Ns=(4, 8, 16, 32), settle: float = SETTLE_MAX, say=lambda s: None) -> list[dict]:
     """Rows: model, N, enforce_cc, tip_err_mm (max over shapes x loads of |tip - rod tip|), cc_dev_mm
     (max |tip - CC tip of the body's sensed q2|), worst (shape / load of the max tip error, with "not
@@ -292,7 +289,6 @@ def modal_comparison(Ns=(4, 8, 16, 32), release_time: float = 4.0, settle: float
     return rows
 
 
-# --- (c) worst-case discretization error by optimization ------------------------------------------------
 def worst_tip_error(N: int, n_random: int = 32, n_refine: int = 6, seed: int = 0) -> tuple[float, np.ndarray]:
     """Largest relative tip error |tip_MuJoCo - tip_CC| / sum(L0) over the in-range q2 box, the chain on
     the CC manifold: the 64 corners (each length and bend at an end of its range) and n_random random
@@ -323,7 +319,6 @@ def worst_tip_error(N: int, n_random: int = 32, n_refine: int = 6, seed: int = 0
     return -float(best.fun), np.concatenate([best.x[:3], best.x[3:] / best.x[:3]])
 
 
-# --- the report ----------------------------------------------------------------------------------------
 METRICS_MM = {"e2_rms_mm": "e2_rms", "e2_max_mm": "e2_max", "beta_min": "beta_min",
               "range_violation_mm": "range_violation"}  # column: metric (m, shown in mm when "_mm")
 

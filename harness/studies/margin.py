@@ -73,7 +73,6 @@ def servo_note(scn: Scenario, names: Sequence[str]) -> str:
             f"{', '.join(hidden)} says little about the controller's dynamics model")
 
 
-# --- points of a search ---------------------------------------------------------------------------------
 def _get(scn: Scenario, key: str) -> Any:
     return get_field(scn, tuple(key.split(".")), scn, key)
 
@@ -117,7 +116,6 @@ def applies(scn: Scenario, p: Param) -> str:
     return ""
 
 
-# --- one search along a ray ------------------------------------------------------------------------------
 @dataclass
 class Search:
     """Bracketing (x2 steps), bisection and probes from the nominal level towards `limit` (one range end):
@@ -210,7 +208,6 @@ class Search:
         return self.state == "done"
 
 
-# --- running ----------------------------------------------------------------------------------------------
 @dataclass
 class Outcome:
     """The journal's record of one run: passed, the violations (text), the first violated bound and the

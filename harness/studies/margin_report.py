@@ -24,7 +24,6 @@ def plot_edge(rows: list[dict], pair: tuple[str, str], path) -> Path:
     return save_figure(fig, path)
 
 
-# --- outputs --------------------------------------------------------------------------------------------
 def _fmt(v) -> str:
     return "-" if v is None else f"{v:.4g}" if isinstance(v, float) else str(v)
 

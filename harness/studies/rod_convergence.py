@@ -30,7 +30,6 @@ SETTLE_ETA = (1.0, 3.0)  # (eta_b N m^2 s, eta_a N s) while settling (the equili
 MAX_SETTLE = 30.0  # s, give up settling after this (reported)
 
 
-# --- independent reference: Timoshenko / Euler-Bernoulli cantilever by finite elements -----------------
 def beam_fe(slave: SlaveParams, shear_factor: float | None, rotary_radius: float,
             per_section: int = FE_ELEMENTS) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(K, M, q, s) of the clamped beam, FE_ELEMENTS Timoshenko elements per section (exact static stiffness,
@@ -80,7 +79,6 @@ def beam_static_tip(slave: SlaveParams, shear_factor: float | None, g: float,
     return float(np.linalg.solve(K, g * q)[-2])
 
 
-# --- the rod -------------------------------------------------------------------------------------------
 def _rod(slave, n, shear_factor, rotary_radius, eta):
     """The straight rod at rest and its rest q2 (6,)."""
     from harness.plant.cosserat import CosseratSlave
@@ -153,7 +151,6 @@ def closed_loop(shear_factor: float, rotary_radius: float, duration: float = 20.
             "rod_dt": tr.meta.get("rod_dt", float("nan")), "wall": time.perf_counter() - t0}
 
 
-# --- the study and its page ----------------------------------------------------------------------------
 def _pct(a: float, b: float) -> str:
     return f"{100.0 * (a / b - 1.0):+.3f} %"
 

@@ -49,7 +49,6 @@ def _positions(plant) -> tuple[np.ndarray, object]:
                                                                                 x[4 + n:4 + 2 * n]], 1)])
 
 
-# --- the one-period closed-loop map -----------------------------------------------------------------------
 class ClosedLoopMap:
     """The closed loop of `scn` (paper law, no sensing noise; the stepped loop's `Stepper`) over one control
     period.  Loop state x = [plant state (`get_state`: analytic [q1, dq1, q2, dq2]; mujoco qpos, qvel,
@@ -130,7 +129,6 @@ class ClosedLoopMap:
         return self.x()
 
 
-# --- linearization and modes ---------------------------------------------------------------------------
 @dataclass
 class Stability:
     """Result of `linearize`: A (n, n) the one-period Jacobian at t (s), its eigenvalues (n,) sorted by

@@ -103,7 +103,6 @@ def _along(scn: Scenario, times, h=None, on_point=lambda res: None) -> tuple[Sta
     return worst, ""
 
 
-# --- predicted stability map -------------------------------------------------------------------------
 def radius_along(scn: Scenario, times) -> dict:
     """The least stable linearization along one run of `scn`: {radius, t, class, frequency_hz, dominant,
     reached (last time linearized), stopped, flip}; class "not reached" if the first time was not."""
