@@ -139,8 +139,8 @@ def _scenario(sim: bool = True) -> list:
                                "scenario.")),
         ("--plant", dict(choices=PLANTS, default=None,
                          help="simulated plant: 'mujoco' (MuJoCo multibody chain), 'analytic' (RK4 on the "
-                              "analytic model) or 'cosserat' (PyElastica rod) (plant.kind). Default: from the "
-                              "scenario (paper: mujoco).")),
+                              "analytic model) or 'cosserat' (PyElastica rod) (plant.kind). Default: from "
+                              "the scenario (paper: mujoco).")),
         ("--actuation", dict(choices=ACTUATIONS, default=None,
                              help="slave actuation (chain and rod): 'servo' (position servos on the "
                                   "command), 'torque' (T2 as ideal generalized forces) or 'muscle' (one-sided"
