@@ -1,10 +1,6 @@
-"""Write one run (`Trajectory`) to a Rerun `.rrd` file (`rerun FILE.rrd` opens it), and read series back.
-
-Everything is sent in bulk (`rr.send_columns`, blocks of `block` rows) on the duration timeline
-``sim_time`` (s), log time off, so that two writes of the same run compare equal (`rerun rrd compare`).
-The file's default blueprint and the scene geometry: `harness.output.scene`.  Entities (world: MuJoCo's,
-Z up; task [X, Z] of an arm with base b is world (b_x + X, b_y, b_z + Z); a static `Transform3D` moves
-each arm's base into the plane Y = 0, `scene.display_offset`):
+"""Write one run (`Trajectory`) to a Rerun `.rrd` file, in bulk on the duration timeline ``sim_time`` (s),
+log time off (two writes of a run compare equal), and read series back.  Blueprint: `harness.output.scene`.
+Entities (world: MuJoCo's, Z up; a static `Transform3D` moves each arm's base into the plane Y = 0):
 
     plots/e1, e2, e2_plant (X, Z) m (11), (16); beta (41); ya (29); deN_norm |e_N-dot| (23);
     q2 d (m), k (1/m); T1 N m; T2 [N, N m^2]; forces/* (runs with interaction, `record_contact`)
@@ -105,20 +101,15 @@ def write_recording(traj: Trajectory, path: str | Path, *, recording_id: str | N
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:  # the final name only ever holds a complete, readable file
-        meta = traj.meta or {}
-        mb, sb = geo.world_base(meta, "master_base"), geo.world_base(meta, "slave_base")
         # batches flushed by size only (never by the 200 ms timer): the same run gives the same chunks
         rec = rr.RecordingStream(APP_ID, recording_id=recording_id,
                                  batcher_config=rr.ChunkBatcherConfig(flush_tick=timedelta(days=1)))
         rec.save(tmp, default_blueprint=sc.build_blueprint(traj))
         rec.set_log_time_enabled(False)
         try:
-            log_static(rec, traj, mb, sb)
+            log_static(rec, traj)
             if len(traj):
-                log_series(rec, traj, int(block))
-                log_spatial(rec, traj, mb, sb, int(block), every)
-                if geo.has_interaction(traj):
-                    log_contacts(rec, traj, TIMELINE, mb)
+                log_steps(rec, traj, int(block), every)
             try:  # the file sink writes from its own thread: a write error (EFBIG, ENOSPC) shows only here
                 rec.flush(timeout_sec=FLUSH_TIMEOUT)
             except RuntimeError as e:
@@ -150,10 +141,11 @@ def geometry_every(traj: Trajectory, rate: float) -> int:
     return max(1, int(np.floor(1.0 / (rate * float(dt)) + 1e-9)))
 
 
-def log_static(rec: rr.RecordingStream, traj: Trajectory, master_base, slave_base) -> None:
+def log_static(rec: rr.RecordingStream, traj: Trajectory) -> None:
     """Everything static: view coordinates, status, series styles, arm placement, bases, obstacles, the
     desired paths and the styles of the per-step entities."""
     meta = traj.meta or {}
+    master_base, slave_base = geo.world_base(meta, "master_base"), geo.world_base(meta, "slave_base")
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     rec.log("status", rr.TextDocument(_status_text(traj), media_type=rr.MediaType.MARKDOWN), static=True)
     for entity, _, names, colors in _series(traj):
@@ -256,14 +248,13 @@ def _send_strips(rec: rr.RecordingStream, entity: str, t: np.ndarray, block: int
           lambda sl: rr.LineStrips3D.columns(strips=_f32(strips[sl])))
 
 
-def log_series(rec: rr.RecordingStream, traj: Trajectory, block: int) -> None:
+def log_steps(rec: rr.RecordingStream, traj: Trajectory, block: int, every: int, fmax: float | None = None):
+    """The time series, the 3-D scene and 2-D traces at every `every`-th step and the last one, and the
+    contacts (force arrows: `fmax` N, default the largest of traj, is ARROW_LENGTH long)."""
+    meta = traj.meta or {}
+    master_base, slave_base = geo.world_base(meta, "master_base"), geo.world_base(meta, "slave_base")
     for entity, values, _, _ in _series(traj):
         _send(rec, entity, traj.t, block, lambda sl, v=values: rr.Scalars.columns(scalars=v[sl]))
-
-
-def log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, every: int) -> None:
-    """The per-step 3-D scene and 2-D traces at every `every`-th step and the last one."""
-    meta = traj.meta or {}
     n = len(traj)
     idx = np.arange(0, n, every)
     if idx[-1] != n - 1:
@@ -308,6 +299,8 @@ def log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, ever
     if "sections" in geometry:
         _send_points(rec, "world/slave/sections", t, block, np.asarray(geometry["sections"])[idx])
     _send_strips(rec, "world/slave/backbone", t, block, geo.backbone_points_world(traj, slave_base)[idx])
+    if geo.has_interaction(traj):
+        log_contacts(rec, traj, master_base, arrow_scale(traj, fmax))
 
 
 def read_series(path: str | Path, entity: str) -> tuple[np.ndarray, np.ndarray]:

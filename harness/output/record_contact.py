@@ -9,6 +9,7 @@ import numpy as np
 import rerun as rr
 
 from harness.loop.trajectory import Trajectory
+from harness.output.scene import TIMELINE
 
 CONTACT_EVERY = 10  # control steps between logged contact arrows
 ARROW_LENGTH = 0.2  # m: the largest contact force of the run is drawn this long (a sixth of the arm)
@@ -47,16 +48,13 @@ def arrow_scale(traj: Trajectory, fmax: float | None = None) -> float:
     return ARROW_LENGTH / fmax if fmax > 0 else ARROW_LENGTH
 
 
-def log_contacts(rec: rr.RecordingStream, traj: Trajectory, timeline: str, master_base: np.ndarray,
-                 scale: float | None = None) -> None:
-    """Contact points and force arrows (world frame, `scale` m per N, default `arrow_scale(traj)`) and
-    the operator's hand point."""
+def log_contacts(rec: rr.RecordingStream, traj: Trajectory, master_base: np.ndarray, scale: float) -> None:
+    """Contact points and force arrows (world frame, `scale` m per N) and the operator's hand point."""
     pts = traj.contact_points
     hand = traj.hand
     op = hand is not None and np.any(hand != 0)
-    scale = arrow_scale(traj) if scale is None else scale
     for k in range(0, len(traj), CONTACT_EVERY):
-        rec.set_time(timeline, duration=float(traj.t[k]))
+        rec.set_time(TIMELINE, duration=float(traj.t[k]))
         if pts is not None:
             live = np.any(pts[k, :, 3:] != 0, axis=1)
             p, f = pts[k, live, :3], pts[k, live, 3:]
