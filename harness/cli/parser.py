@@ -101,70 +101,58 @@ def _times(text: str) -> tuple[float, ...]:
     return ts
 
 
+def _o(flag: str, help: str, **kw) -> tuple[str, dict]:
+    """An option of the table below: its flag and add_argument keywords."""
+    return flag, dict(kw, help=help)
+
+
 def _out(help: str, default: Path | None = None, metavar: str = "DIR"):
-    return "--out", dict(metavar=metavar, type=_path, default=default, help=help)
+    return _o("--out", help, metavar=metavar, type=_path, default=default)
 
 
 _NEW_DIR = "output folder (created; must be writable). Default: "
-_NO_PROGRESS = "--no-progress", dict(action="store_true", help="do not show progress (default: shown on "
-                                                               "stderr when it is a terminal).")
-_RECORD_RATE = "--record-rate", dict(
-    metavar="HZ|full", default=None, help="rate of the 3-D geometry in run.rrd, Hz > 0, or 'full' for every "
-    "control step; time series are always at the control rate. Default: 100 (docs: Performance).",
-    type=_typed(lambda s: math.inf if s.strip().lower() == "full" else float(s), lambda v: v > 0,
-                "a rate in Hz > 0 or 'full'"))
-_BOUNDS = "--bounds", dict(metavar="BOUNDS.toml", type=_path, required=True,
-                           help="bounds file (required; layout: bounds/paper_mujoco.toml).")
-_SET = "--set", dict(dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                     help="override a scenario field by its dotted key with a TOML value (e.g. "
-                          "plant.segments=16, snr_db=30). Repeatable; applied in order after the shortcuts.")
+_NO_PROGRESS = _o("--no-progress", "no progress display (default: on stderr when it is a terminal).",
+                  action="store_true")
+_rate = _typed(lambda s: math.inf if s.strip().lower() == "full" else float(s), lambda v: v > 0,
+               "a rate in Hz > 0 or 'full'")
+_RECORD_RATE = _o("--record-rate", "rate of the 3-D geometry in run.rrd, Hz > 0, or 'full' (every control "
+                  "step; time series always are). Default: 100 (docs: Performance).", metavar="HZ|full",
+                  type=_rate)
+_BOUNDS = _o("--bounds", "bounds file (required; layout: bounds/paper_mujoco.toml).", metavar="BOUNDS.toml",
+             type=_path, required=True)
+_SET = dict(dest="overrides", action="append", default=[], metavar="KEY=VALUE")
 _POOL = (
-    ("--workers", dict(metavar="N", type=_positive_int, default=None,
-                       help="cases run at once (processes or threads), integer >= 1 (ignored with "
-                            f"--scheduler). Default: all cores ({os.cpu_count() or 1} here).")),
-    ("--executor", dict(choices=("processes", "threads"), default="processes",
-                        help="what runs the cases: 'processes' (a crash takes only its worker) or 'threads' "
-                             "(same results; Python-stepped cases run one at a time). Not with --scheduler. "
-                             "Default: processes.")),
-    ("--scheduler", dict(metavar="ADDRESS", default=None, help="address of a running Dask scheduler (e.g. "
-                                                               "tcp://host:8786). Default: none (local).")),
+    _o("--workers", f"cases run at once, integer >= 1 (not with --scheduler). Default: all cores "
+       f"({os.cpu_count() or 1} here).", metavar="N", type=_positive_int),
+    _o("--executor", "worker processes (a crash takes only its worker) or threads (same results). Not with "
+       "--scheduler. Default: processes.", choices=("processes", "threads"), default="processes"),
+    _o("--scheduler", "a running Dask scheduler (e.g. tcp://host:8786). Default: none (local).",
+       metavar="ADDRESS"),
 )
 
 
 def _scenario(sim: bool = True) -> list:
     """The scenario file, its shortcut options (sim: those of commands that simulate) and --set."""
     opts = [
-        ("scenario", dict(nargs="?", metavar="SCENARIO.toml", default=None,
-                          help="scenario file (layout: scenarios/paper.toml). Default: the built-in paper "
-                               "scenario.")),
-        ("--plant", dict(choices=PLANTS, default=None,
-                         help="simulated plant: 'mujoco' (MuJoCo multibody chain), 'analytic' (RK4 on the "
-                              "analytic model) or 'cosserat' (PyElastica rod) (plant.kind). Default: from "
-                              "the scenario (paper: mujoco).")),
-        ("--actuation", dict(choices=ACTUATIONS, default=None,
-                             help="slave actuation (chain and rod): 'servo' (position servos on the "
-                                  "command), 'torque' (T2 as ideal generalized forces) or 'muscle' (one-sided"
-                                  " extensors, plant.muscle_*) (plant.actuation). Default: from the scenario "
-                                  "(paper: servo).")),
-        ("--segments", dict(metavar="N", default=None,
-                            help="rigid segments per slave section of the MuJoCo chain, integer in [1, 64] "
-                                 "(plant.segments). Default: from the scenario (paper: 8).")),
-        ("--duration", dict(metavar="S", default=None,
-                            help="simulated time in s, in (0, 3600]; must exceed the metrics' 'transient'. "
-                                 "Default: from the scenario (paper: 20).")),
-        ("--controller", dict(metavar="NAME|FILE.py:CLASS", default=None,
-                              help="a built-in controller ('teleop controllers'), 'file.py:Class' or "
-                                   "'package.module:Class' (controllers/interface.py; controller.name). "
-                                   "Default: from the scenario (paper: paper).")),
-        ("--allow-code", dict(action="store_true",
-                              help="let the scenario file (or a replayed config.toml) name a Python "
-                                   "controller and run it; only for files you trust. Default: refused.")),
-        ("--seed", dict(metavar="N", default=None,
-                        help="noise seed, integer >= 0. Default: from the scenario (paper: 0).")),
-        ("--snr", dict(metavar="DB|none", default=None,
-                       help="signal-to-noise ratio in dB of the noise on the fed-back states, in [0, 200], "
-                            "or 'none' (snr_db). Default: from the scenario (paper: 40).")),
-        _SET,
+        _o("scenario", "scenario file (layout: scenarios/paper.toml). Default: the paper's.", nargs="?",
+           metavar="SCENARIO.toml"),
+        _o("--plant", "simulated plant (plant.kind): MuJoCo chain, RK4 on the analytic model or Cosserat "
+           "rod. Default: the scenario's (paper: mujoco).", choices=PLANTS),
+        _o("--actuation", "slave actuation (plant.actuation): position servos, ideal generalized forces T2 "
+           "or one-sided muscles. Default: the scenario's (paper: servo).", choices=ACTUATIONS),
+        _o("--segments", "rigid segments per section of the MuJoCo chain (plant.segments), integer in [1, "
+           "64]. Default: the scenario's (paper: 8).", metavar="N"),
+        _o("--duration", "simulated time in s, in (0, 3600], > the metrics' transient. Default: the "
+           "scenario's (paper: 20).", metavar="S"),
+        _o("--controller", "a built-in controller ('teleop controllers'), 'file.py:Class' or "
+           "'package.module:Class'. Default: the scenario's (paper: paper).", metavar="NAME|FILE.py:CLASS"),
+        _o("--allow-code", "run a Python controller the scenario file names (trusted files only). Default: "
+           "refused.", action="store_true"),
+        _o("--seed", "noise seed, integer >= 0. Default: the scenario's (paper: 0).", metavar="N"),
+        _o("--snr", "signal-to-noise ratio of the fed-back states, dB in [0, 200], or 'none'. Default: the "
+           "scenario's (paper: 40).", metavar="DB|none"),
+        _o("--set", "set a scenario field by its dotted key to a TOML value (e.g. plant.segments=16); "
+           "repeatable, applied in order after the shortcut options.", **_SET),
     ]
     sim_only = ("--plant", "--duration", "--controller", "--allow-code", "--seed", "--snr")
     return [opt for opt in opts if sim or opt[0] not in sim_only]
@@ -174,20 +162,19 @@ _STATUS = "exit status: 0 ok; 1 {one}; 2 invalid input; 130 interrupted."
 # (name, help, description, epilog, options (flag, add_argument keywords; exclusive: one group))
 _COMMANDS = (
     ("run", "simulate one scenario and write its outputs",
-     "Simulate a scenario and write config.toml (first), metrics.json, run.rrd and the PNG figures into the "
-     "output folder, also when the run diverges or is interrupted (Ctrl-C stops cleanly, twice aborts).",
+     "Simulate a scenario and write config.toml (first), metrics.json, run.rrd and the PNG figures, also "
+     "when the run diverges or is interrupted (Ctrl-C stops cleanly, twice aborts).",
      _STATUS.format(one="diverged / outputs not written / the --view viewer could not be opened"), [
          *_scenario(), _out(_NEW_DIR + "runs/<scenario name>."), _NO_PROGRESS,
-         ("--view", dict(nargs="?", const="native", choices=("native", "web"), default=None,
-                         help="stream the run to a Rerun viewer: 'native' (a bare --view) spawns it, 'web' "
-                              "serves the web viewer until Ctrl-C after the run. Default: no viewer.")),
-         ("--view-host", dict(metavar="HOST", default="127.0.0.1",
-                              help="address the web viewer listens on; a non-loopback one serves the run to "
-                                   "other machines, without authentication. Default: 127.0.0.1.")),
-         ("--web-port", dict(metavar="N", type=_port, default=9090,
-                             help="HTTP port of the web viewer, 0 for any free port. Default: 9090.")),
-         ("--grpc-port", dict(metavar="N", type=_port, default=9876,
-                              help="data port of the web viewer, 0 for any free port. Default: 9876.")),
+         _o("--view", "stream the run to a Rerun viewer: 'native' (a bare --view) or 'web' (served until "
+            "Ctrl-C after the run). Default: no viewer.", nargs="?", const="native",
+            choices=("native", "web")),
+         _o("--view-host", "address of the web viewer (not loopback: served to other machines, no "
+            "authentication). Default: 127.0.0.1.", metavar="HOST", default="127.0.0.1"),
+         _o("--web-port", "HTTP port of the web viewer, 0 for any free port. Default: 9090.", metavar="N",
+            type=_port, default=9090),
+         _o("--grpc-port", "data port of the web viewer, 0 for any free port. Default: 9876.", metavar="N",
+            type=_port, default=9876),
          _RECORD_RATE]),
     ("check", "simulate a scenario and check acceptance bounds",
      "Like 'run', then list every bound of the bounds file the metrics violate, with value and limit.",
@@ -199,34 +186,28 @@ _COMMANDS = (
      "Write the MJCF of the scenario's plant master and slave (harness.plant.mujoco_model.export_mjcf).",
      None, [
          *_scenario(sim=False),
-         ("--enforce-cc", dict(action=argparse.BooleanOptionalAction, default=None,
-                               help="with / without the constant-curvature equality constraints "
-                                    "(plant.enforce_cc). Default: from the scenario (paper: false).")),
-         _out("output MJCF file (parent folders created). Default: "
-              "mjcf/octarm_<actuation>_n<segments>[_cc].xml.", metavar="FILE.xml")]),
+         _o("--enforce-cc", "with / without the constant-curvature constraints. Default: the scenario's "
+            "(paper: false).", action=argparse.BooleanOptionalAction),
+         _out("output MJCF file. Default: mjcf/octarm_<actuation>_n<segments>[_cc].xml.",
+              metavar="FILE.xml")]),
     ("sweep", "run a parameter sweep (study file)",
      "Run every case of a study file locally or on a Dask cluster; finished cases are appended to "
      "results.jsonl (a re-run resumes). Also writes summary.csv, plots, study.toml, worst-case recordings.",
      "study file: see studies/*.toml. exit status: 0 every case has a row; 1 cases unfinished, the executor "
      "failed or an output was not written; 2 invalid study, option or output folder; 130 interrupted.", [
-         ("study", dict(metavar="STUDY.toml", type=_path, help="study file describing the sweep.")),
-         _out("output folder (created; must be writable; an existing sweep is resumed). Default: "
-              "runs/sweeps/<study name>."), *_POOL,
-         ("--max-cases", dict(metavar="N", type=_positive_int, default=None,
-                              help="refuse a study of more than N cases, integer >= 1. Default: the study's "
-                                   "[sampling] max_cases, else 10000.")),
-         ("--set", dict(_SET[1], help="override a field of the study's base scenario for every case, after "
-                                      "the study's own set (a factor on the same key wins); repeatable. "
-                                      "Default: none.")),
-         ("--case-timeout", dict(metavar="SECONDS", type=_positive_float, default=None,
-                                 help="wall-time limit per case, set-up included, > 0: a case over it "
-                                      "becomes a row with status 'error'. Default: no limit.")),
+         _o("study", "study file describing the sweep.", metavar="STUDY.toml", type=_path),
+         _out(_NEW_DIR + "runs/sweeps/<study name> (an existing sweep is resumed)."), *_POOL,
+         _o("--max-cases", "refuse a study of more than N cases, integer >= 1. Default: the study's, else "
+            "10000.", metavar="N", type=_positive_int),
+         _o("--set", "set a field of every case's scenario, after the study's own set (a factor on the key "
+            "wins); repeatable. Default: none.", **_SET),
+         _o("--case-timeout", "wall-time limit per case, > 0: a case over it becomes a row with status "
+            "'error'. Default: no limit.", metavar="SECONDS", type=_positive_float),
          _NO_PROGRESS,
-         ("--allow-code", dict(action="store_true", help="let the study name Python controllers and run "
-                                                         "them (trusted studies only). Default: refused.")),
-         ("--view", dict(metavar="CASE_ID", default=None,
-                         help="do not run: open <out>/recordings/CASE_ID.rrd in a Rerun viewer. Default: run "
-                              "the sweep."))]),
+         _o("--allow-code", "run the Python controllers the study names (trusted studies only). Default: "
+            "refused.", action="store_true"),
+         _o("--view", "do not run: open <out>/recordings/CASE_ID.rrd in a Rerun viewer. Default: run the "
+            "sweep.", metavar="CASE_ID")]),
     ("controllers", "list the built-in controllers",
      "List the built-in controllers (name, plant actuations, description). Your own: --controller "
      "path/to/file.py:ClassName.", "Default controller of every scenario: paper (the paper's laws).", []),
@@ -234,15 +215,15 @@ _COMMANDS = (
      "List the compiled-kernel cache folders ($TELEOP_CACHE_DIR, else $XDG_CACHE_HOME/octarm-teleop, else "
      "~/.cache/octarm-teleop) with their sizes, marking those this installation uses. Default: list only.",
      "Removing a folder another installation still uses costs it one recompilation (20-60 s).", [
-         ("--prune", dict(action="store_true", exclusive=True,
-                          help="remove the folders this installation does not use. Default: keep them.")),
-         ("--clear", dict(action="store_true", exclusive=True,
-                          help="remove every cache folder (the next run compiles again). Default: keep."))]),
+         _o("--prune", "remove the folders this installation does not use. Default: keep them.",
+            action="store_true", exclusive=True),
+         _o("--clear", "remove every cache folder (the next run compiles again). Default: keep them.",
+            action="store_true", exclusive=True)]),
     ("stability-map", "survival map over null-space gain x rod damping",
      "Run the paper scenario over a grid of k_n (eq. 27-28) and bending viscosity eta_b, free and CC chain, "
      "servo and torque (harness.studies.stability_map). Writes stability_map.md and .png.", None, [
-         ("--duration", dict(metavar="S", type=_positive_float, default=3.0,
-                             help="simulated seconds per cell, > 0. Default: 3.")),
+         _o("--duration", "simulated seconds per cell, > 0. Default: 3.", metavar="S", type=_positive_float,
+            default=3.0),
          _out(_NEW_DIR + "runs/stability_map.", Path("runs/stability_map"))]),
     ("stability", "linear stability of the closed loop at a time point",
      "Run the scenario (no noise) to --at and linearize the closed loop over one control period by central "
@@ -250,14 +231,12 @@ _COMMANDS = (
      "spectrum.csv, stability.json and stability.png.",
      "exit status: 0 stable or marginal; 1 unstable, or the run stopped before --at; 2 invalid input.", [
          *_scenario(),
-         ("--at", dict(metavar="T[,T...]|START:STOP:STEP", type=_times, default=(1.0,),
-                       help="time(s) in s, each in [0, 3600], all on one run; with several, one line each "
-                            "and the files of the least stable. Default: 1.")),
-         ("--fd-step", dict(metavar="H", type=_positive_float, default=None,
-                            help="relative central-difference step, in (0, 0.01). Default: 1e-6 analytic, "
-                                 "1e-7 MuJoCo and rod.")),
-         ("--modes", dict(metavar="N", type=_positive_int, default=6,
-                          help="least stable modes printed, integer >= 1. Default: 6.")),
+         _o("--at", "time(s) in s, each in [0, 3600], on one run (the files: the least stable). Default: 1.",
+            metavar="T[,T...]|START:STOP:STEP", type=_times, default=(1.0,)),
+         _o("--fd-step", "relative central-difference step, in (0, 0.01). Default: 1e-6 analytic, 1e-7 "
+            "MuJoCo and rod.", metavar="H", type=_positive_float),
+         _o("--modes", "least stable modes printed, integer >= 1. Default: 6.", metavar="N",
+            type=_positive_int, default=6),
          _out(_NEW_DIR + "runs/stability/<scenario name>.")]),
     ("margin", "robustness margins of a scenario against a bounds file",
      "For each mismatch parameter, the largest deviation each way for which the scenario passes the bounds, "
@@ -268,47 +247,40 @@ _COMMANDS = (
      "noise_snr (dB, [0, 200]) or any dotted scenario key as a scale. exit status: 0 margins found; 1 the "
      "executor failed; 2 invalid input or the nominal scenario fails; 130 interrupted.", [
          *_scenario(), _BOUNDS,
-         ("--param", dict(dest="params", action="append", default=None, metavar="NAME",
-                          help="parameter to search (repeatable). Default: all of them (those that do not "
-                               "apply to the plant are listed as n/a).")),
-         ("--rtol", dict(metavar="R", type=_rtol, default=0.05,
-                         help="relative tolerance of a scale edge, in (0, 1). Default: 0.05.")),
-         ("--probes", dict(metavar="N", type=_probes, default=2,
-                           help="points per side inside the margin checked for a non-monotone edge, integer "
-                                "in [0, 10]. Default: 2.")),
-         ("--pair", dict(metavar="P1,P2", default=None, help="also trace the pass/fail edge of two scale "
-                                                             "parameters in their plane. Default: none.")),
-         *_POOL, _out("output folder (created; must be writable; an existing one is resumed). Default: "
-                       "runs/margin/<scenario name>."),
-         _NO_PROGRESS]),
+         _o("--param", "parameter to search (repeatable). Default: all that apply to the plant.",
+            dest="params", action="append", metavar="NAME"),
+         _o("--rtol", "relative tolerance of a scale edge, in (0, 1). Default: 0.05.", metavar="R",
+            type=_rtol, default=0.05),
+         _o("--probes", "points per side checked for a non-monotone edge, integer in [0, 10]. Default: 2.",
+            metavar="N", type=_probes, default=2),
+         _o("--pair", "also trace the pass/fail edge of two scale parameters in their plane. Default: none.",
+            metavar="P1,P2"),
+         *_POOL, _out(_NEW_DIR + "runs/margin/<scenario name> (an existing one is resumed)."), _NO_PROGRESS]),
     ("fidelity", "plant-fidelity study over MuJoCo segment counts",
      "Compare the MuJoCo chain with N segments per section against the analytic CC model and with / without "
      "the CC constraints (harness.studies.fidelity). Writes fidelity.md/.csv/.png, fidelity_cc.md/.csv.",
      None, [
-         ("--segments", dict(metavar="N,N,...", type=_segment_list, default="4,8,16,32",
-                             help="segment counts per section, each an integer in [1, 64]. Default: "
-                                  "4,8,16,32.")),
-         ("--samples", dict(metavar="N", type=_positive_int, default=50,
-                            help="random slave configurations, integer >= 1. Default: 50.")),
-         ("--seed", dict(metavar="N", type=_nonnegative_int, default=0,
-                         help="seed of the random configurations, integer >= 0. Default: 0.")),
-         ("--reference", dict(choices=("analytic", "cosserat"), default="analytic",
-                              help="what the tables compare against: the analytic model, or the Cosserat rod "
-                                   "(harness.studies.fidelity_reference). Default: analytic.")),
+         _o("--segments", "segment counts per section, each in [1, 64]. Default: 4,8,16,32.",
+            metavar="N,N,...", type=_segment_list, default="4,8,16,32"),
+         _o("--samples", "random slave configurations, integer >= 1. Default: 50.", metavar="N",
+            type=_positive_int, default=50),
+         _o("--seed", "seed of the random configurations, integer >= 0. Default: 0.", metavar="N",
+            type=_nonnegative_int, default=0),
+         _o("--reference", "compare against the analytic model or the Cosserat rod "
+            "(harness.studies.fidelity_reference). Default: analytic.", choices=("analytic", "cosserat"),
+            default="analytic"),
          _out(_NEW_DIR + "runs/fidelity.", Path("runs/fidelity")), _NO_PROGRESS]),
     ("findings", "rerun the findings and check their claims",
      "Rerun the shipped findings (findings/*.toml; harness.studies.findings), print claim / measured / holds "
      "and write the findings table and the figures of the runs a finding names.", None, [
-         ("names", dict(nargs="*", metavar="NAME", help="finding names or files. Default: all shipped.")),
-         ("--table", dict(metavar="FILE", type=_path, default=None,
-                          help="markdown table of all findings (when all run; one per finding always, "
-                               "'<stem>-NAME.md'). Default: docs/findings-table.md in a checkout, else "
-                               "runs/findings/findings-table.md.")),
-         ("--figures", dict(metavar="DIR", type=_path, default=None,
-                            help="folder of the figures. Default: docs/figures in a checkout, else "
-                                 "runs/findings/figures.")),
-         ("--no-write", dict(action="store_true", help="print only, write nothing. Default: write them.")),
-         ("--list", dict(action="store_true", help="list the shipped findings and exit. Default: run."))]),
+         _o("names", "finding names or files. Default: all shipped.", nargs="*", metavar="NAME"),
+         _o("--table", "markdown table of all findings (when all run; '<stem>-NAME.md' per finding). "
+            "Default: docs/findings-table.md in a checkout, else runs/findings/findings-table.md.",
+            metavar="FILE", type=_path),
+         _o("--figures", "folder of the figures. Default: docs/figures in a checkout, else "
+            "runs/findings/figures.", metavar="DIR", type=_path),
+         _o("--no-write", "print only, write nothing. Default: write them.", action="store_true"),
+         _o("--list", "list the shipped findings and exit. Default: run them.", action="store_true")]),
 )
 
 
