@@ -143,7 +143,7 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
     from harness.config.textio import remove_outputs
     from harness.loop import common
     from harness.loop.metrics import compute_metrics
-    from harness.output.names import FIGURES
+    from harness.output import FIGURES
     from harness.plant import build_plant
 
     failures: list[str] = []
@@ -201,9 +201,8 @@ def _write_outputs(traj: Any, out: Path, record_rate: float | None, attempt: Cal
     """run.rrd and the figures at the same time: the recording in a forked child, FIGURES_IN_CHILD in a
     second one, the other figures here (`harness.output.guarded.start_in_child`).  Each failure goes
     through `attempt`; returns the paths written (run.rrd, then the figures in FIGURES order)."""
-    from harness.output import plots, record
+    from harness.output import FIGURES, plots, record
     from harness.output.guarded import start_in_child
-    from harness.output.names import FIGURES
 
     def start_recording():
         rate = record.DEFAULT_GEOMETRY_RATE if record_rate is None else float(record_rate)

@@ -15,9 +15,8 @@ from matplotlib.figure import Figure
 
 from harness.config.textio import write_atomic
 from harness.loop.trajectory import Trajectory
+from harness.output import FIGURES
 from harness.output import geometry as geo
-from harness.output.names import FIGURES  # what write_figures writes (forces.png only with interaction)
-from harness.output.obstacles import obstacle_outline
 
 DPI = 130
 _SEC_COLORS = ("tab:green", "tab:purple", "tab:brown")
@@ -173,7 +172,7 @@ def _draw_obstacles(ax, obstacles, slave_base: np.ndarray) -> None:
     from matplotlib.patches import Polygon
 
     for j, ob in enumerate(obstacles):
-        xz = obstacle_outline(ob) + slave_base[[0, 2]]
+        xz = geo.obstacle_outline(ob) + slave_base[[0, 2]]
         ax.add_patch(Polygon(xz, closed=True, facecolor=OBSTACLE_FACE, edgecolor=OBSTACLE_EDGE, hatch="//",
                              lw=1.0, label="obstacle" if j == 0 else None, zorder=0))
         ax.update_datalim(xz)

@@ -3,14 +3,15 @@ log time off (two writes of a run compare equal), and read series back.  Bluepri
 Entities (world: MuJoCo's, Z up; a static `Transform3D` moves each arm's base into the plane Y = 0):
 
     plots/e1, e2, e2_plant (X, Z) m (11), (16); beta (41); ya (29); deN_norm |e_N-dot| (23);
-    q2 d (m), k (1/m); T1 N m; T2 [N, N m^2]; forces/* (runs with interaction, `record_contact`)
+    q2 d (m), k (1/m); T1 N m; T2 [N, N m^2]; forces/* (runs with interaction)
     world/master/arm, tip            master base-elbow-tip strip, tip point
     world/slave/segments             plant bodies as oriented boxes (size static, pose per step)
     world/slave/rod, sections        Cosserat plant: centreline strip, section boundaries
     world/slave/backbone, tip        CC backbone of the sensed q2; plant tip (analytic x2 without one)
     world/desired/master, slave      the desired path x_d (static)
-    world/slave/obstacles/NAME       the environment's objects (static; `harness.output.obstacles`)
-    world/contact/points, forces     contacts and forces on the arm (`record_contact`)
+    world/slave/obstacles/NAME       the environment's objects (static; `geometry.obstacle_solid`)
+    world/contact/points, forces     contacts and forces ON the arm, every CONTACT_EVERY steps
+    world/operator/hand              the operator's hand
     traces/desired, master, slave, obstacles/NAME   2-D task-space traces as (X, -Z) (y down on screen)
     status                           run status and message (static text)
 """
@@ -31,8 +32,6 @@ from harness.loop.trajectory import Trajectory
 from harness.output import geometry as geo
 from harness.output import scene as sc
 from harness.output.geometry import cc_backbone
-from harness.output.obstacles import obstacle_face, obstacle_solid
-from harness.output.record_contact import ARROW_LENGTH, arrow_scale, force_series, log_contacts
 from harness.output.scene import TIMELINE
 
 APP_ID = "octarm_teleop"
@@ -43,11 +42,65 @@ STRIP_POINTS_PER_CHUNK = 2500
 # run 8.4 MB in half the time of every step's 22 MB, above a viewer's 60 fps (docs: Performance)
 DEFAULT_GEOMETRY_RATE = 100.0
 FLUSH_TIMEOUT = 60.0  # s: the file sink must have written everything within this after the last log call
+CONTACT_EVERY = 10  # control steps between logged contact arrows
+ARROW_LENGTH = 0.2  # m: the largest contact force of the run is drawn this long (a sixth of the arm)
+ARROW_RADIUS = 0.006  # m, shaft radius of the force arrows
+ARROW_FRONT = 0.06  # m towards the eye (world -Y): a push along the arm is not hidden in its boxes
+_C_TRUE, _C_SENSED, _C_CONTACT = (200, 40, 40), (60, 120, 220), (230, 60, 30)
 
 
 def _ns(t: np.ndarray) -> np.ndarray:
     """Seconds -> nanoseconds, rounded to the nearest ns (rerun's own float path truncates)."""
     return np.round(np.asarray(t, dtype=float) * 1e9).astype(np.int64).astype("timedelta64[ns]")
+
+
+def force_series(traj: Trajectory) -> list[tuple[str, np.ndarray, list[str], list[tuple[int, int, int]]]]:
+    """(entity, values (n, k), names, colours) of the force series, in `_series`' format."""
+    ft, fs = np.asarray(traj.F_true, dtype=float), np.asarray(traj.F_sensed, dtype=float)
+    pen = np.maximum(0.0, -np.asarray(traj.contact, dtype=float)[:, 3:4])
+    cols = [_C_TRUE, (240, 150, 40), _C_SENSED, (60, 200, 200)]
+    return [
+        ("plots/forces/F2", np.column_stack([ft[:, 2:4], fs[:, 2:4]]),
+         ["F2 X true", "F2 Z true", "F2 X to law", "F2 Z to law"], cols),
+        ("plots/forces/F1", np.column_stack([ft[:, 0:2], fs[:, 0:2]]),
+         ["F1 X true", "F1 Z true", "F1 X to law", "F1 Z to law"], cols),
+        ("plots/forces/penetration", pen, ["penetration [m]"], [_C_CONTACT]),
+    ]
+
+
+def max_contact_force(traj: Trajectory) -> float:
+    """N, the largest contact force on the arm over `traj` (0 without contacts)."""
+    pts = traj.contact_points
+    if pts is None or not len(pts):
+        return 0.0
+    f = np.linalg.norm(np.asarray(pts, dtype=float)[:, :, 3:], axis=-1)
+    return float(np.nanmax(f)) if np.isfinite(f).any() else 0.0
+
+
+def arrow_scale(traj: Trajectory, fmax: float | None = None) -> float:
+    """m per N of the contact-force arrows: the largest contact force (`fmax`, default: of `traj`) is
+    ARROW_LENGTH long (ARROW_LENGTH per newton when no contact carries force)."""
+    fmax = max_contact_force(traj) if fmax is None else fmax
+    return ARROW_LENGTH / fmax if fmax > 0 else ARROW_LENGTH
+
+
+def log_contacts(rec: rr.RecordingStream, traj: Trajectory, master_base: np.ndarray, scale: float) -> None:
+    """Contact points and force arrows (world frame, `scale` m per N) and the operator's hand point."""
+    pts = traj.contact_points
+    hand = traj.hand
+    op = hand is not None and np.any(hand != 0)
+    for k in range(0, len(traj), CONTACT_EVERY):
+        rec.set_time(TIMELINE, duration=float(traj.t[k]))
+        if pts is not None:
+            live = np.any(pts[k, :, 3:] != 0, axis=1)
+            p, f = pts[k, live, :3], pts[k, live, 3:]
+            rec.log("world/contact/points", rr.Points3D(p, radii=0.006, colors=_C_CONTACT))
+            rec.log("world/contact/forces",
+                    rr.Arrows3D(origins=p - [0.0, ARROW_FRONT, 0.0], vectors=f * scale, colors=_C_CONTACT,
+                                radii=ARROW_RADIUS))
+        if op:
+            x = [master_base[0] + hand[k, 0], master_base[1], master_base[2] + hand[k, 1]]
+            rec.log("world/operator/hand", rr.Points3D([x], radii=0.015, colors=(240, 200, 60)))
 
 
 def _series(traj: Trajectory) -> list[tuple[str, np.ndarray, list[str], list[tuple[int, int, int]]]]:
@@ -193,7 +246,7 @@ def log_obstacles(rec: rr.RecordingStream, obstacles, slave_base) -> None:
     """The environment's objects (static): solids under world/slave/obstacles (slave task frame placed at
     the slave base), outlines in the 2-D traces view under traces/obstacles (named by their entity path)."""
     for ob in obstacles:
-        solid = obstacle_solid(ob)
+        solid = geo.obstacle_solid(ob)
         fill = rr.components.FillMode.Solid
         if solid is None:
             r = float(ob["size"][0])
@@ -207,7 +260,7 @@ def log_obstacles(rec: rr.RecordingStream, obstacles, slave_base) -> None:
                                rotation_axis_angles=[rr.RotationAxisAngle(axis=[0.0, 1.0, 0.0], angle=angle)])
         name = rr.escape_entity_path_part(str(ob["name"]))
         rec.log(f"world/slave/obstacles/{name}", shape, static=True)
-        outline = rr.LineStrips2D([_screen(obstacle_face(ob))], colors=[sc.C_OBSTACLE],
+        outline = rr.LineStrips2D([_screen(geo.obstacle_face(ob))], colors=[sc.C_OBSTACLE],
                                   radii=rr.Radius.ui_points(1.5))
         rec.log(f"traces/obstacles/{name}", outline, static=True)
 

@@ -12,7 +12,6 @@ import rerun.blueprint as rrb
 from harness.loop.trajectory import Trajectory
 from harness.output import geometry as geo
 from harness.output.geometry import task_to_world, world_base
-from harness.output.obstacles import OBSTACLE_HALF_DEPTH
 
 TIMELINE = "sim_time"  # the duration timeline of every recording
 
@@ -83,7 +82,7 @@ def frame_eye(traj: Trajectory) -> rrb.EyeControls3D:
     near = 0.5 * (hi[1] - lo[1] - abs(world_base(traj.meta or {}, "master_base")[1]
                                        - world_base(traj.meta or {}, "slave_base")[1]))
     if (traj.meta or {}).get("environment"):
-        near = max(near, OBSTACLE_HALF_DEPTH)
+        near = max(near, geo.OBSTACLE_HALF_DEPTH)
     c[1] = 0.0
     pos = [c[0], -max(near, 0.0) - dist, c[2]]
     return rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=pos, look_target=[c[0], c[1], c[2]],

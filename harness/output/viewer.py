@@ -28,7 +28,7 @@ import rerun as rr
 
 from harness.config.runtime import die_with_parent, parent_death_signal
 from harness.loop.trajectory import Trajectory
-from harness.output import geometry, record, record_contact, scene
+from harness.output import geometry, record, scene
 
 DESIRED_PATH_POINTS = 400
 LOCALHOST = "127.0.0.1"
@@ -227,7 +227,7 @@ class LiveView:
             if not self.chunks:
                 self._start(part)
             if geometry.has_interaction(part):  # arrows scaled by the largest force streamed so far
-                self._fmax = max(self._fmax, record_contact.max_contact_force(part))
+                self._fmax = max(self._fmax, record.max_contact_force(part))
             record.log_steps(self.rec, part, 500, 1, self._fmax)
             self.chunks += 1
         except Exception as e:  # noqa: BLE001 - the viewer must never stop a run
