@@ -54,20 +54,6 @@ def _ns(t: np.ndarray) -> np.ndarray:
     return np.round(np.asarray(t, dtype=float) * 1e9).astype(np.int64).astype("timedelta64[ns]")
 
 
-def force_series(traj: Trajectory) -> list[tuple[str, np.ndarray, list[str], list[tuple[int, int, int]]]]:
-    """(entity, values (n, k), names, colours) of the force series, in `_series`' format."""
-    ft, fs = np.asarray(traj.F_true, dtype=float), np.asarray(traj.F_sensed, dtype=float)
-    pen = np.maximum(0.0, -np.asarray(traj.contact, dtype=float)[:, 3:4])
-    cols = [_C_TRUE, (240, 150, 40), _C_SENSED, (60, 200, 200)]
-    return [
-        ("plots/forces/F2", np.column_stack([ft[:, 2:4], fs[:, 2:4]]),
-         ["F2 X true", "F2 Z true", "F2 X to law", "F2 Z to law"], cols),
-        ("plots/forces/F1", np.column_stack([ft[:, 0:2], fs[:, 0:2]]),
-         ["F1 X true", "F1 Z true", "F1 X to law", "F1 Z to law"], cols),
-        ("plots/forces/penetration", pen, ["penetration [m]"], [_C_CONTACT]),
-    ]
-
-
 def max_contact_force(traj: Trajectory) -> float:
     """N, the largest contact force on the arm over `traj` (0 without contacts)."""
     pts = traj.contact_points
@@ -119,8 +105,15 @@ def _series(traj: Trajectory) -> list[tuple[str, np.ndarray, list[str], list[tup
         ("plots/T1", traj.T1, ["T1 a", "T1 b"], xz),
         ("plots/T2", traj.T2, ["T2 d1", "T2 d2", "T2 d3", "T2 k1", "T2 k2", "T2 k3"], sec + sec),
     ]
-    if geo.has_interaction(traj):
-        out += force_series(traj)
+    if geo.has_interaction(traj):  # forces true and to the laws, penetration
+        ft, fs = np.asarray(traj.F_true, dtype=float), np.asarray(traj.F_sensed, dtype=float)
+        cols = [_C_TRUE, (240, 150, 40), _C_SENSED, (60, 200, 200)]
+        out += [("plots/forces/F2", np.column_stack([ft[:, 2:4], fs[:, 2:4]]),
+                 ["F2 X true", "F2 Z true", "F2 X to law", "F2 Z to law"], cols),
+                ("plots/forces/F1", np.column_stack([ft[:, 0:2], fs[:, 0:2]]),
+                 ["F1 X true", "F1 Z true", "F1 X to law", "F1 Z to law"], cols),
+                ("plots/forces/penetration", np.maximum(0.0, -np.asarray(traj.contact, dtype=float)[:, 3:4]),
+                 ["penetration [m]"], [_C_CONTACT])]
     return [(e, np.asarray(v, dtype=np.float64).reshape(len(traj), len(nm)), nm, c) for e, v, nm, c in out]
 
 
@@ -149,8 +142,6 @@ def write_recording(traj: Trajectory, path: str | Path, *, recording_id: str | N
     if geometry_rate is None:
         geometry_rate = (traj.meta or {}).get("geometry_rate")
     every = 1 if geometry_rate is None else geometry_every(traj, geometry_rate)
-    if int(block) < 1:
-        raise ValueError(f"block ({block}) must be >= 1")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:  # the final name only ever holds a complete, readable file
@@ -162,7 +153,7 @@ def write_recording(traj: Trajectory, path: str | Path, *, recording_id: str | N
         try:
             log_static(rec, traj)
             if len(traj):
-                log_steps(rec, traj, int(block), every)
+                log_steps(rec, traj, block, every)
             try:  # the file sink writes from its own thread: a write error (EFBIG, ENOSPC) shows only here
                 rec.flush(timeout_sec=FLUSH_TIMEOUT)
             except RuntimeError as e:
@@ -243,8 +234,7 @@ def log_static(rec: rr.RecordingStream, traj: Trajectory) -> None:
 
 
 def log_obstacles(rec: rr.RecordingStream, obstacles, slave_base) -> None:
-    """The environment's objects (static): solids under world/slave/obstacles (slave task frame placed at
-    the slave base), outlines in the 2-D traces view under traces/obstacles (named by their entity path)."""
+    """The environment's objects (static): solids in the slave's frame, outlines in the 2-D traces view."""
     for ob in obstacles:
         solid = geo.obstacle_solid(ob)
         fill = rr.components.FillMode.Solid
@@ -329,23 +319,16 @@ def log_steps(rec: rr.RecordingStream, traj: Trajectory, block: int, every: int,
     for entity, x in (("traces/master", x1_task), ("traces/slave", x2_task)):
         pos = _f32(_screen(x[idx]))
         _send(rec, entity, t, block, lambda sl, pos=pos: rr.Points2D.columns(positions=pos[sl]))
-    if traj.body_pos is not None and np.asarray(traj.body_pos).shape[1]:
-        # plant bodies: oriented boxes (they tile the chain), size static, poses per step
-        B = rr.Boxes3D
+    if traj.body_pos is not None and np.asarray(traj.body_pos).shape[1]:  # plant bodies: oriented boxes
         bpos = np.asarray(traj.body_pos, dtype=float)[idx]
-        nb = bpos.shape[1]
         half = sc.box_half_size(bpos, meta).astype(np.float32)
-        rec.log("world/slave/segments", B.from_fields(half_sizes=half, colors=sc.C_SLAVE, radii=0.002),
-                static=True)
-        centers, quat = _f32(bpos), None
-        if traj.body_quat is not None:
-            quat = _f32(np.asarray(traj.body_quat, dtype=float)[idx][..., [1, 2, 3, 0]])  # wxyz -> xyzw
-
-        def boxes(sl):
-            q = None if quat is None else quat[sl].reshape(-1, 4)
-            return B.columns(centers=centers[sl].reshape(-1, 3), quaternions=q)
-
-        _send(rec, "world/slave/segments", t, block, boxes, nb)
+        rec.log("world/slave/segments", rr.Boxes3D.from_fields(half_sizes=half, colors=sc.C_SLAVE,
+                                                               radii=0.002), static=True)
+        centers = _f32(bpos)
+        q = None if traj.body_quat is None else _f32(np.asarray(traj.body_quat)[idx][..., [1, 2, 3, 0]])
+        _send(rec, "world/slave/segments", t, block, lambda sl: rr.Boxes3D.columns(  # quaternions xyzw
+            centers=centers[sl].reshape(-1, 3), quaternions=None if q is None else q[sl].reshape(-1, 4)),
+            bpos.shape[1])
     geometry = meta.get("geometry", {})  # Cosserat plant: rod centreline and section boundaries (world)
     if "centreline" in geometry:
         _send_strips(rec, "world/slave/rod", t, block, np.asarray(geometry["centreline"], dtype=float)[idx])
@@ -376,8 +359,6 @@ def read_series(path: str | Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
         v_parts.append(col.flatten().to_numpy(zero_copy_only=False).astype(np.float64).reshape(len(t_ns), -1))
     if not t_parts:
         raise KeyError(f"no scalar series for entity {entity!r} in {path}")
-    if len({v.shape[1] for v in v_parts}) != 1:
-        raise ValueError(f"{entity}: inconsistent number of series across chunks")
     t_ns, values = np.concatenate(t_parts), np.concatenate(v_parts, axis=0)
     order = np.argsort(t_ns, kind="stable")
     return t_ns[order] / 1e9, values[order]
