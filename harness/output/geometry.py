@@ -33,10 +33,13 @@ def task_to_world(x: np.ndarray, base: np.ndarray) -> np.ndarray:
     return np.stack([base[0] + x[..., 0], np.full(x.shape[:-1], base[1]), base[2] + x[..., 1]], axis=-1)
 
 
-def master_points(q1: np.ndarray, lengths, base: np.ndarray) -> np.ndarray:
-    """World positions (n, 3, 3) of master base, elbow, tip from q1 (n, 2) rad, angles from +Z towards +X:
-    x1 = [l1 sin qa + l2 sin(qa + qb), l1 cos qa + l2 cos(qa + qb)] (controllers.params.MasterParams)."""
-    q1 = np.asarray(q1, dtype=float).reshape(-1, 2)
+def master_points(traj: Trajectory, base: np.ndarray) -> np.ndarray:
+    """World positions (n, 3, 3) of master base, elbow, tip: traj.master_pos, else from q1 (n, 2) rad, angles
+    from +Z towards +X: x1 = [l1 sin qa + l2 sin(qa + qb), l1 cos qa + l2 cos(qa + qb)] (l: meta's)."""
+    if traj.master_pos is not None:
+        return np.asarray(traj.master_pos, dtype=float).reshape(-1, 3, 3)
+    q1 = np.asarray(traj.q1, dtype=float).reshape(-1, 2)
+    lengths = (traj.meta or {}).get("master_lengths", DEFAULT_MASTER_LENGTHS)
     l1, l2 = (float(v) for v in np.asarray(lengths, dtype=float).reshape(2))
     a, ab = q1[:, 0], q1[:, 0] + q1[:, 1]
     elbow = np.stack([l1 * np.sin(a), l1 * np.cos(a)], axis=-1)

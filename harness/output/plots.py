@@ -179,10 +179,10 @@ def _draw_obstacles(ax, obstacles, slave_base: np.ndarray) -> None:
 
 
 def fig_shapes(traj: Trajectory, path: Path) -> Path:
-    """Master links and slave backbone at 5 instants, world X-Z (master lengths: meta, else the paper's)."""
+    """Master links and slave backbone at 5 instants, world X-Z plane."""
     meta = traj.meta or {}
-    lengths = meta.get("master_lengths", geo.DEFAULT_MASTER_LENGTHS)
     mb, sb = geo.world_base(meta, "master_base"), geo.world_base(meta, "slave_base")
+    master = geo.master_points(traj, mb)[:, :, [0, 2]]  # (n, 3, 2) world X-Z of base, elbow, tip
     fn = meta.get("backbone_fn")
     fn = fn if callable(fn) else None
     fig, (ax,) = _figure(1, (7.5, 5.0))
@@ -195,11 +195,7 @@ def fig_shapes(traj: Trajectory, path: Path) -> Path:
     for j, i in enumerate(idx):
         c = cmap(j / max(1, len(idx) - 1))
         lab = f"t = {traj.t[i]:.3g} s"
-        if traj.master_pos is not None:  # world X-Z of master base, elbow, tip
-            mxz = np.asarray(traj.master_pos[i], dtype=float)[:, [0, 2]]
-        else:
-            mxz = geo.master_points(traj.q1[i], lengths, mb)[0][:, [0, 2]]
-        ax.plot(mxz[:, 0], mxz[:, 1], "-o", color=c, lw=2.5, ms=4, label=lab)
+        ax.plot(master[i, :, 0], master[i, :, 1], "-o", color=c, lw=2.5, ms=4, label=lab)
         sxz = _slave_xz(traj, i, fn, sb)
         if sxz is not None:
             ax.plot(sxz[:, 0], sxz[:, 1], "-", color=c, lw=2.0)

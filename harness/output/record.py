@@ -305,11 +305,7 @@ def log_steps(rec: rr.RecordingStream, traj: Trajectory, block: int, every: int,
     if len(idx) == n:
         idx = slice(None)  # every step: views instead of fancy-indexed copies
     t = np.asarray(traj.t, dtype=float)[idx]
-    if traj.master_pos is not None:
-        mpos = np.asarray(traj.master_pos, dtype=float)[idx].reshape(-1, 3, 3)
-    else:
-        lengths = meta.get("master_lengths", geo.DEFAULT_MASTER_LENGTHS)
-        mpos = geo.master_points(np.asarray(traj.q1)[idx], lengths, master_base)
+    mpos = geo.master_points(traj, master_base)[idx]
     _send_strips(rec, "world/master/arm", t, block, mpos)
     _send_points(rec, "world/master/tip", t, block, mpos[:, 2:3])
     x2 = traj.x2_plant if traj.x2_plant is not None else traj.x2

@@ -51,11 +51,7 @@ def scene_bounds(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     parts = [mb, sb]
     pad = 0.02  # the base markers' radius
     if len(traj):
-        if traj.master_pos is not None:
-            parts.append(traj.master_pos)
-        else:
-            lengths = meta.get("master_lengths", geo.DEFAULT_MASTER_LENGTHS)
-            parts.append(geo.master_points(traj.q1, lengths, mb))
+        parts.append(geo.master_points(traj, mb))
         x2 = traj.x2_plant if traj.x2_plant is not None else traj.x2
         parts.append(task_to_world(np.asarray(x2, dtype=float), sb))
         for base in (mb, sb):
