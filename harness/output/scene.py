@@ -1,7 +1,5 @@
-"""The scene of a run as the recording shows it: colours, framing and the default blueprint (3-D view
-looking along +Y at the X-Z plane the arms move in, far enough to show both arms over the run; 2-D tip
-traces with a margin).  Used by `harness.output.record` and the live viewer.
-"""
+"""The scene of a run as the recording and the live viewer show it: colours, framing (3-D eye along +Y at
+the arms' X-Z plane, 2-D tip traces, both showing the whole run) and the default blueprint."""
 
 from __future__ import annotations
 
@@ -11,7 +9,7 @@ import rerun.blueprint as rrb
 
 from harness.loop.trajectory import Trajectory
 from harness.output import geometry as geo
-from harness.output.geometry import task_to_world, world_base
+from harness.output.geometry import world_base
 
 TIMELINE = "sim_time"  # the duration timeline of every recording
 
@@ -52,10 +50,8 @@ def scene_bounds(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     pad = 0.02  # the base markers' radius
     if len(traj):
         parts.append(geo.master_points(traj, mb))
-        x2 = traj.x2_plant if traj.x2_plant is not None else traj.x2
-        parts.append(task_to_world(np.asarray(x2, dtype=float), sb))
-        for base in (mb, sb):
-            parts.append(task_to_world(np.asarray(traj.xd, dtype=float), base))
+        xd, _, x2 = trace_points(traj)
+        parts += [geo.task_to_world(x, base) for x, base in ((x2, sb), (xd, mb), (xd, sb))]
         if traj.body_pos is not None and np.asarray(traj.body_pos).size:
             parts.append(traj.body_pos)
             pad = max(pad, float(np.max(box_half_size(np.asarray(traj.body_pos), meta))))

@@ -32,8 +32,6 @@ from harness.output import geometry, record, scene
 
 DESIRED_PATH_POINTS = 400
 LOCALHOST = "127.0.0.1"
-WEB_PORT = 9090  # Rerun's defaults: the web viewer's HTTP port and the data (gRPC) port
-GRPC_PORT = 9876
 START_TIMEOUT = 20.0  # s for a spawned viewer / viewer server to listen
 NATIVE_SETTLE = 2.0  # s a native viewer must stay up after it listens (its window is created after that)
 FLUSH_TIMEOUT = 10.0  # s for the live stream to reach the viewer at the end of a run
@@ -163,8 +161,7 @@ class LiveView:
         self._fmax = 0.0  # N, the largest contact force streamed so far
 
     @classmethod
-    def open(cls, mode: str, scn=None, *, host: str = LOCALHOST, web_port: int = WEB_PORT,
-             grpc_port: int = GRPC_PORT, open_browser: bool = True) -> LiveView:
+    def open(cls, mode: str, scn, *, host: str, web_port: int, grpc_port: int) -> LiveView:
         """A live view on a spawned native viewer ("native", free local port) or a web viewer served on
         host:web_port, the data on host:grpc_port (0: a free port; `url`; stopped by `close()`).  Raises
         ViewerUnavailable (one line) when it cannot be opened."""
@@ -207,7 +204,7 @@ class LiveView:
         rec.connect_grpc(data)
         view.url = f"http://{shown}:{web_port}/?url={urllib.parse.quote(data, safe='')}"
         view.listen = f"{host}:{web_port} (viewer) and {host}:{grpc_port} (data)"
-        if open_browser and has_display():
+        if has_display():
             with contextlib.suppress(Exception):
                 webbrowser.open(view.url)
         return view
