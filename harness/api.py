@@ -101,10 +101,8 @@ def stop_on_signals(stop: threading.Event | None) -> Iterator[list[int]]:
             raise HarnessInterrupt
 
     stop.clear()
-    previous = {}
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            previous[sig] = signal.signal(sig, handler)
         yield received
     finally:
         for sig, old in previous.items():
@@ -204,18 +202,15 @@ def _write_outputs(traj: Any, out: Path, record_rate: float | None, attempt: Cal
     from harness.output import FIGURES, plots, record
     from harness.output.guarded import start_in_child
 
-    def start_recording():
-        rate = record.DEFAULT_GEOMETRY_RATE if record_rate is None else float(record_rate)
-        traj.meta["geometry_rate"] = rate
-        return start_in_child(lambda: record.write_recording(traj, out / "run.rrd"), out / "run.rrd")
-
+    traj.meta["geometry_rate"] = record.DEFAULT_GEOMETRY_RATE if record_rate is None else float(record_rate)
     names = attempt("figures", lambda: plots.figure_names(traj)) or []
     theirs = [n for n in names if n in FIGURES_IN_CHILD]
     mine = [n for n in names if n not in theirs]
     children = []
     written: dict[str, Path] = {}
     try:
-        rec = attempt("run.rrd", start_recording)
+        rec = attempt("run.rrd", lambda: start_in_child(lambda: record.write_recording(traj, out / "run.rrd"),
+                                                        out / "run.rrd"))
         fig = None
         if theirs:
             fig = attempt("figures", lambda: start_in_child(
