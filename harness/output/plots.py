@@ -12,6 +12,7 @@ import numpy as np
 from matplotlib import colormaps
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.patches import Polygon
 
 from harness.config.textio import write_atomic
 from harness.loop.trajectory import Trajectory
@@ -167,17 +168,6 @@ def _slave_xz(traj: Trajectory, i: int, fn: Callable | None, base: np.ndarray) -
     return geo.cc_backbone(q2[None])[0] + base[[0, 2]]
 
 
-def _draw_obstacles(ax, obstacles, slave_base: np.ndarray) -> None:
-    """The environment's objects as filled outlines in world X-Z (slave task frame at the slave base)."""
-    from matplotlib.patches import Polygon
-
-    for j, ob in enumerate(obstacles):
-        xz = geo.obstacle_outline(ob) + slave_base[[0, 2]]
-        ax.add_patch(Polygon(xz, closed=True, facecolor=OBSTACLE_FACE, edgecolor=OBSTACLE_EDGE, hatch="//",
-                             lw=1.0, label="obstacle" if j == 0 else None, zorder=0))
-        ax.update_datalim(xz)
-
-
 def fig_shapes(traj: Trajectory, path: Path) -> Path:
     """Master links and slave backbone at 5 instants, world X-Z plane."""
     meta = traj.meta or {}
@@ -194,8 +184,7 @@ def fig_shapes(traj: Trajectory, path: Path) -> Path:
     rod = meta.get("geometry", {}).get("centreline")  # Cosserat plant: (n, nodes, 3) world
     for j, i in enumerate(idx):
         c = cmap(j / max(1, len(idx) - 1))
-        lab = f"t = {traj.t[i]:.3g} s"
-        ax.plot(master[i, :, 0], master[i, :, 1], "-o", color=c, lw=2.5, ms=4, label=lab)
+        ax.plot(master[i, :, 0], master[i, :, 1], "-o", color=c, lw=2.5, ms=4, label=f"t = {traj.t[i]:.3g} s")
         sxz = _slave_xz(traj, i, fn, sb)
         if sxz is not None:
             ax.plot(sxz[:, 0], sxz[:, 1], "-", color=c, lw=2.0)
@@ -217,7 +206,11 @@ def fig_shapes(traj: Trajectory, path: Path) -> Path:
         ax.plot([], [], "kx", ms=7, label="desired tip x_d (40)")
         ax.plot(*mb[[0, 2]], "ks", ms=7)
         ax.plot(*sb[[0, 2]], "ks", ms=7)
-    _draw_obstacles(ax, meta.get("environment") or (), sb)
+    for j, ob in enumerate(meta.get("environment") or ()):  # filled outlines, slave task frame at its base
+        xz = geo.obstacle_outline(ob) + sb[[0, 2]]
+        ax.add_patch(Polygon(xz, closed=True, facecolor=OBSTACLE_FACE, edgecolor=OBSTACLE_EDGE, hatch="//",
+                             lw=1.0, label="obstacle" if j == 0 else None, zorder=0))
+        ax.update_datalim(xz)
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("world X [m]")
     ax.set_ylabel("world Z [m]")
