@@ -4,8 +4,6 @@ base b is world (b_x + X, b_y, b_z + Z); world is MuJoCo's (right-handed, Z up).
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
 from harness.loop.trajectory import Trajectory
@@ -18,13 +16,9 @@ PLANE_THICKNESS = 0.02  # m, a plane is drawn as a slab this thick on its solid 
 
 
 def world_base(meta: dict, key: str) -> np.ndarray:
+    """World position (3,) of an arm's base, meta[key] (absent: the origin)."""
     b = meta.get(key)
-    if b is None:
-        return np.zeros(3)
-    b = np.asarray(b, dtype=float).reshape(-1)
-    if b.shape != (3,):
-        raise ValueError(f"traj.meta[{key!r}] must be 3 numbers (world x, y, z), got shape {b.shape}")
-    return b
+    return np.zeros(3) if b is None else np.asarray(b, dtype=float).reshape(3)
 
 
 def task_to_world(x: np.ndarray, base: np.ndarray) -> np.ndarray:
@@ -60,17 +54,10 @@ def cc_backbone(q2: np.ndarray, points_per_section: int = BACKBONE_POINTS_PER_SE
     return pts
 
 
-def backbone_points_world(traj: Trajectory, slave_base: np.ndarray) -> np.ndarray | None:
+def backbone_points_world(traj: Trajectory, slave_base: np.ndarray) -> np.ndarray:
+    """World backbone (n, P, 3): meta["backbone"] (the MuJoCo loop's, of the sensed q2), else the CC one."""
     bb = traj.meta.get("backbone")
-    if bb is not None:
-        bb = np.asarray(bb, dtype=float)
-        if bb.ndim != 3 or bb.shape[0] != len(traj) or bb.shape[2] != 3:
-            warnings.warn(
-                f"traj.meta['backbone'] has shape {bb.shape}, expected ({len(traj)}, P, 3); "
-                "logging the analytic backbone of q2 instead", stacklevel=3)
-        else:
-            return bb
-    return task_to_world(cc_backbone(traj.q2), slave_base)
+    return np.asarray(bb, dtype=float) if bb is not None else task_to_world(cc_backbone(traj.q2), slave_base)
 
 
 def has_interaction(traj: Trajectory) -> bool:
