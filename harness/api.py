@@ -19,7 +19,7 @@ import sys
 import threading
 import traceback
 from collections.abc import Callable, Iterable, Iterator, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -35,11 +35,10 @@ Source = Scenario | str | os.PathLike | Mapping | None
 def load_scenario(source: str | os.PathLike | Mapping | None = None, overrides: Iterable[str] = (), *,
                   labels: Iterable[str | None] | None = None, allow_code: bool | None = None,
                   controller: bool = True) -> Scenario:
-    """Read and validate a scenario (TOML path, parsed table or None = the paper scenario), apply the
-    dotted `key=value` overrides and check that its plant can be built (kept for the next `run_scenario`
-    of the returned scenario).  Raises `ConfigError`.  allow_code=True: a scenario FILE may name a Python
-    controller ('file.py:Class'); the overrides are the caller's.  controller=False: the controller is
-    not loaded (no code is imported)."""
+    """Read and validate a scenario (TOML path, parsed table or None = the paper scenario) with the dotted
+    `key=value` overrides, and build its plant (kept for the next `run_scenario` of it).  Raises
+    `ConfigError`.  allow_code=True: a scenario FILE may name a Python controller ('file.py:Class');
+    controller=False: the controller is not loaded (no code is imported)."""
     from harness.config.controller import resolve_controller
     from harness.plant import build_plant
 
@@ -71,22 +70,20 @@ def _scenario_of(scenario: Source, overrides: Iterable[str], allow_code: bool | 
 
 @dataclass
 class RunResult:
-    """What `run_scenario` produced: the trajectory, its metrics (None if they could not be computed),
-    the files written, the outputs that could not be produced (one line each) and whether a signal
-    interrupted the run."""
+    """`run_scenario`'s trajectory, metrics (None: not computed), files written, outputs not produced
+    (one line each) and whether a signal interrupted the run."""
 
     traj: Any
     metrics: dict | None
-    written: list[Path] = field(default_factory=list)
-    failures: list[str] = field(default_factory=list)
-    interrupted: bool = False
+    written: list[Path]
+    failures: list[str]
+    interrupted: bool
 
 
 @contextlib.contextmanager
 def stop_on_signals(stop: threading.Event | None) -> Iterator[list[int]]:
-    """While active, SIGINT/SIGTERM set `stop` (the simulation then returns status "interrupted"); a
-    second signal, or the first while a Python controller's code runs, raises `HarnessInterrupt`.
-    Yields the list of received signal numbers."""
+    """While active, SIGINT/SIGTERM set `stop` (the run ends "interrupted"); a second one, or the first while
+    a Python controller's code runs, raises `HarnessInterrupt`.  Yields the received signal numbers."""
     received: list[int] = []
     if stop is None or threading.current_thread() is not threading.main_thread():
         yield received
@@ -104,10 +101,8 @@ def stop_on_signals(stop: threading.Event | None) -> Iterator[list[int]]:
             raise HarnessInterrupt
 
     stop.clear()
-    previous = {}
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            previous[sig] = signal.signal(sig, handler)
         yield received
     finally:
         for sig, old in previous.items():
@@ -130,36 +125,23 @@ def write_config(scn: Scenario, path: Path) -> Path:
     return write_atomic(path, f"# written by {what}\n" + _load.dumps_scenario(scn))
 
 
-RUN_OUTPUTS = ("config.toml", "run.rrd", "metrics.json")  # + the figures (harness.output.names.FIGURES)
 # drawn by a forked child while this process draws the rest and a third one writes run.rrd (about half
 # the drawing each, measured by benchmarks/bench_core.py)
 FIGURES_IN_CHILD = ("fig2_e1.png", "fig3_e2.png", "fig4_beta.png", "forces.png")
 
 
-def clear_run_outputs(out: Path) -> None:
-    """Remove a previous run's outputs from a reused folder (its fixed names, the files its metrics.json
-    lists, leftover temporary files); other files are left alone.  Raises OutputError."""
-    from harness.config.textio import remove_outputs
-    from harness.output.names import FIGURES
-
-    names = [*RUN_OUTPUTS, *FIGURES]
-    with contextlib.suppress(OSError, ValueError, TypeError, AttributeError):
-        prev = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
-        names += [n for n in prev.get("outputs", []) if isinstance(n, str) and Path(n).name == n]
-    remove_outputs(out, names)
-
-
-def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False, *, plant: Any = None,
+def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False, *,
                  handle_signals: bool = False, on_chunk: Callable | None = None,
                  record_rate: float | None = None) -> RunResult:
-    """Simulate, compute metrics and (if `out`) write every output that can be written, in the order of the
-    docs' "Outputs and their guarantees".  Raises OutputError if the folder cannot be cleared or
-    config.toml cannot be written (nothing ran).  handle_signals:
-    SIGINT/SIGTERM stop the simulation cleanly; on_chunk: `harness.loop.simulate`'s (live viewing);
-    record_rate: Hz of the 3-D geometry in run.rrd (None = record.DEFAULT_GEOMETRY_RATE, math.inf =
-    every step)."""
+    """Simulate, compute metrics and (if `out`) write every output that can be written (docs: "Outputs and
+    their guarantees").  Raises OutputError if the folder cannot be cleared or config.toml cannot be
+    written (nothing ran).  handle_signals: SIGINT/SIGTERM stop the run cleanly; on_chunk: as
+    `harness.loop.simulate`'s; record_rate: Hz of the 3-D geometry in run.rrd (None: the default)."""
     from harness import loop
+    from harness.config.textio import remove_outputs
     from harness.loop import common
+    from harness.loop.metrics import compute_metrics
+    from harness.output import FIGURES
     from harness.plant import build_plant
 
     failures: list[str] = []
@@ -176,23 +158,21 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
             failed.append(what)
         return None
 
-    if plant is None:
-        plant = _BUILT.pop()[1] if _BUILT and _BUILT[0][0] is scn else build_plant(scn)
+    plant = _BUILT.pop()[1] if _BUILT and _BUILT[0][0] is scn else build_plant(scn)
     written: list[Path] = []
-    if out is not None:  # first, so the configuration is on disk whatever happens next
-        clear_run_outputs(out)
+    if out is not None:  # a reused folder's previous outputs go; then the configuration, whatever follows
+        names = ["config.toml", "run.rrd", "metrics.json", *FIGURES]
+        with contextlib.suppress(OSError, ValueError, TypeError, AttributeError):  # those it lists
+            prev = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
+            names += [n for n in prev.get("outputs", []) if isinstance(n, str) and Path(n).name == n]
+        remove_outputs(out, names)
         written.append(write_config(scn, out / "config.toml"))
     with stop_on_signals(common.STOP if handle_signals else None) as received:
         traj = loop.simulate(scn, plant=plant, progress=progress, on_chunk=on_chunk)
     interrupted = bool(received) or traj.status == "interrupted"
     traj.meta["environment"] = [dataclasses.asdict(o) for o in scn.environment.objects]  # drawn by outputs
 
-    def metrics_of():
-        from harness.loop.metrics import compute_metrics
-
-        return dict(compute_metrics(traj, scn))
-
-    metrics = attempt("metrics", metrics_of)
+    metrics = attempt("metrics", lambda: dict(compute_metrics(traj, scn)))
     failed.clear()  # metrics are not a file
     if metrics is not None:
         metrics.setdefault("status", traj.status)
@@ -219,22 +199,18 @@ def _write_outputs(traj: Any, out: Path, record_rate: float | None, attempt: Cal
     """run.rrd and the figures at the same time: the recording in a forked child, FIGURES_IN_CHILD in a
     second one, the other figures here (`harness.output.guarded.start_in_child`).  Each failure goes
     through `attempt`; returns the paths written (run.rrd, then the figures in FIGURES order)."""
-    from harness.output import plots, record
+    from harness.output import FIGURES, plots, record
     from harness.output.guarded import start_in_child
-    from harness.output.names import FIGURES
 
-    def start_recording():
-        rate = record.DEFAULT_GEOMETRY_RATE if record_rate is None else float(record_rate)
-        traj.meta["geometry_rate"] = rate
-        return start_in_child(lambda: record.write_recording(traj, out / "run.rrd"), out / "run.rrd")
-
+    traj.meta["geometry_rate"] = record.DEFAULT_GEOMETRY_RATE if record_rate is None else float(record_rate)
     names = attempt("figures", lambda: plots.figure_names(traj)) or []
     theirs = [n for n in names if n in FIGURES_IN_CHILD]
     mine = [n for n in names if n not in theirs]
     children = []
     written: dict[str, Path] = {}
     try:
-        rec = attempt("run.rrd", start_recording)
+        rec = attempt("run.rrd", lambda: start_in_child(lambda: record.write_recording(traj, out / "run.rrd"),
+                                                        out / "run.rrd"))
         fig = None
         if theirs:
             fig = attempt("figures", lambda: start_in_child(
@@ -261,9 +237,8 @@ def run(scenario: Source = None, overrides: Iterable[str] = (), *, out: str | os
 
     scenario: a `Scenario`, a TOML path, a parsed table, or None (the paper scenario on MuJoCo);
     overrides: dotted `key=value` strings (not with a `Scenario`).  out: folder for run.rrd, figures,
-    metrics.json and config.toml (None = write nothing).  allow_code=True: a scenario file may name a
-    Python controller (`load_scenario`).  Raises `ConfigError` for bad input and `RuntimeError` if an
-    output could not be written (the trajectory is then in the exception's `traj` attribute)."""
+    metrics.json and config.toml (None = write nothing).  allow_code: as `load_scenario`'s.  Raises
+    `ConfigError` for bad input, `RuntimeError` (with the trajectory as `traj`) if an output failed."""
     scn = _scenario_of(scenario, overrides, allow_code)
     res = run_scenario(scn, prepare_out_dir(out) if out is not None else None, progress)
     if res.failures:
@@ -283,11 +258,9 @@ def run_sweep(study, out=None, **kwargs):
 
 def stability(scenario: Source = None, overrides: Iterable[str] = (), *, t: float = 1.0,
               h: float | None = None, out: str | os.PathLike | None = None):
-    """Linear stability of the sampled-data closed loop at time t (s) (paper law, sensing without noise):
-    the one-period Jacobian by central finite differences (relative step h), its eigenvalues, spectral
-    radius, least stable mode and verdict (`harness.studies.stability.Stability`).  out: folder for
-    spectrum.csv, stability.json and stability.png.  Raises `ConfigError` for bad input and
-    `harness.studies.stability.LinearizationError` when the run stops before t."""
+    """Linear stability of the sampled-data closed loop at time t (s), as `teleop stability` (relative
+    central-difference step h; out: folder of its files): `harness.studies.stability.Stability`.  Raises
+    `ConfigError` for bad input, `harness.studies.stability.LinearizationError` if the run stops before t."""
     from harness.studies.stability import linearize
     from harness.studies.stability_report import write_stability
 
@@ -306,10 +279,9 @@ def margins(scenario: Source = None, overrides: Iterable[str] = (), *, bounds,
             out: str | os.PathLike | None = None, workers: int | None = None, scheduler: str | None = None,
             executor: str = "processes", pair: tuple[str, str] | None = None, n_rays: int = 8,
             say: Callable[[str], None] = lambda s: None):
-    """Robustness margins of a scenario against a bounds file (path, table or `Bounds`), as `teleop margin`
-    (its --help gives the method and the outputs in `out`); params default to
-    `harness.studies.margin.DEFAULT_PARAMS`.  Returns (rows, edge rows or None).  Raises `ConfigError`
-    for bad input or a nominal scenario that fails the bounds."""
+    """Robustness margins of a scenario against bounds (path, table or `Bounds`), as `teleop margin`
+    (params: default `harness.studies.margin.DEFAULT_PARAMS`).  Returns (rows, edge rows or None).
+    Raises `ConfigError` for bad input or a nominal scenario that fails the bounds."""
     from harness.config.bounds import Bounds, load_bounds
     from harness.config.load import scenario_to_dict
     from harness.studies import margin as mg

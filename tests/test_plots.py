@@ -44,7 +44,7 @@ def test_early_stopped_and_tiny_runs(tmp_path, synthetic_trajectory, n):
 def test_analytic_plant_without_meta(tmp_path, synthetic_trajectory):
     traj = synthetic_trajectory(300, plant=False, with_master_pos=False)
     traj.meta = {}  # no geometry, bases or ranges: defaults must still draw
-    _check_pngs(write_figures(traj, tmp_path, lengths=(0.6, 0.6)), tmp_path)
+    _check_pngs(write_figures(traj, tmp_path), tmp_path)
 
 
 @pytest.mark.slow

@@ -439,7 +439,7 @@ def test_contact_obstacle_is_drawn_in_the_3d_and_2d_views(contact_run):
     # the ceiling: plane Z = 0.99 m (slave frame), normal -Z: a slab above it, centred at X = 0
     (centres,) = _columns(rrd, "/world/slave/obstacles/ceiling", "Boxes3D:centers")
     (half,) = _columns(rrd, "/world/slave/obstacles/ceiling", "Boxes3D:half_sizes")
-    from harness.output.obstacles import PLANE_THICKNESS
+    from harness.output.geometry import PLANE_THICKNESS
 
     slave_base = np.array([0.0, 0.3, 0.0])  # octarm_base of the generated MuJoCo model
     np.testing.assert_allclose(centres[0], slave_base + [0.0, 0.0, 0.99 + PLANE_THICKNESS / 2], atol=1e-6)
@@ -466,7 +466,7 @@ def test_contact_obstacle_is_drawn_in_the_shapes_figure(contact_run, tmp_path):
 
 
 def test_contact_force_arrows_are_scaled_to_be_seen(contact_run):
-    from harness.output.record_contact import ARROW_LENGTH
+    from harness.output.record import ARROW_LENGTH
 
     vectors = [np.array(v) for v in _columns(contact_run / "run.rrd", "/world/contact/forces",
                                              "Arrows3D:vectors") if v]

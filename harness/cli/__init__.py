@@ -1,8 +1,5 @@
-"""`teleop` command-line interface: each command's function (the options: `harness.cli.parser`).
-
-Invalid input is one ``error: ...`` line on stderr and exit 2, never a traceback (exit statuses:
-`teleop --help`).  Back ends are imported lazily, so that ``--help`` and input validation are fast.
-"""
+"""`teleop` command-line interface: each command's function (options: `harness.cli.parser`).  Invalid input
+is one ``error: ...`` line and exit 2; back ends are imported lazily (fast ``--help`` and validation)."""
 
 from __future__ import annotations
 
@@ -23,38 +20,21 @@ from harness.config.errors import ConfigError
 from harness.config.runtime import RuntimeOptions, fast_exit, set_gc_thresholds, using_options
 from harness.config.textio import jsonable, prepare_out_dir
 
-# (module, class) of the back ends' "invalid input" errors (exit 2); looked up in sys.modules only: a
-# module never imported cannot have raised its exception
-_USER_ERRORS = (("harness.plant.mujoco_model", "PlantModelError"), ("harness.loop.common", "SimulationError"))
-
 
 def _user_error_types() -> tuple[type[BaseException], ...]:
-    found = (getattr(sys.modules.get(mod), cls, None) for mod, cls in _USER_ERRORS)
+    """The "invalid input" errors (exit 2); back ends' looked up in sys.modules (not imported: not raised)."""
+    found = (getattr(sys.modules.get(mod), cls, None) for mod, cls in (
+        ("harness.plant.mujoco_model", "PlantModelError"), ("harness.loop.common", "SimulationError")))
     return (ConfigError, ParameterError, *(c for c in found if isinstance(c, type)))
 
 
-def _err(msg: Any) -> None:
-    print(f"error: {_one_line(msg)}", file=sys.stderr)
+def _err(msg: Any, kind: str = "error") -> None:
+    print(f"{kind}: {_one_line(msg)}", file=sys.stderr)
 
 
-def _warn(msg: Any) -> None:
-    print(f"warning: {_one_line(msg)}", file=sys.stderr)
-
-
-def _code(rc) -> int:
-    """A study's return value as an exit status (anything but an int: success)."""
-    return int(rc) if isinstance(rc, int) and not isinstance(rc, bool) else EXIT_OK
-
-
-_SHORTCUTS = (  # (attribute, option, dotted key)
-    ("plant", "--plant", "plant.kind"),
-    ("actuation", "--actuation", "plant.actuation"),
-    ("segments", "--segments", "plant.segments"),
-    ("duration", "--duration", "duration"),
-    ("controller", "--controller", "controller.name"),
-    ("seed", "--seed", "seed"),
-    ("snr", "--snr", "snr_db"),
-)
+# --plant, ... and their dotted keys
+_SHORTCUTS = {"plant": "plant.kind", "actuation": "plant.actuation", "segments": "plant.segments",
+              "duration": "duration", "controller": "controller.name", "seed": "seed", "snr": "snr_db"}
 
 
 def load_from_args(args: argparse.Namespace, extra: Sequence[tuple[str, str]] = (), controller: bool = True):
@@ -64,13 +44,12 @@ def load_from_args(args: argparse.Namespace, extra: Sequence[tuple[str, str]] = 
     from harness.api import load_scenario
 
     pairs: list[tuple[str, str]] = []
-    for attr, option, key in _SHORTCUTS:
+    for attr, key in _SHORTCUTS.items():
         value = getattr(args, attr, None)
         if value is not None:
             text = str(value).strip()
-            if key in ("plant.kind", "plant.actuation", "controller.name"):
-                text = json.dumps(text)  # always a TOML string
-            pairs.append((f"{key}={text}", f"{option} {value}"))
+            text = json.dumps(text) if attr in ("plant", "actuation", "controller") else text  # TOML strings
+            pairs.append((f"{key}={text}", f"--{attr} {value}"))
     pairs += extra
     pairs += [(t, f"--set {t if len(t) <= 80 else t[:77] + '...'}") for t in args.overrides]
     return load_scenario(args.scenario, [t for t, _ in pairs], labels=[label for _, label in pairs],
@@ -87,10 +66,17 @@ _SUMMARY_KEYS = (("e1_rms", "m"), ("e1_max", "m"), ("e2_rms", "m"), ("e2_max", "
                  ("e2_plant_rms", "m"), ("e2_plant_max", "m"), ("beta_min", ""), ("mujoco_warnings", ""))
 
 
-def _print_summary(scn, traj, metrics: dict | None, out: Path | None, written: list[Path]) -> None:
-    plant = scn.plant.kind
-    if plant == "mujoco":
-        plant += f", {scn.plant.segments} segments/section, {scn.plant.actuation}"
+def _simulate_and_write(args: argparse.Namespace, scn, out: Path | None, live=None):
+    """`harness.api.run_scenario` (live: a `LiveView` fed chunk by chunk), the summary, a warning per
+    output that could not be written and the hint of a known failure.  Returns the `RunResult`."""
+    from harness.api import run_scenario
+
+    res = run_scenario(scn, out, not args.no_progress, handle_signals=True, record_rate=args.record_rate,
+                       on_chunk=live.on_chunk if live is not None else None)
+    traj, metrics, p = res.traj, res.metrics, scn.plant
+    if live is not None:
+        live.finish(traj)
+    plant = p.kind + (f", {p.segments} segments/section, {p.actuation}" if p.kind == "mujoco" else "")
     t_end = float(traj.t[-1]) if len(traj) else 0.0
     print(f"run '{scn.name}': status {traj.status} - {len(traj)} of {scn.n_steps} steps, t = {t_end:.3f} s "
           f"(plant {plant})")
@@ -102,22 +88,10 @@ def _print_summary(scn, traj, metrics: dict | None, out: Path | None, written: l
         for i in range(0, len(items), 3):
             print("  " + "   ".join(items[i:i + 3]))
     if out is not None:
-        names = ", ".join(p.name if p.parent == out else str(p) for p in written)
+        names = ", ".join(f.name if f.parent == out else str(f) for f in res.written)
         print(f"  outputs in {out}/: {names or '(none)'}")
-
-
-def _simulate_and_write(args: argparse.Namespace, scn, out: Path | None, live=None):
-    """`harness.api.run_scenario` (live: a `LiveView` fed chunk by chunk), the summary, a warning per
-    output that could not be written and the hint of a known failure.  Returns the `RunResult`."""
-    from harness.api import run_scenario
-
-    res = run_scenario(scn, out, not args.no_progress, handle_signals=True, record_rate=args.record_rate,
-                       on_chunk=live.on_chunk if live is not None else None)
-    if live is not None:
-        live.finish(res.traj)
-    _print_summary(scn, res.traj, res.metrics, out, res.written)
     for f in res.failures:
-        _warn(f"could not produce {f}")
+        _err(f"could not produce {f}", "warning")
     hint = failure_hint(scn, res.traj)
     if hint:
         print(hint, file=sys.stderr)
@@ -149,14 +123,15 @@ def failure_hint(scn, traj) -> str | None:
             f"junction{runs}")
 
 
-def _run_exit_code(res, wrote: bool = True) -> int:
+def _run_exit_code(res, wrote: bool = True, status: bool = True) -> int:
+    """The exit status of a run: interrupted, (status) not "ok", an output not written, else ok."""
     traj = res.traj
     if res.interrupted:
         t_end = float(traj.t[-1]) if len(traj) else 0.0
         note = "; outputs written for the completed part" if wrote else ""
         _err(f"run interrupted at t = {t_end:.3f} s{note}")
         return EXIT_INTERRUPTED
-    if traj.status != "ok":
+    if status and traj.status != "ok":
         _err(f"run {traj.status}: {traj.message or 'no message'}")
         return EXIT_FAIL
     if res.failures:
@@ -179,15 +154,15 @@ def cmd_run(args: argparse.Namespace) -> int:
             _err(f"{e} (nothing was run, no outputs written)")
             return EXIT_FAIL
         if args.view == "web" and not viewer.is_loopback(args.view_host):
-            _warn(f"--view-host {args.view_host}: the web viewer and the run's data are served to every "
-                  f"machine that can reach this address, without authentication")
+            _err(f"--view-host {args.view_host}: the web viewer and the run's data are served to every "
+                 f"machine that can reach this address, without authentication", "warning")
         if live.url:
             print(f"web viewer: {live.url} (listening on {live.listen})", file=sys.stderr)
     try:
         res = _simulate_and_write(args, scn, out, live)
         rc = _run_exit_code(res)
         if live is not None and live.failed:
-            _warn(f"live view: {live.failed}")
+            _err(f"live view: {live.failed}", "warning")
         if live is not None and live.url and not res.interrupted:
             print(f"serving the web viewer at {live.url} - Ctrl-C to stop", file=sys.stderr)
             with contextlib.suppress(KeyboardInterrupt):
@@ -218,10 +193,7 @@ def cmd_check(args: argparse.Namespace) -> int:
             print(f"  FAIL {v}")
         return EXIT_FAIL
     print(f"check against {args.bounds}: all bounds satisfied")
-    if out is not None and res.failures:
-        _err(f"{len(res.failures)} output(s) could not be produced (see warnings above)")
-        return EXIT_FAIL
-    return EXIT_OK
+    return _run_exit_code(res, status=False)
 
 
 def cmd_models(args: argparse.Namespace) -> int:
@@ -254,17 +226,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if not study.is_file():
         raise ConfigError(f"study file {study}: not a regular file (a folder, named pipe, device or socket "
                           "is not read)", path=str(study))
-    if args.view is not None:
-        return _view_case(sweep, study, args.out, args.view)
-    # validates the study, then creates and checks the output folder
-    return _code(sweep.main_sweep(study, args.out, args.workers, args.scheduler, not args.no_progress,
-                                  max_cases=args.max_cases, executor=args.executor, overrides=args.overrides,
-                                  case_timeout=args.case_timeout, allow_code=args.allow_code))
-
-
-def _view_case(sweep, study: Path, out: Path | None, case_id: str) -> int:
-    """`teleop sweep STUDY --view CASE_ID`: open a case's recording in a spawned Rerun viewer."""
-    out = out if out is not None else Path("runs") / "sweeps" / sweep.load_study(study).name
+    if args.view is None:  # validates the study, then creates and checks the output folder
+        return sweep.main_sweep(study, args.out, args.workers, args.scheduler, not args.no_progress,
+                                max_cases=args.max_cases, executor=args.executor, overrides=args.overrides,
+                                case_timeout=args.case_timeout, allow_code=args.allow_code)
+    case_id = args.view  # open the case's recording in a spawned Rerun viewer
+    out = args.out if args.out is not None else Path("runs") / "sweeps" / sweep.load_study(study).name
     path = out / "recordings" / f"{case_id}.rrd"
     if not path.is_file():
         have = ", ".join(sorted(p.stem for p in (out / "recordings").glob("*.rrd"))) or "none"
@@ -324,8 +291,8 @@ def cmd_fidelity(args: argparse.Namespace) -> int:
     from harness.studies import fidelity, fidelity_reference
 
     if args.reference == "cosserat":
-        return _code(fidelity_reference.main_reference(args.segments, out, not args.no_progress, args.seed))
-    return _code(fidelity.main_fidelity(args.segments, out, not args.no_progress, args.samples, args.seed))
+        return fidelity_reference.main_reference(args.segments, out, not args.no_progress, args.seed)
+    return fidelity.main_fidelity(args.segments, out, not args.no_progress, args.samples, args.seed)
 
 
 def cmd_findings(args: argparse.Namespace) -> int:
@@ -391,7 +358,7 @@ def cmd_margin(args: argparse.Namespace) -> int:
     out = prepare_out_dir(args.out if args.out is not None else Path("runs") / "margin" / scn.name)
     note = servo_note(scn, args.params or ["slave_mass"])
     if note:
-        _warn(note)
+        _err(note, "warning")
     rows, edge = margins(scn, bounds=bounds, params=args.params, rtol=args.rtol, probes=args.probes, out=out,
                          workers=args.workers, scheduler=args.scheduler, executor=args.executor, pair=pair,
                          say=(lambda s: None) if args.no_progress else (lambda s: print(s, file=sys.stderr)))
@@ -448,7 +415,3 @@ def entry() -> NoReturn:
     then `fast_exit` (atexit handlers, no teardown)."""
     prepare_process()
     fast_exit(main())
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

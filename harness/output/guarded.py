@@ -1,7 +1,6 @@
-"""Run an output writer in a forked child that the parent can always stop (docs: Outputs and their
-guarantees): its error comes back as one `OutputError` line; a write error Rerun logs on its stderr, no
-growth of its temporary file for `stall_timeout` s, or Ctrl-C kill it and remove its temporary files.
-Without `fork` the writer runs in-process (same atomic rename)."""
+"""Run an output writer in a forked child the parent can always stop (docs: Outputs and their guarantees):
+its error is one `OutputError` line; a Rerun write error on its stderr, a stalled temporary file or Ctrl-C
+kill it and remove its temporary files.  Without `fork` the writer runs in-process."""
 
 from __future__ import annotations
 
@@ -55,17 +54,9 @@ def _native_cause(text: bytes) -> str:
     return ""
 
 
-def _temps(path: Path, pid: int | None) -> list[Path]:
-    pat = f".{path.name}{TMP_MARK}{pid if pid is not None else ''}*"
-    return [p for p in path.parent.glob(pat) if p.is_file()]
-
-
-def _size(paths: list[Path]) -> int:
-    total = 0
-    for p in paths:
-        with contextlib.suppress(OSError):
-            total += p.stat().st_size
-    return total
+def _temps(path: Path, pid: int) -> list[Path]:
+    """The temporary files of `path` that the writer process `pid` left (`atomic_path` names)."""
+    return [p for p in path.parent.glob(f".{path.name}{TMP_MARK}{pid}*") if p.is_file()]
 
 
 class ChildWriter:
@@ -126,7 +117,10 @@ class ChildWriter:
                                       path=str(path))
                 if self.stall_timeout is None:
                     continue
-                size = _size(_temps(path, pid))
+                size = 0
+                for tmp in _temps(path, pid):
+                    with contextlib.suppress(OSError):  # renamed or removed meanwhile
+                        size += tmp.stat().st_size
                 now = time.monotonic()
                 if size != last_size:
                     last_size, last_change = size, now

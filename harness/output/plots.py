@@ -1,10 +1,6 @@
-"""PNG figures of one run (matplotlib `Figure` on an Agg canvas, no pyplot: safe in workers and headless).
-
-    fig2_e1.png, fig3_e2.png, fig4_beta.png   e1 (11), e2 (16) (+ plant tip, dashed), beta (41): Figs. 2-4
-    q2.png         section lengths d_i (m) and curvatures k_i (1/m) with allowed ranges
-    shapes.png     master links and slave backbone at ~5 instants, world X-Z plane
-    forces.png     interaction forces, true vs what the laws got, and penetration (runs with interaction)
-"""
+"""PNG figures of one run (matplotlib `Figure` on an Agg canvas, no pyplot: safe in workers and headless):
+e1 (11), e2 (16), beta (41) as the paper's Figs. 2-4, q2 with its ranges, arm shapes in world X-Z, and
+forces.png (interaction forces true vs what the laws got, penetration; runs with interaction)."""
 
 from __future__ import annotations
 
@@ -16,29 +12,23 @@ import numpy as np
 from matplotlib import colormaps
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.patches import Polygon
 
 from harness.config.textio import write_atomic
 from harness.loop.trajectory import Trajectory
-from harness.output.geometry import cc_backbone, has_interaction, master_points, world_base
-from harness.output.names import FIGURES  # what write_figures writes (forces.png only with interaction)
-from harness.output.obstacles import obstacle_outline
+from harness.output import FIGURES
+from harness.output import geometry as geo
 
 DPI = 130
 _SEC_COLORS = ("tab:green", "tab:purple", "tab:brown")
 OBSTACLE_FACE, OBSTACLE_EDGE = (0.6, 0.63, 0.72, 0.35), (0.35, 0.38, 0.5, 1.0)
 
 
-def _new_figure(figsize) -> Figure:
-    """A Figure on an Agg canvas at the save DPI, laid out by matplotlib's constrained layout."""
+def _figure(nrows: int = 1, figsize=(7.0, 3.6)):
+    """A Figure on an Agg canvas at the save DPI (constrained layout) and its `nrows` axes sharing x."""
     fig = Figure(figsize=figsize, dpi=DPI, layout="constrained")
     FigureCanvasAgg(fig)
-    return fig
-
-
-def _figure(nrows: int = 1, figsize=(7.0, 3.6)):
-    fig = _new_figure(figsize)
-    axes = fig.subplots(nrows, 1, sharex=True, squeeze=False)[:, 0]
-    return fig, axes
+    return fig, fig.subplots(nrows, 1, sharex=True, squeeze=False)[:, 0]
 
 
 def _plot_series(ax, t, y, *args, **kwargs):
@@ -138,19 +128,16 @@ def fig_q2(traj: Trajectory, path: Path) -> Path:
         ax_d.plot([], [], "k--", lw=0.8, label="allowed range")
     k = q2[:, 3:][np.isfinite(q2[:, 3:])]
     d = q2[:, :3][np.isfinite(q2[:, :3]) & (q2[:, :3] > 0)]
-    kmin_limit = float(max_bend) / float(d.max()) if max_bend is not None and d.size else None
+    label = "+-max_bend / d_i"
     if k.size:  # data first; the bend-limit curves shown unless they are far outside the data
         span = max(float(np.abs(k).max()), 1e-3)
         lim = span
         if max_bend is not None and d.size:
             lim = max(span, min(float(max_bend) / float(d.min()), 10.0 * span))
+            if float(max_bend) / float(d.max()) > 1.1 * lim:  # the limit curves are off the scale
+                label += f":\noff scale (>= {float(max_bend) / float(d.max()):.2g} 1/m)"
         ax_k.set_ylim(-1.1 * lim, 1.1 * lim)
-        if kmin_limit is not None and kmin_limit > 1.1 * lim:  # the limit curves are off the scale
-            kmin_limit = -kmin_limit
     if max_bend is not None:
-        label = "+-max_bend / d_i"
-        if kmin_limit is not None and kmin_limit < 0:
-            label = f"+-max_bend / d_i:\noff scale (>= {-kmin_limit:.2g} 1/m)"
         ax_k.plot([], [], "k--", lw=0.8, label=label)
     ax_d.set_title("Slave section lengths d_i (q2[0:3])")
     ax_d.set_ylabel("d [m]")
@@ -178,42 +165,26 @@ def _slave_xz(traj: Trajectory, i: int, fn: Callable | None, base: np.ndarray) -
             warnings.warn(f"backbone_fn returned shape {pts.shape}, expected (P, 2)", stacklevel=3)
         except Exception as exc:  # plotting must not kill a run's post-processing
             warnings.warn(f"backbone_fn failed ({exc!r}); using the analytic backbone", stacklevel=3)
-    return cc_backbone(q2[None])[0] + base[[0, 2]]
+    return geo.cc_backbone(q2[None])[0] + base[[0, 2]]
 
 
-def _draw_obstacles(ax, obstacles, slave_base: np.ndarray) -> None:
-    """The environment's objects as filled outlines in world X-Z (slave task frame at the slave base)."""
-    from matplotlib.patches import Polygon
-
-    for j, ob in enumerate(obstacles):
-        xz = obstacle_outline(ob) + slave_base[[0, 2]]
-        ax.add_patch(Polygon(xz, closed=True, facecolor=OBSTACLE_FACE, edgecolor=OBSTACLE_EDGE, hatch="//",
-                             lw=1.0, label="obstacle" if j == 0 else None, zorder=0))
-        ax.update_datalim(xz)
-
-
-def fig_shapes(traj: Trajectory, path: Path, lengths=(0.6, 0.6), instants: int = 5) -> Path:
+def fig_shapes(traj: Trajectory, path: Path) -> Path:
+    """Master links and slave backbone at 5 instants, world X-Z plane."""
     meta = traj.meta or {}
-    lengths = meta.get("master_lengths", lengths)
-    mb, sb = world_base(meta, "master_base"), world_base(meta, "slave_base")
+    mb, sb = geo.world_base(meta, "master_base"), geo.world_base(meta, "slave_base")
+    master = geo.master_points(traj, mb)[:, :, [0, 2]]  # (n, 3, 2) world X-Z of base, elbow, tip
     fn = meta.get("backbone_fn")
     fn = fn if callable(fn) else None
-    fig = _new_figure((7.5, 5.0))
-    ax = fig.subplots()
+    fig, (ax,) = _figure(1, (7.5, 5.0))
     n = len(traj)
     if n == 0:
         ax.text(0.5, 0.5, "no steps recorded", ha="center", va="center", transform=ax.transAxes)
-    idx = np.unique(np.linspace(0, n - 1, min(instants, n)).round().astype(int)) if n else []
+    idx = np.unique(np.linspace(0, n - 1, min(5, n)).round().astype(int)) if n else []
     cmap = colormaps["viridis"]
     rod = meta.get("geometry", {}).get("centreline")  # Cosserat plant: (n, nodes, 3) world
     for j, i in enumerate(idx):
         c = cmap(j / max(1, len(idx) - 1))
-        lab = f"t = {traj.t[i]:.3g} s"
-        if traj.master_pos is not None:  # world X-Z of master base, elbow, tip
-            mxz = np.asarray(traj.master_pos[i], dtype=float)[:, [0, 2]]
-        else:
-            mxz = master_points(traj.q1[i], lengths, mb)[0][:, [0, 2]]
-        ax.plot(mxz[:, 0], mxz[:, 1], "-o", color=c, lw=2.5, ms=4, label=lab)
+        ax.plot(master[i, :, 0], master[i, :, 1], "-o", color=c, lw=2.5, ms=4, label=f"t = {traj.t[i]:.3g} s")
         sxz = _slave_xz(traj, i, fn, sb)
         if sxz is not None:
             ax.plot(sxz[:, 0], sxz[:, 1], "-", color=c, lw=2.0)
@@ -235,7 +206,11 @@ def fig_shapes(traj: Trajectory, path: Path, lengths=(0.6, 0.6), instants: int =
         ax.plot([], [], "kx", ms=7, label="desired tip x_d (40)")
         ax.plot(*mb[[0, 2]], "ks", ms=7)
         ax.plot(*sb[[0, 2]], "ks", ms=7)
-    _draw_obstacles(ax, meta.get("environment") or (), sb)
+    for j, ob in enumerate(meta.get("environment") or ()):  # filled outlines, slave task frame at its base
+        xz = geo.obstacle_outline(ob) + sb[[0, 2]]
+        ax.add_patch(Polygon(xz, closed=True, facecolor=OBSTACLE_FACE, edgecolor=OBSTACLE_EDGE, hatch="//",
+                             lw=1.0, label="obstacle" if j == 0 else None, zorder=0))
+        ax.update_datalim(xz)
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("world X [m]")
     ax.set_ylabel("world Z [m]")
@@ -273,13 +248,11 @@ def fig_forces(traj: Trajectory, path: Path) -> Path:
 
 def figure_names(traj: Trajectory) -> list[str]:
     """The files `write_figures(traj, ...)` writes by default: FIGURES (forces.png only with interaction)."""
-    return [n for n in FIGURES if n != "forces.png" or has_interaction(traj)]
+    return [n for n in FIGURES if n != "forces.png" or geo.has_interaction(traj)]
 
 
-def write_figures(traj: Trajectory, outdir: str | Path, *, lengths=(0.6, 0.6),
-                  names: Iterable[str] | None = None) -> list[Path]:
+def write_figures(traj: Trajectory, outdir: str | Path, *, names: Iterable[str] | None = None) -> list[Path]:
     """Write the PNG figures of `traj` into `outdir` (created); returns their paths (FIGURES order).
-    lengths: master link lengths (m) for shapes.png without traj.master_pos or meta["master_lengths"].
     names: the FIGURES to draw (None: `figure_names(traj)`; one that does not apply to this run is
     skipped; one not in FIGURES raises ValueError)."""
     applicable = figure_names(traj)
@@ -291,5 +264,5 @@ def write_figures(traj: Trajectory, outdir: str | Path, *, lengths=(0.6, 0.6),
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     draw = {"fig2_e1.png": fig_e1, "fig3_e2.png": fig_e2, "fig4_beta.png": fig_beta, "q2.png": fig_q2,
-            "shapes.png": lambda tr, path: fig_shapes(tr, path, lengths=lengths), "forces.png": fig_forces}
+            "shapes.png": fig_shapes, "forces.png": fig_forces}
     return [draw[n](traj, outdir / n) for n in applicable]

@@ -1,20 +1,17 @@
-"""Write one run (`Trajectory`) to a Rerun `.rrd` file (`rerun FILE.rrd` opens it), and read series back.
-
-Everything is sent in bulk (`rr.send_columns`, blocks of `block` rows) on the duration timeline
-``sim_time`` (s), log time off, so that two writes of the same run compare equal (`rerun rrd compare`).
-The file's default blueprint and the scene geometry: `harness.output.scene`.  Entities (world: MuJoCo's,
-Z up; task [X, Z] of an arm with base b is world (b_x + X, b_y, b_z + Z); a static `Transform3D` moves
-each arm's base into the plane Y = 0, `scene.display_offset`):
+"""Write one run (`Trajectory`) to a Rerun `.rrd` file, in bulk on the duration timeline ``sim_time`` (s),
+log time off (two writes of a run compare equal), and read series back.  Blueprint: `harness.output.scene`.
+Entities (world: MuJoCo's, Z up; a static `Transform3D` moves each arm's base into the plane Y = 0):
 
     plots/e1, e2, e2_plant (X, Z) m (11), (16); beta (41); ya (29); deN_norm |e_N-dot| (23);
-    q2 d (m), k (1/m); T1 N m; T2 [N, N m^2]; forces/* (runs with interaction, `record_contact`)
+    q2 d (m), k (1/m); T1 N m; T2 [N, N m^2]; forces/* (runs with interaction)
     world/master/arm, tip            master base-elbow-tip strip, tip point
     world/slave/segments             plant bodies as oriented boxes (size static, pose per step)
     world/slave/rod, sections        Cosserat plant: centreline strip, section boundaries
     world/slave/backbone, tip        CC backbone of the sensed q2; plant tip (analytic x2 without one)
     world/desired/master, slave      the desired path x_d (static)
-    world/slave/obstacles/NAME       the environment's objects (static; `harness.output.obstacles`)
-    world/contact/points, forces     contacts and forces on the arm (`record_contact`)
+    world/slave/obstacles/NAME       the environment's objects (static; `geometry.obstacle_solid`)
+    world/contact/points, forces     contacts and forces ON the arm, every CONTACT_EVERY steps
+    world/operator/hand              the operator's hand
     traces/desired, master, slave, obstacles/NAME   2-D task-space traces as (X, -Z) (y down on screen)
     status                           run status and message (static text)
 """
@@ -35,8 +32,6 @@ from harness.loop.trajectory import Trajectory
 from harness.output import geometry as geo
 from harness.output import scene as sc
 from harness.output.geometry import cc_backbone
-from harness.output.obstacles import obstacle_face, obstacle_solid
-from harness.output.record_contact import ARROW_LENGTH, arrow_scale, force_series, log_contacts
 from harness.output.scene import TIMELINE
 
 APP_ID = "octarm_teleop"
@@ -47,11 +42,51 @@ STRIP_POINTS_PER_CHUNK = 2500
 # run 8.4 MB in half the time of every step's 22 MB, above a viewer's 60 fps (docs: Performance)
 DEFAULT_GEOMETRY_RATE = 100.0
 FLUSH_TIMEOUT = 60.0  # s: the file sink must have written everything within this after the last log call
+CONTACT_EVERY = 10  # control steps between logged contact arrows
+ARROW_LENGTH = 0.2  # m: the largest contact force of the run is drawn this long (a sixth of the arm)
+ARROW_RADIUS = 0.006  # m, shaft radius of the force arrows
+ARROW_FRONT = 0.06  # m towards the eye (world -Y): a push along the arm is not hidden in its boxes
+_C_TRUE, _C_SENSED, _C_CONTACT = (200, 40, 40), (60, 120, 220), (230, 60, 30)
 
 
 def _ns(t: np.ndarray) -> np.ndarray:
     """Seconds -> nanoseconds, rounded to the nearest ns (rerun's own float path truncates)."""
     return np.round(np.asarray(t, dtype=float) * 1e9).astype(np.int64).astype("timedelta64[ns]")
+
+
+def max_contact_force(traj: Trajectory) -> float:
+    """N, the largest contact force on the arm over `traj` (0 without contacts)."""
+    pts = traj.contact_points
+    if pts is None or not len(pts):
+        return 0.0
+    f = np.linalg.norm(np.asarray(pts, dtype=float)[:, :, 3:], axis=-1)
+    return float(np.nanmax(f)) if np.isfinite(f).any() else 0.0
+
+
+def arrow_scale(traj: Trajectory, fmax: float | None = None) -> float:
+    """m per N of the contact-force arrows: the largest contact force (`fmax`, default: of `traj`) is
+    ARROW_LENGTH long (ARROW_LENGTH per newton when no contact carries force)."""
+    fmax = max_contact_force(traj) if fmax is None else fmax
+    return ARROW_LENGTH / fmax if fmax > 0 else ARROW_LENGTH
+
+
+def log_contacts(rec: rr.RecordingStream, traj: Trajectory, master_base: np.ndarray, scale: float) -> None:
+    """Contact points and force arrows (world frame, `scale` m per N) and the operator's hand point."""
+    pts = traj.contact_points
+    hand = traj.hand
+    op = hand is not None and np.any(hand != 0)
+    for k in range(0, len(traj), CONTACT_EVERY):
+        rec.set_time(TIMELINE, duration=float(traj.t[k]))
+        if pts is not None:
+            live = np.any(pts[k, :, 3:] != 0, axis=1)
+            p, f = pts[k, live, :3], pts[k, live, 3:]
+            rec.log("world/contact/points", rr.Points3D(p, radii=0.006, colors=_C_CONTACT))
+            rec.log("world/contact/forces",
+                    rr.Arrows3D(origins=p - [0.0, ARROW_FRONT, 0.0], vectors=f * scale, colors=_C_CONTACT,
+                                radii=ARROW_RADIUS))
+        if op:
+            x = [master_base[0] + hand[k, 0], master_base[1], master_base[2] + hand[k, 1]]
+            rec.log("world/operator/hand", rr.Points3D([x], radii=0.015, colors=(240, 200, 60)))
 
 
 def _series(traj: Trajectory) -> list[tuple[str, np.ndarray, list[str], list[tuple[int, int, int]]]]:
@@ -70,8 +105,15 @@ def _series(traj: Trajectory) -> list[tuple[str, np.ndarray, list[str], list[tup
         ("plots/T1", traj.T1, ["T1 a", "T1 b"], xz),
         ("plots/T2", traj.T2, ["T2 d1", "T2 d2", "T2 d3", "T2 k1", "T2 k2", "T2 k3"], sec + sec),
     ]
-    if geo.has_interaction(traj):
-        out += force_series(traj)
+    if geo.has_interaction(traj):  # forces true and to the laws, penetration
+        ft, fs = np.asarray(traj.F_true, dtype=float), np.asarray(traj.F_sensed, dtype=float)
+        cols = [_C_TRUE, (240, 150, 40), _C_SENSED, (60, 200, 200)]
+        out += [("plots/forces/F2", np.column_stack([ft[:, 2:4], fs[:, 2:4]]),
+                 ["F2 X true", "F2 Z true", "F2 X to law", "F2 Z to law"], cols),
+                ("plots/forces/F1", np.column_stack([ft[:, 0:2], fs[:, 0:2]]),
+                 ["F1 X true", "F1 Z true", "F1 X to law", "F1 Z to law"], cols),
+                ("plots/forces/penetration", np.maximum(0.0, -np.asarray(traj.contact, dtype=float)[:, 3:4]),
+                 ["penetration [m]"], [_C_CONTACT])]
     return [(e, np.asarray(v, dtype=np.float64).reshape(len(traj), len(nm)), nm, c) for e, v, nm, c in out]
 
 
@@ -100,25 +142,18 @@ def write_recording(traj: Trajectory, path: str | Path, *, recording_id: str | N
     if geometry_rate is None:
         geometry_rate = (traj.meta or {}).get("geometry_rate")
     every = 1 if geometry_rate is None else geometry_every(traj, geometry_rate)
-    if int(block) < 1:
-        raise ValueError(f"block ({block}) must be >= 1")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:  # the final name only ever holds a complete, readable file
-        meta = traj.meta or {}
-        mb, sb = geo.world_base(meta, "master_base"), geo.world_base(meta, "slave_base")
         # batches flushed by size only (never by the 200 ms timer): the same run gives the same chunks
         rec = rr.RecordingStream(APP_ID, recording_id=recording_id,
                                  batcher_config=rr.ChunkBatcherConfig(flush_tick=timedelta(days=1)))
         rec.save(tmp, default_blueprint=sc.build_blueprint(traj))
         rec.set_log_time_enabled(False)
         try:
-            log_static(rec, traj, mb, sb)
+            log_static(rec, traj)
             if len(traj):
-                log_series(rec, traj, int(block))
-                log_spatial(rec, traj, mb, sb, int(block), every)
-                if geo.has_interaction(traj):
-                    log_contacts(rec, traj, TIMELINE, mb)
+                log_steps(rec, traj, block, every)
             try:  # the file sink writes from its own thread: a write error (EFBIG, ENOSPC) shows only here
                 rec.flush(timeout_sec=FLUSH_TIMEOUT)
             except RuntimeError as e:
@@ -150,10 +185,11 @@ def geometry_every(traj: Trajectory, rate: float) -> int:
     return max(1, int(np.floor(1.0 / (rate * float(dt)) + 1e-9)))
 
 
-def log_static(rec: rr.RecordingStream, traj: Trajectory, master_base, slave_base) -> None:
+def log_static(rec: rr.RecordingStream, traj: Trajectory) -> None:
     """Everything static: view coordinates, status, series styles, arm placement, bases, obstacles, the
     desired paths and the styles of the per-step entities."""
     meta = traj.meta or {}
+    master_base, slave_base = geo.world_base(meta, "master_base"), geo.world_base(meta, "slave_base")
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     rec.log("status", rr.TextDocument(_status_text(traj), media_type=rr.MediaType.MARKDOWN), static=True)
     for entity, _, names, colors in _series(traj):
@@ -198,10 +234,9 @@ def log_static(rec: rr.RecordingStream, traj: Trajectory, master_base, slave_bas
 
 
 def log_obstacles(rec: rr.RecordingStream, obstacles, slave_base) -> None:
-    """The environment's objects (static): solids under world/slave/obstacles (slave task frame placed at
-    the slave base), outlines in the 2-D traces view under traces/obstacles (named by their entity path)."""
+    """The environment's objects (static): solids in the slave's frame, outlines in the 2-D traces view."""
     for ob in obstacles:
-        solid = obstacle_solid(ob)
+        solid = geo.obstacle_solid(ob)
         fill = rr.components.FillMode.Solid
         if solid is None:
             r = float(ob["size"][0])
@@ -215,7 +250,7 @@ def log_obstacles(rec: rr.RecordingStream, obstacles, slave_base) -> None:
                                rotation_axis_angles=[rr.RotationAxisAngle(axis=[0.0, 1.0, 0.0], angle=angle)])
         name = rr.escape_entity_path_part(str(ob["name"]))
         rec.log(f"world/slave/obstacles/{name}", shape, static=True)
-        outline = rr.LineStrips2D([_screen(obstacle_face(ob))], colors=[sc.C_OBSTACLE],
+        outline = rr.LineStrips2D([_screen(geo.obstacle_face(ob))], colors=[sc.C_OBSTACLE],
                                   radii=rr.Radius.ui_points(1.5))
         rec.log(f"traces/obstacles/{name}", outline, static=True)
 
@@ -256,14 +291,13 @@ def _send_strips(rec: rr.RecordingStream, entity: str, t: np.ndarray, block: int
           lambda sl: rr.LineStrips3D.columns(strips=_f32(strips[sl])))
 
 
-def log_series(rec: rr.RecordingStream, traj: Trajectory, block: int) -> None:
+def log_steps(rec: rr.RecordingStream, traj: Trajectory, block: int, every: int, fmax: float | None = None):
+    """The time series, the 3-D scene and 2-D traces at every `every`-th step and the last one, and the
+    contacts (force arrows: `fmax` N, default the largest of traj, is ARROW_LENGTH long)."""
+    meta = traj.meta or {}
+    master_base, slave_base = geo.world_base(meta, "master_base"), geo.world_base(meta, "slave_base")
     for entity, values, _, _ in _series(traj):
         _send(rec, entity, traj.t, block, lambda sl, v=values: rr.Scalars.columns(scalars=v[sl]))
-
-
-def log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, every: int) -> None:
-    """The per-step 3-D scene and 2-D traces at every `every`-th step and the last one."""
-    meta = traj.meta or {}
     n = len(traj)
     idx = np.arange(0, n, every)
     if idx[-1] != n - 1:
@@ -271,11 +305,7 @@ def log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, ever
     if len(idx) == n:
         idx = slice(None)  # every step: views instead of fancy-indexed copies
     t = np.asarray(traj.t, dtype=float)[idx]
-    if traj.master_pos is not None:
-        mpos = np.asarray(traj.master_pos, dtype=float)[idx].reshape(-1, 3, 3)
-    else:
-        lengths = meta.get("master_lengths", geo.DEFAULT_MASTER_LENGTHS)
-        mpos = geo.master_points(np.asarray(traj.q1)[idx], lengths, master_base)
+    mpos = geo.master_points(traj, master_base)[idx]
     _send_strips(rec, "world/master/arm", t, block, mpos)
     _send_points(rec, "world/master/tip", t, block, mpos[:, 2:3])
     x2 = traj.x2_plant if traj.x2_plant is not None else traj.x2
@@ -285,29 +315,24 @@ def log_spatial(rec, traj: Trajectory, master_base, slave_base, block: int, ever
     for entity, x in (("traces/master", x1_task), ("traces/slave", x2_task)):
         pos = _f32(_screen(x[idx]))
         _send(rec, entity, t, block, lambda sl, pos=pos: rr.Points2D.columns(positions=pos[sl]))
-    if traj.body_pos is not None and np.asarray(traj.body_pos).shape[1]:
-        # plant bodies: oriented boxes (they tile the chain), size static, poses per step
-        B = rr.Boxes3D
+    if traj.body_pos is not None and np.asarray(traj.body_pos).shape[1]:  # plant bodies: oriented boxes
         bpos = np.asarray(traj.body_pos, dtype=float)[idx]
-        nb = bpos.shape[1]
         half = sc.box_half_size(bpos, meta).astype(np.float32)
-        rec.log("world/slave/segments", B.from_fields(half_sizes=half, colors=sc.C_SLAVE, radii=0.002),
-                static=True)
-        centers, quat = _f32(bpos), None
-        if traj.body_quat is not None:
-            quat = _f32(np.asarray(traj.body_quat, dtype=float)[idx][..., [1, 2, 3, 0]])  # wxyz -> xyzw
-
-        def boxes(sl):
-            q = None if quat is None else quat[sl].reshape(-1, 4)
-            return B.columns(centers=centers[sl].reshape(-1, 3), quaternions=q)
-
-        _send(rec, "world/slave/segments", t, block, boxes, nb)
+        rec.log("world/slave/segments", rr.Boxes3D.from_fields(half_sizes=half, colors=sc.C_SLAVE,
+                                                               radii=0.002), static=True)
+        centers = _f32(bpos)
+        q = None if traj.body_quat is None else _f32(np.asarray(traj.body_quat)[idx][..., [1, 2, 3, 0]])
+        _send(rec, "world/slave/segments", t, block, lambda sl: rr.Boxes3D.columns(  # quaternions xyzw
+            centers=centers[sl].reshape(-1, 3), quaternions=None if q is None else q[sl].reshape(-1, 4)),
+            bpos.shape[1])
     geometry = meta.get("geometry", {})  # Cosserat plant: rod centreline and section boundaries (world)
     if "centreline" in geometry:
         _send_strips(rec, "world/slave/rod", t, block, np.asarray(geometry["centreline"], dtype=float)[idx])
     if "sections" in geometry:
         _send_points(rec, "world/slave/sections", t, block, np.asarray(geometry["sections"])[idx])
     _send_strips(rec, "world/slave/backbone", t, block, geo.backbone_points_world(traj, slave_base)[idx])
+    if geo.has_interaction(traj):
+        log_contacts(rec, traj, master_base, arrow_scale(traj, fmax))
 
 
 def read_series(path: str | Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
@@ -330,8 +355,6 @@ def read_series(path: str | Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
         v_parts.append(col.flatten().to_numpy(zero_copy_only=False).astype(np.float64).reshape(len(t_ns), -1))
     if not t_parts:
         raise KeyError(f"no scalar series for entity {entity!r} in {path}")
-    if len({v.shape[1] for v in v_parts}) != 1:
-        raise ValueError(f"{entity}: inconsistent number of series across chunks")
     t_ns, values = np.concatenate(t_parts), np.concatenate(v_parts, axis=0)
     order = np.argsort(t_ns, kind="stable")
     return t_ns[order] / 1e9, values[order]

@@ -1,7 +1,5 @@
-"""The scene of a run as the recording shows it: colours, framing and the default blueprint (3-D view
-looking along +Y at the X-Z plane the arms move in, far enough to show both arms over the run; 2-D tip
-traces with a margin).  Used by `harness.output.record` and the live viewer.
-"""
+"""The scene of a run as the recording and the live viewer show it: colours, framing (3-D eye along +Y at
+the arms' X-Z plane, 2-D tip traces, both showing the whole run) and the default blueprint."""
 
 from __future__ import annotations
 
@@ -11,8 +9,7 @@ import rerun.blueprint as rrb
 
 from harness.loop.trajectory import Trajectory
 from harness.output import geometry as geo
-from harness.output.geometry import task_to_world, world_base
-from harness.output.obstacles import OBSTACLE_HALF_DEPTH
+from harness.output.geometry import world_base
 
 TIMELINE = "sim_time"  # the duration timeline of every recording
 
@@ -52,15 +49,9 @@ def scene_bounds(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     parts = [mb, sb]
     pad = 0.02  # the base markers' radius
     if len(traj):
-        if traj.master_pos is not None:
-            parts.append(traj.master_pos)
-        else:
-            lengths = meta.get("master_lengths", geo.DEFAULT_MASTER_LENGTHS)
-            parts.append(geo.master_points(traj.q1, lengths, mb))
-        x2 = traj.x2_plant if traj.x2_plant is not None else traj.x2
-        parts.append(task_to_world(np.asarray(x2, dtype=float), sb))
-        for base in (mb, sb):
-            parts.append(task_to_world(np.asarray(traj.xd, dtype=float), base))
+        parts.append(geo.master_points(traj, mb))
+        xd, _, x2 = trace_points(traj)
+        parts += [geo.task_to_world(x, base) for x, base in ((x2, sb), (xd, mb), (xd, sb))]
         if traj.body_pos is not None and np.asarray(traj.body_pos).size:
             parts.append(traj.body_pos)
             pad = max(pad, float(np.max(box_half_size(np.asarray(traj.body_pos), meta))))
@@ -83,7 +74,7 @@ def frame_eye(traj: Trajectory) -> rrb.EyeControls3D:
     near = 0.5 * (hi[1] - lo[1] - abs(world_base(traj.meta or {}, "master_base")[1]
                                        - world_base(traj.meta or {}, "slave_base")[1]))
     if (traj.meta or {}).get("environment"):
-        near = max(near, OBSTACLE_HALF_DEPTH)
+        near = max(near, geo.OBSTACLE_HALF_DEPTH)
     c[1] = 0.0
     pos = [c[0], -max(near, 0.0) - dist, c[2]]
     return rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=pos, look_target=[c[0], c[1], c[2]],

@@ -1,14 +1,5 @@
-"""Live viewing of a run in Rerun, and opening recordings.
-
-`LiveView` streams each finished chunk of control steps (`harness.loop.simulate(..., on_chunk=)`) with the
-entities, colours and blueprint of the `.rrd` file (`harness.output.record`, still written after the run):
-
-    native  the Rerun viewer spawned on a local port (it stays open after the run); needs a display
-    web     the viewer binary serving the web viewer (HTTP) and the data (gRPC), bound to 127.0.0.1 unless
-            another host is asked for; it lives as long as this process (parent-death signal)
-
-The live blueprint frames the views from the first chunk and the scenario's desired path.
-"""
+"""Live viewing of a run in Rerun (`LiveView`: each chunk of steps with the entities and blueprint of the
+`.rrd` file, `harness.output.record`), and opening recordings.  Modes: `teleop run --help`."""
 
 from __future__ import annotations
 
@@ -37,13 +28,10 @@ import rerun as rr
 
 from harness.config.runtime import die_with_parent, parent_death_signal
 from harness.loop.trajectory import Trajectory
-from harness.output import geometry, record, record_contact, scene
+from harness.output import geometry, record, scene
 
-VIEW_MODES = ("native", "web")
 DESIRED_PATH_POINTS = 400
 LOCALHOST = "127.0.0.1"
-WEB_PORT = 9090  # Rerun's defaults: the web viewer's HTTP port and the data (gRPC) port
-GRPC_PORT = 9876
 START_TIMEOUT = 20.0  # s for a spawned viewer / viewer server to listen
 NATIVE_SETTLE = 2.0  # s a native viewer must stay up after it listens (its window is created after that)
 FLUSH_TIMEOUT = 10.0  # s for the live stream to reach the viewer at the end of a run
@@ -96,8 +84,8 @@ def _check_free(host: str, port: int, option: str) -> int:
 
 
 def _wait_listening(proc: subprocess.Popen, host: str, port: int, log, what: str) -> None:
-    """Wait until `proc` accepts connections on host:port; ViewerUnavailable (with the last line of its
-    output) if it exits first or does not listen within START_TIMEOUT."""
+    """Wait until `proc` accepts connections on host:port; ViewerUnavailable if it exits first or does not
+    listen within START_TIMEOUT."""
     connect_host = LOCALHOST if host in ("0.0.0.0", "") else ("::1" if host == "::" else host)
     deadline = time.monotonic() + START_TIMEOUT
     while time.monotonic() < deadline:
@@ -121,8 +109,7 @@ def _exit_reason(proc: subprocess.Popen, log, what: str) -> ViewerUnavailable:
 
 
 def _wait_alive(proc: subprocess.Popen, seconds: float, log, what: str) -> None:
-    """ViewerUnavailable if `proc` exits within `seconds` (e.g. a native viewer whose window cannot be
-    created: it listens first, then fails on the graphics driver)."""
+    """ViewerUnavailable if `proc` exits within `seconds` (e.g. a native viewer without a usable GPU)."""
     with contextlib.suppress(subprocess.TimeoutExpired):
         proc.wait(seconds)
     if proc.returncode is not None:
@@ -130,8 +117,8 @@ def _wait_alive(proc: subprocess.Popen, seconds: float, log, what: str) -> None:
 
 
 def _start(cmd: list[str], *, detach: bool) -> tuple[subprocess.Popen, Any]:
-    """Start the viewer binary, its output in a temporary file.  detach: it outlives this process; else
-    it gets the parent-death signal (Linux), so a killed `teleop` leaves no server behind."""
+    """Start the viewer binary, its output in a temporary file.  detach: it outlives this process; else it
+    dies with it (parent-death signal on Linux)."""
     log = tempfile.TemporaryFile()
     parent_death_signal()  # looked up here, not in the forked child
     env = {**os.environ, "RERUN_ANALYTICS": os.environ.get("RERUN_ANALYTICS", "0")}
@@ -167,22 +154,17 @@ class LiveView:
     def __init__(self, rec: rr.RecordingStream, scn=None) -> None:
         self.rec = rec
         self.scn = scn
-        self.url: str | None = None  # mode "web": the viewer's address, where it listens, its server
-        self.listen: str | None = None
+        self.url = self.listen = None  # mode "web": the viewer's address, where it listens, its server
         self.server: subprocess.Popen | None = None
         self.chunks = 0
         self.failed: str | None = None
-        self._first: Trajectory | None = None
         self._fmax = 0.0  # N, the largest contact force streamed so far
 
     @classmethod
-    def open(cls, mode: str, scn=None, *, host: str = LOCALHOST, web_port: int = WEB_PORT,
-             grpc_port: int = GRPC_PORT, open_browser: bool = True) -> LiveView:
-        """A live view on a spawned native viewer (mode "native", free local port) or a web viewer served
-        on host:web_port with the data on host:grpc_port (port 0: a free one; `url` to open, stopped by
-        `close()`).  Raises ViewerUnavailable (one line) when it cannot be opened."""
-        if mode not in VIEW_MODES:
-            raise ValueError(f"view mode {mode!r}: expected one of {VIEW_MODES}")
+    def open(cls, mode: str, scn, *, host: str, web_port: int, grpc_port: int) -> LiveView:
+        """A live view on a spawned native viewer ("native", free local port) or a web viewer served on
+        host:web_port, the data on host:grpc_port (0: a free port; `url`; stopped by `close()`).  Raises
+        ViewerUnavailable (one line) when it cannot be opened."""
         exe = rerun_executable()
         if mode == "native" and not has_display():
             raise ViewerUnavailable("--view: no display to open the Rerun viewer in (DISPLAY and "
@@ -222,7 +204,7 @@ class LiveView:
         rec.connect_grpc(data)
         view.url = f"http://{shown}:{web_port}/?url={urllib.parse.quote(data, safe='')}"
         view.listen = f"{host}:{web_port} (viewer) and {host}:{grpc_port} (data)"
-        if open_browser and has_display():
+        if has_display():
             with contextlib.suppress(Exception):
                 webbrowser.open(view.url)
         return view
@@ -239,54 +221,43 @@ class LiveView:
         if self.failed or not len(part):
             return
         try:
-            if self._first is None:
-                self._first = part
+            if not self.chunks:
                 self._start(part)
-            mb, sb = (geometry.world_base(part.meta, key) for key in ("master_base", "slave_base"))
-            record.log_series(self.rec, part, 500)
-            record.log_spatial(self.rec, part, mb, sb, 500, 1)
             if geometry.has_interaction(part):  # arrows scaled by the largest force streamed so far
-                self._fmax = max(self._fmax, record_contact.max_contact_force(part))
-                record_contact.log_contacts(self.rec, part, scene.TIMELINE, mb,
-                                            record_contact.arrow_scale(part, self._fmax))
+                self._fmax = max(self._fmax, record.max_contact_force(part))
+            record.log_steps(self.rec, part, 500, 1, self._fmax)
             self.chunks += 1
         except Exception as e:  # noqa: BLE001 - the viewer must never stop a run
             self.failed = f"{type(e).__name__}: {e}"
             warnings.warn(f"live view stopped: {self.failed}", stacklevel=2)
 
     def _start(self, part: Trajectory) -> None:
+        """Blueprint and static content, framed by `part` extended by the scenario's desired path over the
+        run (the other rows repeating the last state)."""
+        framing = part
         if self.scn is not None:
+            from harness.loop.common import desired_at
+
             part.meta["environment"] = [dataclasses.asdict(o) for o in self.scn.environment.objects]
-        framing = self._with_desired_path(part)
+            period = 2.0 * np.pi / max(abs(float(self.scn.trajectory.omega)), 1e-9)
+            t = np.linspace(0.0, min(float(self.scn.duration), period), DESIRED_PATH_POINTS)
+            xd = np.array([desired_at(self.scn, ti)[0] for ti in t])
+            idx = np.concatenate([np.arange(len(part)), np.full(len(t), len(part) - 1)])
+            fields = {f.name: None if getattr(part, f.name) is None else getattr(part, f.name)[idx]
+                      for f in dataclasses.fields(Trajectory) if f.name not in ("status", "message", "meta")}
+            fields["xd"] = np.concatenate([part.xd, xd])
+            framing = Trajectory(**fields, status="running", message="", meta=dict(part.meta))
         self.rec.send_blueprint(scene.build_blueprint(framing))
-        record.log_static(self.rec, framing, geometry.world_base(part.meta, "master_base"),
-                           geometry.world_base(part.meta, "slave_base"))
+        record.log_static(self.rec, framing)
         self.rec.log("status", rr.TextDocument("# Run status\n\n* status: **running**\n",
                                                media_type=rr.MediaType.MARKDOWN), static=True)
 
-    def _with_desired_path(self, part: Trajectory) -> Trajectory:
-        """`part` extended by the scenario's desired path over the run (framing, static desired path),
-        the other rows repeating the last state."""
-        if self.scn is None:
-            return part
-        from harness.loop.common import desired_at
-
-        period = 2.0 * np.pi / max(abs(float(self.scn.trajectory.omega)), 1e-9)
-        t = np.linspace(0.0, min(float(self.scn.duration), period), DESIRED_PATH_POINTS)
-        xd = np.array([desired_at(self.scn, ti)[0] for ti in t])
-        idx = np.concatenate([np.arange(len(part)), np.full(len(t), len(part) - 1)])
-        fields = {f.name: None if getattr(part, f.name) is None else getattr(part, f.name)[idx]
-                  for f in dataclasses.fields(Trajectory) if f.name not in ("status", "message", "meta")}
-        fields["xd"] = np.concatenate([part.xd, xd])
-        return Trajectory(**fields, status="running", message="", meta=dict(part.meta))
-
     def finish(self, traj: Trajectory) -> None:
         """After the run: final status text and desired path (static), and flush to the viewer."""
-        if self._first is None or self.failed:
+        if not self.chunks or self.failed:
             return
         try:
-            mb, sb = (geometry.world_base(traj.meta, key) for key in ("master_base", "slave_base"))
-            record.log_static(self.rec, traj, mb, sb)
+            record.log_static(self.rec, traj)
             self.rec.flush(timeout_sec=FLUSH_TIMEOUT)
         except Exception as e:  # noqa: BLE001
             self.failed = f"{type(e).__name__}: {e}"
@@ -301,22 +272,17 @@ class LiveView:
             stop_process(self.server)
 
 
-def open_recording(path: str | Path, mode: str = "native") -> list[str]:
-    """Command that opens a recording in a viewer (`rerun FILE` / `rerun --web-viewer FILE`, local only)."""
-    exe = rerun_executable() or "rerun"
-    return [exe, *(["--web-viewer", "--bind", LOCALHOST] if mode == "web" else []), str(path)]
-
-
 def spawn_recording_viewer(path: str | Path, settle: float = 2.0) -> list[str]:
     """Open a recording in a native viewer that outlives this process; returns its command.
     ViewerUnavailable (one line) without a display or binary, or if the viewer exits within `settle` s."""
+    exe = rerun_executable()
     if not has_display():
         raise ViewerUnavailable(f"no display to open the Rerun viewer in (DISPLAY and WAYLAND_DISPLAY are "
-                                f"unset); view it in a browser with: {' '.join(open_recording(path, 'web'))}")
-    if rerun_executable() is None:
+                                f"unset); view it in a browser with: {exe or 'rerun'} --web-viewer --bind "
+                                f"{LOCALHOST} {path}")
+    if exe is None:
         raise ViewerUnavailable("the Rerun viewer binary was not found (rerun-sdk's rerun_cli, or 'rerun' "
                                 "on PATH)")
-    cmd = open_recording(path)
-    proc, log = _start(cmd, detach=True)
+    proc, log = _start([exe, str(path)], detach=True)
     _wait_alive(proc, settle, log, "the Rerun viewer")
-    return cmd
+    return [exe, str(path)]
