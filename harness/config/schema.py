@@ -1,8 +1,6 @@
 """The one validator of every input file: frozen dataclasses whose fields carry their constraints and
-descriptions as `msgspec.Meta` annotations, decoded by `msgspec.convert` (`decode`), plus what msgspec
-does not say: unknown keys with "did you mean" (`suggest`), non-finite numbers and the one-line message
-``<dotted field> = <value>: must be <range>``.  `fields_of` lists the fields for config.toml and the docs.
-"""
+descriptions as `msgspec.Meta` annotations, decoded by `decode` into one-line errors
+``<dotted field> = <value>: must be <range>`` (plus unknown keys with "did you mean", non-finite numbers)."""
 
 from __future__ import annotations
 
@@ -21,7 +19,6 @@ from msgspec import inspect as mi
 
 from harness.config.errors import ConfigError, short_repr
 
-NONE_WORDS = ("none",)  # TOML has no null: "none" (or false) unsets an optional field
 _TOKEN = re.compile(r"\.([^.\[\]]+)|\[(\d+|\.\.\.)\]")
 
 
@@ -55,8 +52,6 @@ def checked(cls: type, spec: Mapping[str, Any]) -> type:
     """A frozen subclass of the parameter dataclass `cls` (names, defaults: its own) with the constrained
     types of `spec` (one entry per field); `plain` turns decoded instances back into `cls`."""
     own = dataclasses.fields(cls)
-    if set(spec) != {f.name for f in own}:
-        raise TypeError(f"{cls.__name__}: schema fields {sorted(spec)} != dataclass fields")
     extra = [(f.name, spec[f.name], dataclasses.field(default=f.default, default_factory=f.default_factory))
              for f in own]
     return dataclasses.make_dataclass(cls.__name__, extra, bases=(cls,), frozen=True, eq=False,
@@ -93,15 +88,11 @@ def _fmt(x: float) -> str:
 
 def describe_range(t: Any) -> str:
     """'in (0, 3600]', '> 0', '' for a numeric type's bounds."""
-    lo, lo_open = (t.gt, True) if t.gt is not None else (t.ge, False)
-    hi, hi_open = (t.lt, True) if t.lt is not None else (t.le, False)
-    if lo is not None and hi is not None:
-        return f"in {'(' if lo_open else '['}{_fmt(lo)}, {_fmt(hi)}{')' if hi_open else ']'}"
-    if lo is not None:
-        return f"{'>' if lo_open else '>='} {_fmt(lo)}"
-    if hi is not None:
-        return f"{'<' if hi_open else '<='} {_fmt(hi)}"
-    return ""
+    lo = ("(", ">", t.gt) if t.gt is not None else ("[", ">=", t.ge)
+    hi = (")", "<", t.lt) if t.lt is not None else ("]", "<=", t.le)
+    if lo[2] is not None and hi[2] is not None:
+        return f"in {lo[0]}{_fmt(lo[2])}, {_fmt(hi[2])}{hi[0]}"
+    return " ".join(f"{op} {_fmt(v)}" for _, op, v in (lo, hi) if v is not None)
 
 
 def describe(t: Any) -> str:
@@ -110,8 +101,7 @@ def describe(t: Any) -> str:
         return t.extra["expect"]
     t = bare(t)
     if isinstance(t, mi.IntType):
-        rng = describe_range(t)
-        return f"an integer {rng}".rstrip() if rng.startswith(("in", ">", "<")) else "an integer"
+        return f"an integer {describe_range(t)}".rstrip()
     if isinstance(t, mi.FloatType):
         rng = describe_range(t)
         return f"a number {rng}" if rng else "a finite number"
@@ -228,7 +218,7 @@ def _normalize(raw: Any, t: Any, path: str, elsewhere: tuple[str, ...], names: d
     """A copy of `raw` with "none" (or false) as None where `t` allows None; unknown keys raise."""
     t0 = bare(t)
     if isinstance(t0, mi.UnionType) and any(isinstance(u, mi.NoneType) for u in t0.types) and (
-            raw is False or (isinstance(raw, str) and raw.strip().lower() in NONE_WORDS)):
+            raw is False or (isinstance(raw, str) and raw.strip().lower() == "none")):
         return None
     dc = _dataclass_of(t)
     if dc is not None and isinstance(raw, Mapping):
@@ -261,55 +251,58 @@ def _non_finite(raw: Any, tokens: list) -> list | None:
 
 
 def _locate(cls: type, raw: Any, tokens: list, names: dict[int, str] | None = None) -> tuple:
-    """-> (dotted field path, raw value of the field, field type, entry tokens below the field)."""
-    t, node, path, value, ftype, rest, hint = bare(info(cls)), raw, "", raw, info(cls), [], cls
+    """-> (dotted field path, raw value of the field, field type, [(index, raw entry)] below the field)."""
+    t, node, path, value, ftype, rest, hint = info(cls), raw, "", raw, info(cls), [], cls
     for tok in tokens:
-        if tok == "..." and isinstance(node, Mapping):
+        dc, bt = _dataclass_of(t), bare(t)
+        if tok == "..." and isinstance(node, Mapping):  # a dict's value: msgspec does not say which key
             tok = _bad_key(node, hint)
+        if isinstance(tok, str) and dc is not None:
+            t, hint = next(f.type for f in dc.fields if f.name == tok), \
+                typing.get_type_hints(dc.cls, include_extras=True)[tok]
+        elif isinstance(tok, str) and isinstance(bt, mi.DictType):
+            t = bt.value_type
+        elif isinstance(tok, int) and isinstance(bt, mi.TupleType) and tok < len(bt.item_types):
+            t = bt.item_types[tok]
+        elif isinstance(tok, int) and isinstance(bt, (mi.VarTupleType, mi.ListType)):
+            t = bt.item_type
+        else:
+            break
         if isinstance(tok, str):
-            dc = _dataclass_of(t)
-            if dc is not None:
-                f = next((f for f in dc.fields if f.name == tok), None)
-                if f is None:
-                    break
-                t, hint = f.type, typing.get_type_hints(dc.cls, include_extras=True)[tok]
-            elif isinstance(bare(t), mi.DictType):
-                t = bare(t).value_type
-            else:
-                break
             path = f"{path}.{tok}" if path else tok
             node = node.get(tok) if isinstance(node, Mapping) else None
-            value, ftype, rest = node, t, []
         else:
-            bt = bare(t)
-            if isinstance(bt, mi.TupleType) and tok < len(bt.item_types):
-                t = bt.item_types[tok]
-            elif isinstance(bt, (mi.VarTupleType, mi.ListType)):
-                t = bt.item_type
-            else:
-                break
             node = node[tok] if isinstance(node, (list, tuple)) and tok < len(node) else None
-            if _dataclass_of(t) is not None:  # a table in an array: named by `names` (objects) or index
-                path = f"{path}.{names[tok]}" if names and tok in names else f"{path}[{tok}]"
-                value, ftype, rest = node, t, []
-            else:
+            if _dataclass_of(t) is None:  # an entry of the field's array
                 rest.append((tok, node))
+                continue
+            path = f"{path}.{names[tok]}" if names and tok in names else f"{path}[{tok}]"
+        value, ftype, rest = node, t, []
     return path, value, ftype, rest
 
 
-def field_error(cls: type, raw: Any, tokens: list, why: str = "", names: dict[int, str] | None = None,
+def field_error(cls: type, raw: Any, tokens: list, why: str, names: dict[int, str] | None = None,
                 prefix: str = "") -> ConfigError:
     """The one-line error for the field at `tokens` of `raw` (decoded as `cls`)."""
     path, value, ftype, rest = _locate(cls, raw, tokens, names)
-    t = bare(ftype)
-    required = re.fullmatch(r"Object missing required field `(\w+)`", why)
-    if required and isinstance(t, mi.DataclassType):
-        key = prefix + (f"{path}.{required.group(1)}" if path else required.group(1))
-        kind = next(f.type for f in t.fields if f.name == required.group(1))
-        what = f"[{key}] table" if _dataclass_of(kind) else f"key {key} ({describe(kind)})"
-        return ConfigError(f"missing {what}", path=key)
-    path = prefix + path if path else prefix.rstrip(".") or "file"
-    expected = describe(ftype)
+    path, t = prefix + path if path else prefix.rstrip("."), bare(ftype)
+    if isinstance(t, mi.DataclassType) and not why.startswith(("Expected", "finite")):
+        fields = {f.name: f.type for f in t.fields}
+        required = re.fullmatch(r"Object missing required field `(\w+)`", why)
+        if required:
+            key, kind = f"{path}.{required[1]}".lstrip("."), fields[required[1]]
+            what = f"[{key}] table" if _dataclass_of(kind) else f"key {key} ({describe(kind)})"
+            return ConfigError(f"missing {what}", path=key)
+        head = re.match(r"[\w.]*", why)[0]  # a class' own check (__post_init__) names its field first
+        name = head.rpartition(".")[2]
+        if name in fields:
+            key = f"{path}.{name}".lstrip(".")
+            return ConfigError(key + why[len(head):], path=key)
+        return ConfigError(f"{path or 'file'}: {why}", path=path)
+    path = path or "file"
+    if isinstance(t, mi.DictType) and why.startswith("Expected `str`"):
+        return ConfigError.field(path, value, "keys must be names (letters, digits, _ and -)")
+    expected = f"a table [{path}]" if isinstance(t, (mi.DataclassType, mi.DictType)) else describe(ftype)
     got = ""
     if rest:
         got = f" (entry {rest[0][0]} is {short_repr(rest[0][1], 30)})"
@@ -320,24 +313,8 @@ def field_error(cls: type, raw: Any, tokens: list, why: str = "", names: dict[in
         got = f"; did you mean {hint[0]!r}?" if hint else ""
     elif why.startswith("Expected `") and ", got `" in why:
         got = f" (got {type_name(value)})"
-    elif why and not why.startswith(("Expected", "Invalid enum", "Number out of range", "finite")):
-        got = f" ({why})"  # a dataclass' own check (__post_init__)
-    if isinstance(t, mi.DictType) and why.startswith("Expected `str`"):
-        return ConfigError.field(path, value, "keys must be names (letters, digits, _ and -)")
-    if isinstance(t, (mi.DataclassType, mi.DictType)) and not why.startswith("Expected"):
-        # a dataclass' own check (__post_init__) names its field: "field = ..." or "<table>.field = ..."
-        name = why.split(" = ", 1)[0]
-        if isinstance(t, mi.DataclassType) and name in {f.name for f in t.fields}:
-            return ConfigError(f"{path}.{why}", path=f"{path}.{name}")
-        owner = why.split(" ", 1)[0].split(".", 1)[0]
-        if owner and path.endswith(owner) and why.startswith(owner + "."):
-            return ConfigError(path[: len(path) - len(owner)] + why, path=path)
-        return ConfigError(f"{path}: {why}", path=path)
-    if why == "finite":
-        expected = f"finite ({expected})"
-    if isinstance(t, (mi.DataclassType, mi.DictType)):
-        expected = f"a table [{path}]"
-    return ConfigError.field(path, value, f"must be {expected}{got}")
+    return ConfigError.field(path, value, f"must be {f'finite ({expected})' if why == 'finite' else expected}"
+                             f"{got}")
 
 
 def _tokens(where: str) -> list:
@@ -358,8 +335,6 @@ def _bad_key(table: Mapping, tp: Any) -> str | None:
 def decode(raw: Any, cls: type, *, prefix: str = "", names: dict[int, str] | None = None) -> Any:
     """`raw` (a parsed TOML table) as a `cls` instance, or a one-line ConfigError ("none" or false unset
     an optional field).  `prefix`: before every field path; `names`: {index: name} of array tables."""
-    if not isinstance(raw, Mapping):
-        raise ConfigError.field(prefix.rstrip(".") or "file", raw, f"must be a table (got {type_name(raw)})")
     raw = _normalize(raw, info(cls), prefix.rstrip("."), paths(cls, prefix), names)
     bad = _non_finite(raw, [])
     if bad is not None:
@@ -370,11 +345,9 @@ def decode(raw: Any, cls: type, *, prefix: str = "", names: dict[int, str] | Non
         why, _, where = str(e).rpartition(" - at ")
         spot = where.strip("`").split("` in `")[-1]
         raise field_error(cls, raw, _tokens(spot.removeprefix("$")), why or str(e), names, prefix) from None
-    except (TypeError, ValueError, OverflowError) as e:  # defensive: msgspec reports bad input above
-        raise ConfigError(f"{prefix.rstrip('.') or 'file'}: {' '.join(str(e).split())}") from None
 
 
-__all__ = ["ConfigError", "Meta", "checked", "decode", "describe", "did_you_mean", "doc", "field_error",
+__all__ = ["ConfigError", "Meta", "checked", "decode", "describe", "did_you_mean", "doc",
            "fields_of", "info", "integer", "num", "paths", "plain", "suggest", "type_name",
            "unknown_keys", "vec"]
 
