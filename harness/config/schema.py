@@ -51,9 +51,8 @@ def doc(tp: Any, desc: str, **meta: Any) -> Any:
 def checked(cls: type, spec: Mapping[str, Any]) -> type:
     """A frozen subclass of the parameter dataclass `cls` (names, defaults: its own) with the constrained
     types of `spec` (one entry per field); `plain` turns decoded instances back into `cls`."""
-    own = dataclasses.fields(cls)
     extra = [(f.name, spec[f.name], dataclasses.field(default=f.default, default_factory=f.default_factory))
-             for f in own]
+             for f in dataclasses.fields(cls)]
     return dataclasses.make_dataclass(cls.__name__, extra, bases=(cls,), frozen=True, eq=False,
                                       namespace={"schema_of": cls})
 
@@ -61,9 +60,8 @@ def checked(cls: type, spec: Mapping[str, Any]) -> type:
 def plain(value: Any) -> Any:
     """A `checked` subclass instance as an instance of its parameter dataclass (others unchanged)."""
     base = getattr(type(value), "schema_of", None)
-    if base is None:
-        return value
-    return base(**{f.name: getattr(value, f.name) for f in dataclasses.fields(base)})
+    return value if base is None else base(**{f.name: getattr(value, f.name)
+                                              for f in dataclasses.fields(base)})
 
 
 @functools.cache
@@ -177,17 +175,15 @@ def unknown_keys(prefix: str, bad: Mapping, allowed: Iterable[str],
     else:
         path = prefix.rstrip(".")
         head = f"{path or 'file'}: unknown keys {', '.join(map(repr, bad))}"
-    allowed_text = ", ".join(allowed) or "none"
-    return ConfigError(f"{head}; {''.join(hints)}allowed keys here: {allowed_text}", path=path)
+    return ConfigError(f"{head}; {''.join(hints)}allowed keys here: {', '.join(allowed) or 'none'}",
+                       path=path)
 
 
 def _dataclass_of(t: Any) -> Any:
     """The dataclass type info inside `t` (through Annotated and Optional), else None."""
     t = bare(t)
-    if isinstance(t, mi.UnionType):
-        found = [bare(u) for u in t.types if isinstance(bare(u), mi.DataclassType)]
-        return found[0] if found else None
-    return t if isinstance(t, mi.DataclassType) else None
+    kinds = [bare(u) for u in t.types] if isinstance(t, mi.UnionType) else [t]
+    return next((k for k in kinds if isinstance(k, mi.DataclassType)), None)
 
 
 def fields_of(cls: type, prefix: str = "", arrays: bool = False) -> Iterator[tuple[str, Any, Any]]:
