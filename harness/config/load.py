@@ -1,11 +1,5 @@
-"""Scenario TOML <-> `Scenario`: defaults, `--set key=value` overrides, cross-field checks, dumping.
-
-Missing keys take the schema defaults, except that [plant.master] / [plant.slave] start from the resolved
-nominal [master] / [slave]; "none" (or false) unsets an optional field; `transient` defaults to 5 s or a
-quarter of a shorter `duration`; `subtask.weights` to each kind's default weight.  A file naming a
-controller by Python code is refused unless `allow_code` (`--allow-code`); relative controller file paths
-resolve against the naming file's folder.  Every error is a one-line `ConfigError`.
-"""
+"""Scenario TOML <-> `Scenario`: defaults (docs/reference/scenario.md), `--set key=value` overrides,
+cross-field checks, dumping.  Every error is a one-line `ConfigError`."""
 
 from __future__ import annotations
 
@@ -256,19 +250,14 @@ def file_reference(name: str) -> tuple[str, str] | None:
     return None
 
 
-def _rebase_controller(raw: dict, base: Path | None) -> None:
+def _rebase_controller(raw: dict, base: str | Path | None) -> None:
     """A relative controller file path in `raw` made relative to `base` (the naming file's folder)."""
-    node = raw.get("controller")
-    table = node if isinstance(node, dict) else None
-    name = table.get("name") if table is not None else node
+    table = raw["controller"] if isinstance(raw.get("controller"), dict) else raw
+    key = "name" if table is not raw else "controller"
+    name = table.get(key)
     ref = file_reference(name.strip()) if isinstance(name, str) and base is not None else None
-    if ref is None or Path(ref[0]).is_absolute():
-        return
-    new = f"{base / ref[0]}:{ref[1]}"
-    if table is not None:
-        table["name"] = new
-    else:
-        raw["controller"] = new
+    if ref is not None and not Path(ref[0]).is_absolute():
+        table[key] = f"{Path(base) / ref[0]}:{ref[1]}"
 
 
 def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterable[str] = (), *,
@@ -282,29 +271,19 @@ def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterabl
     allowed; False = always refused.  code_dir: where relative controller files of a table or of the
     overrides resolve (default: the current folder)."""
     raw, label, default_name = _read_source(source)
-    origin = "table" if isinstance(source, Mapping) else None
-    if label is not None:  # a file
-        origin = "file" if "controller" in raw else None
-        _rebase_controller(raw, Path(label).resolve().parent)
-    elif code_dir is not None:
-        _rebase_controller(raw, Path(code_dir))
-    if isinstance(overrides, str):
-        overrides = [overrides]
-    overrides = list(overrides or ())
-    labels = list(labels) if labels is not None else []
-    labels += [None] * (len(overrides) - len(labels))
+    from_file = label is not None and "controller" in raw  # the scenario file names the controller
+    _rebase_controller(raw, Path(label).resolve().parent if label is not None else code_dir)
+    overrides = [overrides] if isinstance(overrides, str) else list(overrides or ())
     applied: list[tuple[str, str]] = []
-    for text, lab in zip(overrides, labels, strict=False):
-        where = lab or f"override {text!r}"
+    for text, lab in zip(overrides, [*(labels or ()), *[None] * len(overrides)], strict=False):
         try:
             key = _apply_override(raw, text)
         except ConfigError as e:
             raise (e.with_context(lab) if lab else e) from None
-        applied.append((key, where))
+        applied.append((key, lab or f"override {text!r}"))
         if key in ("controller", "controller.name"):
-            origin = "override"
-            if code_dir is not None:
-                _rebase_controller(raw, Path(code_dir))
+            from_file = False
+            _rebase_controller(raw, code_dir)
     try:
         scn = _scenario_from_dict(raw, default_name)
     except ConfigError as e:
@@ -314,8 +293,8 @@ def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterabl
                 raise e.with_context(f"(from {where})") from None
         raise (e.with_context(label) if label else e) from None
     name = scn.controller.name
-    if ":" in name and not allow_code and (allow_code is False or origin == "file"):
-        what = f"scenario file {label}" if origin == "file" else "the study"
+    if ":" in name and not allow_code and (allow_code is False or from_file):
+        what = f"scenario file {label}" if from_file else "the study"
         raise ConfigError(f"controller.name = {name!r} in {what} is Python code; files run no code unless "
                           "you allow it: add --allow-code (API: allow_code=True) if you trust it, or give "
                           "the controller on the command line (--controller)", path="controller.name")
