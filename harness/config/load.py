@@ -31,10 +31,7 @@ MAX_STEPS = 100_000_000  # duration / control_dt
 
 def _is_multiple(x: float, step: float) -> tuple[bool, float]:
     ratio = x / step
-    if not math.isfinite(ratio):
-        return False, ratio
-    n = round(ratio)
-    return abs(ratio - n) <= MULTIPLE_RTOL * max(abs(ratio), 1.0), ratio
+    return math.isfinite(ratio) and abs(ratio - round(ratio)) <= MULTIPLE_RTOL * max(abs(ratio), 1.0), ratio
 
 
 def trajectory_radius_range(traj: TrajectoryConfig, duration: float) -> tuple[float, float]:
@@ -48,9 +45,7 @@ def trajectory_radius_range(traj: TrajectoryConfig, duration: float) -> tuple[fl
         theta = np.linspace(0.0, span, n) * (1.0 if w >= 0 else -1.0)
     with np.errstate(all="ignore"):
         r = np.hypot(c[0] + a[0] * np.sin(theta), c[1] + a[1] * np.cos(theta))
-    if not np.all(np.isfinite(r)):
-        return 0.0, math.inf
-    return float(r.min()), float(r.max())
+    return (float(r.min()), float(r.max())) if np.all(np.isfinite(r)) else (0.0, math.inf)
 
 
 def _check_reach(scn: Scenario) -> None:
@@ -370,21 +365,15 @@ def to_toml(v: Any) -> Any:
     return v
 
 
-def scenario_to_dict(scn: Scenario) -> dict[str, Any]:
-    """The resolved scenario as a TOML-ready dict, every field in schema order (None -> "none")."""
-    return to_toml(scn)
+scenario_to_dict = to_toml  # the resolved scenario as a TOML-ready dict, every field in schema order
 
 
 def _toml_lines(table: Mapping[str, Any], name: str = "") -> list[str]:
     lines = [f"[{name}]"] if name else []
-    subtables = []
+    lines += [f"{k} = {toml_literal(v)}" for k, v in table.items() if not isinstance(v, Mapping)]
     for k, v in table.items():
         if isinstance(v, Mapping):
-            subtables.append((k, v))
-        else:
-            lines.append(f"{k} = {toml_literal(v)}")
-    for k, v in subtables:
-        lines += [""] + _toml_lines(v, f"{name}.{k}" if name else k)
+            lines += [""] + _toml_lines(v, f"{name}.{k}" if name else k)
     return lines
 
 
