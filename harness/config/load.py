@@ -3,7 +3,6 @@ cross-field checks, dumping.  Every error is a one-line `ConfigError`."""
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import math
 import os
@@ -212,20 +211,6 @@ def _apply_override(raw: dict, text: str) -> str:
     return ".".join(parts)
 
 
-def _read_source(source: str | Path | Mapping | None) -> tuple[dict, str | None, str | None]:
-    """-> (raw table, file label for messages, default name)."""
-    if source is None:
-        return {}, None, None
-    if isinstance(source, Mapping):
-        return _plain_copy(source), None, None
-    if not isinstance(source, (str, Path)):
-        raise ConfigError(f"scenario source must be a path or a table, got {type_name(source)}")
-    path = shipped(source, "scenarios")  # a shipped name (paper) works from any folder
-    raw = read_toml(path, "scenario file")
-    stem = path.stem if re.match(NAME_RE, path.stem) else None
-    return raw, str(path), stem
-
-
 def _plain_copy(obj: Any, depth: int = 0) -> Any:
     """Deep copy of a user table (tuples -> lists) within the nesting limit of files."""
     if depth >= MAX_DEPTH and isinstance(obj, (Mapping, list, tuple)):
@@ -234,15 +219,13 @@ def _plain_copy(obj: Any, depth: int = 0) -> Any:
         return {k: _plain_copy(v, depth + 1) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [_plain_copy(v, depth + 1) for v in obj]
-    return copy.copy(obj)
+    return obj
 
 
 def file_reference(name: str) -> tuple[str, str] | None:
     """(path, class) of a 'path/to/file.py:Class' reference, None for anything else."""
     where, sep, attr = name.rpartition(":")
-    if sep and (where.endswith(".py") or "/" in where or "\\" in where):
-        return where, attr
-    return None
+    return (where, attr) if sep and (where.endswith(".py") or "/" in where or "\\" in where) else None
 
 
 def _rebase_controller(raw: dict, base: str | Path | None) -> None:
@@ -265,7 +248,15 @@ def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterabl
     allow_code: None = a Python controller is refused only when the scenario file names it; True =
     allowed; False = always refused.  code_dir: where relative controller files of a table or of the
     overrides resolve (default: the current folder)."""
-    raw, label, default_name = _read_source(source)
+    raw, label, default_name = {}, None, None  # label: the file's path in messages
+    if isinstance(source, Mapping):
+        raw = _plain_copy(source)
+    elif source is not None:
+        if not isinstance(source, (str, Path)):
+            raise ConfigError(f"scenario source must be a path or a table, got {type_name(source)}")
+        path = shipped(source, "scenarios")  # a shipped name (paper) works from any folder
+        raw, label = read_toml(path, "scenario file"), str(path)
+        default_name = path.stem if re.match(NAME_RE, path.stem) else None
     from_file = label is not None and "controller" in raw  # the scenario file names the controller
     _rebase_controller(raw, Path(label).resolve().parent if label is not None else code_dir)
     overrides = [overrides] if isinstance(overrides, str) else list(overrides or ())
@@ -280,7 +271,11 @@ def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterabl
             from_file = False
             _rebase_controller(raw, code_dir)
     try:
-        scn = _scenario_from_dict(raw, default_name)
+        table, names = _prepare(raw, default_name)
+        scn = decode(table, Scenario, names=names)
+        if "transient" not in table and scn.duration <= Scenario.transient:
+            scn = dataclasses.replace(scn, transient=scn.duration / 4.0)
+        _cross_checks(scn)
     except ConfigError as e:
         path = e.path or ""
         for key, where in reversed(applied):
@@ -334,15 +329,6 @@ def _prepare(raw: Mapping, default_name: str | None) -> tuple[dict, dict[int, st
         default_w = dict(zip(SubtaskSpec().kinds, SubtaskSpec().weights, strict=True))
         sub["weights"] = [default_w.get(k, 1.0) if isinstance(k, str) else 1.0 for k in sub["kinds"]]
     return raw, names
-
-
-def _scenario_from_dict(raw: Mapping, default_name: str | None) -> Scenario:
-    table, names = _prepare(raw, default_name)
-    scn = decode(table, Scenario, names=names)
-    if "transient" not in table and scn.duration <= Scenario.transient:
-        scn = dataclasses.replace(scn, transient=scn.duration / 4.0)
-    _cross_checks(scn)
-    return scn
 
 
 def to_toml(v: Any) -> Any:

@@ -313,11 +313,6 @@ def field_error(cls: type, raw: Any, tokens: list, why: str, names: dict[int, st
                              f"{got}")
 
 
-def _tokens(where: str) -> list:
-    return [m.group(1) or (m.group(2) if m.group(2) == "..." else int(m.group(2)))
-            for m in _TOKEN.finditer(where)]
-
-
 def _bad_key(table: Mapping, tp: Any) -> str | None:
     """The first key of `table` whose value a dict type `tp` refuses (msgspec's path says `[...]`)."""
     for k, v in table.items():
@@ -339,8 +334,10 @@ def decode(raw: Any, cls: type, *, prefix: str = "", names: dict[int, str] | Non
         return msgspec.convert(raw, cls)
     except msgspec.ValidationError as e:
         why, _, where = str(e).rpartition(" - at ")
-        spot = where.strip("`").split("` in `")[-1]
-        raise field_error(cls, raw, _tokens(spot.removeprefix("$")), why or str(e), names, prefix) from None
+        spot = where.strip("`").split("` in `")[-1].removeprefix("$")
+        tokens = [m.group(1) or (m.group(2) if m.group(2) == "..." else int(m.group(2)))
+                  for m in _TOKEN.finditer(spot)]
+        raise field_error(cls, raw, tokens, why or str(e), names, prefix) from None
 
 
 __all__ = ["ConfigError", "Meta", "checked", "decode", "describe", "did_you_mean", "doc",

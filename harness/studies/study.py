@@ -1,7 +1,5 @@
-"""Study files (`teleop sweep`): `load_study` checks the file (schema: `harness.config.study`) and returns
-the resolved `Study`; the format and its semantics are in docs/reference/study.md.  Running, results and
-summaries: `harness.studies.sweep`.
-"""
+"""Study files (`teleop sweep`, docs/reference/study.md): `load_study` checks the file (schema:
+`harness.config.study`) and returns the resolved `Study`; running it: `harness.studies.sweep`."""
 
 from __future__ import annotations
 
