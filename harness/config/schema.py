@@ -19,8 +19,6 @@ from msgspec import inspect as mi
 
 from harness.config.errors import ConfigError, short_repr
 
-_TOKEN = re.compile(r"\.([^.\[\]]+)|\[(\d+|\.\.\.)\]")
-
 
 def num(desc: str, **rng: float) -> Any:
     """A finite real number (TOML integers accepted) with optional bounds gt/ge/lt/le."""
@@ -210,31 +208,8 @@ def paths(cls: type, prefix: str = "") -> tuple[str, ...]:
     return tuple(prefix + p for p, _, _ in fields_of(cls))
 
 
-def _normalize(raw: Any, t: Any, path: str, elsewhere: tuple[str, ...], names: dict | None) -> Any:
-    """A copy of `raw` with "none" (or false) as None where `t` allows None; unknown keys raise."""
-    t0 = bare(t)
-    if isinstance(t0, mi.UnionType) and any(isinstance(u, mi.NoneType) for u in t0.types) and (
-            raw is False or (isinstance(raw, str) and raw.strip().lower() == "none")):
-        return None
-    dc = _dataclass_of(t)
-    if dc is not None and isinstance(raw, Mapping):
-        fields = {f.name: f.type for f in dc.fields}
-        for k in raw:
-            if not isinstance(k, str):
-                raise ConfigError(f"{path or 'file'}: key {short_repr(k)} is not a string", path=path)
-        bad = {k: v for k, v in raw.items() if k not in fields}
-        if bad:
-            raise unknown_keys(f"{path}." if path else "", bad, fields, elsewhere)
-        return {k: _normalize(v, fields[k], f"{path}.{k}" if path else k, elsewhere, names)
-                for k, v in raw.items()}
-    if isinstance(t0, (mi.VarTupleType, mi.ListType)) and isinstance(raw, (list, tuple)):
-        return [_normalize(v, t0.item_type, f"{path}.{names[i]}" if names and i in names else f"{path}[{i}]",
-                           elsewhere, names) for i, v in enumerate(raw)]
-    return raw
-
-
 def _non_finite(raw: Any, tokens: list) -> list | None:
-    """The path (tokens) to the first non-finite float in `raw`, else None."""
+    """The path (keys, indices) to the first non-finite float in `raw`, else None."""
     if isinstance(raw, float) and not math.isfinite(raw):
         return tokens
     items = raw.items() if isinstance(raw, Mapping) else enumerate(raw) if isinstance(raw, (list, tuple)) \
@@ -246,66 +221,18 @@ def _non_finite(raw: Any, tokens: list) -> list | None:
     return None
 
 
-def _locate(cls: type, raw: Any, tokens: list, names: dict[int, str] | None = None) -> tuple:
-    """-> (dotted field path, raw value of the field, field type, [(index, raw entry)] below the field)."""
-    t, node, path, value, ftype, rest, hint = info(cls), raw, "", raw, info(cls), [], cls
-    for tok in tokens:
-        dc, bt = _dataclass_of(t), bare(t)
-        if tok == "..." and isinstance(node, Mapping):  # a dict's value: msgspec does not say which key
-            tok = _bad_key(node, hint)
-        if isinstance(tok, str) and dc is not None:
-            t, hint = next(f.type for f in dc.fields if f.name == tok), \
-                typing.get_type_hints(dc.cls, include_extras=True)[tok]
-        elif isinstance(tok, str) and isinstance(bt, mi.DictType):
-            t = bt.value_type
-        elif isinstance(tok, int) and isinstance(bt, mi.TupleType) and tok < len(bt.item_types):
-            t = bt.item_types[tok]
-        elif isinstance(tok, int) and isinstance(bt, (mi.VarTupleType, mi.ListType)):
-            t = bt.item_type
-        else:
-            break
-        if isinstance(tok, str):
-            path = f"{path}.{tok}" if path else tok
-            node = node.get(tok) if isinstance(node, Mapping) else None
-        else:
-            node = node[tok] if isinstance(node, (list, tuple)) and tok < len(node) else None
-            if _dataclass_of(t) is None:  # an entry of the field's array
-                rest.append((tok, node))
-                continue
-            path = f"{path}.{names[tok]}" if names and tok in names else f"{path}[{tok}]"
-        value, ftype, rest = node, t, []
-    return path, value, ftype, rest
-
-
-def field_error(cls: type, raw: Any, tokens: list, why: str, names: dict[int, str] | None = None,
-                prefix: str = "") -> ConfigError:
-    """The one-line error for the field at `tokens` of `raw` (decoded as `cls`)."""
-    path, value, ftype, rest = _locate(cls, raw, tokens, names)
-    path, t = prefix + path if path else prefix.rstrip("."), bare(ftype)
-    if isinstance(t, mi.DataclassType) and not why.startswith(("Expected", "finite")):
-        fields = {f.name: f.type for f in t.fields}
-        required = re.fullmatch(r"Object missing required field `(\w+)`", why)
-        if required:
-            key, kind = f"{path}.{required[1]}".lstrip("."), fields[required[1]]
-            what = f"[{key}] table" if _dataclass_of(kind) else f"key {key} ({describe(kind)})"
-            return ConfigError(f"missing {what}", path=key)
-        head = re.match(r"[\w.]*", why)[0]  # a class' own check (__post_init__) names its field first
-        name = head.rpartition(".")[2]
-        if name in fields:
-            key = f"{path}.{name}".lstrip(".")
-            return ConfigError(key + why[len(head):], path=key)
-        return ConfigError(f"{path or 'file'}: {why}", path=path)
-    path = path or "file"
-    if isinstance(t, mi.DictType) and why.startswith("Expected `str`"):
-        return ConfigError.field(path, value, "keys must be names (letters, digits, _ and -)")
-    expected = f"a table [{path}]" if isinstance(t, (mi.DataclassType, mi.DictType)) else describe(ftype)
+def _value_error(path: str, value: Any, t: Any, why: str, entry: int | None) -> ConfigError:
+    """The one line for `value` (type info `t`) at `path`: msgspec's `why` or "finite"; `entry`: the index
+    of the first bad entry inside the value."""
+    path, b = path or "file", bare(t)
+    expected = f"a table [{path}]" if isinstance(b, (mi.DataclassType, mi.DictType)) else describe(t)
     got = ""
-    if rest:
-        got = f" (entry {rest[0][0]} is {short_repr(rest[0][1], 30)})"
+    if entry is not None and isinstance(b, (mi.TupleType, mi.VarTupleType, mi.ListType)):
+        got = f" (entry {entry} is {short_repr(value[entry], 30)})"
     elif "length" in why and isinstance(value, (list, tuple)):
         got = f" (got {len(value)} entries)"
-    elif isinstance(t, mi.LiteralType) and isinstance(value, str):
-        hint = suggest(value, [str(v) for v in t.values], n=1)
+    elif isinstance(b, mi.LiteralType) and isinstance(value, str):
+        hint = suggest(value, [str(v) for v in b.values], n=1)
         got = f"; did you mean {hint[0]!r}?" if hint else ""
     elif why.startswith("Expected `") and ", got `" in why:
         got = f" (got {type_name(value)})"
@@ -313,31 +240,85 @@ def field_error(cls: type, raw: Any, tokens: list, why: str, names: dict[int, st
                              f"{got}")
 
 
-def _bad_key(table: Mapping, tp: Any) -> str | None:
-    """The first key of `table` whose value a dict type `tp` refuses (msgspec's path says `[...]`)."""
-    for k, v in table.items():
+def _table(raw: Mapping, dc: Any, path: str, ctx: tuple) -> Any:
+    """The table `raw` as an instance of the dataclass (type info) `dc`; unknown keys raise."""
+    prefix = f"{path}." if path else ""
+    for k in raw:
+        if not isinstance(k, str):
+            raise ConfigError(f"{path or 'file'}: key {short_repr(k)} is not a string", path=path)
+    fields = {f.name: f for f in dc.fields}
+    bad = {k: v for k, v in raw.items() if k not in fields}
+    if bad:
+        raise unknown_keys(prefix, bad, fields, ctx[0])
+    hints = _hints(dc.cls)
+    values = {k: _convert(v, hints[k], prefix + k, ctx) for k, v in raw.items()}
+    missing = [f for f in dc.fields if f.required and f.name not in raw]
+    if missing:
+        key, kind = prefix + missing[0].name, missing[0].type
+        what = f"[{key}] table" if _dataclass_of(kind) else f"key {key} ({describe(kind)})"
+        raise ConfigError(f"missing {what}", path=key)
+    try:
+        return dc.cls(**values)
+    except (TypeError, ValueError) as e:  # the class' own check (__post_init__) names its field first
+        why = " ".join(str(e).split())
+        head = re.match(r"[\w.]*", why)[0]
+        name = head.rpartition(".")[2]
+        if name in fields:
+            raise ConfigError(prefix + name + why[len(head):], path=prefix + name) from None
+        raise ConfigError(f"{path or 'file'}: {why}", path=path) from None
+
+
+def _convert(raw: Any, hint: Any, path: str, ctx: tuple) -> Any:
+    """`raw` as a value of the annotation `hint` at the dotted `path`; ctx: (the file's dotted keys for
+    "did you mean", {index: name} of array tables)."""
+    t = info(hint)
+    b, dc = bare(t), _dataclass_of(t)
+    if isinstance(b, mi.UnionType) and any(isinstance(u, mi.NoneType) for u in b.types) and (
+            raw is False or (isinstance(raw, str) and raw.strip().lower() == "none")):
+        return None  # TOML has no null: "none" (or false) unsets an optional field
+    if dc is not None and isinstance(raw, Mapping):
+        return _table(raw, dc, path, ctx)
+    item = _dataclass_of(b.item_type) if isinstance(b, (mi.VarTupleType, mi.ListType)) else None
+    if item is not None and isinstance(raw, (list, tuple)):  # an array of tables, named or numbered
+        names = ctx[1] or {}
+        return (tuple if isinstance(b, mi.VarTupleType) else list)(
+            _convert(v, item.cls, f"{path}.{names[i]}" if i in names else f"{path}[{i}]", ctx)
+            for i, v in enumerate(raw))
+    if isinstance(b, mi.DictType) and isinstance(raw, Mapping):
+        key, value = typing.get_args(_unannotated(hint))
         try:
-            msgspec.convert({k: v}, tp)
+            for k in raw:
+                msgspec.convert(k, key)
         except msgspec.ValidationError:
-            return k
-    return None
+            raise ConfigError.field(path or "file", raw, "keys must be names (letters, digits, _ and -)") \
+                from None
+        return {k: _convert(v, value, f"{path}.{k}", ctx) for k, v in raw.items()}
+    bad = _non_finite(raw, [])
+    if bad is not None:
+        raise _value_error(path, raw, t, "finite", bad[0] if bad and isinstance(bad[0], int) else None)
+    try:
+        return msgspec.convert(raw, hint)
+    except msgspec.ValidationError as e:
+        why, _, where = str(e).rpartition(" - at ")
+        entry = re.match(r"`\$\[(\d+)\]", where)
+        raise _value_error(path, raw, t, why or str(e), int(entry[1]) if entry else None) from None
+
+
+@functools.cache
+def _hints(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls, include_extras=True)
+
+
+def _unannotated(hint: Any) -> Any:
+    while typing.get_origin(hint) is Annotated:
+        hint = typing.get_args(hint)[0]
+    return hint
 
 
 def decode(raw: Any, cls: type, *, prefix: str = "", names: dict[int, str] | None = None) -> Any:
     """`raw` (a parsed TOML table) as a `cls` instance, or a one-line ConfigError ("none" or false unset
     an optional field).  `prefix`: before every field path; `names`: {index: name} of array tables."""
-    raw = _normalize(raw, info(cls), prefix.rstrip("."), paths(cls, prefix), names)
-    bad = _non_finite(raw, [])
-    if bad is not None:
-        raise field_error(cls, raw, bad, "finite", names, prefix)
-    try:
-        return msgspec.convert(raw, cls)
-    except msgspec.ValidationError as e:
-        why, _, where = str(e).rpartition(" - at ")
-        spot = where.strip("`").split("` in `")[-1].removeprefix("$")
-        tokens = [m.group(1) or (m.group(2) if m.group(2) == "..." else int(m.group(2)))
-                  for m in _TOKEN.finditer(spot)]
-        raise field_error(cls, raw, tokens, why or str(e), names, prefix) from None
+    return _convert(raw, cls, prefix.rstrip("."), (paths(cls, prefix), names))
 
 
 __all__ = ["ConfigError", "Meta", "checked", "decode", "describe", "did_you_mean", "doc",
