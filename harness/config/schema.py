@@ -208,17 +208,12 @@ def paths(cls: type, prefix: str = "") -> tuple[str, ...]:
     return tuple(prefix + p for p, _, _ in fields_of(cls))
 
 
-def _non_finite(raw: Any, tokens: list) -> list | None:
-    """The path (keys, indices) to the first non-finite float in `raw`, else None."""
-    if isinstance(raw, float) and not math.isfinite(raw):
-        return tokens
-    items = raw.items() if isinstance(raw, Mapping) else enumerate(raw) if isinstance(raw, (list, tuple)) \
-        else ()
-    for k, v in items:
-        found = _non_finite(v, [*tokens, k])
-        if found is not None:
-            return found
-    return None
+def _non_finite(raw: Any) -> bool:
+    """Whether `raw` is or holds a non-finite float."""
+    if isinstance(raw, float):
+        return not math.isfinite(raw)
+    items = raw.values() if isinstance(raw, Mapping) else raw if isinstance(raw, (list, tuple)) else ()
+    return any(_non_finite(v) for v in items)
 
 
 def _value_error(path: str, value: Any, t: Any, why: str, entry: int | None) -> ConfigError:
@@ -243,9 +238,6 @@ def _value_error(path: str, value: Any, t: Any, why: str, entry: int | None) -> 
 def _table(raw: Mapping, dc: Any, path: str, ctx: tuple) -> Any:
     """The table `raw` as an instance of the dataclass (type info) `dc`; unknown keys raise."""
     prefix = f"{path}." if path else ""
-    for k in raw:
-        if not isinstance(k, str):
-            raise ConfigError(f"{path or 'file'}: key {short_repr(k)} is not a string", path=path)
     fields = {f.name: f for f in dc.fields}
     bad = {k: v for k, v in raw.items() if k not in fields}
     if bad:
@@ -293,9 +285,9 @@ def _convert(raw: Any, hint: Any, path: str, ctx: tuple) -> Any:
             raise ConfigError.field(path or "file", raw, "keys must be names (letters, digits, _ and -)") \
                 from None
         return {k: _convert(v, value, f"{path}.{k}", ctx) for k, v in raw.items()}
-    bad = _non_finite(raw, [])
-    if bad is not None:
-        raise _value_error(path, raw, t, "finite", bad[0] if bad and isinstance(bad[0], int) else None)
+    if _non_finite(raw):
+        entries = enumerate(raw) if isinstance(raw, (list, tuple)) else ()
+        raise _value_error(path, raw, t, "finite", next((i for i, v in entries if _non_finite(v)), None))
     try:
         return msgspec.convert(raw, hint)
     except msgspec.ValidationError as e:
