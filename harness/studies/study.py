@@ -8,7 +8,7 @@ import json
 import math
 import os
 import re
-from dataclasses import dataclass, make_dataclass, replace
+from dataclasses import dataclass, fields, make_dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +23,9 @@ from harness.config.study import (  # noqa: F401 - DEFAULT_MAX_CASES, METRIC_NAM
     METRIC_UNITS,
     Factor,
     Record,
+    SamplingTable,
     StudyFile,
+    StudyTable,
 )
 from harness.config.textio import read_toml
 
@@ -43,23 +45,12 @@ def check_study_name(name: Any) -> str:
     return name
 
 
-@dataclass(frozen=True)
-class Study:
-    """A checked study file (`base_dir`: where its relative paths resolve)."""
-
-    name: str
-    description: str
-    scenario: Path | dict | None  # base scenario: file, inline table, or None = built-in paper
-    set: tuple[str, ...]
-    metrics: tuple[str, ...]
-    record: Record | None  # with its order resolved
-    factors: tuple[Factor, ...]
-    mode: str  # "grid" | "random"
-    n: int | None
-    seed: int
-    max_cases: int = DEFAULT_MAX_CASES
-    allow_code: bool = False  # the study may name Python controllers (--allow-code; a dict: the caller's)
-    base_dir: Path | None = None
+# a checked study: the fields of [study] and [sampling] resolved (scenario: the base scenario's file, an
+# inline table or None = the paper's; record: its order set), its factors, whether it may name Python
+# controllers (--allow-code; a table: the caller's) and the folder its relative paths resolve against
+Study = make_dataclass("Study", [(f.name, f.type) for f in (*fields(StudyTable), *fields(SamplingTable))]
+                       + [("factors", tuple[Factor, ...]), ("allow_code", bool), ("base_dir", Path)],
+                       frozen=True, namespace={"__module__": __name__})
 
 
 @dataclass(frozen=True)
@@ -144,11 +135,12 @@ def load_study(source: str | os.PathLike | dict, base_dir: str | os.PathLike | N
         raise ConfigError(f"[sampling] n = {sp.n!r}: an integer >= 1 is required for random draws")
     if not needs_n and sp.n is not None:
         raise ConfigError("[sampling] n is used only with mode = 'random' or random factors")
-    study = Study(check_study_name(st.name if st.name is not None else stem), st.description,
-                  (base / st.scenario).resolve() if st.scenario is not None else f.scenario, st.set,
-                  st.metrics, record, factors, sp.mode, sp.n, sp.seed,
-                  sp.max_cases if max_cases is None else check_max_cases(max_cases, "--max-cases"),
-                  isinstance(source, dict) if allow_code is None else bool(allow_code), base.resolve())
+    resolved = {"name": check_study_name(st.name if st.name is not None else stem), "record": record,
+                "scenario": (base / st.scenario).resolve() if st.scenario is not None else f.scenario,
+                "max_cases": sp.max_cases if max_cases is None else check_max_cases(max_cases, "--max-cases"),
+                "allow_code": isinstance(source, dict) if allow_code is None else bool(allow_code),
+                "factors": factors, "base_dir": base.resolve()}
+    study = Study(**{**vars(st), **vars(sp), **resolved})
     check_case_count(study)
     return study
 
