@@ -271,8 +271,8 @@ def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterabl
             from_file = False
             _rebase_controller(raw, code_dir)
     try:
-        table, names = _prepare(raw, default_name)
-        scn = decode(table, Scenario, names=names)
+        table = _prepare(raw, default_name)
+        scn = decode(table, Scenario)
         if "transient" not in table and scn.duration <= Scenario.transient:
             scn = dataclasses.replace(scn, transient=scn.duration / 4.0)
         _cross_checks(scn)
@@ -291,9 +291,9 @@ def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterabl
     return scn
 
 
-def _prepare(raw: Mapping, default_name: str | None) -> tuple[dict, dict[int, str]]:
-    """The TOML layout -> the schema's (named objects -> a list, plant models on top of the nominal
-    ones, default sub-task weights) -> (table, {index: object name})."""
+def _prepare(raw: Mapping, default_name: str | None) -> dict:
+    """The scenario table with its defaults that depend on other keys: the name, plant models on top of
+    the nominal ones, sub-task weights per kind; the controller's name alone as its table."""
     order = [f.name for f in info(Scenario).fields]
     raw = {**{k: raw[k] for k in raw if k not in order}, **{k: raw[k] for k in order if k in raw}}
     if "name" not in raw and default_name:
@@ -306,19 +306,6 @@ def _prepare(raw: Mapping, default_name: str | None) -> tuple[dict, dict[int, st
             ctrl["name"] = ctrl["name"].strip()
         if isinstance(ctrl.get("params"), str) and ctrl["params"].strip().lower() == "none":
             ctrl["params"] = {}
-    names: dict[int, str] = {}
-    env = raw.get("environment")
-    if isinstance(env, dict) and "objects" in env:
-        objs = env["objects"]
-        if not isinstance(objs, dict):
-            raise ConfigError.field("environment.objects", objs, "must be a table of [environment.objects."
-                                    f"<name>] tables (got {type_name(objs)})")
-        for i, (name, o) in enumerate(objs.items()):
-            names[i] = str(name)
-            if isinstance(o, dict) and "name" in o:
-                raise ConfigError.field(f"environment.objects.{name}.name", o["name"], "unknown key: the "
-                                        f"name of an object is its table's key (environment.objects.{name})")
-        env["objects"] = [{**o, "name": n} if isinstance(o, dict) else o for n, o in objs.items()]
     plant = raw.get("plant")
     for sub in ("master", "slave"):
         if isinstance(plant, dict) and isinstance(plant.get(sub), dict):
@@ -328,7 +315,7 @@ def _prepare(raw: Mapping, default_name: str | None) -> tuple[dict, dict[int, st
     if isinstance(sub, dict) and "weights" not in sub and isinstance(sub.get("kinds"), list):
         default_w = dict(zip(SubtaskSpec().kinds, SubtaskSpec().weights, strict=True))
         sub["weights"] = [default_w.get(k, 1.0) if isinstance(k, str) else 1.0 for k in sub["kinds"]]
-    return raw, names
+    return raw
 
 
 def to_toml(v: Any) -> Any:

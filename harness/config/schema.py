@@ -235,15 +235,15 @@ def _value_error(path: str, value: Any, t: Any, why: str, entry: int | None) -> 
                              f"{got}")
 
 
-def _table(raw: Mapping, dc: Any, path: str, ctx: tuple) -> Any:
+def _table(raw: Mapping, dc: Any, path: str, elsewhere: tuple[str, ...]) -> Any:
     """The table `raw` as an instance of the dataclass (type info) `dc`; unknown keys raise."""
     prefix = f"{path}." if path else ""
     fields = {f.name: f for f in dc.fields}
     bad = {k: v for k, v in raw.items() if k not in fields}
     if bad:
-        raise unknown_keys(prefix, bad, fields, ctx[0])
+        raise unknown_keys(prefix, bad, fields, elsewhere)
     hints = _hints(dc.cls)
-    values = {k: _convert(v, hints[k], prefix + k, ctx) for k, v in raw.items()}
+    values = {k: _convert(v, hints[k], prefix + k, elsewhere) for k, v in raw.items()}
     missing = [f for f in dc.fields if f.required and f.name not in raw]
     if missing:
         key, kind = prefix + missing[0].name, missing[0].type
@@ -260,22 +260,30 @@ def _table(raw: Mapping, dc: Any, path: str, ctx: tuple) -> Any:
         raise ConfigError(f"{path or 'file'}: {why}", path=path) from None
 
 
-def _convert(raw: Any, hint: Any, path: str, ctx: tuple) -> Any:
-    """`raw` as a value of the annotation `hint` at the dotted `path`; ctx: (the file's dotted keys for
-    "did you mean", {index: name} of array tables)."""
+def _convert(raw: Any, hint: Any, path: str, elsewhere: tuple[str, ...]) -> Any:
+    """`raw` as a value of the annotation `hint` at the dotted `path` (`elsewhere`: the file's dotted keys,
+    for "did you mean")."""
     t = info(hint)
     b, dc = bare(t), _dataclass_of(t)
     if isinstance(b, mi.UnionType) and any(isinstance(u, mi.NoneType) for u in b.types) and (
             raw is False or (isinstance(raw, str) and raw.strip().lower() == "none")):
         return None  # TOML has no null: "none" (or false) unsets an optional field
     if dc is not None and isinstance(raw, Mapping):
-        return _table(raw, dc, path, ctx)
+        return _table(raw, dc, path, elsewhere)
     item = _dataclass_of(b.item_type) if isinstance(b, (mi.VarTupleType, mi.ListType)) else None
-    if item is not None and isinstance(raw, (list, tuple)):  # an array of tables, named or numbered
-        names = ctx[1] or {}
+    if item is not None and isinstance(t, mi.Metadata) and (t.extra or {}).get("item") == "<name>":
+        if not isinstance(raw, Mapping):  # [<path>.<name>] tables, each named by its key
+            raise ConfigError.field(path, raw, f"must be a table of [{path}.<name>] tables "
+                                    f"(got {type_name(raw)})")
+        for k, v in raw.items():
+            if isinstance(v, Mapping) and "name" in v:
+                raise ConfigError.field(f"{path}.{k}.name", v["name"], "unknown key: the name of an entry "
+                                        f"is its table's key ({path}.{k})")
+        return tuple(_convert({**v, "name": k} if isinstance(v, Mapping) else v, item.cls, f"{path}.{k}",
+                              elsewhere) for k, v in raw.items())
+    if item is not None and isinstance(raw, (list, tuple)):  # an array of tables
         return (tuple if isinstance(b, mi.VarTupleType) else list)(
-            _convert(v, item.cls, f"{path}.{names[i]}" if i in names else f"{path}[{i}]", ctx)
-            for i, v in enumerate(raw))
+            _convert(v, item.cls, f"{path}[{i}]", elsewhere) for i, v in enumerate(raw))
     if isinstance(b, mi.DictType) and isinstance(raw, Mapping):
         key, value = typing.get_args(_unannotated(hint))
         try:
@@ -284,7 +292,7 @@ def _convert(raw: Any, hint: Any, path: str, ctx: tuple) -> Any:
         except msgspec.ValidationError:
             raise ConfigError.field(path or "file", raw, "keys must be names (letters, digits, _ and -)") \
                 from None
-        return {k: _convert(v, value, f"{path}.{k}", ctx) for k, v in raw.items()}
+        return {k: _convert(v, value, f"{path}.{k}", elsewhere) for k, v in raw.items()}
     if _non_finite(raw):
         entries = enumerate(raw) if isinstance(raw, (list, tuple)) else ()
         raise _value_error(path, raw, t, "finite", next((i for i, v in entries if _non_finite(v)), None))
@@ -307,10 +315,10 @@ def _unannotated(hint: Any) -> Any:
     return hint
 
 
-def decode(raw: Any, cls: type, *, prefix: str = "", names: dict[int, str] | None = None) -> Any:
+def decode(raw: Any, cls: type, *, prefix: str = "") -> Any:
     """`raw` (a parsed TOML table) as a `cls` instance, or a one-line ConfigError ("none" or false unset
-    an optional field).  `prefix`: before every field path; `names`: {index: name} of array tables."""
-    return _convert(raw, cls, prefix.rstrip("."), (paths(cls, prefix), names))
+    an optional field).  `prefix`: before every field path."""
+    return _convert(raw, cls, prefix.rstrip("."), paths(cls, prefix))
 
 
 __all__ = ["ConfigError", "Meta", "checked", "decode", "describe", "did_you_mean", "doc",
