@@ -291,11 +291,9 @@ def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterabl
     return scn
 
 
-def _prepare(raw: Mapping, default_name: str | None) -> dict:
+def _prepare(raw: dict, default_name: str | None) -> dict:
     """The scenario table with its defaults that depend on other keys: the name, plant models on top of
     the nominal ones, sub-task weights per kind; the controller's name alone as its table."""
-    order = [f.name for f in info(Scenario).fields]
-    raw = {**{k: raw[k] for k in raw if k not in order}, **{k: raw[k] for k in order if k in raw}}
     if "name" not in raw and default_name:
         raw["name"] = default_name
     ctrl = raw.get("controller")
