@@ -8,7 +8,7 @@ from typing import Annotated, Literal
 
 from controllers.params import Gains, MasterParams, SlaveParams, SubtaskSpec
 from harness.config.errors import short_repr
-from harness.config.schema import Meta, checked, doc, integer, num, plain, vec
+from harness.config.schema import Meta, checked, doc, integer, num, vec
 
 PLANTS = ("mujoco", "analytic", "cosserat")
 ELASTIC_LAWS = ("analytic", "linear")
@@ -130,10 +130,6 @@ class PlantConfig:
     cosserat: doc(CosseratConfig, "Cosserat-rod plant numerics (kind = \"cosserat\"; material: [plant.slave] "
                   "and the viscosities of [plant])") = \
         field(default_factory=CosseratConfig)
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "master", plain(self.master))
-        object.__setattr__(self, "slave", plain(self.slave))
 
 
 @dataclass(frozen=True)
@@ -269,10 +265,6 @@ class Scenario:
     operator: doc(OperatorConfig, "the operator's hand (MuJoCo plant): a point mass on the master handle "
                   "(grip spring-damper) pulled toward scripted targets") = \
         field(default_factory=OperatorConfig)
-
-    def __post_init__(self) -> None:
-        for name in ("gains", "master", "slave", "subtask"):
-            object.__setattr__(self, name, plain(getattr(self, name)))
 
     @property
     def plant_master(self) -> MasterParams:

@@ -48,18 +48,11 @@ def doc(tp: Any, desc: str, **meta: Any) -> Any:
 
 def checked(cls: type, spec: Mapping[str, Any]) -> type:
     """A frozen subclass of the parameter dataclass `cls` (names, defaults: its own) with the constrained
-    types of `spec` (one entry per field); `plain` turns decoded instances back into `cls`."""
+    types of `spec` (one entry per field); `decode` builds `cls` itself from it."""
     extra = [(f.name, spec[f.name], dataclasses.field(default=f.default, default_factory=f.default_factory))
              for f in dataclasses.fields(cls)]
     return dataclasses.make_dataclass(cls.__name__, extra, bases=(cls,), frozen=True, eq=False,
                                       namespace={"schema_of": cls})
-
-
-def plain(value: Any) -> Any:
-    """A `checked` subclass instance as an instance of its parameter dataclass (others unchanged)."""
-    base = getattr(type(value), "schema_of", None)
-    return value if base is None else base(**{f.name: getattr(value, f.name)
-                                              for f in dataclasses.fields(base)})
 
 
 @functools.cache
@@ -250,7 +243,7 @@ def _table(raw: Mapping, dc: Any, path: str, elsewhere: tuple[str, ...]) -> Any:
         what = f"[{key}] table" if _dataclass_of(kind) else f"key {key} ({describe(kind)})"
         raise ConfigError(f"missing {what}", path=key)
     try:
-        return dc.cls(**values)
+        return getattr(dc.cls, "schema_of", dc.cls)(**values)
     except (TypeError, ValueError) as e:  # the class' own check (__post_init__) names its field first
         why = " ".join(str(e).split())
         head = re.match(r"[\w.]*", why)[0]
@@ -322,6 +315,6 @@ def decode(raw: Any, cls: type, *, prefix: str = "") -> Any:
 
 
 __all__ = ["ConfigError", "Meta", "checked", "decode", "describe", "did_you_mean", "doc",
-           "fields_of", "info", "integer", "num", "paths", "plain", "suggest", "type_name",
+           "fields_of", "info", "integer", "num", "paths", "suggest", "type_name",
            "unknown_keys", "vec"]
 
