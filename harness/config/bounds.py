@@ -1,8 +1,5 @@
-"""Acceptance bounds on run metrics (`teleop check`): a bounds file is an optional top-level
-`description` and a [bounds] table of ``<metric>_max`` / ``<metric>_min`` limits (metrics of
-`harness.loop.metrics.compute_metrics`) and flags.  A bounded metric that was not measured (absent,
-None, NaN) or is not a finite number violates its bound.
-"""
+"""Acceptance bounds on run metrics (`teleop check`): a [bounds] table of ``<metric>_max`` / ``<metric>_min``
+limits and flags; a bounded metric not measured (absent, None, NaN) or not finite violates its bound."""
 
 from __future__ import annotations
 
@@ -68,10 +65,8 @@ def _fmt(x: Any, unit: str = "") -> str:
         text = short_repr(x, 40)
     elif isinstance(x, int):
         text = str(x)
-    elif x == 0 or (1e-3 <= abs(x) < 1e4):
-        text = f"{x:.4f}"
     else:
-        text = f"{x:.3e}"
+        text = f"{x:.4f}" if x == 0 or 1e-3 <= abs(x) < 1e4 else f"{x:.3e}"
     return f"{text} {unit}" if unit else text
 
 
@@ -114,8 +109,7 @@ def load_bounds(source: str | Path | Mapping) -> Bounds:
     if isinstance(source, Mapping):
         return bounds_from_dict(source)
     path = shipped(source, "bounds")  # a shipped name (paper_mujoco) works from any folder
-    raw = read_toml(path, "bounds file")
-    return bounds_from_dict(raw, label=str(path))
+    return bounds_from_dict(read_toml(path, "bounds file"), label=str(path))
 
 
 def _measured(metrics: Mapping, name: str) -> Any:
@@ -134,21 +128,18 @@ def check_bounds(metrics: Mapping[str, Any], bounds: Bounds) -> list[Violation]:
     out: list[Violation] = []
     for f in fields(bounds):
         key, limit = f.name, getattr(bounds, f.name)
-        if key in FLAGS:
-            name = FLAGS[key]
-            want, rel = (0, "max") if name == "mujoco_warnings" else ("ok", "eq")
-            v = _measured(metrics, name)
-            is_num = isinstance(v, (int, float)) and not isinstance(v, bool)
-            good = v == want and (name == "status" or is_num)
-            if limit and not good:
-                out.append(Violation(name, v, want, key, rel))
-        elif limit is not None:
+        if limit is None or limit is False:
+            continue
+        if key in FLAGS:  # a count of MuJoCo warnings <= 0, status == "ok"
+            name, unit = FLAGS[key], ""
+            rel, limit = ("max", 0) if name == "mujoco_warnings" else ("eq", "ok")
+        else:
             name, rel, unit = limit_of(key)
-            v = _measured(metrics, name)
-            is_num = isinstance(v, (int, float)) and not isinstance(v, bool)
-            within = is_num and math.isfinite(v) and (v <= limit if rel == "max" else v >= limit)
-            if v is None or not within:
-                out.append(Violation(name, v, limit, key, rel, unit))
+        v = _measured(metrics, name)
+        is_num = isinstance(v, (int, float)) and not isinstance(v, bool)
+        if not (v == limit if rel == "eq" else
+                is_num and math.isfinite(v) and (v <= limit if rel == "max" else v >= limit)):
+            out.append(Violation(name, v, limit, key, rel, unit))
     return out
 
 

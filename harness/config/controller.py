@@ -1,8 +1,6 @@
-"""The scenario's controller class: built-ins (`controllers.baselines.BUILTINS`) or user code named
-"path/to/file.py:ClassName" / "package.module:ClassName" (the one place that imports a module by name),
-checked against the plant before anything runs.  Whatever controller code raises is one line naming the
-controller and the phase; while the main thread runs it `USER_CODE[0]` is True (signal handlers use it).
-"""
+"""The scenario's controller class: a built-in or user code ("path/to/file.py:ClassName",
+"package.module:ClassName"; the one place that imports a module by name), checked against the plant before
+anything runs.  While the main thread runs controller code `USER_CODE[0]` is True (signal handlers use it)."""
 
 from __future__ import annotations
 
@@ -114,11 +112,11 @@ def parse_params(cls: type, raw: dict | None, name: str | None = None):
     Raises ConfigError (one line), ControllerCodeError for anything else its check raises."""
     params, raw = getattr(cls, "Params", None), dict(raw or {})
     label = name or getattr(cls, "name", cls.__name__)
+    if params is None and raw:
+        key = sorted(raw)[0]
+        raise ConfigError.field(f"controller.params.{key}", raw[key],
+                                f"unknown key; controller {label!r} takes no parameters")
     if params is None:
-        if raw:
-            key = sorted(raw)[0]
-            raise ConfigError.field(f"controller.params.{key}", raw[key],
-                                    f"unknown key; controller {label!r} takes no parameters")
         return None
     if not dataclasses.is_dataclass(params):
         raise ConfigError(f"controller {label!r}: its Params must be a dataclass with defaults",

@@ -1,15 +1,8 @@
-"""Scenario TOML <-> `Scenario`: defaults, `--set key=value` overrides, cross-field checks, dumping.
-
-Missing keys take the schema defaults, except that [plant.master] / [plant.slave] start from the resolved
-nominal [master] / [slave]; "none" (or false) unsets an optional field; `transient` defaults to 5 s or a
-quarter of a shorter `duration`; `subtask.weights` to each kind's default weight.  A file naming a
-controller by Python code is refused unless `allow_code` (`--allow-code`); relative controller file paths
-resolve against the naming file's folder.  Every error is a one-line `ConfigError`.
-"""
+"""Scenario TOML <-> `Scenario`: defaults (docs/reference/scenario.md), `--set key=value` overrides,
+cross-field checks, dumping.  Every error is a one-line `ConfigError`."""
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import math
 import os
@@ -37,10 +30,7 @@ MAX_STEPS = 100_000_000  # duration / control_dt
 
 def _is_multiple(x: float, step: float) -> tuple[bool, float]:
     ratio = x / step
-    if not math.isfinite(ratio):
-        return False, ratio
-    n = round(ratio)
-    return abs(ratio - n) <= MULTIPLE_RTOL * max(abs(ratio), 1.0), ratio
+    return math.isfinite(ratio) and abs(ratio - round(ratio)) <= MULTIPLE_RTOL * max(abs(ratio), 1.0), ratio
 
 
 def trajectory_radius_range(traj: TrajectoryConfig, duration: float) -> tuple[float, float]:
@@ -54,9 +44,7 @@ def trajectory_radius_range(traj: TrajectoryConfig, duration: float) -> tuple[fl
         theta = np.linspace(0.0, span, n) * (1.0 if w >= 0 else -1.0)
     with np.errstate(all="ignore"):
         r = np.hypot(c[0] + a[0] * np.sin(theta), c[1] + a[1] * np.cos(theta))
-    if not np.all(np.isfinite(r)):
-        return 0.0, math.inf
-    return float(r.min()), float(r.max())
+    return (float(r.min()), float(r.max())) if np.all(np.isfinite(r)) else (0.0, math.inf)
 
 
 def _check_reach(scn: Scenario) -> None:
@@ -223,20 +211,6 @@ def _apply_override(raw: dict, text: str) -> str:
     return ".".join(parts)
 
 
-def _read_source(source: str | Path | Mapping | None) -> tuple[dict, str | None, str | None]:
-    """-> (raw table, file label for messages, default name)."""
-    if source is None:
-        return {}, None, None
-    if isinstance(source, Mapping):
-        return _plain_copy(source), None, None
-    if not isinstance(source, (str, Path)):
-        raise ConfigError(f"scenario source must be a path or a table, got {type_name(source)}")
-    path = shipped(source, "scenarios")  # a shipped name (paper) works from any folder
-    raw = read_toml(path, "scenario file")
-    stem = path.stem if re.match(NAME_RE, path.stem) else None
-    return raw, str(path), stem
-
-
 def _plain_copy(obj: Any, depth: int = 0) -> Any:
     """Deep copy of a user table (tuples -> lists) within the nesting limit of files."""
     if depth >= MAX_DEPTH and isinstance(obj, (Mapping, list, tuple)):
@@ -245,30 +219,23 @@ def _plain_copy(obj: Any, depth: int = 0) -> Any:
         return {k: _plain_copy(v, depth + 1) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [_plain_copy(v, depth + 1) for v in obj]
-    return copy.copy(obj)
+    return obj
 
 
 def file_reference(name: str) -> tuple[str, str] | None:
     """(path, class) of a 'path/to/file.py:Class' reference, None for anything else."""
     where, sep, attr = name.rpartition(":")
-    if sep and (where.endswith(".py") or "/" in where or "\\" in where):
-        return where, attr
-    return None
+    return (where, attr) if sep and (where.endswith(".py") or "/" in where or "\\" in where) else None
 
 
-def _rebase_controller(raw: dict, base: Path | None) -> None:
+def _rebase_controller(raw: dict, base: str | Path | None) -> None:
     """A relative controller file path in `raw` made relative to `base` (the naming file's folder)."""
-    node = raw.get("controller")
-    table = node if isinstance(node, dict) else None
-    name = table.get("name") if table is not None else node
+    table = raw["controller"] if isinstance(raw.get("controller"), dict) else raw
+    key = "name" if table is not raw else "controller"
+    name = table.get(key)
     ref = file_reference(name.strip()) if isinstance(name, str) and base is not None else None
-    if ref is None or Path(ref[0]).is_absolute():
-        return
-    new = f"{base / ref[0]}:{ref[1]}"
-    if table is not None:
-        table["name"] = new
-    else:
-        raw["controller"] = new
+    if ref is not None and not Path(ref[0]).is_absolute():
+        table[key] = f"{Path(base) / ref[0]}:{ref[1]}"
 
 
 def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterable[str] = (), *,
@@ -281,32 +248,34 @@ def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterabl
     allow_code: None = a Python controller is refused only when the scenario file names it; True =
     allowed; False = always refused.  code_dir: where relative controller files of a table or of the
     overrides resolve (default: the current folder)."""
-    raw, label, default_name = _read_source(source)
-    origin = "table" if isinstance(source, Mapping) else None
-    if label is not None:  # a file
-        origin = "file" if "controller" in raw else None
-        _rebase_controller(raw, Path(label).resolve().parent)
-    elif code_dir is not None:
-        _rebase_controller(raw, Path(code_dir))
-    if isinstance(overrides, str):
-        overrides = [overrides]
-    overrides = list(overrides or ())
-    labels = list(labels) if labels is not None else []
-    labels += [None] * (len(overrides) - len(labels))
+    raw, label, default_name = {}, None, None  # label: the file's path in messages
+    if isinstance(source, Mapping):
+        raw = _plain_copy(source)
+    elif source is not None:
+        if not isinstance(source, (str, Path)):
+            raise ConfigError(f"scenario source must be a path or a table, got {type_name(source)}")
+        path = shipped(source, "scenarios")  # a shipped name (paper) works from any folder
+        raw, label = read_toml(path, "scenario file"), str(path)
+        default_name = path.stem if re.match(NAME_RE, path.stem) else None
+    from_file = label is not None and "controller" in raw  # the scenario file names the controller
+    _rebase_controller(raw, Path(label).resolve().parent if label is not None else code_dir)
+    overrides = [overrides] if isinstance(overrides, str) else list(overrides or ())
     applied: list[tuple[str, str]] = []
-    for text, lab in zip(overrides, labels, strict=False):
-        where = lab or f"override {text!r}"
+    for text, lab in zip(overrides, [*(labels or ()), *[None] * len(overrides)], strict=False):
         try:
             key = _apply_override(raw, text)
         except ConfigError as e:
             raise (e.with_context(lab) if lab else e) from None
-        applied.append((key, where))
+        applied.append((key, lab or f"override {text!r}"))
         if key in ("controller", "controller.name"):
-            origin = "override"
-            if code_dir is not None:
-                _rebase_controller(raw, Path(code_dir))
+            from_file = False
+            _rebase_controller(raw, code_dir)
     try:
-        scn = _scenario_from_dict(raw, default_name)
+        table = _prepare(raw, default_name)
+        scn = decode(table, Scenario)
+        if "transient" not in table and scn.duration <= Scenario.transient:
+            scn = dataclasses.replace(scn, transient=scn.duration / 4.0)
+        _cross_checks(scn)
     except ConfigError as e:
         path = e.path or ""
         for key, where in reversed(applied):
@@ -314,19 +283,17 @@ def load_scenario(source: str | Path | Mapping | None = None, overrides: Iterabl
                 raise e.with_context(f"(from {where})") from None
         raise (e.with_context(label) if label else e) from None
     name = scn.controller.name
-    if ":" in name and not allow_code and (allow_code is False or origin == "file"):
-        what = f"scenario file {label}" if origin == "file" else "the study"
+    if ":" in name and not allow_code and (allow_code is False or from_file):
+        what = f"scenario file {label}" if from_file else "the study"
         raise ConfigError(f"controller.name = {name!r} in {what} is Python code; files run no code unless "
                           "you allow it: add --allow-code (API: allow_code=True) if you trust it, or give "
                           "the controller on the command line (--controller)", path="controller.name")
     return scn
 
 
-def _prepare(raw: Mapping, default_name: str | None) -> tuple[dict, dict[int, str]]:
-    """The TOML layout -> the schema's (named objects -> a list, plant models on top of the nominal
-    ones, default sub-task weights) -> (table, {index: object name})."""
-    order = [f.name for f in info(Scenario).fields]
-    raw = {**{k: raw[k] for k in raw if k not in order}, **{k: raw[k] for k in order if k in raw}}
+def _prepare(raw: dict, default_name: str | None) -> dict:
+    """The scenario table with its defaults that depend on other keys: the name, plant models on top of
+    the nominal ones, sub-task weights per kind; the controller's name alone as its table."""
     if "name" not in raw and default_name:
         raw["name"] = default_name
     ctrl = raw.get("controller")
@@ -337,19 +304,6 @@ def _prepare(raw: Mapping, default_name: str | None) -> tuple[dict, dict[int, st
             ctrl["name"] = ctrl["name"].strip()
         if isinstance(ctrl.get("params"), str) and ctrl["params"].strip().lower() == "none":
             ctrl["params"] = {}
-    names: dict[int, str] = {}
-    env = raw.get("environment")
-    if isinstance(env, dict) and "objects" in env:
-        objs = env["objects"]
-        if not isinstance(objs, dict):
-            raise ConfigError.field("environment.objects", objs, "must be a table of [environment.objects."
-                                    f"<name>] tables (got {type_name(objs)})")
-        for i, (name, o) in enumerate(objs.items()):
-            names[i] = str(name)
-            if isinstance(o, dict) and "name" in o:
-                raise ConfigError.field(f"environment.objects.{name}.name", o["name"], "unknown key: the "
-                                        f"name of an object is its table's key (environment.objects.{name})")
-        env["objects"] = [{**o, "name": n} if isinstance(o, dict) else o for n, o in objs.items()]
     plant = raw.get("plant")
     for sub in ("master", "slave"):
         if isinstance(plant, dict) and isinstance(plant.get(sub), dict):
@@ -359,16 +313,7 @@ def _prepare(raw: Mapping, default_name: str | None) -> tuple[dict, dict[int, st
     if isinstance(sub, dict) and "weights" not in sub and isinstance(sub.get("kinds"), list):
         default_w = dict(zip(SubtaskSpec().kinds, SubtaskSpec().weights, strict=True))
         sub["weights"] = [default_w.get(k, 1.0) if isinstance(k, str) else 1.0 for k in sub["kinds"]]
-    return raw, names
-
-
-def _scenario_from_dict(raw: Mapping, default_name: str | None) -> Scenario:
-    table, names = _prepare(raw, default_name)
-    scn = decode(table, Scenario, names=names)
-    if "transient" not in table and scn.duration <= Scenario.transient:
-        scn = dataclasses.replace(scn, transient=scn.duration / 4.0)
-    _cross_checks(scn)
-    return scn
+    return raw
 
 
 def to_toml(v: Any) -> Any:
@@ -391,21 +336,15 @@ def to_toml(v: Any) -> Any:
     return v
 
 
-def scenario_to_dict(scn: Scenario) -> dict[str, Any]:
-    """The resolved scenario as a TOML-ready dict, every field in schema order (None -> "none")."""
-    return to_toml(scn)
+scenario_to_dict = to_toml  # the resolved scenario as a TOML-ready dict, every field in schema order
 
 
 def _toml_lines(table: Mapping[str, Any], name: str = "") -> list[str]:
     lines = [f"[{name}]"] if name else []
-    subtables = []
+    lines += [f"{k} = {toml_literal(v)}" for k, v in table.items() if not isinstance(v, Mapping)]
     for k, v in table.items():
         if isinstance(v, Mapping):
-            subtables.append((k, v))
-        else:
-            lines.append(f"{k} = {toml_literal(v)}")
-    for k, v in subtables:
-        lines += [""] + _toml_lines(v, f"{name}.{k}" if name else k)
+            lines += [""] + _toml_lines(v, f"{name}.{k}" if name else k)
     return lines
 
 

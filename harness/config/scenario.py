@@ -8,7 +8,7 @@ from typing import Annotated, Literal
 
 from controllers.params import Gains, MasterParams, SlaveParams, SubtaskSpec
 from harness.config.errors import short_repr
-from harness.config.schema import Meta, checked, doc, integer, num, plain, vec
+from harness.config.schema import Meta, checked, doc, integer, num, vec
 
 PLANTS = ("mujoco", "analytic", "cosserat")
 ELASTIC_LAWS = ("analytic", "linear")
@@ -49,8 +49,7 @@ SLAVE = {
     "max_bend": num("rad, |k_i d_i| <= max_bend", gt=0.0, le=math.pi),
     "n_quad": integer("Gauss-Legendre points per section for the energy integrals", ge=2, le=32),
 }
-GAINS = {k: num(f"gain {k} of the paper's law, eq. (39)", **POS) for k in ("k1", "k2", "k3", "k4", "ky", "ks",
-                                                                          "kn")}
+GAINS = {k: num(f"gain {k} of the paper's law, eq. (39)", **POS) for k in "k1 k2 k3 k4 ky ks kn".split()}
 SUBTASK = {
     "kinds": doc(tuple[Literal[SUBTASKS], ...], "null-space sub-tasks (29)-(33): 'manipulability' (41), "
                  "'limits'; distinct"),
@@ -64,8 +63,6 @@ Master, Slave, GainsSpec, Subtask = (checked(c, s) for c, s in ((MasterParams, M
 
 @dataclass(frozen=True)
 class TrajectoryConfig:
-    """x_d(t) = [cx + ax sin(w t), cz + az cos(w t)] (m, master base frame), paper eq. (40)."""
-
     center: vec(2, "m; x_d(t) must stay inside the master workspace annulus [|l1 - l2| + 1 mm, "
                 "l1 + l2 - 1 mm] (nominal and plant master)") = (0.0, 1.0)
     amplitude: vec(2, "m") = (0.01, 0.01)
@@ -74,8 +71,6 @@ class TrajectoryConfig:
 
 @dataclass(frozen=True)
 class InitialState:
-    """Initial conditions, both arms at rest."""
-
     master_offset: vec(2, "m, added to x_d(0) before the master inverse kinematics") = (0.0, 0.0)
     master_elbow: doc(Literal[-1, 1], "sign of the elbow angle q_b of the IK solution") = -1
     slave_q2: doc(vec(6, "") | None, '[d1, d2, d3, k1, k2, k3] (m, 1/m); "none" = equal sections under '
@@ -85,8 +80,6 @@ class InitialState:
 
 @dataclass(frozen=True)
 class CosseratConfig:
-    """Cosserat-rod plant numerics (material: [plant.slave] and the viscosities of [plant])."""
-
     elements_per_section: integer("rod elements per section", ge=2, le=200) = 10
     dt: doc(num("", gt=0.0, le=0.01) | Literal["auto"], 's, rod time step, or "auto" (largest control_dt / m '
             "below the stable step)") = "auto"
@@ -100,23 +93,15 @@ class CosseratConfig:
 
 @dataclass(frozen=True)
 class PlantConfig:
-    """The 'true' plant; the controller keeps the nominal `Scenario.master` / `Scenario.slave`."""
-
     kind: doc(Literal[PLANTS], '"mujoco" | "analytic" (RK4 on the analytic model) | "cosserat" (rod)') = \
         "mujoco"
     master: doc(Master | None, '"none" = same as [master]; or a [plant.master] table whose missing keys '
                 "take the nominal [master] value") = None
     slave: doc(Slave | None, '"none" = same as [slave]; or a [plant.slave] table whose missing keys take '
                "the nominal [slave] value") = None
-    actuation: doc(Literal[ACTUATIONS], '"servo" | "torque" | "muscle".  "servo": position servos, '
-                   "defined per unit length, track the integrated command q2_ref: they hide the "
-                   "slave's inertia and the controller's dynamics model (the stiff inner loop does the "
-                   'work).  "torque": the controller\'s T2 acts on the body as ideal, instantaneous '
-                   'generalized forces: hides actuator dynamics and limits.  "muscle": two one-sided '
-                   "extensor groups per section "
-                   "(force >= 0, lengthening the fibres at +-muscle_radius) with first-order force dynamics "
-                   "(muscle_time_constant) and limits (muscle_max_force): hides none of these; it cannot "
-                   "realize every T2 (commands outside [0, F_max] are clipped) and lags by tau") = "servo"
+    actuation: doc(Literal[ACTUATIONS], '"servo" (position servos tracking the integrated command; hide the '
+                   'slave\'s inertia) | "torque" (T2 as ideal generalized forces) | "muscle" (two one-sided '
+                   "groups per section with force dynamics and limits); see docs/plants.md") = "servo"
     segments: integer("rigid segments per section N (mujoco only)", ge=1, le=64) = 8
     enforce_cc: doc(bool, "equality constraints holding each section at constant curvature (mujoco "
                     "only)") = False
@@ -142,18 +127,13 @@ class PlantConfig:
                            "MuJoCo chain: hinge damping eta_b / h", **NONNEG) = (0.1, 0.1, 0.1)
     extension_viscosity: vec(3, "eta_a, N s, material extension viscosity per section; MuJoCo chain: "
                              "slide damping eta_a / h", **NONNEG) = (3.0, 3.0, 3.0)
-    cosserat: doc(CosseratConfig, "Cosserat-rod plant (kind = \"cosserat\")") = \
+    cosserat: doc(CosseratConfig, "Cosserat-rod plant numerics (kind = \"cosserat\"; material: [plant.slave] "
+                  "and the viscosities of [plant])") = \
         field(default_factory=CosseratConfig)
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "master", plain(self.master))
-        object.__setattr__(self, "slave", plain(self.slave))
 
 
 @dataclass(frozen=True)
 class FaultConfig:
-    """Deliberate controller faults (does a bounds file catch them?); defaults: none."""
-
     e2_sign: doc(Literal[-1, 1], "-1 flips the sign of the coordination-error feedback in (18)") = 1
     null_space_scale: num("multiplies phi_N (27): 0 = null-space term dropped, 1 = intact", ge=0.0,
                           le=10.0) = 1.0
@@ -166,8 +146,6 @@ ParamValue = doc(_LEAF | list[_LEAF | list[_LEAF | list[_LEAF]]], "",
 
 @dataclass(frozen=True)
 class ControllerConfig:
-    """Which controller runs (checked by `harness.config.controller.resolve_controller`)."""
-
     name: doc(str, '"paper" (the paper\'s law, compiled), another built-in ("teleop controllers") or '
               '"path/to/file.py:ClassName" / "package.module:ClassName"', pattern=CONTROLLER_RE,
               expect=CONTROLLER_EXPECT) = "paper"
@@ -201,8 +179,6 @@ class EnvObject:
 
 @dataclass(frozen=True)
 class EnvironmentConfig:
-    """Objects the slave's segments and tip can touch (none = the paper's free-space scenario)."""
-
     objects: doc(tuple[EnvObject, ...], "one [environment.objects.<name>] table per object (see "
                  "scenarios/contact.toml)", item="<name>") = ()
 
@@ -214,8 +190,6 @@ class EnvironmentConfig:
 
 @dataclass(frozen=True)
 class ForceSensingConfig:
-    """What the laws (13), (17) get as F = [F1, F2]."""
-
     mode: doc(Literal[FORCE_MODES], '"exact" (true forces) | "sensed" (noise, filter, delay) | "ignored" '
               "(F = 0)") = "exact"
     noise_std: num("N, white noise per component (sensed mode)", **NONNEG) = 0.0
@@ -234,9 +208,6 @@ class SensingConfig:
 
 @dataclass(frozen=True)
 class OperatorConfig:
-    """The operator's hand: a point mass on the master tip (grip spring-damper), pulled toward the
-    scripted targets by the arm's spring-damper (MuJoCo plant)."""
-
     enabled: doc(bool, "simulate the operator's hand") = False
     mass: num("kg, hand mass", **POS) = 0.5
     stiffness: num("N/m, arm spring toward the target", **NONNEG) = 200.0
@@ -275,9 +246,11 @@ class Scenario:
     slave: doc(Slave, "NOMINAL Octarm model used by the controller (3 constant-curvature sections; our "
                "proposal)") = field(default_factory=SlaveParams)
     subtask: doc(Subtask, "null-space sub-tasks (29)-(33)") = field(default_factory=SubtaskSpec)
-    trajectory: doc(TrajectoryConfig, "paper eq. (40)") = field(default_factory=TrajectoryConfig)
-    initial: doc(InitialState, "initial state") = field(default_factory=InitialState)
-    plant: doc(PlantConfig, 'the "true" plant the controller drives') = field(default_factory=PlantConfig)
+    trajectory: doc(TrajectoryConfig, "x_d(t) = [cx + ax sin(w t), cz + az cos(w t)] (m, master base "
+                    "frame), paper eq. (40)") = field(default_factory=TrajectoryConfig)
+    initial: doc(InitialState, "initial state, both arms at rest") = field(default_factory=InitialState)
+    plant: doc(PlantConfig, 'the "true" plant the controller drives (its own master / slave models)') = \
+        field(default_factory=PlantConfig)
     interaction_forces: doc(tuple[vec(2, ""), vec(2, "")], "[F1, F2], N, constant tip forces (X, Z) on "
                             "master, slave") = ((0.0, 0.0), (0.0, 0.0))
     continuous_control: doc(bool, "analytic plant only: evaluate the control law in every RK4 stage") = False
@@ -285,15 +258,13 @@ class Scenario:
         field(default_factory=FaultConfig)
     controller: doc(ControllerConfig, "which control law runs (a table, or just the name)") = \
         field(default_factory=ControllerConfig)
-    environment: doc(EnvironmentConfig, "objects the slave can touch (MuJoCo and Cosserat plants)") = \
+    environment: doc(EnvironmentConfig, "objects the slave can touch (MuJoCo and Cosserat plants; none = "
+                     "free space)") = \
         field(default_factory=EnvironmentConfig)
     sensing: doc(SensingConfig, "force sensing for the laws") = field(default_factory=SensingConfig)
-    operator: doc(OperatorConfig, "the operator's hand on the master handle (MuJoCo plant)") = \
+    operator: doc(OperatorConfig, "the operator's hand (MuJoCo plant): a point mass on the master handle "
+                  "(grip spring-damper) pulled toward scripted targets") = \
         field(default_factory=OperatorConfig)
-
-    def __post_init__(self) -> None:
-        for name in ("gains", "master", "slave", "subtask"):
-            object.__setattr__(self, name, plain(getattr(self, name)))
 
     @property
     def plant_master(self) -> MasterParams:

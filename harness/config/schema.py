@@ -1,8 +1,6 @@
 """The one validator of every input file: frozen dataclasses whose fields carry their constraints and
-descriptions as `msgspec.Meta` annotations, decoded by `msgspec.convert` (`decode`), plus what msgspec
-does not say: unknown keys with "did you mean" (`suggest`), non-finite numbers and the one-line message
-``<dotted field> = <value>: must be <range>``.  `fields_of` lists the fields for config.toml and the docs.
-"""
+descriptions as `msgspec.Meta` annotations, decoded by `decode` into one-line errors
+``<dotted field> = <value>: must be <range>`` (plus unknown keys with "did you mean", non-finite numbers)."""
 
 from __future__ import annotations
 
@@ -20,9 +18,6 @@ from msgspec import Meta
 from msgspec import inspect as mi
 
 from harness.config.errors import ConfigError, short_repr
-
-NONE_WORDS = ("none",)  # TOML has no null: "none" (or false) unsets an optional field
-_TOKEN = re.compile(r"\.([^.\[\]]+)|\[(\d+|\.\.\.)\]")
 
 
 def num(desc: str, **rng: float) -> Any:
@@ -53,22 +48,11 @@ def doc(tp: Any, desc: str, **meta: Any) -> Any:
 
 def checked(cls: type, spec: Mapping[str, Any]) -> type:
     """A frozen subclass of the parameter dataclass `cls` (names, defaults: its own) with the constrained
-    types of `spec` (one entry per field); `plain` turns decoded instances back into `cls`."""
-    own = dataclasses.fields(cls)
-    if set(spec) != {f.name for f in own}:
-        raise TypeError(f"{cls.__name__}: schema fields {sorted(spec)} != dataclass fields")
+    types of `spec` (one entry per field); `decode` builds `cls` itself from it."""
     extra = [(f.name, spec[f.name], dataclasses.field(default=f.default, default_factory=f.default_factory))
-             for f in own]
+             for f in dataclasses.fields(cls)]
     return dataclasses.make_dataclass(cls.__name__, extra, bases=(cls,), frozen=True, eq=False,
                                       namespace={"schema_of": cls})
-
-
-def plain(value: Any) -> Any:
-    """A `checked` subclass instance as an instance of its parameter dataclass (others unchanged)."""
-    base = getattr(type(value), "schema_of", None)
-    if base is None:
-        return value
-    return base(**{f.name: getattr(value, f.name) for f in dataclasses.fields(base)})
 
 
 @functools.cache
@@ -93,15 +77,11 @@ def _fmt(x: float) -> str:
 
 def describe_range(t: Any) -> str:
     """'in (0, 3600]', '> 0', '' for a numeric type's bounds."""
-    lo, lo_open = (t.gt, True) if t.gt is not None else (t.ge, False)
-    hi, hi_open = (t.lt, True) if t.lt is not None else (t.le, False)
-    if lo is not None and hi is not None:
-        return f"in {'(' if lo_open else '['}{_fmt(lo)}, {_fmt(hi)}{')' if hi_open else ']'}"
-    if lo is not None:
-        return f"{'>' if lo_open else '>='} {_fmt(lo)}"
-    if hi is not None:
-        return f"{'<' if hi_open else '<='} {_fmt(hi)}"
-    return ""
+    lo = ("(", ">", t.gt) if t.gt is not None else ("[", ">=", t.ge)
+    hi = (")", "<", t.lt) if t.lt is not None else ("]", "<=", t.le)
+    if lo[2] is not None and hi[2] is not None:
+        return f"in {lo[0]}{_fmt(lo[2])}, {_fmt(hi[2])}{hi[0]}"
+    return " ".join(f"{op} {_fmt(v)}" for _, op, v in (lo, hi) if v is not None)
 
 
 def describe(t: Any) -> str:
@@ -110,8 +90,7 @@ def describe(t: Any) -> str:
         return t.extra["expect"]
     t = bare(t)
     if isinstance(t, mi.IntType):
-        rng = describe_range(t)
-        return f"an integer {rng}".rstrip() if rng.startswith(("in", ">", "<")) else "an integer"
+        return f"an integer {describe_range(t)}".rstrip()
     if isinstance(t, mi.FloatType):
         rng = describe_range(t)
         return f"a number {rng}" if rng else "a finite number"
@@ -187,17 +166,15 @@ def unknown_keys(prefix: str, bad: Mapping, allowed: Iterable[str],
     else:
         path = prefix.rstrip(".")
         head = f"{path or 'file'}: unknown keys {', '.join(map(repr, bad))}"
-    allowed_text = ", ".join(allowed) or "none"
-    return ConfigError(f"{head}; {''.join(hints)}allowed keys here: {allowed_text}", path=path)
+    return ConfigError(f"{head}; {''.join(hints)}allowed keys here: {', '.join(allowed) or 'none'}",
+                       path=path)
 
 
 def _dataclass_of(t: Any) -> Any:
     """The dataclass type info inside `t` (through Annotated and Optional), else None."""
     t = bare(t)
-    if isinstance(t, mi.UnionType):
-        found = [bare(u) for u in t.types if isinstance(bare(u), mi.DataclassType)]
-        return found[0] if found else None
-    return t if isinstance(t, mi.DataclassType) else None
+    kinds = [bare(u) for u in t.types] if isinstance(t, mi.UnionType) else [t]
+    return next((k for k in kinds if isinstance(k, mi.DataclassType)), None)
 
 
 def fields_of(cls: type, prefix: str = "", arrays: bool = False) -> Iterator[tuple[str, Any, Any]]:
@@ -224,157 +201,120 @@ def paths(cls: type, prefix: str = "") -> tuple[str, ...]:
     return tuple(prefix + p for p, _, _ in fields_of(cls))
 
 
-def _normalize(raw: Any, t: Any, path: str, elsewhere: tuple[str, ...], names: dict | None) -> Any:
-    """A copy of `raw` with "none" (or false) as None where `t` allows None; unknown keys raise."""
-    t0 = bare(t)
-    if isinstance(t0, mi.UnionType) and any(isinstance(u, mi.NoneType) for u in t0.types) and (
-            raw is False or (isinstance(raw, str) and raw.strip().lower() in NONE_WORDS)):
-        return None
-    dc = _dataclass_of(t)
-    if dc is not None and isinstance(raw, Mapping):
-        fields = {f.name: f.type for f in dc.fields}
-        for k in raw:
-            if not isinstance(k, str):
-                raise ConfigError(f"{path or 'file'}: key {short_repr(k)} is not a string", path=path)
-        bad = {k: v for k, v in raw.items() if k not in fields}
-        if bad:
-            raise unknown_keys(f"{path}." if path else "", bad, fields, elsewhere)
-        return {k: _normalize(v, fields[k], f"{path}.{k}" if path else k, elsewhere, names)
-                for k, v in raw.items()}
-    if isinstance(t0, (mi.VarTupleType, mi.ListType)) and isinstance(raw, (list, tuple)):
-        return [_normalize(v, t0.item_type, f"{path}.{names[i]}" if names and i in names else f"{path}[{i}]",
-                           elsewhere, names) for i, v in enumerate(raw)]
-    return raw
+def _non_finite(raw: Any) -> bool:
+    """Whether `raw` is or holds a non-finite float."""
+    if isinstance(raw, float):
+        return not math.isfinite(raw)
+    items = raw.values() if isinstance(raw, Mapping) else raw if isinstance(raw, (list, tuple)) else ()
+    return any(_non_finite(v) for v in items)
 
 
-def _non_finite(raw: Any, tokens: list) -> list | None:
-    """The path (tokens) to the first non-finite float in `raw`, else None."""
-    if isinstance(raw, float) and not math.isfinite(raw):
-        return tokens
-    items = raw.items() if isinstance(raw, Mapping) else enumerate(raw) if isinstance(raw, (list, tuple)) \
-        else ()
-    for k, v in items:
-        found = _non_finite(v, [*tokens, k])
-        if found is not None:
-            return found
-    return None
-
-
-def _locate(cls: type, raw: Any, tokens: list, names: dict[int, str] | None = None) -> tuple:
-    """-> (dotted field path, raw value of the field, field type, entry tokens below the field)."""
-    t, node, path, value, ftype, rest, hint = bare(info(cls)), raw, "", raw, info(cls), [], cls
-    for tok in tokens:
-        if tok == "..." and isinstance(node, Mapping):
-            tok = _bad_key(node, hint)
-        if isinstance(tok, str):
-            dc = _dataclass_of(t)
-            if dc is not None:
-                f = next((f for f in dc.fields if f.name == tok), None)
-                if f is None:
-                    break
-                t, hint = f.type, typing.get_type_hints(dc.cls, include_extras=True)[tok]
-            elif isinstance(bare(t), mi.DictType):
-                t = bare(t).value_type
-            else:
-                break
-            path = f"{path}.{tok}" if path else tok
-            node = node.get(tok) if isinstance(node, Mapping) else None
-            value, ftype, rest = node, t, []
-        else:
-            bt = bare(t)
-            if isinstance(bt, mi.TupleType) and tok < len(bt.item_types):
-                t = bt.item_types[tok]
-            elif isinstance(bt, (mi.VarTupleType, mi.ListType)):
-                t = bt.item_type
-            else:
-                break
-            node = node[tok] if isinstance(node, (list, tuple)) and tok < len(node) else None
-            if _dataclass_of(t) is not None:  # a table in an array: named by `names` (objects) or index
-                path = f"{path}.{names[tok]}" if names and tok in names else f"{path}[{tok}]"
-                value, ftype, rest = node, t, []
-            else:
-                rest.append((tok, node))
-    return path, value, ftype, rest
-
-
-def field_error(cls: type, raw: Any, tokens: list, why: str = "", names: dict[int, str] | None = None,
-                prefix: str = "") -> ConfigError:
-    """The one-line error for the field at `tokens` of `raw` (decoded as `cls`)."""
-    path, value, ftype, rest = _locate(cls, raw, tokens, names)
-    t = bare(ftype)
-    required = re.fullmatch(r"Object missing required field `(\w+)`", why)
-    if required and isinstance(t, mi.DataclassType):
-        key = prefix + (f"{path}.{required.group(1)}" if path else required.group(1))
-        kind = next(f.type for f in t.fields if f.name == required.group(1))
-        what = f"[{key}] table" if _dataclass_of(kind) else f"key {key} ({describe(kind)})"
-        return ConfigError(f"missing {what}", path=key)
-    path = prefix + path if path else prefix.rstrip(".") or "file"
-    expected = describe(ftype)
+def _value_error(path: str, value: Any, t: Any, why: str, entry: int | None) -> ConfigError:
+    """The one line for `value` (type info `t`) at `path`: msgspec's `why` or "finite"; `entry`: the index
+    of the first bad entry inside the value."""
+    path, b = path or "file", bare(t)
+    expected = f"a table [{path}]" if isinstance(b, (mi.DataclassType, mi.DictType)) else describe(t)
     got = ""
-    if rest:
-        got = f" (entry {rest[0][0]} is {short_repr(rest[0][1], 30)})"
+    if entry is not None and isinstance(b, (mi.TupleType, mi.VarTupleType, mi.ListType)):
+        got = f" (entry {entry} is {short_repr(value[entry], 30)})"
     elif "length" in why and isinstance(value, (list, tuple)):
         got = f" (got {len(value)} entries)"
-    elif isinstance(t, mi.LiteralType) and isinstance(value, str):
-        hint = suggest(value, [str(v) for v in t.values], n=1)
+    elif isinstance(b, mi.LiteralType) and isinstance(value, str):
+        hint = suggest(value, [str(v) for v in b.values], n=1)
         got = f"; did you mean {hint[0]!r}?" if hint else ""
     elif why.startswith("Expected `") and ", got `" in why:
         got = f" (got {type_name(value)})"
-    elif why and not why.startswith(("Expected", "Invalid enum", "Number out of range", "finite")):
-        got = f" ({why})"  # a dataclass' own check (__post_init__)
-    if isinstance(t, mi.DictType) and why.startswith("Expected `str`"):
-        return ConfigError.field(path, value, "keys must be names (letters, digits, _ and -)")
-    if isinstance(t, (mi.DataclassType, mi.DictType)) and not why.startswith("Expected"):
-        # a dataclass' own check (__post_init__) names its field: "field = ..." or "<table>.field = ..."
-        name = why.split(" = ", 1)[0]
-        if isinstance(t, mi.DataclassType) and name in {f.name for f in t.fields}:
-            return ConfigError(f"{path}.{why}", path=f"{path}.{name}")
-        owner = why.split(" ", 1)[0].split(".", 1)[0]
-        if owner and path.endswith(owner) and why.startswith(owner + "."):
-            return ConfigError(path[: len(path) - len(owner)] + why, path=path)
-        return ConfigError(f"{path}: {why}", path=path)
-    if why == "finite":
-        expected = f"finite ({expected})"
-    if isinstance(t, (mi.DataclassType, mi.DictType)):
-        expected = f"a table [{path}]"
-    return ConfigError.field(path, value, f"must be {expected}{got}")
+    return ConfigError.field(path, value, f"must be {f'finite ({expected})' if why == 'finite' else expected}"
+                             f"{got}")
 
 
-def _tokens(where: str) -> list:
-    return [m.group(1) or (m.group(2) if m.group(2) == "..." else int(m.group(2)))
-            for m in _TOKEN.finditer(where)]
-
-
-def _bad_key(table: Mapping, tp: Any) -> str | None:
-    """The first key of `table` whose value a dict type `tp` refuses (msgspec's path says `[...]`)."""
-    for k, v in table.items():
-        try:
-            msgspec.convert({k: v}, tp)
-        except msgspec.ValidationError:
-            return k
-    return None
-
-
-def decode(raw: Any, cls: type, *, prefix: str = "", names: dict[int, str] | None = None) -> Any:
-    """`raw` (a parsed TOML table) as a `cls` instance, or a one-line ConfigError ("none" or false unset
-    an optional field).  `prefix`: before every field path; `names`: {index: name} of array tables."""
-    if not isinstance(raw, Mapping):
-        raise ConfigError.field(prefix.rstrip(".") or "file", raw, f"must be a table (got {type_name(raw)})")
-    raw = _normalize(raw, info(cls), prefix.rstrip("."), paths(cls, prefix), names)
-    bad = _non_finite(raw, [])
-    if bad is not None:
-        raise field_error(cls, raw, bad, "finite", names, prefix)
+def _table(raw: Mapping, dc: Any, path: str, elsewhere: tuple[str, ...]) -> Any:
+    """The table `raw` as an instance of the dataclass (type info) `dc`; unknown keys raise."""
+    prefix = f"{path}." if path else ""
+    fields = {f.name: f for f in dc.fields}
+    bad = {k: v for k, v in raw.items() if k not in fields}
+    if bad:
+        raise unknown_keys(prefix, bad, fields, elsewhere)
+    hints = _hints(dc.cls)
+    values = {k: _convert(v, hints[k], prefix + k, elsewhere) for k, v in raw.items()}
+    missing = [f for f in dc.fields if f.required and f.name not in raw]
+    if missing:
+        key, kind = prefix + missing[0].name, missing[0].type
+        what = f"[{key}] table" if _dataclass_of(kind) else f"key {key} ({describe(kind)})"
+        raise ConfigError(f"missing {what}", path=key)
     try:
-        return msgspec.convert(raw, cls)
+        return getattr(dc.cls, "schema_of", dc.cls)(**values)
+    except (TypeError, ValueError) as e:  # the class' own check (__post_init__) names its field first
+        why = " ".join(str(e).split())
+        head = re.match(r"[\w.]*", why)[0]
+        name = head.rpartition(".")[2]
+        if name in fields:
+            raise ConfigError(prefix + name + why[len(head):], path=prefix + name) from None
+        raise ConfigError(f"{path or 'file'}: {why}", path=path) from None
+
+
+def _convert(raw: Any, hint: Any, path: str, elsewhere: tuple[str, ...]) -> Any:
+    """`raw` as a value of the annotation `hint` at the dotted `path` (`elsewhere`: the file's dotted keys,
+    for "did you mean")."""
+    t = info(hint)
+    b, dc = bare(t), _dataclass_of(t)
+    if isinstance(b, mi.UnionType) and any(isinstance(u, mi.NoneType) for u in b.types) and (
+            raw is False or (isinstance(raw, str) and raw.strip().lower() == "none")):
+        return None  # TOML has no null: "none" (or false) unsets an optional field
+    if dc is not None and isinstance(raw, Mapping):
+        return _table(raw, dc, path, elsewhere)
+    item = _dataclass_of(b.item_type) if isinstance(b, (mi.VarTupleType, mi.ListType)) else None
+    if item is not None and isinstance(t, mi.Metadata) and (t.extra or {}).get("item") == "<name>":
+        if not isinstance(raw, Mapping):  # [<path>.<name>] tables, each named by its key
+            raise ConfigError.field(path, raw, f"must be a table of [{path}.<name>] tables "
+                                    f"(got {type_name(raw)})")
+        for k, v in raw.items():
+            if isinstance(v, Mapping) and "name" in v:
+                raise ConfigError.field(f"{path}.{k}.name", v["name"], "unknown key: the name of an entry "
+                                        f"is its table's key ({path}.{k})")
+        return tuple(_convert({**v, "name": k} if isinstance(v, Mapping) else v, item.cls, f"{path}.{k}",
+                              elsewhere) for k, v in raw.items())
+    if item is not None and isinstance(raw, (list, tuple)):  # an array of tables
+        return (tuple if isinstance(b, mi.VarTupleType) else list)(
+            _convert(v, item.cls, f"{path}[{i}]", elsewhere) for i, v in enumerate(raw))
+    if isinstance(b, mi.DictType) and isinstance(raw, Mapping):
+        key, value = typing.get_args(_unannotated(hint))
+        try:
+            for k in raw:
+                msgspec.convert(k, key)
+        except msgspec.ValidationError:
+            raise ConfigError.field(path or "file", raw, "keys must be names (letters, digits, _ and -)") \
+                from None
+        return {k: _convert(v, value, f"{path}.{k}", elsewhere) for k, v in raw.items()}
+    if _non_finite(raw):
+        entries = enumerate(raw) if isinstance(raw, (list, tuple)) else ()
+        raise _value_error(path, raw, t, "finite", next((i for i, v in entries if _non_finite(v)), None))
+    try:
+        return msgspec.convert(raw, hint)
     except msgspec.ValidationError as e:
         why, _, where = str(e).rpartition(" - at ")
-        spot = where.strip("`").split("` in `")[-1]
-        raise field_error(cls, raw, _tokens(spot.removeprefix("$")), why or str(e), names, prefix) from None
-    except (TypeError, ValueError, OverflowError) as e:  # defensive: msgspec reports bad input above
-        raise ConfigError(f"{prefix.rstrip('.') or 'file'}: {' '.join(str(e).split())}") from None
+        entry = re.match(r"`\$\[(\d+)\]", where)
+        raise _value_error(path, raw, t, why or str(e), int(entry[1]) if entry else None) from None
 
 
-__all__ = ["ConfigError", "Meta", "checked", "decode", "describe", "did_you_mean", "doc", "field_error",
-           "fields_of", "info", "integer", "num", "paths", "plain", "suggest", "type_name",
+@functools.cache
+def _hints(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls, include_extras=True)
+
+
+def _unannotated(hint: Any) -> Any:
+    while typing.get_origin(hint) is Annotated:
+        hint = typing.get_args(hint)[0]
+    return hint
+
+
+def decode(raw: Any, cls: type, *, prefix: str = "") -> Any:
+    """`raw` (a parsed TOML table) as a `cls` instance, or a one-line ConfigError ("none" or false unset
+    an optional field).  `prefix`: before every field path."""
+    return _convert(raw, cls, prefix.rstrip("."), paths(cls, prefix))
+
+
+__all__ = ["ConfigError", "Meta", "checked", "decode", "describe", "did_you_mean", "doc",
+           "fields_of", "info", "integer", "num", "paths", "suggest", "type_name",
            "unknown_keys", "vec"]
 

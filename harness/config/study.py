@@ -5,7 +5,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from harness.config.schema import doc, integer
+from harness.config.schema import doc, integer, num
 
 # unit of every metric of harness.loop.metrics.compute_metrics kept in a row (status/message are row fields)
 METRIC_UNITS = {
@@ -16,9 +16,12 @@ METRIC_UNITS = {
     "penetration_max": "m", "contact_time": "s", "body_contact_time": "s", "force_tracking_rms": "N",
 }
 METRIC_NAMES = tuple(METRIC_UNITS)
+# the keys of each {random = kind, ...} table with their ranges (low < high, integers: low <= high)
 DISTRIBUTIONS = {
-    "uniform": ("low", "high"), "loguniform": ("low", "high"), "normal": ("mean", "std"),
-    "integers": ("low", "high"),
+    "uniform": {"low": num(""), "high": num("")},
+    "loguniform": {"low": num("", gt=0.0), "high": num("")},
+    "normal": {"mean": num(""), "std": num("", gt=0.0)},
+    "integers": {"low": integer(""), "high": integer("")},
 }
 DEFAULT_MAX_CASES = 10000  # [sampling] max_cases / --max-cases
 PARAM_RE = re.compile(r"^([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)(?:\[(\d+)\])?$")
@@ -28,7 +31,7 @@ _Number = int | float
 
 
 @dataclass(frozen=True)
-class RecordTable:
+class Record:
     worst: integer("number of worst cases recorded as .rrd", ge=1) = 1
     by: doc(Literal[METRIC_NAMES], "metric that ranks the cases (one of study.metrics)") = "e2_rms"
     order: doc(Literal["max", "min"] | None, 'which end of the metric is worst; default "min" for beta_min, '
@@ -45,11 +48,15 @@ class StudyTable:
     set: doc(tuple[str, ...], "scenario overrides 'key=value' applied to every case") = ()
     metrics: doc(tuple[Literal[METRIC_NAMES], ...], "metrics kept per case (default: all)",
                  min_length=1) = METRIC_NAMES
-    record: doc(RecordTable | None, "recordings of the worst cases: {worst, by, order}") = None
+    record: doc(Record | None, "recordings of the worst cases: {worst, by, order}") = None
 
 
 @dataclass(frozen=True)
-class FactorTable:
+class Factor:
+    """One varied field; `name` defaults to `param`; `mode`: "scale" or "values" (the one given), `dist`:
+    its {random = ...} table or `levels`: its list; `path`, `index`: ("plant", "slave", "masses"), 0 of
+    param "plant.slave.masses[0]"."""
+
     param: doc(str, "dotted Scenario path, optionally indexed (plant.slave.masses[0]); "
                "'controller' compares controllers", pattern=PARAM_RE.pattern,
                expect="a dotted Scenario path like 'plant.slave.masses[0]'")
@@ -58,6 +65,35 @@ class FactorTable:
                "or a {random = ...} table", expect="an array of numbers or a {random = ...} table") = None
     values: doc(list[Any] | dict[str, Any] | None, "absolute values, or a {random = ...} table",
                 expect="an array of values or a {random = ...} table") = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "name", self.param if self.name is None else self.name)
+
+    @property
+    def mode(self) -> str:
+        return "scale" if self.scale is not None else "values"
+
+    @property
+    def dist(self) -> dict | None:
+        spec = getattr(self, self.mode)
+        return spec if isinstance(spec, dict) else None
+
+    @property
+    def is_random(self) -> bool:
+        return self.dist is not None
+
+    @property
+    def levels(self) -> tuple | None:
+        return None if self.is_random else tuple(getattr(self, self.mode) or ())
+
+    @property
+    def path(self) -> tuple[str, ...]:
+        return tuple(PARAM_RE.match(self.param).group(1).split("."))
+
+    @property
+    def index(self) -> int | None:
+        i = PARAM_RE.match(self.param).group(2)
+        return None if i is None else int(i)
 
 
 @dataclass(frozen=True)
@@ -73,7 +109,7 @@ class StudyFile:
     """A study file: [study], one [[factor]] per varied field, [sampling], an optional inline
     [scenario] (same keys as a scenario file)."""
 
-    factor: doc(tuple[FactorTable, ...], "one table per varied field (at least one)") = ()
+    factor: doc(tuple[Factor, ...], "one table per varied field (at least one)") = ()
     study: doc(StudyTable, "the study") = field(default_factory=StudyTable)
     sampling: doc(SamplingTable, "how cases are drawn") = field(default_factory=SamplingTable)
     scenario: doc(dict[str, Any] | None, "inline base scenario (instead of study.scenario)") = None
