@@ -1,11 +1,7 @@
-"""Analytic model of the planar 3-section Octarm slave, q2 = [d1, d2, d3 (m), k1, k2, k3 (1/m)], tip x2 =
-[X, Z] (m).  Paper eq. (1), i = 2: M2 ddq + N2 = T2 + J2^T F2, N2 = C dq + G + K + D dq, from
-
-    T = sum_s int_0^1 [ m_s/2 |dp_s(u)/dt|^2 + I_s/2 (dtheta_s(u)/dt)^2 ] du
-    V = -sum_s m_s int_0^1 g . p_s(u) du + sum_s [ Kb_s d_s k_s^2 / 2 + Ke_s (d_s - L0_s)^2 / 2 ]
-
-(mass uniform over the material coordinate u; Gauss-Legendre quadrature, `n_quad` points per section).
-Kernels take `SlaveParams.packed()`; the Christoffel form is tests/reference_models.py.
+"""Analytic model of the planar 3-section Octarm, q2 = [d1, d2, d3 (m), k1, k2, k3 (1/m)], tip x2 =
+[X, Z] (m): paper eq. (1), i = 2, M2 ddq + N2 = T2 + J2^T F2, N2 = C dq + G + K + D dq, from
+T = sum_s int_0^1 [m_s/2 |dp_s/dt|^2 + I_s/2 (dtheta_s/dt)^2] du, V = gravity + sum_s [Kb_s d_s k_s^2 / 2
++ Ke_s (d_s - L0_s)^2 / 2] (Gauss-Legendre, `n_quad` points per section; docs/models.md).
 """
 
 from __future__ import annotations

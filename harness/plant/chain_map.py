@@ -1,7 +1,5 @@
-"""The discretized Octarm chain <-> CC coordinates q2: sensing, actuation and elastic-correction maps
-(layout: `harness.plant.mujoco_model`; joints = C [d - L0, k d], [d - L0, k d] = R joints, R C = I).
-The ``chain_*`` kernels are numba-compatible loops writing into ``out``; ``ChainMap`` holds a model's
-addresses and constant arrays, with allocating wrappers.
+"""The discretized Octarm chain <-> CC coordinates q2 (joints = C [d - L0, k d], R C = I): numba-
+compatible ``chain_*`` kernels writing into ``out``, and ``ChainMap``, a model's addresses and arrays.
 """
 
 from __future__ import annotations

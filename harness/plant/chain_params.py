@@ -1,7 +1,5 @@
-"""Per-joint physical parameters of the discretized Octarm chain (masses, inertias, stiffness, damping,
-armature, servo gains, muscle tendons) from the slave parameters; layout: `harness.plant.chain_map`,
-model and derivations: `harness.plant.mujoco_model`, docs/plants.md.
-"""
+"""Per-joint physical parameters of the discretized Octarm chain from the slave parameters
+(docs/plants.md)."""
 
 from __future__ import annotations
 

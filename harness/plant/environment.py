@@ -1,10 +1,6 @@
-"""Environment objects the Octarm can touch, contact sensing and the t = 0 clearance check (MuJoCo plant;
-docs/guide/contact.md).  Objects are world geoms in the slave's plane (world = octarm_base + [X, 0, Z]);
-every segment capsule and a tip sphere touch them through explicit frictionless pairs with
-
-    solref = (-k (1 - d) A_b, -c (1 - d) A_b),  solimp = (d, d, 0.001, 0.5, 2)  =>  f = k r + c dr/dt
-
-in static equilibrium (r penetration, d the impedance, A_b = body_invweight0, c = 2 zeta sqrt(k / A_b)).
+"""Environment objects, contact sensing and the t = 0 clearance check of the MuJoCo plant
+(docs/guide/contact.md): frictionless pairs with solref = (-k (1 - d) A_b, -c (1 - d) A_b),
+solimp = (d, d, 0.001, 0.5, 2), i.e. f = k r + c dr/dt (A_b = body_invweight0).
 """
 
 from __future__ import annotations

@@ -1,8 +1,6 @@
-"""Compiled physics of the planar Octarm Cosserat rod (`harness.plant.cosserat.rod`; maths, frames and
-parameters: docs/plants.md, "The Cosserat rod's model"): `rod_loads` (elastic, damping, active and
-external loads from the strains of PyElastica's kernels, `harness.plant.cosserat.pyelastica`), `run_steps`
-(position Verlet with PyElastica's update kernels in one loop), `fit_rod` (the least-squares CC fit),
-`rest_strains`, `active_loads`, `muscle_loads`.
+"""Compiled physics of the planar Octarm Cosserat rod (`harness.plant.cosserat.rod`): loads, position
+Verlet steps, the CC fit and the commands' strains and loads.  Maths and frames: docs/plants.md,
+"The Cosserat rod's model".
 """
 
 from __future__ import annotations
@@ -247,6 +245,25 @@ def _wrap(a):
 
 
 @njit(cache=True)
+def _midpoints(arc, smid):
+    """smid (m,) <- arc length at the middle of each element of arcs arc (m,); returns (total length,
+    mean of smid, sum of squared deviations of smid)."""
+    m = arc.shape[0]
+    acc = 0.0
+    for t in range(m):
+        smid[t] = acc + 0.5 * arc[t]
+        acc += arc[t]
+    sbar = 0.0
+    for t in range(m):
+        sbar += smid[t]
+    sbar /= m
+    sxx = 0.0
+    for t in range(m):
+        sxx += (smid[t] - sbar) ** 2
+    return acc, sbar, sxx
+
+
+@njit(cache=True)
 def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
     """Least-squares CC fit (docs/plants.md, Sensing) of the nodes xz, rates vxz (nn, 2) [X, Z] of each
     section (boundary nodes bounds (4,)) into q2 = [d, k], dq2 (first-order rates)."""
@@ -277,19 +294,13 @@ def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
             arc[t] = c[j0 + t]
         k = 0.0
         for _ in range(n_iter):
-            acc = 0.0
+            _, sbar, sxx = _midpoints(arc, smid)
+            pbar = 0.0
             for t in range(m):
-                smid[t] = acc + 0.5 * arc[t]
-                acc += arc[t]
-            sbar, pbar = 0.0, 0.0
-            for t in range(m):
-                sbar += smid[t]
                 pbar += phi[j0 + t]
-            sbar /= m
             pbar /= m
-            sxx, sxy = 0.0, 0.0
+            sxy = 0.0
             for t in range(m):
-                sxx += (smid[t] - sbar) ** 2
                 sxy += (smid[t] - sbar) * (phi[j0 + t] - pbar)
             k = sxy / sxx if m > 1 else 0.0
             # chord -> arc length for the fitted curvature: a = c / sinc(k a / 2), solved as 2 asin(kc/2)/k
@@ -301,18 +312,7 @@ def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
                     arc[t] = c[j0 + t] * np.arcsin(u) / u
                 else:
                     arc[t] = c[j0 + t] * 0.5 * np.pi / min(abs(u), 1.0)
-        acc = 0.0
-        for t in range(m):
-            smid[t] = acc + 0.5 * arc[t]
-            acc += arc[t]
-        d = acc
-        sbar = 0.0
-        for t in range(m):
-            sbar += smid[t]
-        sbar /= m
-        sxx = 0.0
-        for t in range(m):
-            sxx += (smid[t] - sbar) ** 2
+        d, sbar, sxx = _midpoints(arc, smid)
         for t in range(m):
             w[t] = (smid[t] - sbar) / sxx if m > 1 else 0.0
         # rates: a' = (da/dc) c' + (da/dk) k', k' = sum w (phi' - k s') (exact on CC data), iterated

@@ -1,6 +1,5 @@
-"""Limits of the Cosserat rod's explicit stepping and what it does on faults (`CosseratSlave`): the stable
-step `stable_dt`, the refused configurations (`check_steps_per_control`), interrupts (`RodStopped`) and
-divergence; described in docs/plants.md, "The Cosserat rod's model"."""
+"""Limits of the Cosserat rod's explicit stepping (`stable_dt`, refused configurations, interrupts,
+divergence); docs/plants.md, "The Cosserat rod's model"."""
 
 from __future__ import annotations
 

@@ -1,12 +1,5 @@
-"""The Cosserat-rod plant of a scenario (`CosseratPlant`, a `harness.plant.stepped.SteppedPlant`): the rod
-slave (`CosseratSlave`) and the analytic master (eq. 1, RK4 steps of at most 1 ms, `master_rk4`).
-Actuation: servo = q2_ref as rest strains plus, with plant.servo_feedforward, T2 - dV/dq2 at the fitted
-q2 (`feedforward`: the rest-strain servo replaces the stiffness T2 compensates); torque = T2 as
-internal loads; muscle = the chain's groups (plant.muscle_*): commands `chain_map.muscle_commands`
-(sensed q2, T2) clipped to [0, F_max], the forces `muscle_force` (N) held over each control period T,
-then act += (p - act)(1 - e^(-T/tau)) (MuJoCo's filterexact).  Sensing: the CC fit of each section.
-Forces: F1 on the master tip, F2 plus contact on the rod's tip node.  Time step: `rod_dt`.  Geometry
-(world frame): "centreline" (3 n + 1, 3), "sections" (4, 3), "master" (3, 3); docs/plants.md.
+"""The Cosserat-rod plant of a scenario (`CosseratPlant`, a `SteppedPlant`): the rod slave and the
+analytic master (eq. 1, RK4 steps <= 1 ms).  Actuation, sensing, forces, geometry: docs/plants.md.
 """
 
 from __future__ import annotations

@@ -1,7 +1,5 @@
-"""Cosserat-rod plant of the planar 3-section Octarm slave, on PyElastica: `CosseratSlave` (model,
-actuation, sensing by CC fit).  API, frames, discretization, elastic law, damping, actuation, sensing and
-time stepping: docs/plants.md, "The Cosserat rod's model".  Bad settings raise `ValueError` with one
-line naming `plant.cosserat.<name>`, its value and the allowed range.
+"""Cosserat-rod plant of the planar 3-section Octarm slave on PyElastica (`CosseratSlave`); model,
+frames, actuation, sensing and stepping: docs/plants.md, "The Cosserat rod's model".
 """
 
 from __future__ import annotations
