@@ -39,21 +39,14 @@ def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_len
 
     # --- shear/stretch stress n (material frame), Kelvin-Voigt on the strain rate -------------------
     # sigma = Q (x_{i+1} - x_i) / l0 - e3; d sigma / dt = Q dv / l0 - omega x (sigma + e3)
-    dv = np.empty((3, ne))
-    for i in range(3):
-        for k in range(ne):
-            dv[i, k] = (vel[i, k + 1] - vel[i, k]) / rest_lengths[k]
-    qdv = _batch_matvec(Q, dv)
+    qdv = _batch_matvec(Q, (vel[:, 1:] - vel[:, :-1]) / rest_lengths)
     se3 = sigma.copy()
-    for k in range(ne):
-        se3[2, k] += 1.0
+    se3[2] += 1.0
     sdot = qdv - _batch_cross(omega, se3)
     n = np.empty((3, ne))
     for i in range(3):
-        for k in range(ne):
-            n[i, k] = shear_matrix[i, i, k] * (sigma[i, k] - rest_sigma[i, k]) + eta_e[i, k] * sdot[i, k]
-    for k in range(ne):
-        n[2, k] -= act_n[k]
+        n[i] = shear_matrix[i, i] * (sigma[i] - rest_sigma[i]) + eta_e[i] * sdot[i]
+    n[2] -= act_n
 
     # --- bending couples m at the hinges (elastic + active), base half-element hinge -------------------
     m = np.empty((3, nv))
@@ -92,11 +85,9 @@ def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_len
         for k in range(ne):
             N[i, k] = (Q[0, i, k] * n[0, k] + Q[1, i, k] * n[1, k] + Q[2, i, k] * n[2, k]
                        + tension[k] * tangents[i, k])
-    for i in range(3):
-        f_int[i, 0] = N[i, 0]
-        for k in range(1, ne):
-            f_int[i, k] = N[i, k] - N[i, k - 1]
-        f_int[i, ne] = -N[i, ne - 1]
+    f_int[:, 0] = N[:, 0]
+    f_int[:, 1:ne] = N[:, 1:] - N[:, :-1]
+    f_int[:, ne] = -N[:, ne - 1]
 
     # --- torques: couple difference + kappa x m (trapezoid) + (sigma + e3) x n l0 + inertial terms ----
     km = _batch_cross(kappa, m)
@@ -119,19 +110,13 @@ def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_len
                              + lag[i, k] / dil[k] + Jw[i, k] * dil_rate[k] / (dil[k] * dil[k]))
 
     # --- external: gravity, tip force; the base node is held (zero net force, zero velocity) ---------
-    for i in range(3):
-        for k in range(nn):
-            f_ext[i, k] = node_force[i, k]
-        f_ext[i, nn - 1] += tip_force[i]
+    f_ext[:] = node_force
+    f_ext[:, nn - 1] += tip_force
     if objs.shape[0] > 0:
         contact_forces(pos, vel, objs, cdamp, f_contact)
-        for i in range(3):
-            for k in range(nn):
-                f_ext[i, k] += f_contact[i, k]
-    for i in range(3):
-        for k in range(ne):
-            tau_ext[i, k] = 0.0
-        f_int[i, 0] = -f_ext[i, 0]
+        f_ext += f_contact
+    tau_ext[:] = 0.0
+    f_int[:, 0] = -f_ext[:, 0]
 
     # --- Kelvin-Voigt bending damping, backward Euler over the kick (tridiagonal per component) -------
     # (J_i / (e_i dt)) (w_i' - w_i) = tau_i - sum_hinges g (w' differences); g = eta / (D0 eps)
@@ -212,9 +197,7 @@ def contact_forces(pos, vel, objs, cdamp, f_contact):
     (no, nn + 1) rows [k N/m, c_j N s/m]; penetration g > 0 gives (k g - c n . v_j) n (Gazzola et al.
     2018, eq. 4.8; docs/plants.md, "Contact on the rod")."""
     nn = pos.shape[1]
-    for i in range(3):
-        for j in range(nn):
-            f_contact[i, j] = 0.0
+    f_contact[:] = 0.0
     for o in range(objs.shape[0]):
         k = cdamp[o, 0]
         for j in range(1, nn):
@@ -357,15 +340,10 @@ def _at_hinges(v, sec, l0, out, base):
     """A per-section value v (3,) as a couple about the binormal at the rod's hinges: out (3, ne - 1) <-
     [0, rest-length l0 (ne,) weighted mean of v over the two elements of each hinge, 0], base (3,) <-
     [0, v[0], 0].  sec (ne,): section of each element."""
-    for j in range(sec.shape[0] - 1):
-        a = v[sec[j]]
-        b = v[sec[j + 1]]
-        out[0, j] = 0.0
-        out[1, j] = (l0[j] * a + l0[j + 1] * b) / (l0[j] + l0[j + 1])
-        out[2, j] = 0.0
-    base[0] = 0.0
+    out[:] = 0.0
+    out[1] = (l0[:-1] * v[sec[:-1]] + l0[1:] * v[sec[1:]]) / (l0[:-1] + l0[1:])
+    base[:] = 0.0
     base[1] = v[0]
-    base[2] = 0.0
 
 
 @njit(cache=True)
@@ -381,11 +359,8 @@ def rest_strains(q2c, n, L0, sec, l0, rest_sigma, rest_kappa, base_kappa0):
         s = 1.0 - x * x / 6.0 if abs(x) < 1e-8 else np.sin(x) / x
         sig[i] = d / L0[i] * s - 1.0
         kap[i] = k * d / L0[i]
-    ne = sec.shape[0]
-    for j in range(ne):
-        rest_sigma[0, j] = 0.0
-        rest_sigma[1, j] = 0.0
-        rest_sigma[2, j] = sig[sec[j]]
+    rest_sigma[:2] = 0.0
+    rest_sigma[2] = sig[sec]
     _at_hinges(kap, sec, l0, rest_kappa, base_kappa0)
 
 
@@ -416,7 +391,5 @@ def muscle_loads(p, radius, sec, l0, act_n, act_m, act_m_base):
 @njit(cache=True)
 def _section_loads(mu, ax, sec, l0, act_n, act_m, act_m_base):
     """Per-section couple mu (3,) N m and axial force ax (3,) N -> act_n (ne,), act_m (3, nv), act_m_base."""
-    ne = sec.shape[0]
-    for j in range(ne):
-        act_n[j] = ax[sec[j]]
+    act_n[:] = ax[sec]
     _at_hinges(mu, sec, l0, act_m, act_m_base)

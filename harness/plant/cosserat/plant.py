@@ -38,22 +38,18 @@ _elastic_kernel = njit(cache=True)(slave_model.elastic_kernel)
 def master_rk4(mpk, s, T1, F1, h, nsub):
     """nsub classical RK4 steps of h (s) of the master, in place on s (4,) = [q1, dq1], T1 (2,) N m and
     the tip force F1 (2,) N held.  False on a singular mass matrix or a non-finite state."""
-    k1, k2, k3, k4, tmp = np.empty(4), np.empty(4), np.empty(4), np.empty(4), np.empty(4)
+    K, tmp = np.empty((4, 4)), np.empty(4)
+    c = (0.5 * h, 0.5 * h, h)  # the stage offsets
     for _ in range(nsub):
-        ok = _master_accel(mpk, s, T1, F1, k1)
-        for i in range(4):
-            tmp[i] = s[i] + 0.5 * h * k1[i]
-        ok = _master_accel(mpk, tmp, T1, F1, k2) and ok
-        for i in range(4):
-            tmp[i] = s[i] + 0.5 * h * k2[i]
-        ok = _master_accel(mpk, tmp, T1, F1, k3) and ok
-        for i in range(4):
-            tmp[i] = s[i] + h * k3[i]
-        ok = _master_accel(mpk, tmp, T1, F1, k4) and ok
+        ok = _master_accel(mpk, s, T1, F1, K[0])
+        for st in range(3):
+            for i in range(4):
+                tmp[i] = s[i] + c[st] * K[st, i]
+            ok = _master_accel(mpk, tmp, T1, F1, K[st + 1]) and ok
         if not ok:
             return False
         for i in range(4):
-            s[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+            s[i] += h / 6.0 * (K[0, i] + 2.0 * K[1, i] + 2.0 * K[2, i] + K[3, i])
             if not np.isfinite(s[i]):
                 return False
     return True
