@@ -15,7 +15,7 @@ import numpy as np
 
 from controllers.params import MasterParams, SlaveParams
 from harness.config.assets import asset_dir
-from harness.config.scenario import ACTUATIONS, PlantConfig, Scenario
+from harness.config.scenario import ACTUATIONS, INTEGRATORS, PlantConfig, Scenario
 from harness.config.textio import atomic_path
 from harness.plant.chain_map import ChainMap, chain_layout
 from harness.plant.chain_params import (
@@ -39,13 +39,8 @@ MAX_SEGMENTS = 64
 CC_SOLREF = (0.002, 1.0)
 CC_SOLIMP = (0.99, 0.999, 0.001, 0.5, 2.0)
 
-_INTEGRATORS = {
-    "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST,
-    "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
-    "euler": mujoco.mjtIntegrator.mjINT_EULER,
-    "rk4": mujoco.mjtIntegrator.mjINT_RK4,
-    "discrete": mujoco.mjtIntegrator.mjINT_DISCRETE,  # not in harness.config.INTEGRATORS
-}
+# the scenario's integrators, and "discrete" (not in harness.config.INTEGRATORS)
+_INTEGRATORS = {n: getattr(mujoco.mjtIntegrator, f"mjINT_{n.upper()}") for n in (*INTEGRATORS, "discrete")}
 
 
 class PlantModelError(ValueError):
@@ -199,42 +194,36 @@ def _add_actuators(spec: mujoco.MjSpec, joint_names: list[str], actuation: str) 
 
 
 def _add_cc_equalities(spec: mujoco.MjSpec, N: int) -> None:
-    """Joint and tendon equalities holding each section at constant curvature."""
-
-    def joint_eq(name, j1, j2, a1):
-        eq = spec.add_equality(name=name, type=mujoco.mjtEq.mjEQ_JOINT, name1=j1, name2=j2,
-                               objtype=mujoco.mjtObj.mjOBJ_JOINT)
-        eq.data[:5] = [0.0, a1, 0.0, 0.0, 0.0]
-        eq.solref, eq.solimp = list(CC_SOLREF), list(CC_SOLIMP)
-
-    def tendon_eq(name, coefs):
-        t = spec.add_tendon(name=f"{name}_tendon")
-        for jn, cf in coefs:
-            t.wrap_joint(jn, cf)
-        eq = spec.add_equality(name=f"{name}_equality", type=mujoco.mjtEq.mjEQ_TENDON,
-                               name1=t.name, objtype=mujoco.mjtObj.mjOBJ_TENDON)
-        eq.data[:5] = [0.0, 0.0, 0.0, 0.0, 0.0]
-        eq.solref, eq.solimp = list(CC_SOLREF), list(CC_SOLIMP)
+    """Joint equalities (name, joint, joint it follows, ratio) and tendon equalities (name, [(joint,
+    coefficient)], sum = 0) holding each section at constant curvature."""
 
     def sl(i, j):
         return f"octarm_s{i}_seg{j}_slide"
 
-    for i in range(3):
-        for j in range(1, N):
-            joint_eq(f"octarm_s{i}_seg{j}_hinge_equality", f"octarm_s{i}_seg{j}_hinge",
-                     f"octarm_s{i}_seg0_hinge", 1.0)
-    if N == 1:
-        # 4 slides, 3 extensions: s00 - s10 + s20 - tip = 0 on the manifold
-        tendon_eq("octarm_slide_cc", [(sl(0, 0), 1.0), (sl(1, 0), -1.0), (sl(2, 0), 1.0),
-                                      ("octarm_tip_slide", -1.0)])
-        return
-    for i in range(3):
-        for j in range(2, N):
-            joint_eq(f"octarm_s{i}_seg{j}_slide_equality", sl(i, j), sl(i, 1), 1.0)
-    joint_eq("octarm_s0_seg0_slide_equality", sl(0, 0), sl(0, 1), 0.5)
-    for i in (1, 2):
-        tendon_eq(f"octarm_s{i}_boundary", [(sl(i, 0), 1.0), (sl(i - 1, 1), -0.5), (sl(i, 1), -0.5)])
-    joint_eq("octarm_tip_slide_equality", "octarm_tip_slide", sl(2, 1), 0.5)
+    eqs = [(f"octarm_s{i}_seg{j}_hinge_equality", f"octarm_s{i}_seg{j}_hinge", f"octarm_s{i}_seg0_hinge", 1.0)
+           for i in range(3) for j in range(1, N)]
+    if N == 1:  # 4 slides, 3 extensions: s00 - s10 + s20 - tip = 0 on the manifold
+        eqs.append(("octarm_slide_cc", [(sl(0, 0), 1.0), (sl(1, 0), -1.0), (sl(2, 0), 1.0),
+                                        ("octarm_tip_slide", -1.0)]))
+    else:
+        eqs += [(f"{sl(i, j)}_equality", sl(i, j), sl(i, 1), 1.0) for i in range(3) for j in range(2, N)]
+        eqs.append((f"{sl(0, 0)}_equality", sl(0, 0), sl(0, 1), 0.5))
+        eqs += [(f"octarm_s{i}_boundary", [(sl(i, 0), 1.0), (sl(i - 1, 1), -0.5), (sl(i, 1), -0.5)])
+                for i in (1, 2)]
+        eqs.append(("octarm_tip_slide_equality", "octarm_tip_slide", sl(2, 1), 0.5))
+    for name, *rest in eqs:
+        if len(rest) == 1:  # a tendon
+            t = spec.add_tendon(name=f"{name}_tendon")
+            for jn, cf in rest[0]:
+                t.wrap_joint(jn, cf)
+            eq = spec.add_equality(name=f"{name}_equality", type=mujoco.mjtEq.mjEQ_TENDON, name1=t.name,
+                                   objtype=mujoco.mjtObj.mjOBJ_TENDON)
+            eq.data[:5] = [0.0, 0.0, 0.0, 0.0, 0.0]
+        else:
+            eq = spec.add_equality(name=name, type=mujoco.mjtEq.mjEQ_JOINT, name1=rest[0], name2=rest[1],
+                                   objtype=mujoco.mjtObj.mjOBJ_JOINT)
+            eq.data[:5] = [0.0, rest[2], 0.0, 0.0, 0.0]
+        eq.solref, eq.solimp = list(CC_SOLREF), list(CC_SOLIMP)
 
 
 def _validate_plant(plant: PlantConfig) -> int:

@@ -156,14 +156,10 @@ class CosseratSlave:
             M[d3, d3] = v
         # hinges: inside a section EI_i, at boundaries the series combination of the two half elements
         D0 = b.rest_voronoi_lengths.copy()
-        Bh = np.empty(nv)
-        etah = np.empty(nv)
-        for j in range(nv):
-            a, c = sec[j], sec[j + 1]
-            Bh[j] = D0[j] / (0.5 * l0[j] / EI[a] + 0.5 * l0[j + 1] / EI[c])
-            eb = (self.eta_b[a], self.eta_b[c])
-            etah[j] = (D0[j] / (0.5 * l0[j] / eb[0] + 0.5 * l0[j + 1] / eb[1])
-                       if min(eb) > 0 else 0.0)
+        Bh = D0 / (0.5 * l0[:-1] / EI[sec[:-1]] + 0.5 * l0[1:] / EI[sec[1:]])
+        e0, e1 = self.eta_b[sec[:-1]], self.eta_b[sec[1:]]
+        with np.errstate(divide="ignore"):
+            etah = np.where(np.minimum(e0, e1) > 0, D0 / (0.5 * l0[:-1] / e0 + 0.5 * l0[1:] / e1), 0.0)
         b.bend_matrix[:] = 0.0
         b.bend_matrix[d3, d3] = np.stack([Bh, Bh, Bh * (2.0 / 3.0)])
         self._eta_v = np.stack([etah, etah, etah * (2.0 / 3.0)])
