@@ -157,8 +157,9 @@ def check_range(key: str, value: float, lo: float | None = None, hi: float | Non
 
 
 class Controller:
-    """Base class: set the class attributes, implement `reset` and `step`.  requires: {plant kind:
-    {dotted scenario key: value}}; Params: frozen dataclass (optional ``check()`` raising ParamsError)."""
+    """Base class: set the class attributes, implement `reset` and `step`.  actuations: "torque" (T2)
+    and/or "servo" (u2 or the reference); plants: plant kinds (None: any); requires: {plant kind: {dotted
+    scenario key: value}}; Params: frozen dataclass (optional ``check()`` raising ParamsError) or None."""
 
     name = "controller"
     description = ""

@@ -91,16 +91,10 @@ def muscle_commands(q2, T2, radius, max_force, out):
 
 
 def chain_elastic_correction(qpos_chain, R, C, L0, section, is_hinge, seg_kb, ke, k_joint, k_shape, out):
-    """Elastic force to ADD to MuJoCo's joint springs (through qfrc_applied), out (n_chain,), so that
-    springs + out = -grad E,
-
-      E = sum_i [ seg_kb_i / (2 d_i) sum_j theta_ij^2 + 1/2 ke_i (d_i - L0_i)^2 ] + 1/2 sum_s k_shape_s r_s^2,
-
-    d_i = L0_i + (R qpos)_i, theta_ij section i's hinges, r = s - C_e (P s) the non-CC part of the slides
-    s (P = R[:3]).  On the manifold E is the analytic elastic energy, so A^T (springs + out) = -dV/dq2;
-    the shape term keeps the non-CC slide patterns as stiff as the springs.  A stiff state-dependent
-    force: recompute it every physics step.  R (6, n), C (n, 6), L0, seg_kb = N Kb, ke (3,); section,
-    is_hinge (n,) int64; k_joint (n,) MuJoCo joint stiffness; k_shape (n,) (0 on hinges)."""
+    """Force out (n_chain,) to ADD to MuJoCo's joint springs so that springs + out = -grad E, E = sum_i
+    [seg_kb_i / (2 d_i) sum_j theta_ij^2 + ke_i (d_i - L0_i)^2 / 2] + sum_s k_shape_s r_s^2 / 2 (d_i = L0_i
+    + (R qpos)_i, theta_ij section i's hinges, r = s - C_e (P s) the non-CC part of the slides s, P = R[:3]);
+    the analytic elastic energy on the manifold.  seg_kb = N Kb; k_joint: MuJoCo's; k_shape 0 on hinges."""
     n = R.shape[1]
     e, sq = scratch_zeros(3), scratch_zeros(3)
     for c in range(n):
@@ -172,13 +166,9 @@ def chain_layout(n_segments: int) -> dict[str, np.ndarray]:
 
 @dataclass(frozen=True, eq=False)
 class ChainMap:
-    """Addresses and constant arrays tying a MuJoCo model to q2 (read-only, C-contiguous float64/int64).
-
-    Chain arrays (n_chain = 6N + 1) in MuJoCo order; chain_actuator_ids: the servo/motor per joint (empty
-    for muscles); muscle_actuator_ids (6,): ``muscle_commands`` order (else empty); muscle_radius,
-    muscle_max_force (3,) m, N; *_base_pos (3,): world positions of the bases; C, R, L0 as
-    ``chain_layout``; joint_stiffness: MuJoCo's; shape_stiffness, seg_kb, ke: ``chain_elastic_correction``;
-    servo_kp, servo_kv (zeros unless servo)."""
+    """Addresses and constant arrays tying a MuJoCo model to q2 (read-only); chain arrays (6N + 1,) in
+    MuJoCo order; muscle_actuator_ids in ``muscle_commands`` order (empty unless muscle, as
+    chain_actuator_ids for muscles); *_base_pos (3,) world; C, R, L0: ``chain_layout``."""
 
     n_segments: int
     actuation: str

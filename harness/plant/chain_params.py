@@ -12,11 +12,8 @@ TIP_SLIDE_ARMATURE = 1.0  # extra armature of the tip slide, in last-section seg
 
 
 def segment_inertias(slave: SlaveParams, N: int) -> tuple[np.ndarray, np.ndarray, float]:
-    """Per-body masses (3, N) kg, inertias about y (3, N) kg m^2 and the tip mass kg.
-
-    Rod term (m_i / N) l0_i^2 / 12 on the segment's body; the slice inertia Is_i / N of a segment split
-    in halves between the two bodies carrying its end tangents (trapezoidal, second order; the base's
-    half is dropped)."""
+    """Per-body masses (3, N) kg, inertias about y (3, N) kg m^2 (rod term, plus the slice inertia Is_i / N
+    split in halves between the bodies at the segment's ends) and the tip mass kg."""
     m = np.asarray(slave.masses)
     L0 = np.asarray(slave.rest_lengths)
     Is = np.asarray(slave.slice_inertia)
@@ -97,11 +94,8 @@ def joint_armature(slave: SlaveParams, N: int, layout: dict, fraction: float) ->
 
 def servo_gains(mass_u: np.ndarray, N: int, layout: dict, frequency: float,
                 damping_ratio: float) -> tuple[np.ndarray, np.ndarray]:
-    """Position-servo gains per chain joint (kp, kv), per unit length of the section.
-
-    mass_u (6,): diag(C^T M C), the inertias of u = [e (kg), Theta (kg m^2)] at the straight rest pose.
-    Each CC coordinate alone is a servo of `frequency` (Hz) and `damping_ratio`: K_u = mass_u w^2,
-    D_u = 2 zeta w mass_u, spread like the springs (hinges N K_Theta, slides `slide_pattern` of K_e)."""
+    """Position-servo gains (kp, kv) per chain joint: each CC coordinate u = [e, Theta] of inertia mass_u
+    (6,) = diag(C^T M C) a servo of `frequency` (Hz) and `damping_ratio`, spread like the springs."""
     w = 2.0 * np.pi * float(frequency)
     mu = np.asarray(mass_u, dtype=float)
     kp_u, kv_u = mu * w * w, 2.0 * float(damping_ratio) * w * mu

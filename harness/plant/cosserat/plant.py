@@ -124,14 +124,9 @@ class CosseratPlant:
         self.physics_dt = self.slave.dt
         self.feedforward = scn.plant.servo_feedforward
         self.mpk = master_model.packed(scn.plant_master)
-        F = np.asarray(scn.interaction_forces, dtype=float)
-        self.F1 = F[0].copy()
-        self.F2 = F[1].copy()
+        self.F1, self.F2 = np.array(scn.interaction_forces, dtype=float)
         self._m = np.zeros(4)  # master [q1, dq1]
-        self._T1 = np.zeros(2)
-        self._T2 = np.zeros(6)
-        self._q_ref = np.zeros(6)
-        self._ff = np.zeros(6)
+        self._T1, self._T2, self._q_ref, self._ff = np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6)
         self._spk = scn.plant_slave.packed()
         self._fmax = np.repeat(np.asarray(scn.plant.muscle_max_force, dtype=float), 2)
         self._tau = np.repeat(np.asarray(scn.plant.muscle_time_constant, dtype=float), 2)
@@ -148,7 +143,6 @@ class CosseratPlant:
         self._m_hist = np.zeros((scn.n_steps, 4))
         self._dist = np.zeros(nn)
         self._objs, cdamp = rod_contact.contact_arrays(scn.environment, self.slave._b.mass)
-        self._F_free = np.concatenate([self.F1, self.F2 + 0.0])  # `forces` without objects
         if scn.environment.objects:
             try:
                 s0 = initial_state(scn)
@@ -223,10 +217,6 @@ class CosseratPlant:
     def forces(self, F: np.ndarray, contact: np.ndarray) -> None:
         """True interaction forces ON the robots F (4,) [F1x, F1z, F2x, F2z] N (F2 = constant + contact force
         on the tip node, last rod substep) and the contact summary (5,) (`rod_contact.summary`)."""
-        if self._objs.shape[0] == 0:  # no environment: f_contact stays 0, F is constant (same sums)
-            F[:] = self._F_free
-            contact[:] = 0.0
-            return
         fc = self.slave.f_contact
         F[0:2] = self.F1
         F[2] = self.F2[0] + fc[0, -1]

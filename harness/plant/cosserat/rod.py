@@ -48,11 +48,6 @@ def hinge_damping(eta_b, h):
     return np.asarray(eta_b, dtype=float) / np.asarray(h, dtype=float)
 
 
-def slide_damping(eta_a, h):
-    """Slide damping (N s/m) of a segment of rest length h of a rod of extension viscosity eta_a."""
-    return np.asarray(eta_a, dtype=float) / np.asarray(h, dtype=float)
-
-
 def _rot_y(p: float) -> np.ndarray:
     c, s = math.cos(p), math.sin(p)
     return np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])
@@ -379,4 +374,4 @@ class CosseratSlave:
 
 __all__ = ["BATCH_STEPS", "DEFAULT_ELEMENTS", "DEFAULT_ETA_A", "DEFAULT_ETA_B", "MAX_STEPS_PER_CONTROL",
            "CosseratSlave", "RodStopped", "auto_dt", "check_steps_per_control", "hinge_damping",
-           "material_damping_from_slave", "slide_damping", "stable_dt"]
+           "material_damping_from_slave", "stable_dt"]
