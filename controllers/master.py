@@ -1,8 +1,6 @@
-"""Analytic model of the planar 2-link revolute master (paper Sec. II-C, VI).
-
-q1 = [q_a, q_b] (rad) from +Z toward +X (a MuJoCo hinge about +y); task x1 = [X, Z] (m) from the base:
-X = l1 sin q_a + l2 sin(q_a + q_b), Z = l1 cos q_a + l2 cos(q_a + q_b).  Uniform links (centre of mass
-at l/2, inertia m l^2/12), gravity along -Z, optional viscous joint friction.
+"""Analytic model of the planar 2-link revolute master (paper Sec. II-C, VI): q1 = [q_a, q_b] (rad) from
++Z toward +X, x1 = [X, Z] = [l1 sin q_a + l2 sin(q_a + q_b), l1 cos q_a + l2 cos(q_a + q_b)] (m);
+uniform links, gravity along -Z, optional viscous joint friction.
 """
 
 from __future__ import annotations

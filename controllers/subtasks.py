@@ -1,12 +1,7 @@
-"""Null-space sub-tasks, paper Sec. V, eqs. (29)-(33) and (41).
-
-A sub-task beta(q2) >= 0 is increased by the null-space motion: y_a = exp(-ky beta) (29), J_s = dy_a/dq2
-(31), g = -ks J_s^T y_a = ks ky y_a^2 grad beta (33); beta = sum_j w_j beta_j of
-* ``manipulability`` (41): beta_m = sqrt(det(J2 J2^T));
-* ``limits``: beta_l = sum_j (1 - s_j^(2p)), s_j in [-1, 1] the normalised section lengths (range [L0,
-  e L0]) and bend angles k d / bmax; its gradient grows steeply toward the limits.
-Each returns beta, grad beta and d/dt grad beta (closed form).  Packed spec = [w_manip, w_limits, p,
-e, bmax, L0 (3)].
+"""Null-space sub-tasks, paper Sec. V, eqs. (29)-(33), (41): y_a = exp(-ky beta), g = ks ky y_a^2 grad beta,
+beta = sum_j w_j beta_j of ``manipulability`` beta_m = sqrt(det(J2 J2^T)) (41) and ``limits`` beta_l =
+sum_j (1 - s_j^(2p)), s_j in [-1, 1] the normalised section lengths and bend angles k d / bmax; each with
+grad beta and d/dt grad beta in closed form.  Packed spec = [w_manip, w_limits, p, e, bmax, L0 (3)].
 """
 
 from __future__ import annotations

@@ -1,7 +1,6 @@
-"""The tip of the 3-section CC arm and its exact q-derivatives to third order, per control step (x2, J2,
-dJ2/dt, and for the sub-task's rate (27) H = d^2 x2/dq2^2 and dH/dt).  Representation as `controllers.cc`;
-the tails R_j = sum_{m >= j} d_m f_m E_0(Theta_m) (chord from section j's start to the tip) give
-dc/dTheta_l = i (R_{l+1} + d_l f_l E_1(Theta_l)).  Checked against tests/reference_models.py.
+"""Tip of the 3-section CC arm and its exact q-derivatives to third order per control step (x2, J2,
+dJ2/dt, H = d^2 x2/dq2^2 and dH/dt for (27)); representation as `controllers.cc`; tails R_j = sum_{m >= j}
+d_m f_m E_0(Theta_m) give dc/dTheta_l = i (R_{l+1} + d_l f_l E_1(Theta_l)).
 """
 
 from __future__ import annotations

@@ -163,7 +163,7 @@ class CosseratSlave:
         self._base_eta = np.array([self.eta_b[0], self.eta_b[0], self.eta_b[0] * 2.0 / 3.0])
         self._base_Q = np.eye(3)
         self._base_kappa0 = np.zeros(3)
-        self._sec, self._l0, self._D0 = sec, l0, D0
+        self._sec, self._l0 = sec, l0
         g3 = np.array([p.gravity[0], 0.0, p.gravity[1]])
         self._node_force = np.ascontiguousarray(np.outer(g3, b.mass))
         self._tip_force = np.zeros(3)
