@@ -105,8 +105,7 @@ def backbone_rows(q2, n_per_section, out):
 
 def gram_terms(J, Jd, out):
     """A = J J^T and dA/dt = dJ J^T + J dJ^T for a 2x6 J: out = [A00, A01, A11, dA00, dA01, dA11]."""
-    for r in range(6):
-        out[r] = 0.0
+    out[:] = 0.0
     for a in range(6):
         out[0] += J[0, a] * J[0, a]
         out[1] += J[0, a] * J[1, a]

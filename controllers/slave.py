@@ -54,10 +54,8 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
             PJ[s, a] = PJ[j, a]
         term_grad_add(j, d[j], b0, b1, PJ[s])
         Pcor[s] = Pcor[j] + term_ydd(j, d[j], ydot, b0, b1, b2)
-    for a in range(6):
-        N[a] = 0.0
-        for b in range(6):
-            M[a, b] = 0.0
+    M[:] = 0.0
+    N[:] = 0.0
     gcc = complex(pk[PACK_G + 1], -pk[PACK_G])  # conj(gravity as Z + iX)
     cen = scratch(3)  # 2 dk_i dd_i
     for i in range(3):
@@ -95,9 +93,7 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
             A[2] += Y[2, 3 + i] * cen[i]
         # the section's weighted moments: by their series (controllers.moments), else node by node
         if not section_moments(th[s], fs[s], nodes, Q):
-            for k in range(3):
-                for m in range(4):
-                    Q[k, m] = 0.0
+            Q[:] = 0.0
             for g in range(nodes.shape[0]):
                 w = weights[g]
                 b0, b1, b2, b3 = term_bases(nodes[g], th[s], fs[s])
@@ -115,8 +111,7 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
             for g in range(nodes.shape[0]):
                 u = nodes[g]
                 thdd = 0.0  # d^2 theta/dt^2 at ddq = 0
-                for a in range(6):
-                    alpha[a] = 0.0
+                alpha[:] = 0.0
                 for ll in range(s + 1):
                     f = 1.0 if ll < s else u
                     alpha[ll] = f * q[3 + ll]

@@ -272,13 +272,11 @@ class ChainMap:
 
     def master_tip(self, m: mujoco.MjModel, d: mujoco.MjData) -> np.ndarray:
         """[X, Z] of master_tip_site relative to master_base (needs up-to-date kinematics)."""
-        p = d.site_xpos[self.master_site_id] - self.master_base_pos
-        return np.array([p[0], p[2]])
+        return (d.site_xpos[self.master_site_id] - self.master_base_pos)[[0, 2]]
 
     def octarm_tip(self, m: mujoco.MjModel, d: mujoco.MjData) -> np.ndarray:
         """[X, Z] of octarm_tip_site relative to octarm_base (needs up-to-date kinematics)."""
-        p = d.site_xpos[self.tip_site_id] - self.octarm_base_pos
-        return np.array([p[0], p[2]])
+        return (d.site_xpos[self.tip_site_id] - self.octarm_base_pos)[[0, 2]]
 
 
 # kernels compiled by harness.loop.fast (numba) together with controllers/

@@ -302,11 +302,10 @@ class CosseratPlant:
         # coordinates) -> (r_x c + r_z s, r_y, -r_x s + r_z c)
         da = x[4 + 2 * m:i] - a0
         c, sn = np.cos(da), np.sin(da)
-        out = dirs.copy()
-        for r in range(3):
-            out[r, 0] = dirs[r, 0] * c + dirs[r, 2] * sn
-            out[r, 2] = -dirs[r, 0] * sn + dirs[r, 2] * c
-        b.director_collection[:] = out
+        D = b.director_collection
+        D[:] = dirs
+        D[:, 0] = dirs[:, 0] * c + dirs[:, 2] * sn
+        D[:, 2] = -dirs[:, 0] * sn + dirs[:, 2] * c
         s._fit_valid = False
 
     def meta(self) -> dict:
