@@ -111,22 +111,20 @@ def chain_elastic_correction(qpos_chain, R, C, L0, section, is_hinge, seg_kb, ke
     # shape term: g = k_shape * r on slides;  grad = g - P^T (C_e^T g)
     ctg = scratch_zeros(3)
     for c in range(n):
-        if is_hinge[c] == 0 and k_shape[c] != 0.0:
+        if is_hinge[c] == 0:
             r = qpos_chain[c]
             for i in range(3):
                 r -= C[c, i] * e[i]
-            g = k_shape[c] * r
-            for i in range(3):
-                ctg[i] += C[c, i] * g
+            out[c] = k_shape[c] * r  # g, kept in out until the last loop
+            if k_shape[c] != 0.0:
+                for i in range(3):
+                    ctg[i] += C[c, i] * out[c]
     for c in range(n):
         q = qpos_chain[c]
         if is_hinge[c] == 1:
             grad = seg_kb[section[c]] * q * dinv[section[c]]
         else:
-            r = q
-            for i in range(3):
-                r -= C[c, i] * e[i]
-            grad = k_shape[c] * r
+            grad = out[c]
             for i in range(3):
                 grad += R[i, c] * (dEdd[i] - ctg[i])
         out[c] = -grad + k_joint[c] * q

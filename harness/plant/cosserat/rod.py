@@ -167,9 +167,7 @@ class CosseratSlave:
         g3 = np.array([p.gravity[0], 0.0, p.gravity[1]])
         self._node_force = np.ascontiguousarray(np.outer(g3, b.mass))
         self._tip_force = np.zeros(3)
-        self._act_n = np.zeros(ne)
-        self._act_m = np.zeros((3, nv))
-        self._act_m_base = np.zeros(3)
+        self._act_n, self._act_m, self._act_m_base = np.zeros(ne), np.zeros((3, nv)), np.zeros(3)
         self._act_q2, self._act_dq2 = np.zeros(6), np.zeros(6)  # the fit `_set_active` works at
         self._L0 = np.asarray(p.rest_lengths, dtype=float)
         self._law = 1 if self.analytic_law else 0
