@@ -67,9 +67,7 @@ def master_points(pk, m, base, out):
     l1, l2 = pk[0], pk[1]
     for k in range(m.shape[0]):
         q0, q1 = m[k, 0], m[k, 1]
-        for i in range(3):
-            for j in range(3):
-                out[k, i, j] = base[j]
+        out[k] = base
         out[k, 1, 0] += l1 * np.sin(q0)
         out[k, 1, 2] += l1 * np.cos(q0)
         out[k, 2, 0] = out[k, 1, 0] + l2 * np.sin(q0 + q1)

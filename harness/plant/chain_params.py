@@ -81,14 +81,10 @@ def joint_armature(slave: SlaveParams, N: int, layout: dict, fraction: float) ->
     """Joint armature per chain joint: ``fraction`` times the section's inertia scale (hinges m_i L0_i^2 / 3
     kg m^2, slides m_i kg), plus TIP_SLIDE_ARMATURE m_2 / N on the tip slide (otherwise the fastest mode).
     A regularizer the loaded chain needs (a mismatch ~ fraction / (6 N) of M2)."""
-    m = np.asarray(slave.masses)
-    L0 = np.asarray(slave.rest_lengths)
-    n = layout["C"].shape[0]
-    a = np.zeros(n)
-    for c in range(n):
-        i = int(layout["section"][c])
-        a[c] = fraction * (m[i] * L0[i] ** 2 / 3.0 if layout["is_hinge"][c] else m[i])
-    a[-1] += TIP_SLIDE_ARMATURE * m[2] / N
+    sec = layout["section"]
+    m, L0 = np.asarray(slave.masses)[sec], np.asarray(slave.rest_lengths)[sec]
+    a = fraction * np.where(layout["is_hinge"] == 1, m * L0 ** 2 / 3.0, m)
+    a[-1] += TIP_SLIDE_ARMATURE * slave.masses[2] / N
     return a
 
 

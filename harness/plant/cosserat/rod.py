@@ -61,7 +61,7 @@ class CosseratSlave:
     """Planar 3-section Octarm as one PyElastica Cosserat rod (see the module docstring)."""
 
     def __init__(self, params: SlaveParams, elements_per_section: int = DEFAULT_ELEMENTS,
-                 dt: float | None = None, material_damping=None,
+                 dt: float | None = None, material_damping=(DEFAULT_ETA_B, DEFAULT_ETA_A),
                  shear_factor: float = DEFAULT_SHEAR_FACTOR, actuation: str = "servo",
                  rotary_radius: float = DEFAULT_ROTARY_RADIUS, elastic_law: str = "analytic",
                  stepper: str = "numba", muscle_radius=(0.16, 0.12, 0.09)) -> None:
@@ -84,18 +84,14 @@ class CosseratSlave:
                         ("slave.extension_stiffness", params.extension_stiffness)):
             if min(v) <= 0:
                 raise _err(name, tuple(v), "every entry must be > 0 (moduli of the rod)")
-        if material_damping is None:
-            eta_b, eta_a = np.full(3, DEFAULT_ETA_B), np.full(3, DEFAULT_ETA_A)
-        else:
-            try:
-                eta_b, eta_a = (np.broadcast_to(np.asarray(x, dtype=float), (3,)).copy()
-                                for x in material_damping)
-            except (TypeError, ValueError):
-                raise _err("material_damping", material_damping,
-                           "must be (eta_b, eta_a), each a number or 3 numbers >= 0") from None
-            if not (np.all(np.isfinite(eta_b)) and np.all(np.isfinite(eta_a))
-                    and eta_b.min() >= 0 and eta_a.min() >= 0):
-                raise _err("material_damping", material_damping, "every entry must be finite and >= 0")
+        try:
+            eta_b, eta_a = (np.broadcast_to(np.asarray(x, float), (3,)).copy() for x in material_damping)
+        except (TypeError, ValueError):
+            raise _err("material_damping", material_damping,
+                       "must be (eta_b, eta_a), each a number or 3 numbers >= 0") from None
+        if not (np.all(np.isfinite(eta_b)) and np.all(np.isfinite(eta_a)) and eta_b.min() >= 0
+                and eta_a.min() >= 0):
+            raise _err("material_damping", material_damping, "every entry must be finite and >= 0")
         self.stable_dt = stable_dt(params, n, shear_factor, rotary_radius, eta_a)
         if dt is None:
             dt = auto_dt(_BASE_DT, self.stable_dt)
