@@ -31,8 +31,7 @@ class ControllerDiverged(RuntimeError):
 
 
 class Observation:
-    """What a controller sees at one step; views of harness buffers overwritten every step.
-
+    """What a controller sees at one step; views of harness buffers overwritten every step:
     t (s), k (step index); sensed (16,) = [q1, dq1, q2, dq2]: true state + the scenario's noise, with
     views q1, dq1 (2,), q2, dq2 (6,); x_d, dx_d, ddx_d (2,): desired master tip, eq. (40); F (4,) =
     [F1, F2] (2,) each: interaction forces of (1) when the plant provides them, else zeros."""
@@ -51,8 +50,7 @@ class Observation:
 
 
 class Action:
-    """What a controller commands at one step (preallocated; write into its arrays).
-
+    """What a controller commands at one step (preallocated; write into its arrays):
     T1 (2,) N m, eq. (12); T2 (6,) [N, N m], eq. (17): drives a torque plant, servo feed-forward
     otherwise; u2 (6,) commanded ddq2, eq. (18): a servo plant integrates it into its reference;
     q2_ref, dq2_ref (6,) with use_ref = True: the servo reference given directly; deN (6,): the

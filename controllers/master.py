@@ -46,8 +46,7 @@ def master_kernel(pk, q, dq, x, J, Jd, M, N):
 
 def master_accel(pk, s, T1, F1, acc):
     """Forward dynamics, eq. (1) i = 1: acc (4,) = d/dt s of s (4,) = [q1, dq1] under T1 (2,) N m and the
-    tip force F1 (2,) N (Cramer's rule).  False if M1 is singular.  Heap work arrays: compiled by the
-    Cosserat plant."""
+    tip force F1 (2,) N (Cramer's rule).  False if M1 is singular (compiled by the Cosserat plant)."""
     x, J, Jd, M, N = np.empty(2), np.empty((2, 2)), np.empty((2, 2)), np.empty((2, 2)), np.empty(2)
     master_kernel(pk, s[0:2], s[2:4], x, J, Jd, M, N)
     r0 = T1[0] - N[0] + J[0, 0] * F1[0] + J[1, 0] * F1[1]

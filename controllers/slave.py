@@ -33,11 +33,9 @@ def elastic_kernel(pk, q, out):
 
 
 def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
-    """M2 (6,6) and N2 (6,) together (outputs overwritten); nodes, weights: Gauss-Legendre rule on [0, 1].
-
-    Coriolis in Lagrange form: C dq = sum_s int m_s J_p^T (d^2p/dt^2 at ddq = 0) du (+ slice rotation).
-    Along section s, J_p(u) = V0 + b0(u) V1 + b1(u) V2 and d^2p/dt^2 is affine in (1, b0, b1, b2)
-    (`cc.term_bases`, `cc.term_ydd`), so the quadrature only needs the moments Q (`moments`)."""
+    """M2 (6,6) and N2 (6,) (overwritten); nodes, weights: Gauss-Legendre rule on [0, 1].  C dq = sum_s int
+    m_s J_p^T (d^2p/dt^2 at ddq = 0) du (+ slice rotation), J_p = V0 + b0 V1 + b1 V2 and d^2p/dt^2 affine
+    in (1, b0, b1, b2), so the quadrature needs only the moments Q (`moments`)."""
     d, th, ydot = scratch(3), scratch(3), scratch(6)
     y_of_q(q, d, th, ydot, dq)
     # prefix sums over the completed sections: y-gradient and ydot^T H_y ydot of their end terms

@@ -56,8 +56,7 @@ def put_sym(X, a, b, v):
 def tip_kinematics(q, dq, order, x, J, H, Hd):
     """Tip and its q-derivatives in [X, Z] rows: q, dq (6,); x (2,) m; J (2,6) (order >= 1);
     H (2,6,6) = d^2x/dq^2 (order >= 2); Hd (2,6,6) = dH/dt along dq (order >= 3).  J2dot = H . dq.
-
-    Chain rule y -> q (Theta_i = k_i d_i), with the product rule for dH/dt:
+    Chain rule y -> q (Theta_i = k_i d_i; dH/dt by the product rule):
         H[d_i, d_j] = k_j XdT[i, j] + k_i XdT[j, i] + k_i k_j XTT[i, j]
         H[d_i, k_j] = d_j (XdT[i, j] + k_i XTT[i, j]) + [i = j] G[i]
         H[k_i, k_j] = d_i d_j XTT[i, j]."""

@@ -66,10 +66,8 @@ def joint_stiffness(slave: SlaveParams, N: int, layout: dict) -> np.ndarray:
 
 def joint_damping(slave: SlaveParams, N: int, layout: dict, bending_viscosity=(0.0, 0.0, 0.0),
                   extension_viscosity=(0.0, 0.0, 0.0)) -> np.ndarray:
-    """MuJoCo joint damping per chain joint (N m s/rad, N s/m): the q2 damping (Dk on k-rates, De on
-    d-rates) plus the rod's material damping (eta_b, eta_a; hinge eta_b / h, slide eta_a / h for a
-    segment of length h, the springs' rules for half rods).  Hinges N (Dk_i / L0_i + eta_b_i) / L0_i,
-    slides `slide_pattern` of De_i + eta_a_i / L0_i (exact on the CC manifold at rest length)."""
+    """MuJoCo joint damping per chain joint (N m s/rad, N s/m), the q2 damping plus the material damping
+    (eta_b, eta_a): hinges N (Dk_i / L0_i + eta_b_i) / L0_i, slides `slide_pattern` of De + eta_a / L0."""
     L0 = np.asarray(slave.rest_lengths)
     eb = np.asarray(bending_viscosity, dtype=float)
     ea = np.asarray(extension_viscosity, dtype=float)
@@ -78,9 +76,8 @@ def joint_damping(slave: SlaveParams, N: int, layout: dict, bending_viscosity=(0
 
 
 def joint_armature(slave: SlaveParams, N: int, layout: dict, fraction: float) -> np.ndarray:
-    """Joint armature per chain joint: ``fraction`` times the section's inertia scale (hinges m_i L0_i^2 / 3
-    kg m^2, slides m_i kg), plus TIP_SLIDE_ARMATURE m_2 / N on the tip slide (otherwise the fastest mode).
-    A regularizer the loaded chain needs (a mismatch ~ fraction / (6 N) of M2)."""
+    """Joint armature per chain joint (a regularizer): ``fraction`` times m_i L0_i^2 / 3 (hinges, kg m^2)
+    or m_i (slides, kg), plus TIP_SLIDE_ARMATURE m_2 / N on the tip slide."""
     sec = layout["section"]
     m, L0 = np.asarray(slave.masses)[sec], np.asarray(slave.rest_lengths)[sec]
     a = fraction * np.where(layout["is_hinge"] == 1, m * L0 ** 2 / 3.0, m)

@@ -295,11 +295,9 @@ def _mass_matrix0(m: mujoco.MjModel) -> np.ndarray:
 
 def build_spec(master: MasterParams, slave: SlaveParams, plant: PlantConfig, *,
                scene_xml: str | os.PathLike | None = None) -> mujoco.MjSpec:
-    """The plant as an editable ``mujoco.MjSpec``: scene.xml (or scene_xml, which must define the named
-    master elements, ``octarm_base`` and the ``octarm_*`` default classes), the master from ``master``
-    and the generated Octarm.  master/slave: the plant's parameters (may differ from the controller's);
-    plant: segments N in [1, 64], actuation, enforce_cc, physics_dt, integrator, servo tuning,
-    armature_fraction.  Raises PlantModelError on bad input or MJCF."""
+    """The plant as an editable ``mujoco.MjSpec``: scene.xml (or scene_xml, defining the master elements,
+    ``octarm_base`` and the ``octarm_*`` default classes) with the master and the generated Octarm from the
+    plant's own parameters.  Raises PlantModelError on bad input or MJCF."""
     return _build(master, slave, plant, scene_xml)[0]
 
 
@@ -373,9 +371,8 @@ def _check_clearance(m: mujoco.MjModel, cmap: ChainMap, cm: ContactMap, scn: Sce
 
 
 def stiffness_courant_number(m: mujoco.MjModel, cm: ChainMap) -> float:
-    """h w_max of the chain's joint springs (and servo kp) against its inertia at qpos0: w_max^2 the largest
-    generalized eigenvalue of diag(stiffness + kp) and the chain block of M; explicit springs need < 2
-    (it grows with N: N <= 32 steps stably at 1 ms)."""
+    """h w_max of the chain's joint springs (and servo kp) against the chain block of M at qpos0;
+    explicit springs need < 2."""
     idx = np.asarray(cm.chain_dof_adr)
     k = np.asarray(cm.joint_stiffness) + np.asarray(cm.servo_kp)
     L = np.linalg.cholesky(_mass_matrix0(m)[np.ix_(idx, idx)])

@@ -206,8 +206,7 @@ class CosseratPlant:
 
     @property
     def stop(self):
-        """The run's stop flag (an Event or None): once set, the rod stops between batches of its steps
-        (`CosseratSlave.step` raises `RodStopped`, a KeyboardInterrupt)."""
+        """The run's stop flag (an Event or None): once set, the rod raises `RodStopped` between batches."""
         return self.slave.stop
 
     @stop.setter
@@ -235,8 +234,7 @@ class CosseratPlant:
         return g
 
     def record(self, k: int) -> None:
-        """Keep what the recording of control step k needs (the rod nodes, the master state).  The
-        buffers are sized for the scenario the plant was built for and grow (doubling) for a longer run."""
+        """Keep the rod nodes and master state of control step k (the buffers grow for a longer run)."""
         if k >= self._pos_hist.shape[0]:
             n = max(k + 1, 2 * self._pos_hist.shape[0])
             self._pos_hist, self._m_hist = (np.concatenate([a, np.zeros((n - len(a), *a.shape[1:]))])

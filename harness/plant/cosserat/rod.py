@@ -257,9 +257,8 @@ class CosseratSlave:
         self._steps = 0
 
     def _cc(self, q2):
-        """Nodes [X, Z] (3 n + 1, 2) of the CC shape q2 at uniform arc-length steps d_i / n within each
-        section (exactly on the arcs: `controllers.cc.backbone_points`) and the element chord angles (3 n,)
-        (from +Z toward +X: the tangent at the element's middle)."""
+        """Nodes [X, Z] (3 n + 1, 2) of the CC shape q2 at arc-length steps d_i / n (on the arcs) and the
+        element chord angles (3 n,) from +Z toward +X."""
         q2 = np.asarray(q2, dtype=float)
         xz = np.empty((3 * self.n + 1, 2))
         backbone_points(q2, self.n, xz)
@@ -280,9 +279,8 @@ class CosseratSlave:
         self._tip_force[:] = (F[0], 0.0, F[1])
 
     def step(self, command, duration: float, feedforward=None) -> bool:
-        """Advance by `duration` (a multiple of dt) with the command held: servo: q2 command (rest
-        strains, plus `feedforward` T2 if given); torque: T2; muscle: the group forces p (N).  Returns
-        False if the state diverged."""
+        """Advance by `duration` (a multiple of dt) holding the command: servo: q2 (rest strains, plus
+        `feedforward` T2); torque: T2; muscle: the group forces p (N).  False if the state diverged."""
         command = self._vec6("command", command)
         m = round(duration / self.dt)
         tol = 1e-9 * max(1.0, duration)
@@ -331,8 +329,7 @@ class CosseratSlave:
             t = self._verlet.step_single_instance(b, t, np.float64(self.dt))
 
     def _sane(self) -> bool:
-        """Node positions, velocities and element angular velocities finite, every node within
-        EXPLODING_LENGTHS rod lengths of the base."""
+        """Nodes and rates finite, every node within EXPLODING_LENGTHS rod lengths of the base."""
         b = self._b
         pos = b.position_collection
         if not (np.isfinite(pos).all() and np.isfinite(b.velocity_collection).all()
@@ -347,8 +344,7 @@ class CosseratSlave:
         return q2, dq2
 
     def sense_into(self, q2: np.ndarray, dq2: np.ndarray) -> None:
-        """`sense` into q2, dq2 (6,).  The fit is kept until the rod moves (`step`, `reset`): the plant's
-        sensing and the servo feed-forward of the next step fit the same state once, not twice."""
+        """`sense` into q2, dq2 (6,); the fit is cached until the rod moves (`step`, `reset`)."""
         if not self._fit_valid:
             b = self._b
             kr.fit_rod(b.position_collection, b.velocity_collection, self._fit_xz, self._fit_vxz,
