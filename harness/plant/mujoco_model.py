@@ -15,7 +15,7 @@ import numpy as np
 
 from controllers.params import MasterParams, SlaveParams
 from harness.config.assets import asset_dir
-from harness.config.scenario import ACTUATIONS, INTEGRATORS, PlantConfig, Scenario
+from harness.config.scenario import INTEGRATORS, PlantConfig, Scenario
 from harness.config.textio import atomic_path
 from harness.plant.chain_map import ChainMap, chain_layout
 from harness.plant.chain_params import (
@@ -34,7 +34,6 @@ from harness.plant.initial import InitialStateError, initial_state
 MJCF_DIR = asset_dir("mjcf")  # the shipped MJCF (package data when installed; harness.config.assets)
 SCENE_XML = MJCF_DIR / "scene.xml"
 
-MAX_SEGMENTS = 64
 # equality constraints holding the sections at constant curvature (api-notes: tight values)
 CC_SOLREF = (0.002, 1.0)
 CC_SOLIMP = (0.99, 0.999, 0.001, 0.5, 2.0)
@@ -226,30 +225,8 @@ def _add_cc_equalities(spec: mujoco.MjSpec, N: int) -> None:
         eq.solref, eq.solimp = list(CC_SOLREF), list(CC_SOLIMP)
 
 
-def _validate_plant(plant: PlantConfig) -> int:
-    """N, the segments per section, once every plant option is valid (else PlantModelError)."""
-    n = plant.segments
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not (1 <= int(n) <= MAX_SEGMENTS):
-        raise PlantModelError(f"plant.segments = {n!r}: must be an integer in [1, {MAX_SEGMENTS}]")
-    if plant.actuation not in ACTUATIONS:
-        raise PlantModelError(f"plant.actuation = {plant.actuation!r}: must be one of {ACTUATIONS}")
-    if plant.integrator not in _INTEGRATORS:
-        raise PlantModelError(
-            f"plant.integrator = {plant.integrator!r}: must be one of {tuple(_INTEGRATORS)}")
-    for f in ("physics_dt", "servo_frequency", "servo_damping_ratio"):
-        v = getattr(plant, f)
-        if not (np.isfinite(v) and v > 0):
-            raise PlantModelError(f"plant.{f} = {v!r}: must be finite and > 0")
-    for f in ("muscle_time_constant", "muscle_max_force", "muscle_radius"):
-        if np.shape(v := getattr(plant, f)) != (3,) or not np.all(np.isfinite(v) & (np.asarray(v) > 0)):
-            raise PlantModelError(f"plant.{f} = {v!r}: must be 3 finite numbers > 0")
-    if not (np.isfinite(plant.armature_fraction) and plant.armature_fraction >= 0):
-        raise PlantModelError(f"plant.armature_fraction = {plant.armature_fraction!r}: must be >= 0")
-    return int(n)
-
-
 def _build(master: MasterParams, slave: SlaveParams, plant: PlantConfig, scene=None, environment=None):
-    N = _validate_plant(plant)
+    N = int(plant.segments)  # plant options: validated by the scenario schema
     if scene is None:
         scene = getattr(plant, "scene_xml", None)
     scene = SCENE_XML if scene is None else Path(scene)
