@@ -158,7 +158,7 @@ def _add_octarm(spec: mujoco.MjSpec, slave: SlaveParams, plant: PlantConfig, N: 
 
 def _add_muscles(spec: mujoco.MjSpec, joint_names: list[str], plant: PlantConfig, layout: dict,
                  N: int) -> list[str]:
-    """Two one-sided extensor groups per section on fixed tendons (module docstring)."""
+    """Two one-sided extensor groups per section on fixed tendons (docs/plants.md)."""
     slide, hinge = muscle_tendon_coefs(N, layout)
     names = []
     for i in range(3):
@@ -181,14 +181,10 @@ def _add_muscles(spec: mujoco.MjSpec, joint_names: list[str], plant: PlantConfig
 
 
 def _add_actuators(spec: mujoco.MjSpec, joint_names: list[str], actuation: str) -> list[str]:
-    """A servo (gains set in `_build`) or a motor per chain joint."""
+    """A servo (made a position actuator with its gains in `_build`) or a motor per chain joint."""
     kind = "servo" if actuation == "servo" else "motor"
     for jn in joint_names:
-        a = spec.add_actuator(name=f"{jn}_{kind}", target=jn, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-        if kind == "servo":
-            a.set_to_position(kp=1.0, kv=0.0)
-        else:
-            a.set_to_motor()
+        spec.add_actuator(name=f"{jn}_{kind}", target=jn, trntype=mujoco.mjtTrn.mjTRN_JOINT).set_to_motor()
     return [f"{jn}_{kind}" for jn in joint_names]
 
 

@@ -23,13 +23,11 @@ MASTER_BASE = np.array([0.0, -0.3, 0.0])  # m, world (as mjcf/master.xml)
 SLAVE_BASE = np.array([0.0, 0.3, 0.0])  # m, world (as mjcf/octarm_base.xml)
 MASTER_MAX_H = 1e-3  # s, largest master RK4 step
 
-def _jit(fn, **deps):
-    """numba.njit(cache=True) of a numba-compatible function of `controllers`, its callees `deps` compiled."""
-    return njit(cache=True)(types.FunctionType(fn.__code__, {**fn.__globals__, **deps}, fn.__name__))
-
-
 _master_kernel = njit(cache=True)(master_model.master_kernel)
-_master_accel = _jit(master_model.master_accel, master_kernel=_master_kernel)
+# master_accel compiled with its callee compiled (a copy of the function bound to _master_kernel)
+_accel = master_model.master_accel
+_master_accel = njit(cache=True)(types.FunctionType(_accel.__code__, {**_accel.__globals__,
+                                                                      "master_kernel": _master_kernel}))
 master_points = njit(cache=True)(master_model.master_points)
 _elastic_kernel = njit(cache=True)(slave_model.elastic_kernel)
 
