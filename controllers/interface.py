@@ -71,11 +71,9 @@ class NominalModels:
     def __init__(self, master_p: MasterParams, slave_p: SlaveParams, subtask: SubtaskSpec | None = None,
                  kernels: Any = None) -> None:
         if kernels is None:
-            kernels = types.SimpleNamespace(master_kernel=master.master_kernel,
-                                            tip_kinematics=tip.tip_kinematics,
-                                            mass_nle_kernel=slave.mass_nle_kernel,
-                                            pinv_terms=control.pinv_terms,
-                                            control_laws=control.control_laws)
+            kernels = types.SimpleNamespace(**{f.__name__: f for f in (
+                master.master_kernel, tip.tip_kinematics, slave.mass_nle_kernel, control.pinv_terms,
+                control.control_laws)})
         self._k = kernels
         self.mpk = master.packed(master_p)
         self.spk = slave_p.packed()

@@ -14,14 +14,9 @@ from .params import SLAVE_PACK, SlaveParams
 from .scratch import scratch, scratch_c, scratch_cz
 from .tip import tip_kinematics
 
-PACK_L0 = SLAVE_PACK["L0"]
-PACK_M = SLAVE_PACK["m"]
-PACK_KB = SLAVE_PACK["Kb"]
-PACK_KE = SLAVE_PACK["Ke"]
-PACK_CD = SLAVE_PACK["cd"]
-PACK_CK = SLAVE_PACK["ck"]
-PACK_IS = SLAVE_PACK["Is"]
-PACK_G = SLAVE_PACK["g"]
+# offsets of the fields in SlaveParams.packed() (module-level ints: constants for numba)
+PACK_L0, PACK_M, PACK_KB, PACK_KE, PACK_CD, PACK_CK, PACK_IS, PACK_G = (
+    SLAVE_PACK[k] for k in ("L0", "m", "Kb", "Ke", "cd", "ck", "Is", "g"))
 
 
 def elastic_kernel(pk, q, out):
