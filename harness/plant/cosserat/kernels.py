@@ -39,13 +39,18 @@ def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_len
 
     # --- shear/stretch stress n (material frame), Kelvin-Voigt on the strain rate -------------------
     # sigma = Q (x_{i+1} - x_i) / l0 - e3; d sigma / dt = Q dv / l0 - omega x (sigma + e3)
-    qdv = _batch_matvec(Q, (vel[:, 1:] - vel[:, :-1]) / rest_lengths)
+    dv = np.empty((3, ne))
+    for i in range(3):
+        for k in range(ne):
+            dv[i, k] = (vel[i, k + 1] - vel[i, k]) / rest_lengths[k]
+    qdv = _batch_matvec(Q, dv)
     se3 = sigma.copy()
     se3[2] += 1.0
     sdot = qdv - _batch_cross(omega, se3)
     n = np.empty((3, ne))
     for i in range(3):
-        n[i] = shear_matrix[i, i] * (sigma[i] - rest_sigma[i]) + eta_e[i] * sdot[i]
+        for k in range(ne):
+            n[i, k] = shear_matrix[i, i, k] * (sigma[i, k] - rest_sigma[i, k]) + eta_e[i, k] * sdot[i, k]
     n[2] -= act_n
 
     # --- bending couples m at the hinges (elastic + active), base half-element hinge -------------------
@@ -85,9 +90,11 @@ def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_len
         for k in range(ne):
             N[i, k] = (Q[0, i, k] * n[0, k] + Q[1, i, k] * n[1, k] + Q[2, i, k] * n[2, k]
                        + tension[k] * tangents[i, k])
-    f_int[:, 0] = N[:, 0]
-    f_int[:, 1:ne] = N[:, 1:] - N[:, :-1]
-    f_int[:, ne] = -N[:, ne - 1]
+    for i in range(3):
+        f_int[i, 0] = N[i, 0]
+        for k in range(1, ne):
+            f_int[i, k] = N[i, k] - N[i, k - 1]
+        f_int[i, ne] = -N[i, ne - 1]
 
     # --- torques: couple difference + kappa x m (trapezoid) + (sigma + e3) x n l0 + inertial terms ----
     km = _batch_cross(kappa, m)
@@ -110,13 +117,17 @@ def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_len
                              + lag[i, k] / dil[k] + Jw[i, k] * dil_rate[k] / (dil[k] * dil[k]))
 
     # --- external: gravity, tip force; the base node is held (zero net force, zero velocity) ---------
-    f_ext[:] = node_force
-    f_ext[:, nn - 1] += tip_force
+    for i in range(3):
+        for k in range(nn):
+            f_ext[i, k] = node_force[i, k]
+        f_ext[i, nn - 1] += tip_force[i]
     if objs.shape[0] > 0:
         contact_forces(pos, vel, objs, cdamp, f_contact)
         f_ext += f_contact
-    tau_ext[:] = 0.0
-    f_int[:, 0] = -f_ext[:, 0]
+    for i in range(3):
+        for k in range(ne):
+            tau_ext[i, k] = 0.0
+        f_int[i, 0] = -f_ext[i, 0]
 
     # --- Kelvin-Voigt bending damping, backward Euler over the kick (tridiagonal per component) -------
     # (J_i / (e_i dt)) (w_i' - w_i) = tau_i - sum_hinges g (w' differences); g = eta / (D0 eps)
