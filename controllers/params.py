@@ -14,14 +14,16 @@ GRAVITY = 9.81  # m/s^2, standard gravity (magnitude)
 
 
 class ParameterError(ValueError):
-    """A model parameter or gain is outside its allowed range.  Message names field, value and range."""
+    """Parameters the schema's per-field ranges cannot check (one line naming the field)."""
 
 
 def _as_tuples(obj) -> None:
     """Store the tuple fields of a parameter dataclass as tuples of floats (lists, arrays accepted)."""
     for f in fields(obj):
-        if isinstance(f.default, tuple) and f.name != "kinds":
-            object.__setattr__(obj, f.name, tuple(float(v) for v in np.ravel(getattr(obj, f.name))))
+        v = getattr(obj, f.name)
+        if isinstance(f.default, tuple) and f.name != "kinds" and not (
+                type(v) is tuple and all(type(x) is float for x in v)):
+            object.__setattr__(obj, f.name, tuple(float(x) for x in np.ravel(v)))
 
 
 def _packed(name: str, default: tuple):
