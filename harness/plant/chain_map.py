@@ -132,8 +132,7 @@ def chain_elastic_correction(qpos_chain, R, C, L0, section, is_hinge, seg_kb, ke
 
 def chain_layout(n_segments: int) -> dict[str, np.ndarray]:
     """Constant layout arrays for N segments per section: ``C`` (n_chain, 6), ``R`` (6, n_chain) (R C = I),
-    ``S`` (n_slides, 3) (extensions -> slides), ``section``, ``is_hinge``, ``segment`` (n_chain,) int64
-    (segment N for the tip slide), ``slide_index`` (n_slides,)."""
+    ``section``, ``is_hinge``, ``segment`` (n_chain,) int64 (segment N for the tip slide)."""
     N = int(n_segments)
     n = 6 * N + 1
     section = np.r_[np.repeat(np.arange(3), 2 * N), 2].astype(np.int64)
@@ -151,15 +150,12 @@ def chain_layout(n_segments: int) -> dict[str, np.ndarray]:
         else:
             C[c, i] = 1.0 / N
     C[n - 1, 2] = 0.5 / N  # tip slide
-    slide_index = np.flatnonzero(is_hinge == 0)
-    S = C[slide_index, :3].copy()
-    P = np.linalg.pinv(S)  # (3, n_slides), P S = I
+    slides = np.flatnonzero(is_hinge == 0)
     R = np.zeros((6, n))
-    R[:3, slide_index] = P
+    R[:3, slides] = np.linalg.pinv(C[slides, :3])  # least-squares extensions of the slides
     for c in np.flatnonzero(is_hinge == 1):
         R[3 + section[c], c] = 1.0
-    return {"C": C, "R": R, "S": S, "section": section, "is_hinge": is_hinge,
-            "slide_index": slide_index, "segment": segment}
+    return {"C": C, "R": R, "section": section, "is_hinge": is_hinge, "segment": segment}
 
 
 @dataclass(frozen=True, eq=False)
