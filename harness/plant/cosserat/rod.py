@@ -58,7 +58,7 @@ class _Sim(ea.BaseSystemCollection):
 
 
 class CosseratSlave:
-    """Planar 3-section Octarm as one PyElastica Cosserat rod (see the module docstring)."""
+    """Planar 3-section Octarm as one PyElastica Cosserat rod (docs/plants.md)."""
 
     def __init__(self, params: SlaveParams, elements_per_section: int = DEFAULT_ELEMENTS,
                  dt: float | None = None, material_damping=(DEFAULT_ETA_B, DEFAULT_ETA_A),
@@ -167,7 +167,7 @@ class CosseratSlave:
         self._act_q2, self._act_dq2 = np.zeros(6), np.zeros(6)  # the fit `_set_active` works at
         self._L0 = np.asarray(p.rest_lengths, dtype=float)
         self._law = 1 if self.analytic_law else 0
-        self._objs = np.zeros((0, 6))  # environment contact (`set_contacts`, harness.plant.rod_contact)
+        self._objs = np.zeros((0, 6))  # environment contact (`set_contacts`, harness.plant.cosserat.contact)
         self._cdamp = np.zeros((0, ne + 2))
         self.f_contact = np.zeros((3, ne + 1))  # N, contact force on each node (last substep)
         self._fit_valid = False  # `sense_into`: the CC fit of the current rod state is cached
@@ -189,7 +189,7 @@ class CosseratSlave:
 
     def set_contacts(self, objs: np.ndarray, cdamp: np.ndarray) -> None:
         """Environment objects acting on the nodes from now on: objs (no, 6), cdamp (no, nn + 1) as in
-        `cosserat_rod.contact_forces`."""
+        `kernels.contact_forces`."""
         self._objs = np.ascontiguousarray(objs, dtype=float)
         self._cdamp = np.ascontiguousarray(cdamp, dtype=float)
 
