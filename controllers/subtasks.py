@@ -11,8 +11,7 @@ import numpy as np
 from .cc import gram_terms
 from .params import SlaveParams, SubtaskSpec
 from .scratch import scratch
-from .slave import jacobian
-from .tip import tip_kinematics
+from .slave import jacobian, tip_derivatives
 
 SPEC_SIZE = 8
 
@@ -131,8 +130,7 @@ def beta(spec: SubtaskSpec, slave: SlaveParams, q, dq=None) -> tuple[float, np.n
     """(beta, grad beta (6,), d/dt grad beta (6,)) of the combined sub-task at q2, dq2."""
     q = np.ascontiguousarray(q, dtype=float)
     dq = np.zeros(6) if dq is None else np.ascontiguousarray(dq, dtype=float)
-    x, J, H, Hd = np.empty(2), np.empty((2, 6)), np.empty((2, 6, 6)), np.empty((2, 6, 6))
-    tip_kinematics(q, dq, 3, x, J, H, Hd)
+    x, J, H, Hd = tip_derivatives(slave, q, dq)
     Jd = np.einsum("iab,b->ia", H, dq)
     grad, graddot, parts = np.empty(6), np.empty(6), np.empty(3)
     b = subtask_kernel(pack_subtask(spec, slave), J, H, Jd, Hd, q, dq, grad, graddot, parts)
