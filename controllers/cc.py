@@ -1,13 +1,7 @@
-"""Planar constant-curvature (CC) kinematics with exact derivatives up to third order.
-
-A point is c = Z + i X; the tangent at arc angle phi is exp(i phi) (k > 0 bends toward +X).  Section j
-(length d_j, bend Theta_j = k_j d_j) at material coordinate u in [0, 1]:
-
-    c_s(u) = sum_{j<s} T_j(1) + T_s(u),     T_j(u) = exp(i phi_{j-1}) u d_j E_0(u Theta_j),
-
-phi_{j-1} = sum_{l<j} Theta_l, E_n(t) = int_0^1 v^n exp(i t v) dv (entire, smooth across k = 0).  The
-bases b_n = f u^(1+n) E_n(u Theta) (`term_bases`) carry every derivative in y = [d, Theta].  Kernels:
-numba-compatible loops writing into the arrays the caller passes.
+"""Planar constant-curvature (CC) kinematics with exact derivatives up to third order.  A point is
+c = Z + i X, the tangent at arc angle phi is exp(i phi); section j at material coordinate u in [0, 1]:
+c_s(u) = sum_{j<s} T_j(1) + T_s(u), T_j(u) = exp(i phi_{j-1}) u d_j E_0(u Theta_j), Theta_j = k_j d_j,
+E_n(t) = int_0^1 v^n exp(i t v) dv; the bases b_n = f u^(1+n) E_n(u Theta) carry every y-derivative.
 """
 
 from __future__ import annotations
@@ -111,8 +105,7 @@ def backbone_rows(q2, n_per_section, out):
 
 def gram_terms(J, Jd, out):
     """A = J J^T and dA/dt = dJ J^T + J dJ^T for a 2x6 J: out = [A00, A01, A11, dA00, dA01, dA11]."""
-    for r in range(6):
-        out[r] = 0.0
+    out[:] = 0.0
     for a in range(6):
         out[0] += J[0, a] * J[0, a]
         out[1] += J[0, a] * J[1, a]

@@ -84,12 +84,9 @@ def pinv_terms(J, Jd, Jp, Jpd):
 
 
 def slave_control_kernel(pk, nodes, weights, gains, spec, q, dq, x1, dx1, a1, F2, T2, u2, deN, info):
-    """Slave law (17)-(18) with the null-space terms (23)-(33).
-
-    pk: packed SlaveParams; gains: [k1, k2, k3, k4, ky, ks, kn] (+ optional fault factors [e2_sign,
-    null_space_scale]); spec: packed sub-task; q, dq (6,) sensed; x1, dx1 (2,) master tip and velocity;
-    a1 (2,) master's commanded task acceleration; F2 (2,).  Writes T2, u2, deN (6,) and info (SLAVE_INFO,):
-    x2, e2, de2, beta, y_a, det, beta_m, beta_l.  Returns det(J2 J2^T); <= DET_MIN: singular, T2 = u2 = 0."""
+    """Slave law (17)-(18) with the null-space terms (23)-(33); gains [k1, k2, k3, k4, ky, ks, kn (, e2_sign,
+    null_space_scale)]; q, dq (6,); x1, dx1, a1 (2,) master tip, velocity, commanded acceleration.  Writes
+    T2, u2, deN (6,), info (SLAVE_INFO,).  Returns det(J2 J2^T); <= DET_MIN: singular, T2 = u2 = 0."""
     k3, k4, ky, ks, kn = gains[2], gains[3], gains[4], gains[5], gains[6]
     sgn = 1.0  # fault factors: e2 sign and null-space scale
     nss = 1.0

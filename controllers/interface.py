@@ -1,12 +1,5 @@
-"""The controller protocol: ``reset(ctx: ControllerContext)`` once before the run, then
-``step(obs: Observation) -> Action`` once per control step (period ``ctx.dt``).
-
-Task space x = [X, Z] (m, Z up) relative to each arm's base; q1 = [q_a, q_b] (rad); q2 = [d1, d2, d3 (m),
-k1, k2, k3 (1/m)]; forces N, moments N m.  ``actuations`` says which slave command a controller
-provides ("torque": T2; "servo": u2 or the reference); the harness rejects a mismatch before running.
-``Params`` (a frozen dataclass with defaults, optional ``check()`` raising ParamsError) is decoded from
-``[controller] params`` by the scenario's validator, one line per error naming
-``controller.params.<key>``.  ``ctx.models`` (`NominalModels`): the nominal analytic models.
+"""The controller protocol: ``reset(ctx)`` once, then ``step(obs) -> Action`` every control period
+``ctx.dt``.  Units, frames and fields: docs/guide/controllers.md; q2 = [d1, d2, d3 (m), k1, k2, k3 (1/m)].
 """
 
 from __future__ import annotations
@@ -22,7 +15,7 @@ from .params import Gains, MasterParams, SlaveParams, SubtaskSpec
 
 
 class ParamsError(ValueError):
-    """A controller parameter is invalid.  One line: ``controller.params.<key> = <value>: <why>``."""
+    """One line: ``controller.params.<key> = <value>: <why>``."""
 
     def __init__(self, key: str, value: Any, why: str) -> None:
         super().__init__(f"controller.params.{key} = {value!r}: {why}")
@@ -30,8 +23,7 @@ class ParamsError(ValueError):
 
 
 class ControllerDiverged(RuntimeError):
-    """Raised by a controller that detects that it cannot continue (e.g. a singular Jacobian); the run
-    stops with status "diverged" (not "error").  `code`: a status code of controllers.status."""
+    """The controller cannot continue: the run stops as "diverged"; `code`: a `controllers.status` code."""
 
     def __init__(self, message: str, code: int = 0) -> None:
         super().__init__(message)
@@ -39,8 +31,7 @@ class ControllerDiverged(RuntimeError):
 
 
 class Observation:
-    """What a controller sees at one step; views of harness buffers overwritten every step.
-
+    """What a controller sees at one step; views of harness buffers overwritten every step:
     t (s), k (step index); sensed (16,) = [q1, dq1, q2, dq2]: true state + the scenario's noise, with
     views q1, dq1 (2,), q2, dq2 (6,); x_d, dx_d, ddx_d (2,): desired master tip, eq. (40); F (4,) =
     [F1, F2] (2,) each: interaction forces of (1) when the plant provides them, else zeros."""
@@ -59,8 +50,7 @@ class Observation:
 
 
 class Action:
-    """What a controller commands at one step (preallocated; write into its arrays).
-
+    """What a controller commands at one step (preallocated; write into its arrays):
     T1 (2,) N m, eq. (12); T2 (6,) [N, N m], eq. (17): drives a torque plant, servo feed-forward
     otherwise; u2 (6,) commanded ddq2, eq. (18): a servo plant integrates it into its reference;
     q2_ref, dq2_ref (6,) with use_ref = True: the servo reference given directly; deN (6,): the
@@ -75,18 +65,15 @@ class Action:
 
 
 class NominalModels:
-    """The nominal analytic models bound to the nominal parameters.  kernels: a namespace of the
-    controllers/ kernels (the harness passes the compiled ones; default interpreted).  Methods return
-    views of buffers owned by this object, valid until the next call of the same method."""
+    """The nominal analytic models; kernels: namespace of compiled kernels (default interpreted).
+    Methods return views of owned buffers, valid until the next call of the same method."""
 
     def __init__(self, master_p: MasterParams, slave_p: SlaveParams, subtask: SubtaskSpec | None = None,
                  kernels: Any = None) -> None:
         if kernels is None:
-            kernels = types.SimpleNamespace(master_kernel=master.master_kernel,
-                                            tip_kinematics=tip.tip_kinematics,
-                                            mass_nle_kernel=slave.mass_nle_kernel,
-                                            pinv_terms=control.pinv_terms,
-                                            control_laws=control.control_laws)
+            kernels = types.SimpleNamespace(**{f.__name__: f for f in (
+                master.master_kernel, tip.tip_kinematics, slave.mass_nle_kernel, control.pinv_terms,
+                control.control_laws)})
         self._k = kernels
         self.mpk = master.packed(master_p)
         self.spk = slave_p.packed()
@@ -137,12 +124,8 @@ class NominalModels:
 
 @dataclass(frozen=True)
 class ControllerContext:
-    """The scenario as a controller sees it at `reset` (the nominal/controller side).
-
-    dt: control period (s); actuation: "torque" or "servo"; plant: plant kind (informational);
-    F (2, 2): [F1, F2] (N); params: the validated `Params` (or None); models: `NominalModels`; q0 (16,):
-    the noise-free initial state; faults: (e2_sign, null_space_scale), deliberate faults of the paper's
-    law for mutation tests of bounds files."""
+    """The scenario as a controller sees it at `reset`: dt (s); F (2, 2) [F1, F2] N; params: the
+    validated `Params` or None; q0 (16,) noise-free initial state; faults: (e2_sign, null_space_scale)."""
 
     dt: float
     n_steps: int
@@ -170,12 +153,9 @@ def check_range(key: str, value: float, lo: float | None = None, hi: float | Non
 
 
 class Controller:
-    """Base class of every controller: set the class attributes, implement `reset` and `step`.
-
-    actuations: what it supports ("torque": computes T2; "servo": u2 or the reference); plants: plant
-    kinds it runs on (None: any); requires: {plant kind: {dotted scenario key: value}}, e.g.
-    ``{"mujoco": {"plant.enforce_cc": True}}``; Params: a frozen dataclass with defaults (optional
-    ``check(self)`` raising ParamsError) or None."""
+    """Base class: set the class attributes, implement `reset` and `step`.  actuations: "torque" (T2)
+    and/or "servo" (u2 or the reference); plants: plant kinds (None: any); requires: {plant kind: {dotted
+    scenario key: value}}; Params: frozen dataclass (optional ``check()`` raising ParamsError) or None."""
 
     name = "controller"
     description = ""

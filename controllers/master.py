@@ -1,8 +1,6 @@
-"""Analytic model of the planar 2-link revolute master (paper Sec. II-C, VI).
-
-q1 = [q_a, q_b] (rad) from +Z toward +X (a MuJoCo hinge about +y); task x1 = [X, Z] (m) from the base:
-X = l1 sin q_a + l2 sin(q_a + q_b), Z = l1 cos q_a + l2 cos(q_a + q_b).  Uniform links (centre of mass
-at l/2, inertia m l^2/12), gravity along -Z, optional viscous joint friction.
+"""Analytic model of the planar 2-link revolute master (paper Sec. II-C, VI): q1 = [q_a, q_b] (rad) from
++Z toward +X, x1 = [X, Z] = [l1 sin q_a + l2 sin(q_a + q_b), l1 cos q_a + l2 cos(q_a + q_b)] (m);
+uniform links, gravity along -Z, optional viscous joint friction.
 """
 
 from __future__ import annotations
@@ -48,8 +46,7 @@ def master_kernel(pk, q, dq, x, J, Jd, M, N):
 
 def master_accel(pk, s, T1, F1, acc):
     """Forward dynamics, eq. (1) i = 1: acc (4,) = d/dt s of s (4,) = [q1, dq1] under T1 (2,) N m and the
-    tip force F1 (2,) N (Cramer's rule).  False if M1 is singular.  Heap work arrays: compiled by the
-    Cosserat plant."""
+    tip force F1 (2,) N (Cramer's rule).  False if M1 is singular (compiled by the Cosserat plant)."""
     x, J, Jd, M, N = np.empty(2), np.empty((2, 2)), np.empty((2, 2)), np.empty((2, 2)), np.empty(2)
     master_kernel(pk, s[0:2], s[2:4], x, J, Jd, M, N)
     r0 = T1[0] - N[0] + J[0, 0] * F1[0] + J[1, 0] * F1[1]
@@ -69,9 +66,7 @@ def master_points(pk, m, base, out):
     l1, l2 = pk[0], pk[1]
     for k in range(m.shape[0]):
         q0, q1 = m[k, 0], m[k, 1]
-        for i in range(3):
-            for j in range(3):
-                out[k, i, j] = base[j]
+        out[k] = base
         out[k, 1, 0] += l1 * np.sin(q0)
         out[k, 1, 2] += l1 * np.cos(q0)
         out[k, 2, 0] = out[k, 1, 0] + l2 * np.sin(q0 + q1)

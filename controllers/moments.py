@@ -1,13 +1,10 @@
-"""The per-section quadrature moments of `slave.mass_nle_kernel` as power series in the section's bend
-angle Theta, coefficients tabulated once per Gauss-Legendre rule (the same sums, regrouped).
-
-With the bases b_n(u) = f u^(n+1) E_n(u Theta) (`cc.term_bases`), |f| = 1, and mu_j = sum_g w_g u_g^j:
+"""Per-section quadrature moments of `slave.mass_nle_kernel` as power series in the bend angle Theta,
+tabulated once per Gauss-Legendre rule (the same sums, regrouped); mu_j = sum_g w_g u_g^j:
 
     Q[0, n+1]   = sum_g w_g b_n(u_g)                =  f sum_p (i Theta)^p a_{n,p} mu_{p+n+1}
     Q[k+1, l+1] = sum_g w_g conj(b_k(u_g)) b_l(u_g) =    sum_p (i Theta)^p c_{kl,p} mu_{p+k+l+2}
 
-a_{n,p} = 1 / (p! (p+n+1)), c_{kl,p} = sum_{m=0..p} (-1)^m / (m! (m+k+1) (p-m)! (p-m+l+1)).  Used for
-|Theta| <= MOMENT_RADIUS and the rules n = 2..N_RULES; elsewhere the caller sums over the nodes.
+a_{n,p} = 1 / (p! (p+n+1)), c_{kl,p} = sum_{m=0..p} (-1)^m / (m! (m+k+1) (p-m)! (p-m+l+1)).
 """
 
 from __future__ import annotations

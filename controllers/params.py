@@ -6,7 +6,6 @@ our proposal (docs/models.md).  Task space x = [X, Z] (m), Z up, gravity along -
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -15,24 +14,16 @@ GRAVITY = 9.81  # m/s^2, standard gravity (magnitude)
 
 
 class ParameterError(ValueError):
-    """A model parameter or gain is outside its allowed range.  Message names field, value and range."""
+    """Parameters the schema's per-field ranges cannot check (one line naming the field)."""
 
 
-def _tup(x) -> tuple[float, ...]:
-    if type(x) in (tuple, list) and all(type(v) in (float, int) for v in x):  # the common case, no numpy
-        return tuple(float(v) for v in x)
-    return tuple(float(v) for v in np.asarray(x, dtype=float).ravel())
-
-
-def _check_positive(owner: str, name: str, values, allow_zero: bool = False) -> None:
-    if isinstance(values, tuple) and all(type(v) is float for v in values):  # the dataclasses' own fields
-        bad = any(not math.isfinite(v) or (v < 0.0 if allow_zero else v <= 0.0) for v in values)
-    else:  # scalars, lists, arrays: the same rule through numpy
-        arr = np.atleast_1d(np.asarray(values, dtype=float))
-        bad = bool(np.any(~np.isfinite(arr) | ((arr < 0) if allow_zero else (arr <= 0))))
-    if bad:
-        rng = ">= 0" if allow_zero else "> 0"
-        raise ParameterError(f"{owner}.{name} = {values!r}: every entry must be finite and {rng}")
+def _as_tuples(obj) -> None:
+    """Store the tuple fields of a parameter dataclass as tuples of floats (lists, arrays accepted)."""
+    for f in fields(obj):
+        v = getattr(obj, f.name)
+        if isinstance(f.default, tuple) and f.name != "kinds" and not (
+                type(v) is tuple and all(type(x) is float for x in v)):
+            object.__setattr__(obj, f.name, tuple(float(x) for x in np.ravel(v)))
 
 
 def _packed(name: str, default: tuple):
@@ -61,12 +52,7 @@ class MasterParams:
     gravity: float = GRAVITY  # m/s^2 along -Z
 
     def __post_init__(self) -> None:
-        for f in ("lengths", "masses", "damping"):
-            object.__setattr__(self, f, _tup(getattr(self, f)))
-            if len(getattr(self, f)) != 2:
-                raise ParameterError(f"master.{f} must have 2 entries, got {getattr(self, f)!r}")
-            _check_positive("master", f, getattr(self, f), allow_zero=f == "damping")
-        _check_positive("master", "gravity", self.gravity, allow_zero=True)
+        _as_tuples(self)
 
     @property
     def inertias(self) -> tuple[float, float]:
@@ -94,22 +80,7 @@ class SlaveParams:
     n_quad: int = 8  # Gauss-Legendre points per section for the energy integrals
 
     def __post_init__(self) -> None:
-        for f, allow_zero in (("rest_lengths", False), ("masses", False), ("bending_stiffness", True),
-                              ("extension_stiffness", True), ("extension_damping", True),
-                              ("bending_damping", True), ("slice_inertia", True)):
-            object.__setattr__(self, f, _tup(getattr(self, f)))
-            if len(getattr(self, f)) != 3:
-                raise ParameterError(f"slave.{f} must have 3 entries, got {getattr(self, f)!r}")
-            _check_positive("slave", f, getattr(self, f), allow_zero=allow_zero)
-        object.__setattr__(self, "gravity", _tup(self.gravity))
-        if len(self.gravity) != 2 or not np.all(np.isfinite(self.gravity)):
-            raise ParameterError(f"slave.gravity = {self.gravity!r}: must be 2 finite numbers (X, Z)")
-        if not (np.isfinite(self.max_extension) and self.max_extension > 1.0):
-            raise ParameterError(f"slave.max_extension = {self.max_extension!r}: must be > 1")
-        if not (0.0 < self.max_bend <= np.pi):
-            raise ParameterError(f"slave.max_bend = {self.max_bend!r}: must be in (0, pi]")
-        if not (isinstance(self.n_quad, int) and 2 <= self.n_quad <= 32):
-            raise ParameterError(f"slave.n_quad = {self.n_quad!r}: must be an integer in [2, 32]")
+        _as_tuples(self)
 
     @property
     def length_range(self) -> tuple[np.ndarray, np.ndarray]:
@@ -139,10 +110,7 @@ class Gains:
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            v = getattr(self, f.name)
-            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
-                raise ParameterError(f"gains.{f.name} = {v!r}: must be a finite number > 0")
-            object.__setattr__(self, f.name, float(v))
+            object.__setattr__(self, f.name, float(getattr(self, f.name)))
 
     def packed(self) -> np.ndarray:
         return np.array([self.k1, self.k2, self.k3, self.k4, self.ky, self.ks, self.kn])
@@ -159,19 +127,12 @@ class SubtaskSpec:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "kinds", tuple(self.kinds))
-        object.__setattr__(self, "weights", _tup(self.weights))
-        allowed = {"manipulability", "limits"}
-        for k in self.kinds:
-            if k not in allowed:
-                raise ParameterError(f"subtask.kinds: unknown sub-task {k!r}; allowed: {sorted(allowed)}")
+        _as_tuples(self)
         if len(set(self.kinds)) != len(self.kinds):
             raise ParameterError(f"subtask.kinds = {self.kinds!r}: duplicates are not allowed")
         if len(self.weights) != len(self.kinds):
             raise ParameterError(
                 f"subtask.weights = {self.weights!r}: need one weight per kind ({len(self.kinds)})")
-        _check_positive("subtask", "weights", self.weights) if self.weights else None
-        if not (isinstance(self.limit_power, int) and 1 <= self.limit_power <= 10):
-            raise ParameterError(f"subtask.limit_power = {self.limit_power!r}: must be an integer in [1, 10]")
 
 
 __all__ = ["GRAVITY", "SLAVE_PACK", "SLAVE_PACK_SIZE", "Gains", "MasterParams", "ParameterError",

@@ -1,11 +1,7 @@
-"""Analytic model of the planar 3-section Octarm slave, q2 = [d1, d2, d3 (m), k1, k2, k3 (1/m)], tip x2 =
-[X, Z] (m).  Paper eq. (1), i = 2: M2 ddq + N2 = T2 + J2^T F2, N2 = C dq + G + K + D dq, from
-
-    T = sum_s int_0^1 [ m_s/2 |dp_s(u)/dt|^2 + I_s/2 (dtheta_s(u)/dt)^2 ] du
-    V = -sum_s m_s int_0^1 g . p_s(u) du + sum_s [ Kb_s d_s k_s^2 / 2 + Ke_s (d_s - L0_s)^2 / 2 ]
-
-(mass uniform over the material coordinate u; Gauss-Legendre quadrature, `n_quad` points per section).
-Kernels take `SlaveParams.packed()`; the Christoffel form is tests/reference_models.py.
+"""Analytic model of the planar 3-section Octarm, q2 = [d1, d2, d3 (m), k1, k2, k3 (1/m)], tip x2 =
+[X, Z] (m): paper eq. (1), i = 2, M2 ddq + N2 = T2 + J2^T F2, N2 = C dq + G + K + D dq, from
+T = sum_s int_0^1 [m_s/2 |dp_s/dt|^2 + I_s/2 (dtheta_s/dt)^2] du, V = gravity + sum_s [Kb_s d_s k_s^2 / 2
++ Ke_s (d_s - L0_s)^2 / 2] (Gauss-Legendre, `n_quad` points per section; docs/models.md).
 """
 
 from __future__ import annotations
@@ -18,14 +14,9 @@ from .params import SLAVE_PACK, SlaveParams
 from .scratch import scratch, scratch_c, scratch_cz
 from .tip import tip_kinematics
 
-PACK_L0 = SLAVE_PACK["L0"]
-PACK_M = SLAVE_PACK["m"]
-PACK_KB = SLAVE_PACK["Kb"]
-PACK_KE = SLAVE_PACK["Ke"]
-PACK_CD = SLAVE_PACK["cd"]
-PACK_CK = SLAVE_PACK["ck"]
-PACK_IS = SLAVE_PACK["Is"]
-PACK_G = SLAVE_PACK["g"]
+# offsets of the fields in SlaveParams.packed() (module-level ints: constants for numba)
+PACK_L0, PACK_M, PACK_KB, PACK_KE, PACK_CD, PACK_CK, PACK_IS, PACK_G = (
+    SLAVE_PACK[k] for k in ("L0", "m", "Kb", "Ke", "cd", "ck", "Is", "g"))
 
 
 def elastic_kernel(pk, q, out):
@@ -37,11 +28,9 @@ def elastic_kernel(pk, q, out):
 
 
 def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
-    """M2 (6,6) and N2 (6,) together (outputs overwritten); nodes, weights: Gauss-Legendre rule on [0, 1].
-
-    Coriolis in Lagrange form: C dq = sum_s int m_s J_p^T (d^2p/dt^2 at ddq = 0) du (+ slice rotation).
-    Along section s, J_p(u) = V0 + b0(u) V1 + b1(u) V2 and d^2p/dt^2 is affine in (1, b0, b1, b2)
-    (`cc.term_bases`, `cc.term_ydd`), so the quadrature only needs the moments Q (`moments`)."""
+    """M2 (6,6) and N2 (6,) (overwritten); nodes, weights: Gauss-Legendre rule on [0, 1].  C dq = sum_s int
+    m_s J_p^T (d^2p/dt^2 at ddq = 0) du (+ slice rotation), J_p = V0 + b0 V1 + b1 V2 and d^2p/dt^2 affine
+    in (1, b0, b1, b2), so the quadrature needs only the moments Q (`moments`)."""
     d, th, ydot = scratch(3), scratch(3), scratch(6)
     y_of_q(q, d, th, ydot, dq)
     # prefix sums over the completed sections: y-gradient and ydot^T H_y ydot of their end terms
@@ -58,10 +47,8 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
             PJ[s, a] = PJ[j, a]
         term_grad_add(j, d[j], b0, b1, PJ[s])
         Pcor[s] = Pcor[j] + term_ydd(j, d[j], ydot, b0, b1, b2)
-    for a in range(6):
-        N[a] = 0.0
-        for b in range(6):
-            M[a, b] = 0.0
+    M[:] = 0.0
+    N[:] = 0.0
     gcc = complex(pk[PACK_G + 1], -pk[PACK_G])  # conj(gravity as Z + iX)
     cen = scratch(3)  # 2 dk_i dd_i
     for i in range(3):
@@ -99,9 +86,7 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
             A[2] += Y[2, 3 + i] * cen[i]
         # the section's weighted moments: by their series (controllers.moments), else node by node
         if not section_moments(th[s], fs[s], nodes, Q):
-            for k in range(3):
-                for m in range(4):
-                    Q[k, m] = 0.0
+            Q[:] = 0.0
             for g in range(nodes.shape[0]):
                 w = weights[g]
                 b0, b1, b2, b3 = term_bases(nodes[g], th[s], fs[s])
@@ -119,8 +104,7 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
             for g in range(nodes.shape[0]):
                 u = nodes[g]
                 thdd = 0.0  # d^2 theta/dt^2 at ddq = 0
-                for a in range(6):
-                    alpha[a] = 0.0
+                alpha[:] = 0.0
                 for ll in range(s + 1):
                     f = 1.0 if ll < s else u
                     alpha[ll] = f * q[3 + ll]

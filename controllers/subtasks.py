@@ -1,12 +1,7 @@
-"""Null-space sub-tasks, paper Sec. V, eqs. (29)-(33) and (41).
-
-A sub-task beta(q2) >= 0 is increased by the null-space motion: y_a = exp(-ky beta) (29), J_s = dy_a/dq2
-(31), g = -ks J_s^T y_a = ks ky y_a^2 grad beta (33); beta = sum_j w_j beta_j of
-* ``manipulability`` (41): beta_m = sqrt(det(J2 J2^T));
-* ``limits``: beta_l = sum_j (1 - s_j^(2p)), s_j in [-1, 1] the normalised section lengths (range [L0,
-  e L0]) and bend angles k d / bmax; its gradient grows steeply toward the limits.
-Each returns beta, grad beta and d/dt grad beta (closed form).  Packed spec = [w_manip, w_limits, p,
-e, bmax, L0 (3)].
+"""Null-space sub-tasks, paper Sec. V, eqs. (29)-(33), (41): y_a = exp(-ky beta), g = ks ky y_a^2 grad beta,
+beta = sum_j w_j beta_j of ``manipulability`` beta_m = sqrt(det(J2 J2^T)) (41) and ``limits`` beta_l =
+sum_j (1 - s_j^(2p)), s_j in [-1, 1] the normalised section lengths and bend angles k d / bmax; each with
+grad beta and d/dt grad beta in closed form.  Packed spec = [w_manip, w_limits, p, e, bmax, L0 (3)].
 """
 
 from __future__ import annotations
@@ -16,8 +11,7 @@ import numpy as np
 from .cc import gram_terms
 from .params import SlaveParams, SubtaskSpec
 from .scratch import scratch
-from .slave import jacobian
-from .tip import tip_kinematics
+from .slave import jacobian, tip_derivatives
 
 SPEC_SIZE = 8
 
@@ -136,8 +130,7 @@ def beta(spec: SubtaskSpec, slave: SlaveParams, q, dq=None) -> tuple[float, np.n
     """(beta, grad beta (6,), d/dt grad beta (6,)) of the combined sub-task at q2, dq2."""
     q = np.ascontiguousarray(q, dtype=float)
     dq = np.zeros(6) if dq is None else np.ascontiguousarray(dq, dtype=float)
-    x, J, H, Hd = np.empty(2), np.empty((2, 6)), np.empty((2, 6, 6)), np.empty((2, 6, 6))
-    tip_kinematics(q, dq, 3, x, J, H, Hd)
+    x, J, H, Hd = tip_derivatives(slave, q, dq)
     Jd = np.einsum("iab,b->ia", H, dq)
     grad, graddot, parts = np.empty(6), np.empty(6), np.empty(3)
     b = subtask_kernel(pack_subtask(spec, slave), J, H, Jd, Hd, q, dq, grad, graddot, parts)

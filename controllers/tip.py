@@ -1,7 +1,6 @@
-"""The tip of the 3-section CC arm and its exact q-derivatives to third order, per control step (x2, J2,
-dJ2/dt, and for the sub-task's rate (27) H = d^2 x2/dq2^2 and dH/dt).  Representation as `controllers.cc`;
-the tails R_j = sum_{m >= j} d_m f_m E_0(Theta_m) (chord from section j's start to the tip) give
-dc/dTheta_l = i (R_{l+1} + d_l f_l E_1(Theta_l)).  Checked against tests/reference_models.py.
+"""Tip of the 3-section CC arm and its exact q-derivatives to third order per control step (x2, J2,
+dJ2/dt, H = d^2 x2/dq2^2 and dH/dt for (27)); representation as `controllers.cc`; tails R_j = sum_{m >= j}
+d_m f_m E_0(Theta_m) give dc/dTheta_l = i (R_{l+1} + d_l f_l E_1(Theta_l)).
 """
 
 from __future__ import annotations
@@ -57,8 +56,7 @@ def put_sym(X, a, b, v):
 def tip_kinematics(q, dq, order, x, J, H, Hd):
     """Tip and its q-derivatives in [X, Z] rows: q, dq (6,); x (2,) m; J (2,6) (order >= 1);
     H (2,6,6) = d^2x/dq^2 (order >= 2); Hd (2,6,6) = dH/dt along dq (order >= 3).  J2dot = H . dq.
-
-    Chain rule y -> q (Theta_i = k_i d_i), with the product rule for dH/dt:
+    Chain rule y -> q (Theta_i = k_i d_i; dH/dt by the product rule):
         H[d_i, d_j] = k_j XdT[i, j] + k_i XdT[j, i] + k_i k_j XTT[i, j]
         H[d_i, k_j] = d_j (XdT[i, j] + k_i XTT[i, j]) + [i = j] G[i]
         H[k_i, k_j] = d_i d_j XTT[i, j]."""

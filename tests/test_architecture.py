@@ -218,7 +218,7 @@ def test_warm_modules_keep_the_layer_rules():
 # uses is dead code (the test below).  Entries are independent references or entry points of modules
 # whose consolidation is under way elsewhere (the slave and master models, the Cosserat rod, outputs).
 TEST_ONLY = {
-    "tip_derivatives", "to_file", "slave_control",
+    "to_file", "slave_control",
 }
 
 

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import re
-from dataclasses import replace
 
 import mujoco
 import numpy as np
 import pytest
 
 from controllers.params import MasterParams, SlaveParams
+from harness.config.errors import ConfigError
+from harness.config.load import load_scenario
 from harness.config.scenario import PlantConfig
 from harness.plant import mujoco_model as pm
 from harness.studies.fidelity import sample_q2, warning_count
@@ -371,15 +372,16 @@ def test_export_reloads(tmp_path):
 
 @pytest.mark.parametrize("bad", [0, 65, 2.5, True, "8", None])
 def test_bad_segments(bad):
-    with pytest.raises(pm.PlantModelError, match="segments"):
-        pm.build_model(MASTER, SLAVE, replace(PlantConfig(), segments=bad))
+    """The plant options are checked once, by the scenario schema, before any model is built."""
+    with pytest.raises(ConfigError, match=r"^plant\.segments = .*must be an integer in \[1, 64\]"):
+        load_scenario({"plant": {"segments": bad}})
 
 
 def test_bad_options():
-    with pytest.raises(pm.PlantModelError, match="actuation"):
-        pm.build_model(MASTER, SLAVE, PlantConfig(actuation="pneumatic"))
-    with pytest.raises(pm.PlantModelError, match="integrator"):
-        pm.build_model(MASTER, SLAVE, PlantConfig(integrator="leapfrog"))
+    with pytest.raises(ConfigError, match=r"^plant\.actuation = 'pneumatic'"):
+        load_scenario({"plant": {"actuation": "pneumatic"}})
+    with pytest.raises(ConfigError, match=r"^plant\.integrator = 'leapfrog'"):
+        load_scenario({"plant": {"integrator": "leapfrog"}})
     with pytest.raises(pm.PlantModelError, match="gravity"):
         pm.build_model(MasterParams(gravity=1.62), SLAVE, PlantConfig())
 

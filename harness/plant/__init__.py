@@ -1,7 +1,5 @@
-"""Plants: the "true" systems the controllers drive: the MuJoCo chain (`mujoco_model`, maps in
-`chain_map`), the analytic models themselves (`analytic`) and the Cosserat rod (`cosserat`).
-`build_plant(scn)` builds the one a scenario asks for and reports plant errors as `ConfigError` naming
-the scenario field (so `harness.config` never imports a plant).
+"""Plants: the MuJoCo chain, the analytic models and the Cosserat rod; `build_plant(scn)` reports
+plant errors as `ConfigError` naming the scenario field.
 """
 
 from __future__ import annotations

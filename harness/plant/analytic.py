@@ -43,37 +43,26 @@ def cholesky_solve(A, b, out, L, y):
 
 def plant_accel(mpk, spk, nodes, weights, s, T1, T2, F, acc):
     """Analytic plant forward dynamics: acc (16,) = d/dt [q1, dq1, q2, dq2].  False if not SPD."""
-    x = scratch(2)
-    J1 = scratch((2, 2))
-    Jd1 = scratch((2, 2))
-    M1 = scratch((2, 2))
-    N1 = scratch(2)
+    x, J1, Jd1, M1, N1 = scratch(2), scratch((2, 2)), scratch((2, 2)), scratch((2, 2)), scratch(2)
     master_kernel(mpk, s[0:2], s[2:4], x, J1, Jd1, M1, N1)
-    rhs1 = scratch(2)
+    rhs1, dd1 = scratch(2), scratch(2)
     for i in range(2):
         rhs1[i] = T1[i] - N1[i] + J1[0, i] * F[0] + J1[1, i] * F[1]
-    dd1 = scratch(2)
     ok1 = cholesky_solve(M1, rhs1, dd1, scratch((2, 2)), scratch(2))
-    M2 = scratch((6, 6))
-    N2 = scratch(6)
+    M2, N2, rhs2, dd2 = scratch((6, 6)), scratch(6), scratch(6), scratch(6)
     mass_nle_kernel(spk, s[4:10], s[10:16], nodes, weights, M2, N2)
-    rhs2 = scratch(6)
     if F[2] != 0.0 or F[3] != 0.0:
-        x2 = scratch(2)
-        J2 = scratch((2, 6))
-        H = scratch((2, 6, 6))
+        x2, J2, H = scratch(2), scratch((2, 6)), scratch((2, 6, 6))
         tip_kinematics(s[4:10], s[10:16], 1, x2, J2, H, H)
         for a in range(6):
             rhs2[a] = T2[a] - N2[a] + J2[0, a] * F[2] + J2[1, a] * F[3]
     else:
         for a in range(6):
             rhs2[a] = T2[a] - N2[a]
-    dd2 = scratch(6)
     ok2 = cholesky_solve(M2, rhs2, dd2, scratch((6, 6)), scratch(6))
-    acc[0] = s[2]
-    acc[1] = s[3]
-    acc[2] = dd1[0]
-    acc[3] = dd1[1]
+    for i in range(2):
+        acc[i] = s[2 + i]
+        acc[2 + i] = dd1[i]
     for a in range(6):
         acc[4 + a] = s[10 + a]
         acc[10 + a] = dd2[a]

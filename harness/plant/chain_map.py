@@ -1,7 +1,5 @@
-"""The discretized Octarm chain <-> CC coordinates q2: sensing, actuation and elastic-correction maps
-(layout: `harness.plant.mujoco_model`; joints = C [d - L0, k d], [d - L0, k d] = R joints, R C = I).
-The ``chain_*`` kernels are numba-compatible loops writing into ``out``; ``ChainMap`` holds a model's
-addresses and constant arrays, with allocating wrappers.
+"""The discretized Octarm chain <-> CC coordinates q2 (joints = C [d - L0, k d], R C = I): numba-
+compatible ``chain_*`` kernels writing into ``out``, and ``ChainMap``, a model's addresses and arrays.
 """
 
 from __future__ import annotations
@@ -93,16 +91,10 @@ def muscle_commands(q2, T2, radius, max_force, out):
 
 
 def chain_elastic_correction(qpos_chain, R, C, L0, section, is_hinge, seg_kb, ke, k_joint, k_shape, out):
-    """Elastic force to ADD to MuJoCo's joint springs (through qfrc_applied), out (n_chain,), so that
-    springs + out = -grad E,
-
-      E = sum_i [ seg_kb_i / (2 d_i) sum_j theta_ij^2 + 1/2 ke_i (d_i - L0_i)^2 ] + 1/2 sum_s k_shape_s r_s^2,
-
-    d_i = L0_i + (R qpos)_i, theta_ij section i's hinges, r = s - C_e (P s) the non-CC part of the slides
-    s (P = R[:3]).  On the manifold E is the analytic elastic energy, so A^T (springs + out) = -dV/dq2;
-    the shape term keeps the non-CC slide patterns as stiff as the springs.  A stiff state-dependent
-    force: recompute it every physics step.  R (6, n), C (n, 6), L0, seg_kb = N Kb, ke (3,); section,
-    is_hinge (n,) int64; k_joint (n,) MuJoCo joint stiffness; k_shape (n,) (0 on hinges)."""
+    """Force out (n_chain,) to ADD to MuJoCo's joint springs so that springs + out = -grad E, E = sum_i
+    [seg_kb_i / (2 d_i) sum_j theta_ij^2 + ke_i (d_i - L0_i)^2 / 2] + sum_s k_shape_s r_s^2 / 2 (d_i = L0_i
+    + (R qpos)_i, theta_ij section i's hinges, r = s - C_e (P s) the non-CC part of the slides s, P = R[:3]);
+    the analytic elastic energy on the manifold.  seg_kb = N Kb; k_joint: MuJoCo's; k_shape 0 on hinges."""
     n = R.shape[1]
     e, sq = scratch_zeros(3), scratch_zeros(3)
     for c in range(n):
@@ -119,22 +111,20 @@ def chain_elastic_correction(qpos_chain, R, C, L0, section, is_hinge, seg_kb, ke
     # shape term: g = k_shape * r on slides;  grad = g - P^T (C_e^T g)
     ctg = scratch_zeros(3)
     for c in range(n):
-        if is_hinge[c] == 0 and k_shape[c] != 0.0:
+        if is_hinge[c] == 0:
             r = qpos_chain[c]
             for i in range(3):
                 r -= C[c, i] * e[i]
-            g = k_shape[c] * r
-            for i in range(3):
-                ctg[i] += C[c, i] * g
+            out[c] = k_shape[c] * r  # g, kept in out until the last loop
+            if k_shape[c] != 0.0:
+                for i in range(3):
+                    ctg[i] += C[c, i] * out[c]
     for c in range(n):
         q = qpos_chain[c]
         if is_hinge[c] == 1:
             grad = seg_kb[section[c]] * q * dinv[section[c]]
         else:
-            r = q
-            for i in range(3):
-                r -= C[c, i] * e[i]
-            grad = k_shape[c] * r
+            grad = out[c]
             for i in range(3):
                 grad += R[i, c] * (dEdd[i] - ctg[i])
         out[c] = -grad + k_joint[c] * q
@@ -142,8 +132,7 @@ def chain_elastic_correction(qpos_chain, R, C, L0, section, is_hinge, seg_kb, ke
 
 def chain_layout(n_segments: int) -> dict[str, np.ndarray]:
     """Constant layout arrays for N segments per section: ``C`` (n_chain, 6), ``R`` (6, n_chain) (R C = I),
-    ``S`` (n_slides, 3) (extensions -> slides), ``section``, ``is_hinge``, ``segment`` (n_chain,) int64
-    (segment N for the tip slide), ``slide_index`` (n_slides,)."""
+    ``section``, ``is_hinge``, ``segment`` (n_chain,) int64 (segment N for the tip slide)."""
     N = int(n_segments)
     n = 6 * N + 1
     section = np.r_[np.repeat(np.arange(3), 2 * N), 2].astype(np.int64)
@@ -161,26 +150,19 @@ def chain_layout(n_segments: int) -> dict[str, np.ndarray]:
         else:
             C[c, i] = 1.0 / N
     C[n - 1, 2] = 0.5 / N  # tip slide
-    slide_index = np.flatnonzero(is_hinge == 0)
-    S = C[slide_index, :3].copy()
-    P = np.linalg.pinv(S)  # (3, n_slides), P S = I
+    slides = np.flatnonzero(is_hinge == 0)
     R = np.zeros((6, n))
-    R[:3, slide_index] = P
+    R[:3, slides] = np.linalg.pinv(C[slides, :3])  # least-squares extensions of the slides
     for c in np.flatnonzero(is_hinge == 1):
         R[3 + section[c], c] = 1.0
-    return {"C": C, "R": R, "S": S, "section": section, "is_hinge": is_hinge,
-            "slide_index": slide_index, "segment": segment}
+    return {"C": C, "R": R, "section": section, "is_hinge": is_hinge, "segment": segment}
 
 
 @dataclass(frozen=True, eq=False)
 class ChainMap:
-    """Addresses and constant arrays tying a MuJoCo model to q2 (read-only, C-contiguous float64/int64).
-
-    Chain arrays (n_chain = 6N + 1) in MuJoCo order; chain_actuator_ids: the servo/motor per joint (empty
-    for muscles); muscle_actuator_ids (6,): ``muscle_commands`` order (else empty); muscle_radius,
-    muscle_max_force (3,) m, N; *_base_pos (3,): world positions of the bases; C, R, L0 as
-    ``chain_layout``; joint_stiffness: MuJoCo's; shape_stiffness, seg_kb, ke: ``chain_elastic_correction``;
-    servo_kp, servo_kv (zeros unless servo)."""
+    """Addresses and constant arrays tying a MuJoCo model to q2 (read-only); chain arrays (6N + 1,) in
+    MuJoCo order; muscle_actuator_ids in ``muscle_commands`` order (empty unless muscle, as
+    chain_actuator_ids for muscles); *_base_pos (3,) world; C, R, L0: ``chain_layout``."""
 
     n_segments: int
     actuation: str
@@ -284,13 +266,11 @@ class ChainMap:
 
     def master_tip(self, m: mujoco.MjModel, d: mujoco.MjData) -> np.ndarray:
         """[X, Z] of master_tip_site relative to master_base (needs up-to-date kinematics)."""
-        p = d.site_xpos[self.master_site_id] - self.master_base_pos
-        return np.array([p[0], p[2]])
+        return (d.site_xpos[self.master_site_id] - self.master_base_pos)[[0, 2]]
 
     def octarm_tip(self, m: mujoco.MjModel, d: mujoco.MjData) -> np.ndarray:
         """[X, Z] of octarm_tip_site relative to octarm_base (needs up-to-date kinematics)."""
-        p = d.site_xpos[self.tip_site_id] - self.octarm_base_pos
-        return np.array([p[0], p[2]])
+        return (d.site_xpos[self.tip_site_id] - self.octarm_base_pos)[[0, 2]]
 
 
 # kernels compiled by harness.loop.fast (numba) together with controllers/

@@ -1,7 +1,5 @@
-"""Per-joint physical parameters of the discretized Octarm chain (masses, inertias, stiffness, damping,
-armature, servo gains, muscle tendons) from the slave parameters; layout: `harness.plant.chain_map`,
-model and derivations: `harness.plant.mujoco_model`, docs/plants.md.
-"""
+"""Per-joint physical parameters of the discretized Octarm chain from the slave parameters
+(docs/plants.md)."""
 
 from __future__ import annotations
 
@@ -14,11 +12,8 @@ TIP_SLIDE_ARMATURE = 1.0  # extra armature of the tip slide, in last-section seg
 
 
 def segment_inertias(slave: SlaveParams, N: int) -> tuple[np.ndarray, np.ndarray, float]:
-    """Per-body masses (3, N) kg, inertias about y (3, N) kg m^2 and the tip mass kg.
-
-    Rod term (m_i / N) l0_i^2 / 12 on the segment's body; the slice inertia Is_i / N of a segment split
-    in halves between the two bodies carrying its end tangents (trapezoidal, second order; the base's
-    half is dropped)."""
+    """Per-body masses (3, N) kg, inertias about y (3, N) kg m^2 (rod term, plus the slice inertia Is_i / N
+    split in halves between the bodies at the segment's ends) and the tip mass kg."""
     m = np.asarray(slave.masses)
     L0 = np.asarray(slave.rest_lengths)
     Is = np.asarray(slave.slice_inertia)
@@ -71,10 +66,8 @@ def joint_stiffness(slave: SlaveParams, N: int, layout: dict) -> np.ndarray:
 
 def joint_damping(slave: SlaveParams, N: int, layout: dict, bending_viscosity=(0.0, 0.0, 0.0),
                   extension_viscosity=(0.0, 0.0, 0.0)) -> np.ndarray:
-    """MuJoCo joint damping per chain joint (N m s/rad, N s/m): the q2 damping (Dk on k-rates, De on
-    d-rates) plus the rod's material damping (eta_b, eta_a; hinge eta_b / h, slide eta_a / h for a
-    segment of length h, the springs' rules for half rods).  Hinges N (Dk_i / L0_i + eta_b_i) / L0_i,
-    slides `slide_pattern` of De_i + eta_a_i / L0_i (exact on the CC manifold at rest length)."""
+    """MuJoCo joint damping per chain joint (N m s/rad, N s/m), the q2 damping plus the material damping
+    (eta_b, eta_a): hinges N (Dk_i / L0_i + eta_b_i) / L0_i, slides `slide_pattern` of De + eta_a / L0."""
     L0 = np.asarray(slave.rest_lengths)
     eb = np.asarray(bending_viscosity, dtype=float)
     ea = np.asarray(extension_viscosity, dtype=float)
@@ -83,27 +76,19 @@ def joint_damping(slave: SlaveParams, N: int, layout: dict, bending_viscosity=(0
 
 
 def joint_armature(slave: SlaveParams, N: int, layout: dict, fraction: float) -> np.ndarray:
-    """Joint armature per chain joint: ``fraction`` times the section's inertia scale (hinges m_i L0_i^2 / 3
-    kg m^2, slides m_i kg), plus TIP_SLIDE_ARMATURE m_2 / N on the tip slide (otherwise the fastest mode).
-    A regularizer the loaded chain needs (a mismatch ~ fraction / (6 N) of M2)."""
-    m = np.asarray(slave.masses)
-    L0 = np.asarray(slave.rest_lengths)
-    n = layout["C"].shape[0]
-    a = np.zeros(n)
-    for c in range(n):
-        i = int(layout["section"][c])
-        a[c] = fraction * (m[i] * L0[i] ** 2 / 3.0 if layout["is_hinge"][c] else m[i])
-    a[-1] += TIP_SLIDE_ARMATURE * m[2] / N
+    """Joint armature per chain joint (a regularizer): ``fraction`` times m_i L0_i^2 / 3 (hinges, kg m^2)
+    or m_i (slides, kg), plus TIP_SLIDE_ARMATURE m_2 / N on the tip slide."""
+    sec = layout["section"]
+    m, L0 = np.asarray(slave.masses)[sec], np.asarray(slave.rest_lengths)[sec]
+    a = fraction * np.where(layout["is_hinge"] == 1, m * L0 ** 2 / 3.0, m)
+    a[-1] += TIP_SLIDE_ARMATURE * slave.masses[2] / N
     return a
 
 
 def servo_gains(mass_u: np.ndarray, N: int, layout: dict, frequency: float,
                 damping_ratio: float) -> tuple[np.ndarray, np.ndarray]:
-    """Position-servo gains per chain joint (kp, kv), per unit length of the section.
-
-    mass_u (6,): diag(C^T M C), the inertias of u = [e (kg), Theta (kg m^2)] at the straight rest pose.
-    Each CC coordinate alone is a servo of `frequency` (Hz) and `damping_ratio`: K_u = mass_u w^2,
-    D_u = 2 zeta w mass_u, spread like the springs (hinges N K_Theta, slides `slide_pattern` of K_e)."""
+    """Position-servo gains (kp, kv) per chain joint: each CC coordinate u = [e, Theta] of inertia mass_u
+    (6,) = diag(C^T M C) a servo of `frequency` (Hz) and `damping_ratio`, spread like the springs."""
     w = 2.0 * np.pi * float(frequency)
     mu = np.asarray(mass_u, dtype=float)
     kp_u, kv_u = mu * w * w, 2.0 * float(damping_ratio) * w * mu

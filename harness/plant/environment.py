@@ -1,10 +1,6 @@
-"""Environment objects the Octarm can touch, contact sensing and the t = 0 clearance check (MuJoCo plant;
-docs/guide/contact.md).  Objects are world geoms in the slave's plane (world = octarm_base + [X, 0, Z]);
-every segment capsule and a tip sphere touch them through explicit frictionless pairs with
-
-    solref = (-k (1 - d) A_b, -c (1 - d) A_b),  solimp = (d, d, 0.001, 0.5, 2)  =>  f = k r + c dr/dt
-
-in static equilibrium (r penetration, d the impedance, A_b = body_invweight0, c = 2 zeta sqrt(k / A_b)).
+"""Environment objects, contact sensing and the t = 0 clearance check of the MuJoCo plant
+(docs/guide/contact.md): frictionless pairs with solref = (-k (1 - d) A_b, -c (1 - d) A_b),
+solimp = (d, d, 0.001, 0.5, 2), i.e. f = k r + c dr/dt (A_b = body_invweight0).
 """
 
 from __future__ import annotations
@@ -24,6 +20,7 @@ N_POINTS = 4  # contact points recorded per control step (largest forces)
 # contact sensor data bits (mjtConDataField order) and reductions
 _FOUND, _FORCE, _DIST, _POS, _NORMAL = 1, 2, 8, 16, 32
 _MINDIST, _MAXFORCE, _NETFORCE = 1, 2, 3
+SENSORS = ("tip_contact_net", "arm_contact_net", "arm_contact_min", "arm_contact_pts")
 
 
 @dataclass(frozen=True)
@@ -64,12 +61,6 @@ def _add_object(spec: mujoco.MjSpec, obj: EnvObject, base: np.ndarray) -> str:
     return name
 
 
-def _contact_sensor(spec, name, objtype, objname, data, reduce, num):
-    s = spec.add_sensor(name=name, type=mujoco.mjtSensor.mjSENS_CONTACT, objtype=objtype, objname=objname)
-    s.intprm[:3] = [data, reduce, num]
-    return s
-
-
 def add_environment(spec: mujoco.MjSpec, env: EnvironmentConfig, invweight: dict[str, float],
                     arm_geoms: list[tuple[str, str]]) -> None:
     """Add the objects, the tip sphere, one pair per (arm geom, object) and the contact sensors to `spec`
@@ -88,19 +79,19 @@ def add_environment(spec: mujoco.MjSpec, env: EnvironmentConfig, invweight: dict
             solref, solimp = contact_parameters(obj, invweight[bname])
             spec.add_pair(name=f"pair_{gname}_{obj.name}", geomname1=gname, geomname2=oname, condim=1,
                           solref=solref, solimp=solimp, margin=0.0, gap=0.0)
-    body, xbody = mujoco.mjtObj.mjOBJ_BODY, mujoco.mjtObj.mjOBJ_XBODY
-    first = arm_geoms[0][1]
-    _contact_sensor(spec, "tip_contact_net", body, "octarm_tip_body", _FOUND | _FORCE, _NETFORCE, 1)
-    _contact_sensor(spec, "arm_contact_net", xbody, first, _FOUND | _FORCE, _NETFORCE, 1)
-    _contact_sensor(spec, "arm_contact_min", xbody, first, _FOUND | _DIST, _MINDIST, 1)
-    _contact_sensor(spec, "arm_contact_pts", xbody, first, _FOUND | _FORCE | _POS | _NORMAL, _MAXFORCE,
-                    N_POINTS)
+    body, xbody, first = mujoco.mjtObj.mjOBJ_BODY, mujoco.mjtObj.mjOBJ_XBODY, arm_geoms[0][1]
+    for name, objtype, objname, data, reduce, num in (  # the sensors of ContactMap.adr, in its order
+            (SENSORS[0], body, "octarm_tip_body", _FOUND | _FORCE, _NETFORCE, 1),
+            (SENSORS[1], xbody, first, _FOUND | _FORCE, _NETFORCE, 1),
+            (SENSORS[2], xbody, first, _FOUND | _DIST, _MINDIST, 1),
+            (SENSORS[3], xbody, first, _FOUND | _FORCE | _POS | _NORMAL, _MAXFORCE, N_POINTS)):
+        s = spec.add_sensor(name=name, type=mujoco.mjtSensor.mjSENS_CONTACT, objtype=objtype, objname=objname)
+        s.intprm[:3] = [data, reduce, num]
     spec.option.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
 
 
 def contact_map(m: mujoco.MjModel) -> ContactMap:
-    names = ("tip_contact_net", "arm_contact_net", "arm_contact_min", "arm_contact_pts")
-    adr = np.array([m.sensor_adr[m.sensor(n).id] for n in names], dtype=np.int64)
+    adr = np.array([m.sensor_adr[m.sensor(n).id] for n in SENSORS], dtype=np.int64)
     obj = [g for g in range(m.ngeom) if m.geom(g).name.startswith("env_")]
     paired = {int(m.pair_geom1[p]) for p in range(m.npair)} | {int(m.pair_geom2[p]) for p in range(m.npair)}
     arm = sorted(paired - set(obj))  # MuJoCo may store either geom of a pair first

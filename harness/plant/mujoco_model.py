@@ -1,13 +1,6 @@
-"""MuJoCo plant: the master and a discretized Octarm, built from ``mjcf/`` by editing an MjSpec (the model
-and its actuations: docs/plants.md; the joint <-> q2 maps: `harness.plant.chain_map`; per-joint
-parameters: `harness.plant.chain_params`).  SI units; both robots move in planes parallel to world x-z,
-hinges turn about +y (+z toward +x); task space [X, Z] is relative to each base.
-
-Section i (d_i, k_i, Theta_i = k_i d_i, rest L0_i) is N segments: body ``octarm_s{i}_seg{j}_body`` at the
-segment midpoint has a slide ``..._slide`` along the parent's tangent, then a hinge ``..._hinge``;
-``octarm_tip_body`` (``octarm_tip_slide``, ``octarm_tip_site``) ends the chain.  On the CC manifold, with
-e_i = d_i - L0_i: hinge(i, j) = Theta_i / N, slide(i, j >= 1) = e_i / N, slide(i, 0) = (e_{i-1} + e_i)
-/ (2N), tip slide = e_2 / (2N), i.e. joints = C [e, Theta] (n_chain = 6N + 1, MuJoCo order).
+"""MuJoCo plant: the master and a discretized Octarm built by editing an MjSpec of ``mjcf/`` (model,
+naming and joint layout: docs/plants.md; maps: `chain_map`; per-joint parameters: `chain_params`).
+SI units; hinges turn about +y; task space [X, Z] relative to each base.
 """
 
 from __future__ import annotations
@@ -22,7 +15,7 @@ import numpy as np
 
 from controllers.params import MasterParams, SlaveParams
 from harness.config.assets import asset_dir
-from harness.config.scenario import ACTUATIONS, PlantConfig, Scenario
+from harness.config.scenario import INTEGRATORS, PlantConfig, Scenario
 from harness.config.textio import atomic_path
 from harness.plant.chain_map import ChainMap, chain_layout
 from harness.plant.chain_params import (
@@ -41,18 +34,12 @@ from harness.plant.initial import InitialStateError, initial_state
 MJCF_DIR = asset_dir("mjcf")  # the shipped MJCF (package data when installed; harness.config.assets)
 SCENE_XML = MJCF_DIR / "scene.xml"
 
-MAX_SEGMENTS = 64
 # equality constraints holding the sections at constant curvature (api-notes: tight values)
 CC_SOLREF = (0.002, 1.0)
 CC_SOLIMP = (0.99, 0.999, 0.001, 0.5, 2.0)
 
-_INTEGRATORS = {
-    "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST,
-    "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
-    "euler": mujoco.mjtIntegrator.mjINT_EULER,
-    "rk4": mujoco.mjtIntegrator.mjINT_RK4,
-    "discrete": mujoco.mjtIntegrator.mjINT_DISCRETE,  # not in harness.config.INTEGRATORS
-}
+# the scenario's integrators, and "discrete" (not in harness.config.INTEGRATORS)
+_INTEGRATORS = {n: getattr(mujoco.mjtIntegrator, f"mjINT_{n.upper()}") for n in (*INTEGRATORS, "discrete")}
 
 
 class PlantModelError(ValueError):
@@ -171,7 +158,7 @@ def _add_octarm(spec: mujoco.MjSpec, slave: SlaveParams, plant: PlantConfig, N: 
 
 def _add_muscles(spec: mujoco.MjSpec, joint_names: list[str], plant: PlantConfig, layout: dict,
                  N: int) -> list[str]:
-    """Two one-sided extensor groups per section on fixed tendons (module docstring)."""
+    """Two one-sided extensor groups per section on fixed tendons (docs/plants.md)."""
     slide, hinge = muscle_tendon_coefs(N, layout)
     names = []
     for i in range(3):
@@ -194,80 +181,48 @@ def _add_muscles(spec: mujoco.MjSpec, joint_names: list[str], plant: PlantConfig
 
 
 def _add_actuators(spec: mujoco.MjSpec, joint_names: list[str], actuation: str) -> list[str]:
-    """A servo (gains set in `_build`) or a motor per chain joint."""
+    """A servo (made a position actuator with its gains in `_build`) or a motor per chain joint."""
     kind = "servo" if actuation == "servo" else "motor"
     for jn in joint_names:
-        a = spec.add_actuator(name=f"{jn}_{kind}", target=jn, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-        if kind == "servo":
-            a.set_to_position(kp=1.0, kv=0.0)
-        else:
-            a.set_to_motor()
+        spec.add_actuator(name=f"{jn}_{kind}", target=jn, trntype=mujoco.mjtTrn.mjTRN_JOINT).set_to_motor()
     return [f"{jn}_{kind}" for jn in joint_names]
 
 
 def _add_cc_equalities(spec: mujoco.MjSpec, N: int) -> None:
-    """Joint and tendon equalities holding each section at constant curvature."""
-
-    def joint_eq(name, j1, j2, a1):
-        eq = spec.add_equality(name=name, type=mujoco.mjtEq.mjEQ_JOINT, name1=j1, name2=j2,
-                               objtype=mujoco.mjtObj.mjOBJ_JOINT)
-        eq.data[:5] = [0.0, a1, 0.0, 0.0, 0.0]
-        eq.solref, eq.solimp = list(CC_SOLREF), list(CC_SOLIMP)
-
-    def tendon_eq(name, coefs):
-        t = spec.add_tendon(name=f"{name}_tendon")
-        for jn, cf in coefs:
-            t.wrap_joint(jn, cf)
-        eq = spec.add_equality(name=f"{name}_equality", type=mujoco.mjtEq.mjEQ_TENDON,
-                               name1=t.name, objtype=mujoco.mjtObj.mjOBJ_TENDON)
-        eq.data[:5] = [0.0, 0.0, 0.0, 0.0, 0.0]
-        eq.solref, eq.solimp = list(CC_SOLREF), list(CC_SOLIMP)
+    """Joint equalities (name, joint, joint it follows, ratio) and tendon equalities (name, [(joint,
+    coefficient)], sum = 0) holding each section at constant curvature."""
 
     def sl(i, j):
         return f"octarm_s{i}_seg{j}_slide"
 
-    for i in range(3):
-        for j in range(1, N):
-            joint_eq(f"octarm_s{i}_seg{j}_hinge_equality", f"octarm_s{i}_seg{j}_hinge",
-                     f"octarm_s{i}_seg0_hinge", 1.0)
-    if N == 1:
-        # 4 slides, 3 extensions: s00 - s10 + s20 - tip = 0 on the manifold
-        tendon_eq("octarm_slide_cc", [(sl(0, 0), 1.0), (sl(1, 0), -1.0), (sl(2, 0), 1.0),
-                                      ("octarm_tip_slide", -1.0)])
-        return
-    for i in range(3):
-        for j in range(2, N):
-            joint_eq(f"octarm_s{i}_seg{j}_slide_equality", sl(i, j), sl(i, 1), 1.0)
-    joint_eq("octarm_s0_seg0_slide_equality", sl(0, 0), sl(0, 1), 0.5)
-    for i in (1, 2):
-        tendon_eq(f"octarm_s{i}_boundary", [(sl(i, 0), 1.0), (sl(i - 1, 1), -0.5), (sl(i, 1), -0.5)])
-    joint_eq("octarm_tip_slide_equality", "octarm_tip_slide", sl(2, 1), 0.5)
-
-
-def _validate_plant(plant: PlantConfig) -> int:
-    """N, the segments per section, once every plant option is valid (else PlantModelError)."""
-    n = plant.segments
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not (1 <= int(n) <= MAX_SEGMENTS):
-        raise PlantModelError(f"plant.segments = {n!r}: must be an integer in [1, {MAX_SEGMENTS}]")
-    if plant.actuation not in ACTUATIONS:
-        raise PlantModelError(f"plant.actuation = {plant.actuation!r}: must be one of {ACTUATIONS}")
-    if plant.integrator not in _INTEGRATORS:
-        raise PlantModelError(
-            f"plant.integrator = {plant.integrator!r}: must be one of {tuple(_INTEGRATORS)}")
-    for f in ("physics_dt", "servo_frequency", "servo_damping_ratio"):
-        v = getattr(plant, f)
-        if not (np.isfinite(v) and v > 0):
-            raise PlantModelError(f"plant.{f} = {v!r}: must be finite and > 0")
-    for f in ("muscle_time_constant", "muscle_max_force", "muscle_radius"):
-        if np.shape(v := getattr(plant, f)) != (3,) or not np.all(np.isfinite(v) & (np.asarray(v) > 0)):
-            raise PlantModelError(f"plant.{f} = {v!r}: must be 3 finite numbers > 0")
-    if not (np.isfinite(plant.armature_fraction) and plant.armature_fraction >= 0):
-        raise PlantModelError(f"plant.armature_fraction = {plant.armature_fraction!r}: must be >= 0")
-    return int(n)
+    eqs = [(f"octarm_s{i}_seg{j}_hinge_equality", f"octarm_s{i}_seg{j}_hinge", f"octarm_s{i}_seg0_hinge", 1.0)
+           for i in range(3) for j in range(1, N)]
+    if N == 1:  # 4 slides, 3 extensions: s00 - s10 + s20 - tip = 0 on the manifold
+        eqs.append(("octarm_slide_cc", [(sl(0, 0), 1.0), (sl(1, 0), -1.0), (sl(2, 0), 1.0),
+                                        ("octarm_tip_slide", -1.0)]))
+    else:
+        eqs += [(f"{sl(i, j)}_equality", sl(i, j), sl(i, 1), 1.0) for i in range(3) for j in range(2, N)]
+        eqs.append((f"{sl(0, 0)}_equality", sl(0, 0), sl(0, 1), 0.5))
+        eqs += [(f"octarm_s{i}_boundary", [(sl(i, 0), 1.0), (sl(i - 1, 1), -0.5), (sl(i, 1), -0.5)])
+                for i in (1, 2)]
+        eqs.append(("octarm_tip_slide_equality", "octarm_tip_slide", sl(2, 1), 0.5))
+    for name, *rest in eqs:
+        if len(rest) == 1:  # a tendon
+            t = spec.add_tendon(name=f"{name}_tendon")
+            for jn, cf in rest[0]:
+                t.wrap_joint(jn, cf)
+            eq = spec.add_equality(name=f"{name}_equality", type=mujoco.mjtEq.mjEQ_TENDON, name1=t.name,
+                                   objtype=mujoco.mjtObj.mjOBJ_TENDON)
+            eq.data[:5] = [0.0, 0.0, 0.0, 0.0, 0.0]
+        else:
+            eq = spec.add_equality(name=name, type=mujoco.mjtEq.mjEQ_JOINT, name1=rest[0], name2=rest[1],
+                                   objtype=mujoco.mjtObj.mjOBJ_JOINT)
+            eq.data[:5] = [0.0, rest[2], 0.0, 0.0, 0.0]
+        eq.solref, eq.solimp = list(CC_SOLREF), list(CC_SOLIMP)
 
 
 def _build(master: MasterParams, slave: SlaveParams, plant: PlantConfig, scene=None, environment=None):
-    N = _validate_plant(plant)
+    N = int(plant.segments)  # plant options: validated by the scenario schema
     if scene is None:
         scene = getattr(plant, "scene_xml", None)
     scene = SCENE_XML if scene is None else Path(scene)
@@ -313,11 +268,9 @@ def _mass_matrix0(m: mujoco.MjModel) -> np.ndarray:
 
 def build_spec(master: MasterParams, slave: SlaveParams, plant: PlantConfig, *,
                scene_xml: str | os.PathLike | None = None) -> mujoco.MjSpec:
-    """The plant as an editable ``mujoco.MjSpec``: scene.xml (or scene_xml, which must define the named
-    master elements, ``octarm_base`` and the ``octarm_*`` default classes), the master from ``master``
-    and the generated Octarm.  master/slave: the plant's parameters (may differ from the controller's);
-    plant: segments N in [1, 64], actuation, enforce_cc, physics_dt, integrator, servo tuning,
-    armature_fraction.  Raises PlantModelError on bad input or MJCF."""
+    """The plant as an editable ``mujoco.MjSpec``: scene.xml (or scene_xml, defining the master elements,
+    ``octarm_base`` and the ``octarm_*`` default classes) with the master and the generated Octarm from the
+    plant's own parameters.  Raises PlantModelError on bad input or MJCF."""
     return _build(master, slave, plant, scene_xml)[0]
 
 
@@ -391,9 +344,8 @@ def _check_clearance(m: mujoco.MjModel, cmap: ChainMap, cm: ContactMap, scn: Sce
 
 
 def stiffness_courant_number(m: mujoco.MjModel, cm: ChainMap) -> float:
-    """h w_max of the chain's joint springs (and servo kp) against its inertia at qpos0: w_max^2 the largest
-    generalized eigenvalue of diag(stiffness + kp) and the chain block of M; explicit springs need < 2
-    (it grows with N: N <= 32 steps stably at 1 ms)."""
+    """h w_max of the chain's joint springs (and servo kp) against the chain block of M at qpos0;
+    explicit springs need < 2."""
     idx = np.asarray(cm.chain_dof_adr)
     k = np.asarray(cm.joint_stiffness) + np.asarray(cm.servo_kp)
     L = np.linalg.cholesky(_mass_matrix0(m)[np.ix_(idx, idx)])

@@ -1,15 +1,8 @@
-"""The protocol of plants stepped by `harness.loop.stepped_loop` (the Cosserat rod, the adapters of
-`harness.loop.stepped_plants`).  Per control step: `true_state`, then (after the controller) `record(k)`,
-`command` (the commands of step k - actuation delay) and `advance(control_dt)`.
-
-Optional members: `record(k)` / `finish(traj, done)` (the plant records its own geometry; else
-`slave_tip()` [X, Z] (2,) m and `geometry()` (world-frame arrays, "master" (3, 3)) are copied each step);
-`forces(F (4,), contact (5,))` (the true forces, else the constant ones); `stop` (the run's stop flag);
-`state_names`, `get_state(keep=False) -> (n,)`, `set_state(x)` (for `harness.studies.stability`;
-keep=True also keeps the rest of the physics state, restored by every later `set_state`).
-
-Units: q1 rad, q2 = [d (m), k (1/m)]; T1 N m (13); T2 = [T_d (N), T_k (N m^2)] (18).  Statuses:
-`controllers.status.Status`."""
+"""The protocol of plants stepped by `harness.loop.stepped_loop`; per control step: `true_state`,
+`record(k)`, `command`, `advance(control_dt)`.  Optional: `record(k)` / `finish(traj, done)` (else
+`slave_tip()` (2,) m and `geometry()` are copied each step), `forces(F (4,), contact (5,))`, `stop`,
+`state_names`, `get_state(keep=False) -> (n,)`, `set_state(x)` (keep=True: `set_state` restores the
+rest of the physics state).  Units: q1 rad, q2 = [d (m), k (1/m)], T1 N m, T2 [N, N m^2] (18)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,5 @@
-"""Environment objects on the Cosserat plant: the scenario's `[environment.objects.<name>]` acting on every
-rod node through PyElastica's plane / sphere penalty law compiled into the rod's step
-(`kernels.contact_forces`); geometry, law, its differences from PyElastica and the sensed summary:
-docs/plants.md, "Contact on the rod"."""
+"""Environment objects on the Cosserat plant: plane / sphere penalty contact on every rod node
+(`kernels.contact_forces`); docs/plants.md, "Contact on the rod"."""
 
 from __future__ import annotations
 

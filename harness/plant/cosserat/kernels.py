@@ -1,8 +1,6 @@
-"""Compiled physics of the planar Octarm Cosserat rod (`harness.plant.cosserat.rod`; maths, frames and
-parameters: docs/plants.md, "The Cosserat rod's model"): `rod_loads` (elastic, damping, active and
-external loads from the strains of PyElastica's kernels, `harness.plant.cosserat.pyelastica`), `run_steps`
-(position Verlet with PyElastica's update kernels in one loop), `fit_rod` (the least-squares CC fit),
-`rest_strains`, `active_loads`, `muscle_loads`.
+"""Compiled physics of the planar Octarm Cosserat rod (`harness.plant.cosserat.rod`): loads, position
+Verlet steps, the CC fit and the commands' strains and loads.  Maths and frames: docs/plants.md,
+"The Cosserat rod's model".
 """
 
 from __future__ import annotations
@@ -47,15 +45,13 @@ def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_len
             dv[i, k] = (vel[i, k + 1] - vel[i, k]) / rest_lengths[k]
     qdv = _batch_matvec(Q, dv)
     se3 = sigma.copy()
-    for k in range(ne):
-        se3[2, k] += 1.0
+    se3[2] += 1.0
     sdot = qdv - _batch_cross(omega, se3)
     n = np.empty((3, ne))
     for i in range(3):
         for k in range(ne):
             n[i, k] = shear_matrix[i, i, k] * (sigma[i, k] - rest_sigma[i, k]) + eta_e[i, k] * sdot[i, k]
-    for k in range(ne):
-        n[2, k] -= act_n[k]
+    n[2] -= act_n
 
     # --- bending couples m at the hinges (elastic + active), base half-element hinge -------------------
     m = np.empty((3, nv))
@@ -127,9 +123,7 @@ def rod_loads(pos, vel, Q, omega, J, volume, lengths, tangents, radius, rest_len
         f_ext[i, nn - 1] += tip_force[i]
     if objs.shape[0] > 0:
         contact_forces(pos, vel, objs, cdamp, f_contact)
-        for i in range(3):
-            for k in range(nn):
-                f_ext[i, k] += f_contact[i, k]
+        f_ext += f_contact
     for i in range(3):
         for k in range(ne):
             tau_ext[i, k] = 0.0
@@ -214,9 +208,7 @@ def contact_forces(pos, vel, objs, cdamp, f_contact):
     (no, nn + 1) rows [k N/m, c_j N s/m]; penetration g > 0 gives (k g - c n . v_j) n (Gazzola et al.
     2018, eq. 4.8; docs/plants.md, "Contact on the rod")."""
     nn = pos.shape[1]
-    for i in range(3):
-        for j in range(nn):
-            f_contact[i, j] = 0.0
+    f_contact[:] = 0.0
     for o in range(objs.shape[0]):
         k = cdamp[o, 0]
         for j in range(1, nn):
@@ -244,6 +236,25 @@ def contact_forces(pos, vel, objs, cdamp, f_contact):
 @njit(cache=True)
 def _wrap(a):
     return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+@njit(cache=True)
+def _midpoints(arc, smid):
+    """smid (m,) <- arc length at the middle of each element of arcs arc (m,); returns (total length,
+    mean of smid, sum of squared deviations of smid)."""
+    m = arc.shape[0]
+    acc = 0.0
+    for t in range(m):
+        smid[t] = acc + 0.5 * arc[t]
+        acc += arc[t]
+    sbar = 0.0
+    for t in range(m):
+        sbar += smid[t]
+    sbar /= m
+    sxx = 0.0
+    for t in range(m):
+        sxx += (smid[t] - sbar) ** 2
+    return acc, sbar, sxx
 
 
 @njit(cache=True)
@@ -277,19 +288,13 @@ def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
             arc[t] = c[j0 + t]
         k = 0.0
         for _ in range(n_iter):
-            acc = 0.0
+            _, sbar, sxx = _midpoints(arc, smid)
+            pbar = 0.0
             for t in range(m):
-                smid[t] = acc + 0.5 * arc[t]
-                acc += arc[t]
-            sbar, pbar = 0.0, 0.0
-            for t in range(m):
-                sbar += smid[t]
                 pbar += phi[j0 + t]
-            sbar /= m
             pbar /= m
-            sxx, sxy = 0.0, 0.0
+            sxy = 0.0
             for t in range(m):
-                sxx += (smid[t] - sbar) ** 2
                 sxy += (smid[t] - sbar) * (phi[j0 + t] - pbar)
             k = sxy / sxx if m > 1 else 0.0
             # chord -> arc length for the fitted curvature: a = c / sinc(k a / 2), solved as 2 asin(kc/2)/k
@@ -301,18 +306,7 @@ def cc_fit(xz, vxz, bounds, n_iter, q2, dq2):
                     arc[t] = c[j0 + t] * np.arcsin(u) / u
                 else:
                     arc[t] = c[j0 + t] * 0.5 * np.pi / min(abs(u), 1.0)
-        acc = 0.0
-        for t in range(m):
-            smid[t] = acc + 0.5 * arc[t]
-            acc += arc[t]
-        d = acc
-        sbar = 0.0
-        for t in range(m):
-            sbar += smid[t]
-        sbar /= m
-        sxx = 0.0
-        for t in range(m):
-            sxx += (smid[t] - sbar) ** 2
+        d, sbar, sxx = _midpoints(arc, smid)
         for t in range(m):
             w[t] = (smid[t] - sbar) / sxx if m > 1 else 0.0
         # rates: a' = (da/dc) c' + (da/dk) k', k' = sum w (phi' - k s') (exact on CC data), iterated
@@ -357,15 +351,10 @@ def _at_hinges(v, sec, l0, out, base):
     """A per-section value v (3,) as a couple about the binormal at the rod's hinges: out (3, ne - 1) <-
     [0, rest-length l0 (ne,) weighted mean of v over the two elements of each hinge, 0], base (3,) <-
     [0, v[0], 0].  sec (ne,): section of each element."""
-    for j in range(sec.shape[0] - 1):
-        a = v[sec[j]]
-        b = v[sec[j + 1]]
-        out[0, j] = 0.0
-        out[1, j] = (l0[j] * a + l0[j + 1] * b) / (l0[j] + l0[j + 1])
-        out[2, j] = 0.0
-    base[0] = 0.0
+    out[:] = 0.0
+    out[1] = (l0[:-1] * v[sec[:-1]] + l0[1:] * v[sec[1:]]) / (l0[:-1] + l0[1:])
+    base[:] = 0.0
     base[1] = v[0]
-    base[2] = 0.0
 
 
 @njit(cache=True)
@@ -381,11 +370,8 @@ def rest_strains(q2c, n, L0, sec, l0, rest_sigma, rest_kappa, base_kappa0):
         s = 1.0 - x * x / 6.0 if abs(x) < 1e-8 else np.sin(x) / x
         sig[i] = d / L0[i] * s - 1.0
         kap[i] = k * d / L0[i]
-    ne = sec.shape[0]
-    for j in range(ne):
-        rest_sigma[0, j] = 0.0
-        rest_sigma[1, j] = 0.0
-        rest_sigma[2, j] = sig[sec[j]]
+    rest_sigma[:2] = 0.0
+    rest_sigma[2] = sig[sec]
     _at_hinges(kap, sec, l0, rest_kappa, base_kappa0)
 
 
@@ -416,7 +402,5 @@ def muscle_loads(p, radius, sec, l0, act_n, act_m, act_m_base):
 @njit(cache=True)
 def _section_loads(mu, ax, sec, l0, act_n, act_m, act_m_base):
     """Per-section couple mu (3,) N m and axial force ax (3,) N -> act_n (ne,), act_m (3, nv), act_m_base."""
-    ne = sec.shape[0]
-    for j in range(ne):
-        act_n[j] = ax[sec[j]]
+    act_n[:] = ax[sec]
     _at_hinges(mu, sec, l0, act_m, act_m_base)

@@ -1,6 +1,5 @@
-"""Limits of the Cosserat rod's explicit stepping and what it does on faults (`CosseratSlave`): the stable
-step `stable_dt`, the refused configurations (`check_steps_per_control`), interrupts (`RodStopped`) and
-divergence; described in docs/plants.md, "The Cosserat rod's model"."""
+"""Limits of the Cosserat rod's explicit stepping (`stable_dt`, refused configurations, interrupts,
+divergence); docs/plants.md, "The Cosserat rod's model"."""
 
 from __future__ import annotations
 
@@ -36,7 +35,7 @@ def _material(params: SlaveParams, shear_factor: float, rotary_radius: float):
 def stable_dt(params: SlaveParams, elements_per_section: int = DEFAULT_ELEMENTS,
               shear_factor: float = DEFAULT_SHEAR_FACTOR, rotary_radius: float = DEFAULT_ROTARY_RADIUS,
               eta_a=DEFAULT_ETA_A) -> float:
-    """Largest explicit step (s) estimated stable for these settings (see module docstring)."""
+    """Largest explicit step (s) estimated stable for these settings (docs/plants.md)."""
     L0, EI, EA, GA, rhoA, rhoI = _material(params, shear_factor, rotary_radius)
     eta_a = np.broadcast_to(np.asarray(eta_a, dtype=float), (3,))
     h = L0 / elements_per_section
@@ -64,7 +63,7 @@ class RodStopped(KeyboardInterrupt):
 
 def check_steps_per_control(dt: float, control_dt: float) -> int:
     """Rod steps per control step (control_dt / dt, rounded); ValueError (one line) when it exceeds
-    `MAX_STEPS_PER_CONTROL` (see the module docstring)."""
+    `MAX_STEPS_PER_CONTROL`."""
     m = max(1, round(control_dt / dt))
     if m > MAX_STEPS_PER_CONTROL:
         raise ValueError(f"plant.cosserat.dt = {float(dt)!r}: {m} rod steps of {dt:.3g} s per control step "

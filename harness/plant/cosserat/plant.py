@@ -1,12 +1,5 @@
-"""The Cosserat-rod plant of a scenario (`CosseratPlant`, a `harness.plant.stepped.SteppedPlant`): the rod
-slave (`CosseratSlave`) and the analytic master (eq. 1, RK4 steps of at most 1 ms, `master_rk4`).
-Actuation: servo = q2_ref as rest strains plus, with plant.servo_feedforward, T2 - dV/dq2 at the fitted
-q2 (`feedforward`: the rest-strain servo replaces the stiffness T2 compensates); torque = T2 as
-internal loads; muscle = the chain's groups (plant.muscle_*): commands `chain_map.muscle_commands`
-(sensed q2, T2) clipped to [0, F_max], the forces `muscle_force` (N) held over each control period T,
-then act += (p - act)(1 - e^(-T/tau)) (MuJoCo's filterexact).  Sensing: the CC fit of each section.
-Forces: F1 on the master tip, F2 plus contact on the rod's tip node.  Time step: `rod_dt`.  Geometry
-(world frame): "centreline" (3 n + 1, 3), "sections" (4, 3), "master" (3, 3); docs/plants.md.
+"""The Cosserat-rod plant of a scenario (`CosseratPlant`, a `SteppedPlant`): the rod slave and the
+analytic master (eq. 1, RK4 steps <= 1 ms).  Actuation, sensing, forces, geometry: docs/plants.md.
 """
 
 from __future__ import annotations
@@ -30,13 +23,11 @@ MASTER_BASE = np.array([0.0, -0.3, 0.0])  # m, world (as mjcf/master.xml)
 SLAVE_BASE = np.array([0.0, 0.3, 0.0])  # m, world (as mjcf/octarm_base.xml)
 MASTER_MAX_H = 1e-3  # s, largest master RK4 step
 
-def _jit(fn, **deps):
-    """numba.njit(cache=True) of a numba-compatible function of `controllers`, its callees `deps` compiled."""
-    return njit(cache=True)(types.FunctionType(fn.__code__, {**fn.__globals__, **deps}, fn.__name__))
-
-
 _master_kernel = njit(cache=True)(master_model.master_kernel)
-_master_accel = _jit(master_model.master_accel, master_kernel=_master_kernel)
+# master_accel compiled with its callee compiled (a copy of the function bound to _master_kernel)
+_accel = master_model.master_accel
+_master_accel = njit(cache=True)(types.FunctionType(_accel.__code__, {**_accel.__globals__,
+                                                                      "master_kernel": _master_kernel}))
 master_points = njit(cache=True)(master_model.master_points)
 _elastic_kernel = njit(cache=True)(slave_model.elastic_kernel)
 
@@ -45,22 +36,18 @@ _elastic_kernel = njit(cache=True)(slave_model.elastic_kernel)
 def master_rk4(mpk, s, T1, F1, h, nsub):
     """nsub classical RK4 steps of h (s) of the master, in place on s (4,) = [q1, dq1], T1 (2,) N m and
     the tip force F1 (2,) N held.  False on a singular mass matrix or a non-finite state."""
-    k1, k2, k3, k4, tmp = np.empty(4), np.empty(4), np.empty(4), np.empty(4), np.empty(4)
+    K, tmp = np.empty((4, 4)), np.empty(4)
+    c = (0.5 * h, 0.5 * h, h)  # the stage offsets
     for _ in range(nsub):
-        ok = _master_accel(mpk, s, T1, F1, k1)
-        for i in range(4):
-            tmp[i] = s[i] + 0.5 * h * k1[i]
-        ok = _master_accel(mpk, tmp, T1, F1, k2) and ok
-        for i in range(4):
-            tmp[i] = s[i] + 0.5 * h * k2[i]
-        ok = _master_accel(mpk, tmp, T1, F1, k3) and ok
-        for i in range(4):
-            tmp[i] = s[i] + h * k3[i]
-        ok = _master_accel(mpk, tmp, T1, F1, k4) and ok
+        ok = _master_accel(mpk, s, T1, F1, K[0])
+        for st in range(3):
+            for i in range(4):
+                tmp[i] = s[i] + c[st] * K[st, i]
+            ok = _master_accel(mpk, tmp, T1, F1, K[st + 1]) and ok
         if not ok:
             return False
         for i in range(4):
-            s[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+            s[i] += h / 6.0 * (K[0, i] + 2.0 * K[1, i] + 2.0 * K[2, i] + K[3, i])
             if not np.isfinite(s[i]):
                 return False
     return True
@@ -135,14 +122,9 @@ class CosseratPlant:
         self.physics_dt = self.slave.dt
         self.feedforward = scn.plant.servo_feedforward
         self.mpk = master_model.packed(scn.plant_master)
-        F = np.asarray(scn.interaction_forces, dtype=float)
-        self.F1 = F[0].copy()
-        self.F2 = F[1].copy()
+        self.F1, self.F2 = np.array(scn.interaction_forces, dtype=float)
         self._m = np.zeros(4)  # master [q1, dq1]
-        self._T1 = np.zeros(2)
-        self._T2 = np.zeros(6)
-        self._q_ref = np.zeros(6)
-        self._ff = np.zeros(6)
+        self._T1, self._T2, self._q_ref, self._ff = np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6)
         self._spk = scn.plant_slave.packed()
         self._fmax = np.repeat(np.asarray(scn.plant.muscle_max_force, dtype=float), 2)
         self._tau = np.repeat(np.asarray(scn.plant.muscle_time_constant, dtype=float), 2)
@@ -159,7 +141,6 @@ class CosseratPlant:
         self._m_hist = np.zeros((scn.n_steps, 4))
         self._dist = np.zeros(nn)
         self._objs, cdamp = rod_contact.contact_arrays(scn.environment, self.slave._b.mass)
-        self._F_free = np.concatenate([self.F1, self.F2 + 0.0])  # `forces` without objects
         if scn.environment.objects:
             try:
                 s0 = initial_state(scn)
@@ -223,8 +204,7 @@ class CosseratPlant:
 
     @property
     def stop(self):
-        """The run's stop flag (an Event or None): once set, the rod stops between batches of its steps
-        (`CosseratSlave.step` raises `RodStopped`, a KeyboardInterrupt)."""
+        """The run's stop flag (an Event or None): once set, the rod raises `RodStopped` between batches."""
         return self.slave.stop
 
     @stop.setter
@@ -234,10 +214,6 @@ class CosseratPlant:
     def forces(self, F: np.ndarray, contact: np.ndarray) -> None:
         """True interaction forces ON the robots F (4,) [F1x, F1z, F2x, F2z] N (F2 = constant + contact force
         on the tip node, last rod substep) and the contact summary (5,) (`rod_contact.summary`)."""
-        if self._objs.shape[0] == 0:  # no environment: f_contact stays 0, F is constant (same sums)
-            F[:] = self._F_free
-            contact[:] = 0.0
-            return
         fc = self.slave.f_contact
         F[0:2] = self.F1
         F[2] = self.F2[0] + fc[0, -1]
@@ -256,8 +232,7 @@ class CosseratPlant:
         return g
 
     def record(self, k: int) -> None:
-        """Keep what the recording of control step k needs (the rod nodes, the master state).  The
-        buffers are sized for the scenario the plant was built for and grow (doubling) for a longer run."""
+        """Keep the rod nodes and master state of control step k (the buffers grow for a longer run)."""
         if k >= self._pos_hist.shape[0]:
             n = max(k + 1, 2 * self._pos_hist.shape[0])
             self._pos_hist, self._m_hist = (np.concatenate([a, np.zeros((n - len(a), *a.shape[1:]))])
@@ -323,11 +298,10 @@ class CosseratPlant:
         # coordinates) -> (r_x c + r_z s, r_y, -r_x s + r_z c)
         da = x[4 + 2 * m:i] - a0
         c, sn = np.cos(da), np.sin(da)
-        out = dirs.copy()
-        for r in range(3):
-            out[r, 0] = dirs[r, 0] * c + dirs[r, 2] * sn
-            out[r, 2] = -dirs[r, 0] * sn + dirs[r, 2] * c
-        b.director_collection[:] = out
+        D = b.director_collection
+        D[:] = dirs
+        D[:, 0] = dirs[:, 0] * c + dirs[:, 2] * sn
+        D[:, 2] = -dirs[:, 0] * sn + dirs[:, 2] * c
         s._fit_valid = False
 
     def meta(self) -> dict:

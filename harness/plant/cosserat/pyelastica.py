@@ -1,7 +1,5 @@
-"""The one place that reaches into PyElastica's internals: the numba kernels of its Cosserat rod that the
-compiled step of `harness.plant.cosserat.kernels` calls directly (strains, dilatation rate, rotations, the
-position-Verlet updates).  They are not PyElastica's public API, so they are imported here behind a version
-guard: a PyElastica without them stops with one line naming the installed and the supported versions.
+"""The one place that imports PyElastica's internal rod kernels (not its public API), behind a version
+guard: a PyElastica without them stops with one line naming the installed and supported versions.
 """
 
 from __future__ import annotations

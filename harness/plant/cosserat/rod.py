@@ -1,7 +1,5 @@
-"""Cosserat-rod plant of the planar 3-section Octarm slave, on PyElastica: `CosseratSlave` (model,
-actuation, sensing by CC fit).  API, frames, discretization, elastic law, damping, actuation, sensing and
-time stepping: docs/plants.md, "The Cosserat rod's model".  Bad settings raise `ValueError` with one
-line naming `plant.cosserat.<name>`, its value and the allowed range.
+"""Cosserat-rod plant of the planar 3-section Octarm slave on PyElastica (`CosseratSlave`); model,
+frames, actuation, sensing and stepping: docs/plants.md, "The Cosserat rod's model".
 """
 
 from __future__ import annotations
@@ -50,11 +48,6 @@ def hinge_damping(eta_b, h):
     return np.asarray(eta_b, dtype=float) / np.asarray(h, dtype=float)
 
 
-def slide_damping(eta_a, h):
-    """Slide damping (N s/m) of a segment of rest length h of a rod of extension viscosity eta_a."""
-    return np.asarray(eta_a, dtype=float) / np.asarray(h, dtype=float)
-
-
 def _rot_y(p: float) -> np.ndarray:
     c, s = math.cos(p), math.sin(p)
     return np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])
@@ -65,10 +58,10 @@ class _Sim(ea.BaseSystemCollection):
 
 
 class CosseratSlave:
-    """Planar 3-section Octarm as one PyElastica Cosserat rod (see the module docstring)."""
+    """Planar 3-section Octarm as one PyElastica Cosserat rod (docs/plants.md)."""
 
     def __init__(self, params: SlaveParams, elements_per_section: int = DEFAULT_ELEMENTS,
-                 dt: float | None = None, material_damping=None,
+                 dt: float | None = None, material_damping=(DEFAULT_ETA_B, DEFAULT_ETA_A),
                  shear_factor: float = DEFAULT_SHEAR_FACTOR, actuation: str = "servo",
                  rotary_radius: float = DEFAULT_ROTARY_RADIUS, elastic_law: str = "analytic",
                  stepper: str = "numba", muscle_radius=(0.16, 0.12, 0.09)) -> None:
@@ -91,18 +84,14 @@ class CosseratSlave:
                         ("slave.extension_stiffness", params.extension_stiffness)):
             if min(v) <= 0:
                 raise _err(name, tuple(v), "every entry must be > 0 (moduli of the rod)")
-        if material_damping is None:
-            eta_b, eta_a = np.full(3, DEFAULT_ETA_B), np.full(3, DEFAULT_ETA_A)
-        else:
-            try:
-                eta_b, eta_a = (np.broadcast_to(np.asarray(x, dtype=float), (3,)).copy()
-                                for x in material_damping)
-            except (TypeError, ValueError):
-                raise _err("material_damping", material_damping,
-                           "must be (eta_b, eta_a), each a number or 3 numbers >= 0") from None
-            if not (np.all(np.isfinite(eta_b)) and np.all(np.isfinite(eta_a))
-                    and eta_b.min() >= 0 and eta_a.min() >= 0):
-                raise _err("material_damping", material_damping, "every entry must be finite and >= 0")
+        try:
+            eta_b, eta_a = (np.broadcast_to(np.asarray(x, float), (3,)).copy() for x in material_damping)
+        except (TypeError, ValueError):
+            raise _err("material_damping", material_damping,
+                       "must be (eta_b, eta_a), each a number or 3 numbers >= 0") from None
+        if not (np.all(np.isfinite(eta_b)) and np.all(np.isfinite(eta_a)) and eta_b.min() >= 0
+                and eta_a.min() >= 0):
+            raise _err("material_damping", material_damping, "every entry must be finite and >= 0")
         self.stable_dt = stable_dt(params, n, shear_factor, rotary_radius, eta_a)
         if dt is None:
             dt = auto_dt(_BASE_DT, self.stable_dt)
@@ -158,14 +147,10 @@ class CosseratSlave:
             M[d3, d3] = v
         # hinges: inside a section EI_i, at boundaries the series combination of the two half elements
         D0 = b.rest_voronoi_lengths.copy()
-        Bh = np.empty(nv)
-        etah = np.empty(nv)
-        for j in range(nv):
-            a, c = sec[j], sec[j + 1]
-            Bh[j] = D0[j] / (0.5 * l0[j] / EI[a] + 0.5 * l0[j + 1] / EI[c])
-            eb = (self.eta_b[a], self.eta_b[c])
-            etah[j] = (D0[j] / (0.5 * l0[j] / eb[0] + 0.5 * l0[j + 1] / eb[1])
-                       if min(eb) > 0 else 0.0)
+        Bh = D0 / (0.5 * l0[:-1] / EI[sec[:-1]] + 0.5 * l0[1:] / EI[sec[1:]])
+        e0, e1 = self.eta_b[sec[:-1]], self.eta_b[sec[1:]]
+        with np.errstate(divide="ignore"):
+            etah = np.where(np.minimum(e0, e1) > 0, D0 / (0.5 * l0[:-1] / e0 + 0.5 * l0[1:] / e1), 0.0)
         b.bend_matrix[:] = 0.0
         b.bend_matrix[d3, d3] = np.stack([Bh, Bh, Bh * (2.0 / 3.0)])
         self._eta_v = np.stack([etah, etah, etah * (2.0 / 3.0)])
@@ -174,17 +159,15 @@ class CosseratSlave:
         self._base_eta = np.array([self.eta_b[0], self.eta_b[0], self.eta_b[0] * 2.0 / 3.0])
         self._base_Q = np.eye(3)
         self._base_kappa0 = np.zeros(3)
-        self._sec, self._l0, self._D0 = sec, l0, D0
+        self._sec, self._l0 = sec, l0
         g3 = np.array([p.gravity[0], 0.0, p.gravity[1]])
         self._node_force = np.ascontiguousarray(np.outer(g3, b.mass))
         self._tip_force = np.zeros(3)
-        self._act_n = np.zeros(ne)
-        self._act_m = np.zeros((3, nv))
-        self._act_m_base = np.zeros(3)
+        self._act_n, self._act_m, self._act_m_base = np.zeros(ne), np.zeros((3, nv)), np.zeros(3)
         self._act_q2, self._act_dq2 = np.zeros(6), np.zeros(6)  # the fit `_set_active` works at
         self._L0 = np.asarray(p.rest_lengths, dtype=float)
         self._law = 1 if self.analytic_law else 0
-        self._objs = np.zeros((0, 6))  # environment contact (`set_contacts`, harness.plant.rod_contact)
+        self._objs = np.zeros((0, 6))  # environment contact (`set_contacts`, harness.plant.cosserat.contact)
         self._cdamp = np.zeros((0, ne + 2))
         self.f_contact = np.zeros((3, ne + 1))  # N, contact force on each node (last substep)
         self._fit_valid = False  # `sense_into`: the CC fit of the current rod state is cached
@@ -206,7 +189,7 @@ class CosseratSlave:
 
     def set_contacts(self, objs: np.ndarray, cdamp: np.ndarray) -> None:
         """Environment objects acting on the nodes from now on: objs (no, 6), cdamp (no, nn + 1) as in
-        `cosserat_rod.contact_forces`."""
+        `kernels.contact_forces`."""
         self._objs = np.ascontiguousarray(objs, dtype=float)
         self._cdamp = np.ascontiguousarray(cdamp, dtype=float)
 
@@ -274,9 +257,8 @@ class CosseratSlave:
         self._steps = 0
 
     def _cc(self, q2):
-        """Nodes [X, Z] (3 n + 1, 2) of the CC shape q2 at uniform arc-length steps d_i / n within each
-        section (exactly on the arcs: `controllers.cc.backbone_points`) and the element chord angles (3 n,)
-        (from +Z toward +X: the tangent at the element's middle)."""
+        """Nodes [X, Z] (3 n + 1, 2) of the CC shape q2 at arc-length steps d_i / n (on the arcs) and the
+        element chord angles (3 n,) from +Z toward +X."""
         q2 = np.asarray(q2, dtype=float)
         xz = np.empty((3 * self.n + 1, 2))
         backbone_points(q2, self.n, xz)
@@ -297,9 +279,8 @@ class CosseratSlave:
         self._tip_force[:] = (F[0], 0.0, F[1])
 
     def step(self, command, duration: float, feedforward=None) -> bool:
-        """Advance by `duration` (a multiple of dt) with the command held: servo: q2 command (rest
-        strains, plus `feedforward` T2 if given); torque: T2; muscle: the group forces p (N).  Returns
-        False if the state diverged."""
+        """Advance by `duration` (a multiple of dt) holding the command: servo: q2 (rest strains, plus
+        `feedforward` T2); torque: T2; muscle: the group forces p (N).  False if the state diverged."""
         command = self._vec6("command", command)
         m = round(duration / self.dt)
         tol = 1e-9 * max(1.0, duration)
@@ -348,8 +329,7 @@ class CosseratSlave:
             t = self._verlet.step_single_instance(b, t, np.float64(self.dt))
 
     def _sane(self) -> bool:
-        """Node positions, velocities and element angular velocities finite, every node within
-        EXPLODING_LENGTHS rod lengths of the base."""
+        """Nodes and rates finite, every node within EXPLODING_LENGTHS rod lengths of the base."""
         b = self._b
         pos = b.position_collection
         if not (np.isfinite(pos).all() and np.isfinite(b.velocity_collection).all()
@@ -364,8 +344,7 @@ class CosseratSlave:
         return q2, dq2
 
     def sense_into(self, q2: np.ndarray, dq2: np.ndarray) -> None:
-        """`sense` into q2, dq2 (6,).  The fit is kept until the rod moves (`step`, `reset`): the plant's
-        sensing and the servo feed-forward of the next step fit the same state once, not twice."""
+        """`sense` into q2, dq2 (6,); the fit is cached until the rod moves (`step`, `reset`)."""
         if not self._fit_valid:
             b = self._b
             kr.fit_rod(b.position_collection, b.velocity_collection, self._fit_xz, self._fit_vxz,
@@ -385,4 +364,4 @@ class CosseratSlave:
 
 __all__ = ["BATCH_STEPS", "DEFAULT_ELEMENTS", "DEFAULT_ETA_A", "DEFAULT_ETA_B", "MAX_STEPS_PER_CONTROL",
            "CosseratSlave", "RodStopped", "auto_dt", "check_steps_per_control", "hinge_damping",
-           "material_damping_from_slave", "slide_damping", "stable_dt"]
+           "material_damping_from_slave", "stable_dt"]
