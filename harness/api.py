@@ -64,6 +64,7 @@ def _scenario_of(scenario: Source, overrides: Iterable[str], allow_code: bool | 
     from harness.config.controller import resolve_controller
     from harness.plant import validate_plant
 
+    _load.load_scenario(_load.scenario_to_dict(scenario), allow_code=True)  # a file's checks, every field
     validate_plant(scenario)
     return resolve_controller(scenario)
 

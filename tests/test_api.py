@@ -59,3 +59,21 @@ def test_import_harness_is_cheap():
             "if m in sys.modules]; print(','.join(heavy))")
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
     assert out.stdout.strip() == ""
+
+
+@pytest.mark.parametrize("field, value", [("slave", {"masses": (-1.0, 0.7, 0.4)}),
+                                          ("gains", {"kn": 0.0}),
+                                          ("plant", {"kind": "analytic", "segments": 0})])
+def test_a_scenario_built_in_python_gets_the_checks_of_a_file(field, value):
+    """A Scenario edited with dataclasses.replace is refused in one line, as the same values in a file."""
+    import dataclasses
+
+    from harness import load_scenario, run
+    from harness.config.errors import ConfigError
+
+    scn = load_scenario(None, ["duration=0.1"])
+    bad = dataclasses.replace(scn, **{field: dataclasses.replace(getattr(scn, field), **value)})
+    with pytest.raises(ConfigError) as e:
+        run(bad)
+    key = next(iter(value.keys() - {"kind"}))
+    assert f"{field}.{key} = " in str(e.value) and "\n" not in str(e.value)
