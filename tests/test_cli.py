@@ -42,7 +42,7 @@ OPTIONS = {
     "controllers": [],
     "cache": ["--prune", "--clear"],
     "findings": ["--table", "--figures", "--no-write", "--list", "NAME"],
-    "stability-map": ["--duration", "--out"],
+    "stability-map": ["--duration", "--predicted", "--out"],
     "stability": ["--at", "--fd-step", "--modes", "--plant", "--actuation", "--set", "--out",
                   "SCENARIO.toml"],
     "margin": ["--bounds", "--param", "--rtol", "--probes", "--pair", "--workers", "--executor",
@@ -656,3 +656,19 @@ def test_stability_map_command_writes_its_table_and_figure(tmp_path, monkeypatch
     assert "| 10" in (out / "stability_map.md").read_text() or "10" in (out / "stability_map.md").read_text()
     assert main(["stability-map", "--duration", "0"]) == 2
     assert "expected a positive number" in capsys.readouterr().err
+
+
+def test_stability_map_predicted_sits_next_to_the_simulated_map(tmp_path, monkeypatch):
+    """`teleop stability-map --predicted` (one cell: k_n = 100, eta_b = 0.001, 0.5 s): the linearization
+    calls the cell unstable (a flip) and its simulation diverges, in one table cell."""
+    from harness.studies import stability_map as smap
+
+    monkeypatch.setattr(smap, "KNS", (100.0,))
+    monkeypatch.setattr(smap, "ETAS", (0.001,))
+    monkeypatch.setattr(smap, "MAPS", {smap.PREDICTED: smap.MAPS[smap.PREDICTED]})
+    out = tmp_path / "smap"
+    assert main(["stability-map", "--duration", "0.5", "--predicted", "--out", str(out)]) == 0
+    text = (out / "stability_map.md").read_text()
+    assert "predicted" in text
+    cell = text.splitlines()[-1]
+    assert "(unstable, flip) / sim: diverged" in cell, cell

@@ -101,8 +101,18 @@ def test_build_spec_compiles_to_build_model():
 
 
 def test_stiffness_courant_number_default_is_explicitly_stable():
+    """h w_max of the chain's joint springs (and servo kp) against the chain block of M at qpos0 (MuJoCo's
+    own mj_fullM): explicit springs need < 2."""
     m, cm = _model(8, "torque")
-    assert pm.stiffness_courant_number(m, cm) < 2.0
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    M = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, M)
+    idx = np.asarray(cm.chain_dof_adr)
+    k = np.asarray(cm.joint_stiffness) + np.asarray(cm.servo_kp)
+    Li = np.linalg.inv(np.linalg.cholesky(M[np.ix_(idx, idx)]))
+    w2 = np.linalg.eigvalsh(Li @ (k[:, None] * Li.T))
+    assert 0.0 < m.opt.timestep * np.sqrt(w2[-1]) < 2.0
 
 
 def test_scene_options_and_bases():

@@ -146,8 +146,7 @@ def test_predicted_map_agrees_with_simulated_map():
     """k_n x eta_b on the free chain in torque actuation (2 x 3): "unstable" from the spectral radius along
     the run (linearized at 0, 0.5, 1 s) in exactly the cells whose simulation (1.5 s, same settings,
     `harness.studies.stability_map`) diverges."""
-    from harness.studies.stability_map import stability_map
-    from harness.studies.stability_report import predicted_map
+    from harness.studies.stability_map import predicted_map, stability_map
 
     kns, etas, ov = (10.0, 100.0), (0.001, 0.01, 1.0), ["plant.actuation=torque", "snr_db=none"]
     pred = predicted_map(kns, etas, ov, times=(0.0, 0.5, 1.0))

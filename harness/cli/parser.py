@@ -224,6 +224,9 @@ _COMMANDS = (
      "servo and torque (harness.studies.stability_map). Writes stability_map.md and .png.", None, [
          _o("--duration", "simulated seconds per cell, > 0. Default: 3.", metavar="S", type=_positive_float,
             default=3.0),
+         _o("--predicted", "also the map predicted by linearizing each cell of the noise-free torque map "
+            "every 0.25 s of its run, next to its simulation (a few minutes). Default: off.",
+            action="store_true"),
          _out(_NEW_DIR + "runs/stability_map.", Path("runs/stability_map"))]),
     ("stability", "linear stability of the closed loop at a time point",
      "Run the scenario (no noise) to --at and linearize the closed loop over one control period by central "

@@ -343,15 +343,7 @@ def _check_clearance(m: mujoco.MjModel, cmap: ChainMap, cm: ContactMap, scn: Sce
             f"{-dist:.4g} m); move the object or the initial state", f"environment.objects.{name}")
 
 
-def stiffness_courant_number(m: mujoco.MjModel, cm: ChainMap) -> float:
-    """h w_max of the chain's joint springs (and servo kp) against the chain block of M at qpos0;
-    explicit springs need < 2."""
-    idx = np.asarray(cm.chain_dof_adr)
-    k = np.asarray(cm.joint_stiffness) + np.asarray(cm.servo_kp)
-    L = np.linalg.cholesky(_mass_matrix0(m)[np.ix_(idx, idx)])
-    Li = np.linalg.inv(L)
-    w2 = np.linalg.eigvalsh(Li @ (k[:, None] * Li.T))
-    return float(m.opt.timestep * np.sqrt(max(w2[-1], 0.0)))
+
 
 
 def export_mjcf(master: MasterParams, slave: SlaveParams, plant: PlantConfig, path) -> Path:
@@ -371,4 +363,4 @@ def export_mjcf(master: MasterParams, slave: SlaveParams, plant: PlantConfig, pa
 
 
 __all__ = ["CC_SOLIMP", "CC_SOLREF", "MJCF_DIR", "SCENE_XML", "TIP_MASS_FRACTION", "ChainMap", "MujocoPlant",
-           "PlantModelError", "build_model", "build_spec", "export_mjcf", "stiffness_courant_number"]
+           "PlantModelError", "build_model", "build_spec", "export_mjcf"]

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from harness.studies.figures import printer, pyplot, run_paper, save, save_figure
+from harness.studies.stability_report import radius_along
 
 MAPS = {
     "chain CC off, servo": ["plant.enforce_cc=false", "plant.actuation=servo"],
@@ -78,12 +79,52 @@ def plot_stability_map(maps: dict[str, list[dict]], duration: float, path) -> Pa
     return save_figure(fig, path)
 
 
-def main(out="runs/stability_map", duration: float = 3.0) -> int:
-    """`teleop stability-map`: the maps of MAPS over KNS x ETAS, stability_map.md and .png in `out`."""
+def predicted_map(kns, etas, overrides=(), times=(0.0,), say=lambda s: None) -> list[dict]:
+    """`radius_along` over the k_n x eta_b grid of `harness.studies.stability_map` (same overrides and keys),
+    sensing without noise: rows {kn, eta_b, radius, t, class, frequency_hz, dominant, reached, stopped}."""
+    from harness.config.load import load_scenario
+
+    rows = []
+    for kn, eta in itertools.product(kns, etas):
+        eta_s = f"[{eta},{eta},{eta}]"
+        sets = [*overrides, "snr_db=none", f"gains.kn={kn}", f"plant.bending_viscosity={eta_s}"]
+        row = {"kn": float(kn), "eta_b": float(eta), **radius_along(load_scenario(None, sets), times)}
+        rows.append(row)
+        say(f"kn = {kn:g}, eta_b = {eta:g}: rho = {row['radius']:.6f} at t = {row['t']:g} s "
+            f"({row['class']}, {row['frequency_hz']:.1f} Hz)")
+    return rows
+
+
+def predicted_markdown(rows: list[dict], sim: list[dict] | None = None) -> str:
+    """Table of the predicted map (spectral radius, class) next to the simulated one
+    (`harness.studies.stability_map.stability_map` rows) when given."""
+    simc = {(r["kn"], r["eta_b"]): r for r in (sim or [])}
+
+    def text(r: dict) -> str:
+        txt = f"rho {r['radius']:.4f} ({r['class']}" + (", flip)" if r["flip"] else ")")
+        s = simc.get((r["kn"], r["eta_b"]))
+        if s is not None:
+            txt += " / sim: " + ("ok" if s["status"] == "ok" else f"diverged {s['t_end']:.3f} s")
+        return txt
+
+    return "\n".join(grid_lines(rows, text))
+
+
+PREDICTED = "chain CC off, torque, no noise"  # the map `--predicted` linearizes
+
+
+def main(out="runs/stability_map", duration: float = 3.0, predicted: bool = False) -> int:
+    """`teleop stability-map`: the maps of MAPS over KNS x ETAS, stability_map.md and .png in `out`;
+    `predicted`: also the PREDICTED map from the spectral radius along each run (every 0.25 s)."""
     maps, text, say = {}, [], printer(True)
     for name, ov in MAPS.items():
         maps[name] = stability_map(KNS, ETAS, ov, duration, say=lambda s, n=name: say(f"{n} {s}"))
         text.append(f"{name}\n\n" + stability_markdown(maps[name], duration))
+    if predicted:
+        times = [0.25 * i for i in range(int(duration / 0.25 + 1e-9) + 1)]
+        pred = predicted_map(KNS, ETAS, MAPS[PREDICTED], times, say=lambda s: say(f"predicted {s}"))
+        head = f"{PREDICTED}, predicted (largest spectral radius over t = 0, 0.25, ..., {times[-1]:g} s)"
+        text.append(f"{head} / simulated\n\n" + predicted_markdown(pred, maps[PREDICTED]))
     save(Path(out) / "stability_map.md", "\n\n".join(text) + "\n")
     plot_stability_map(maps, duration, Path(out) / "stability_map.png")
     print("\n\n".join(text))

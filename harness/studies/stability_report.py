@@ -1,9 +1,8 @@
-"""Outputs of the linear stability analysis: mode shapes on the arm, the spectrum files, and the stability
-map predicted from the spectral radius next to the simulated one (`harness.studies.stability_map`)."""
+"""Outputs of the linear stability analysis: mode shapes on the arm, the spectrum files, and the spectral
+radius along a run (`radius_along`, which `harness.studies.stability_map` predicts its map from)."""
 
 from __future__ import annotations
 
-import itertools
 import math
 from pathlib import Path
 
@@ -12,7 +11,6 @@ import numpy as np
 from harness.config.scenario import Scenario
 from harness.studies.figures import pyplot, save_csv, save_figure
 from harness.studies.stability import ClosedLoopMap, LinearizationError, Stability, linearize
-from harness.studies.stability_map import grid_lines
 
 
 def mode_shape(res: Stability, j: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
@@ -117,38 +115,7 @@ def radius_along(scn: Scenario, times) -> dict:
             "stopped": stopped, "flip": bool(abs(np.angle(res.eigenvalues[0])) > 0.99 * math.pi)}
 
 
-def predicted_map(kns, etas, overrides=(), times=(0.0,), say=lambda s: None) -> list[dict]:
-    """`radius_along` over the k_n x eta_b grid of `harness.studies.stability_map` (same overrides and keys),
-    sensing without noise: rows {kn, eta_b, radius, t, class, frequency_hz, dominant, reached, stopped}."""
-    from harness.config.load import load_scenario
-
-    rows = []
-    for kn, eta in itertools.product(kns, etas):
-        eta_s = f"[{eta},{eta},{eta}]"
-        sets = [*overrides, "snr_db=none", f"gains.kn={kn}", f"plant.bending_viscosity={eta_s}"]
-        row = {"kn": float(kn), "eta_b": float(eta), **radius_along(load_scenario(None, sets), times)}
-        rows.append(row)
-        say(f"kn = {kn:g}, eta_b = {eta:g}: rho = {row['radius']:.6f} at t = {row['t']:g} s "
-            f"({row['class']}, {row['frequency_hz']:.1f} Hz)")
-    return rows
-
-
-def predicted_markdown(rows: list[dict], sim: list[dict] | None = None) -> str:
-    """Table of the predicted map (spectral radius, class) next to the simulated one
-    (`harness.studies.stability_map.stability_map` rows) when given."""
-    simc = {(r["kn"], r["eta_b"]): r for r in (sim or [])}
-
-    def text(r: dict) -> str:
-        txt = f"rho {r['radius']:.4f} ({r['class']}" + (", flip)" if r["flip"] else ")")
-        s = simc.get((r["kn"], r["eta_b"]))
-        if s is not None:
-            txt += " / sim: " + ("ok" if s["status"] == "ok" else f"diverged {s['t_end']:.3f} s")
-        return txt
-
-    return "\n".join(grid_lines(rows, text))
-
-
-__all__ = ["mode_shape", "plot_stability", "predicted_map", "predicted_markdown", "radius_along",
+__all__ = ["mode_shape", "plot_stability", "radius_along",
            "write_stability"]
 
 

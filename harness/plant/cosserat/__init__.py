@@ -4,7 +4,7 @@ master (`plant.CosseratPlant`)."""
 
 from harness.plant.cosserat.contact import NODE_RADIUS, contact_arrays
 from harness.plant.cosserat.plant import CosseratPlant, rod_dt
-from harness.plant.cosserat.rod import CosseratSlave, hinge_damping, material_damping_from_slave, stable_dt
+from harness.plant.cosserat.rod import CosseratSlave, material_damping_from_slave, stable_dt
 
-__all__ = ["NODE_RADIUS", "CosseratPlant", "CosseratSlave", "contact_arrays", "hinge_damping",
+__all__ = ["NODE_RADIUS", "CosseratPlant", "CosseratSlave", "contact_arrays",
            "material_damping_from_slave", "rod_dt", "stable_dt"]

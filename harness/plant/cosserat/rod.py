@@ -43,9 +43,7 @@ def material_damping_from_slave(params: SlaveParams) -> tuple[np.ndarray, np.nda
     return np.asarray(params.bending_damping) / L0, np.asarray(params.extension_damping) * L0
 
 
-def hinge_damping(eta_b, h):
-    """Hinge damping (N m s/rad) between two rigid segments of length h of a rod of viscosity eta_b."""
-    return np.asarray(eta_b, dtype=float) / np.asarray(h, dtype=float)
+
 
 
 def _rot_y(p: float) -> np.ndarray:
@@ -363,5 +361,5 @@ class CosseratSlave:
 
 
 __all__ = ["BATCH_STEPS", "DEFAULT_ELEMENTS", "DEFAULT_ETA_A", "DEFAULT_ETA_B", "MAX_STEPS_PER_CONTROL",
-           "CosseratSlave", "RodStopped", "auto_dt", "check_steps_per_control", "hinge_damping",
+           "CosseratSlave", "RodStopped", "auto_dt", "check_steps_per_control",
            "material_damping_from_slave", "stable_dt"]
