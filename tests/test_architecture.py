@@ -219,6 +219,7 @@ def test_warm_modules_keep_the_layer_rules():
 # whose consolidation is under way elsewhere (the slave and master models, the Cosserat rod, outputs).
 TEST_ONLY = {
     "to_file", "slave_control",
+    "read_series",  # users' reader of a run.rrd series (docs/guide/outputs.md); the harness writes, never reads
 }
 
 

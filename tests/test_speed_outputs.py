@@ -9,14 +9,9 @@ No timings here: speed is measured in benchmarks/bench_core.py.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
 import pytest
-from rerun.chunk import RrdReader
-
-from harness.output.scene import TIMELINE
 
 
 # ---------------------------------------------------------------------------------------------
@@ -61,7 +56,9 @@ def test_figure_data_are_every_sample_of_a_real_run(tmp_path, monkeypatch, real_
 
 
 def test_rrd_scalars_bit_exact_with_geometry_at_display_rate(tmp_path, real_traj):
-    from harness.output.record import geometry_every, write_recording
+    from rerun.chunk import RrdReader
+
+    from harness.output.record import TIMELINE, geometry_every, read_series, write_recording
 
     tr = real_traj
     assert geometry_every(tr, 100.0) == 10 and geometry_every(tr, 60.0) == 16  # rate >= the requested one
@@ -143,28 +140,3 @@ def test_outputs_written_in_parallel_equal_serial_writes(tmp_path):
     assert [p.name for p in serial] == [p.name for p in res.written if p.suffix == ".png"]
     for p in serial:
         assert (out / p.name).read_bytes() == p.read_bytes(), p.name
-
-
-def read_series(path: str | Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
-    """A `plots/...` series read back with Rerun's reader: (t s (n,), values (n, k)), sorted by time
-    (stable).  Raises KeyError if the file has no scalar data for `entity`."""
-    want = "/" + entity.strip("/")
-    t_parts, v_parts = [], []
-    for chunk in RrdReader(path).stream().to_chunks():
-        if chunk.entity_path != want or chunk.is_static:
-            continue
-        batch = chunk.to_record_batch()
-        if "Scalars:scalars" not in batch.schema.names or TIMELINE not in batch.schema.names:
-            continue
-        t_ns = batch.column(TIMELINE).cast(pa.int64()).to_numpy(zero_copy_only=False)
-        col = batch.column("Scalars:scalars")
-        lens = col.value_lengths().to_numpy(zero_copy_only=False)
-        if len(lens) and np.any(lens != lens[0]):
-            raise ValueError(f"{entity}: rows with different numbers of series in one chunk")
-        t_parts.append(t_ns)
-        v_parts.append(col.flatten().to_numpy(zero_copy_only=False).astype(np.float64).reshape(len(t_ns), -1))
-    if not t_parts:
-        raise KeyError(f"no scalar series for entity {entity!r} in {path}")
-    t_ns, values = np.concatenate(t_parts), np.concatenate(v_parts, axis=0)
-    order = np.argsort(t_ns, kind="stable")
-    return t_ns[order] / 1e9, values[order]

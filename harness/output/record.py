@@ -23,6 +23,7 @@ from datetime import timedelta
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 import rerun as rr
 from rerun.chunk import RrdReader
 
@@ -334,8 +335,30 @@ def log_steps(rec: rr.RecordingStream, traj: Trajectory, block: int, every: int,
         log_contacts(rec, traj, master_base, arrow_scale(traj, fmax))
 
 
+def read_series(path: str | Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
+    """A `plots/...` series read back with Rerun's reader: (t s (n,), values (n, k)), sorted by time
+    (stable).  Raises KeyError if the file has no scalar data for `entity`."""
+    want = "/" + entity.strip("/")
+    t_parts, v_parts = [], []
+    for chunk in RrdReader(path).stream().to_chunks():
+        if chunk.entity_path != want or chunk.is_static:
+            continue
+        batch = chunk.to_record_batch()
+        if "Scalars:scalars" not in batch.schema.names or TIMELINE not in batch.schema.names:
+            continue
+        t_ns = batch.column(TIMELINE).cast(pa.int64()).to_numpy(zero_copy_only=False)
+        col = batch.column("Scalars:scalars")
+        lens = col.value_lengths().to_numpy(zero_copy_only=False)
+        if len(lens) and np.any(lens != lens[0]):
+            raise ValueError(f"{entity}: rows with different numbers of series in one chunk")
+        t_parts.append(t_ns)
+        v_parts.append(col.flatten().to_numpy(zero_copy_only=False).astype(np.float64).reshape(len(t_ns), -1))
+    if not t_parts:
+        raise KeyError(f"no scalar series for entity {entity!r} in {path}")
+    t_ns, values = np.concatenate(t_parts), np.concatenate(v_parts, axis=0)
+    order = np.argsort(t_ns, kind="stable")
+    return t_ns[order] / 1e9, values[order]
 
 
-
-__all__ = ["APP_ID", "DEFAULT_GEOMETRY_RATE", "TIMELINE", "cc_backbone", "geometry_every",
+__all__ = ["APP_ID", "DEFAULT_GEOMETRY_RATE", "TIMELINE", "cc_backbone", "geometry_every", "read_series",
            "write_recording"]
