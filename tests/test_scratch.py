@@ -111,12 +111,13 @@ _NO_ALLOCATION_SCRIPT = textwrap.dedent("""
     n = scn.n_steps
     model = compile_model(scn)
     rows = np.zeros((n, ROW_WIDTH))
-    plant = (scn.control_dt, 1, False, master.packed(scn.plant_master), scn.plant_slave.packed())
+    plant = (model, model.F, scn.control_dt, 1, False, master.packed(scn.plant_master),
+             scn.plant_slave.packed(), np.empty((4, 16)), np.empty(16))
 
     def run(k0, k1, state):
         noise, scale = noise_table(scn, n)  # fresh: its running power sums are updated in place
         ring = np.zeros((1, 8))  # the actuation-delay ring (no delay)
-        return K.analytic_chunk(k0, k1, model, plant, (state, noise, scale, model.F, rows, ring, 0))
+        return K.analytic_chunk(k0, k1, model, (state, noise, scale, rows, ring, 0, scn.control_dt), plant)
 
     run(0, 1, model.s0.copy())  # compile or load
     counts = []

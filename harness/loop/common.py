@@ -1,5 +1,5 @@
-"""What every closed loop shares: the run model, the stop flag, the initial state, the desired trajectory,
-the seeded noise table, the chunk driver and the run's outcome and metadata."""
+"""What every closed loop shares: the run model, the stop flag, the desired trajectory, the seeded noise
+table, the chunk driver and the run's outcome and metadata."""
 
 from __future__ import annotations
 
@@ -99,8 +99,7 @@ class ChunkRun:
     def trajectory(self, scn: Scenario, rows: np.ndarray, detail: str = "") -> Trajectory:
         """The Trajectory of rows[:done]; status / message: an exception, a status code (+ `detail`), an
         interrupt, or "ok"."""
-        traj = Trajectory.from_rows(rows[:self.done])
-        traj.meta.update(run_meta(scn, self.wall))
+        traj = Trajectory.from_rows(rows[:self.done], meta=run_meta(scn, self.wall))
         if self.error:
             traj.status, cause = "error", self.error
         elif self.status != 0:
@@ -116,19 +115,13 @@ class ChunkRun:
 
 def part_trajectory(scn: Scenario, rows: np.ndarray) -> Trajectory:
     """A chunk of a run as a Trajectory (time series only), for `on_chunk`."""
-    part = Trajectory.from_rows(rows)
-    part.meta.update(run_meta(scn, 0.0))
-    return part
+    return Trajectory.from_rows(rows, meta=run_meta(scn, 0.0))
 
 
 def progress_bar(enabled: bool, total: int, desc: str):
     if not enabled:
         return None
-    try:
-        bar = progress_bar_class()
-    except ImportError:  # pragma: no cover
-        return None
-    return bar(total=total, desc=desc, unit="step", unit_scale=True, leave=False)
+    return progress_bar_class()(total=total, desc=desc, unit="step", unit_scale=True, leave=False)
 
 
 class RunModel(NamedTuple):

@@ -43,3 +43,18 @@ class WarningSink:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def warning_counts(numbers) -> dict[str, int]:
+    """Non-zero MuJoCo warning counters by name (numbers: mjData.warning.number)."""
+    return {name: int(numbers[int(w)]) for name, w in mujoco.mjtWarning.__members__.items()
+            if name != "mjNWARNING" and int(numbers[int(w)])}
+
+
+def warning_detail(warned: dict[str, int], text: list[str]) -> str:
+    """The status message's detail of a run's warnings: " (name: count, ...); MuJoCo says: <first text>"
+    ("" without any)."""
+    if not warned:
+        return ""
+    detail = " (" + ", ".join(f"{k}: {v}" for k, v in warned.items()) + ")"
+    return detail + (f"; MuJoCo says: {text[0].strip()}" if text else "")
