@@ -20,6 +20,7 @@ from harness.config.scenario import Scenario
 from harness.loop.fast import K
 from harness.loop.force_kernels import filter_alpha
 from harness.loop.kernels import DQ2_FILTER
+from harness.loop.mj_warnings import warning_detail, warning_sink
 from harness.loop.trajectory import Trajectory
 from harness.plant.initial import InitialStateError, initial_state
 
@@ -66,27 +67,30 @@ class ChunkRun:
     def __init__(self, n: int, size: int, bar=None, on_part=None):
         self.n, self.size, self.bar, self.on_part = n, size, bar, on_part
         self.status, self.done, self.interrupted, self.error, self.exc, self.wall = 0, 0, False, "", None, 0.0
+        self.warnings: list[str] = []
 
     def run(self, call) -> None:
         """call(k, k1) -> (status, steps done) runs steps k..k1-1; then the bar and on_part(k, done).  Stops
-        at a non-zero status, on STOP or a KeyboardInterrupt (interrupted) or an exception (error / exc)."""
+        at a non-zero status, on STOP or a KeyboardInterrupt (interrupted) or an exception (error / exc).
+        Keeps MuJoCo's warning text raised meanwhile (`warnings`)."""
         t0 = time.perf_counter()
         try:
-            k = 0
-            while k < self.n:
-                k1 = min(self.n, k + self.size)
-                self.status, m = call(k, k1)
-                self.done = k + m
-                if self.bar is not None:
-                    self.bar.update(m)
-                if self.on_part is not None and m:
-                    self.on_part(k, self.done)
-                if self.status != 0:
-                    break
-                k = k1
-                if STOP.is_set():
-                    self.interrupted = True
-                    break
+            with warning_sink() as self.warnings:
+                k = 0
+                while k < self.n:
+                    k1 = min(self.n, k + self.size)
+                    self.status, m = call(k, k1)
+                    self.done = k + m
+                    if self.bar is not None:
+                        self.bar.update(m)
+                    if self.on_part is not None and m:
+                        self.on_part(k, self.done)
+                    if self.status != 0:
+                        break
+                    k = k1
+                    if STOP.is_set():
+                        self.interrupted = True
+                        break
         except KeyboardInterrupt:
             self.interrupted = True
         except Exception as exc:  # keep what was computed; report the cause
@@ -96,14 +100,16 @@ class ChunkRun:
                 self.bar.close()
             self.wall = time.perf_counter() - t0
 
-    def trajectory(self, scn: Scenario, rows: np.ndarray, detail: str = "") -> Trajectory:
-        """The Trajectory of rows[:done]; status / message: an exception, a status code (+ `detail`), an
-        interrupt, or "ok"."""
+    def trajectory(self, scn: Scenario, rows: np.ndarray, warned: dict[str, int] | None = None) -> Trajectory:
+        """The Trajectory of rows[:done]; status / message: an exception, a status code (+ the MuJoCo
+        warnings `warned`, counts by name, and their text), an interrupt, or "ok"."""
         traj = Trajectory.from_rows(rows[:self.done], meta=run_meta(scn, self.wall))
+        traj.meta["mujoco_warning_text"] = self.warnings[:20]
         if self.error:
             traj.status, cause = "error", self.error
         elif self.status != 0:
             known = self.status in {int(s) for s in Status}
+            detail = warning_detail(warned or {}, self.warnings)
             traj.status, cause = "diverged", (Status(self.status).text if known else "unknown") + detail
         elif self.interrupted:
             traj.status, cause = "interrupted", "interrupted"

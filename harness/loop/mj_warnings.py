@@ -3,8 +3,10 @@ process-wide callback hands each warning to the run whose thread raised it (coun
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import threading
+from collections.abc import Iterator
 
 import mujoco
 
@@ -20,29 +22,23 @@ def _dispatch(msg) -> None:
         sys.stderr.write(f"WARNING: {msg}\n")
 
 
-class WarningSink:
-    """The warning text (`text`, in order) MuJoCo raises in this thread until `close` (a context manager)."""
-
-    def __init__(self) -> None:
-        self.text: list[str] = []
-        self._ident = threading.get_ident()
+@contextlib.contextmanager
+def warning_sink() -> Iterator[list[str]]:
+    """The warning text MuJoCo raises in this thread inside the block (a list, in order)."""
+    text: list[str] = []
+    ident = threading.get_ident()
+    with _lock:
+        if not _sinks:
+            mujoco.set_mju_user_warning(_dispatch)
+        _sinks[ident] = text
+    try:
+        yield text
+    finally:
         with _lock:
-            if not _sinks:
-                mujoco.set_mju_user_warning(_dispatch)
-            _sinks[self._ident] = self.text
-
-    def close(self) -> None:
-        with _lock:
-            if _sinks.get(self._ident) is self.text:
-                del _sinks[self._ident]
+            if _sinks.get(ident) is text:
+                del _sinks[ident]
             if not _sinks:
                 mujoco.set_mju_user_warning(None)
-
-    def __enter__(self) -> WarningSink:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
 
 
 def warning_counts(numbers) -> dict[str, int]:

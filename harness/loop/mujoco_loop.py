@@ -17,7 +17,7 @@ from harness.config.scenario import Scenario
 from harness.loop.aot import A
 from harness.loop.common import ChunkRun, RunModel, compile_model, noise_table, part_trajectory, progress_bar
 from harness.loop.force_kernels import FORCE_MODES, filter_alpha
-from harness.loop.mj_warnings import WarningSink, warning_counts, warning_detail
+from harness.loop.mj_warnings import warning_counts
 from harness.loop.native import MJ_FUNCS
 from harness.loop.trajectory import ROW_WIDTH, Trajectory
 from harness.plant.chain_map import ChainMap
@@ -140,16 +140,15 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
 
     bar = progress_bar(progress, n, f"MuJoCo plant (N={cmap.n_segments}, {scn.plant.actuation})")
     run = ChunkRun(n, MUJOCO_CHUNK, bar, part if on_chunk is not None else None)
-    with WarningSink() as sink:  # MuJoCo's warning text raised by this run
-        run.run(chunk)
-    traj = run.trajectory(scn, rows, warning_detail(warned, sink.text))
+    run.run(chunk)
+    traj = run.trajectory(scn, rows, warned)
     cpts = groups[3][2]
     if cpts.shape[0]:
         traj.contact_points = cpts[:run.done].copy()
     tg = time.perf_counter()
     geo.finish(traj, run.done, warned, int(groups[6][9][0]))
     traj.meta.update(geometry_time=time.perf_counter() - tg, build_time=build_time,
-                     kernel_load_time=load_time, mujoco_warning_text=sink.text[:20])
+                     kernel_load_time=load_time)
     return traj
 
 

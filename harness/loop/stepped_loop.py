@@ -22,7 +22,6 @@ from harness.loop.common import (
 )
 from harness.loop.fast import K
 from harness.loop.interface_adapter import ControllerFailure, InterfaceController, is_compiled
-from harness.loop.mj_warnings import WarningSink, warning_detail
 from harness.loop.trajectory import ROW_WIDTH, Trajectory
 from harness.plant.stepped import SteppedPlant
 
@@ -141,8 +140,7 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
     run = ChunkRun(n, CHUNK, progress_bar(progress, n, f"{plant.kind} plant ({plant.actuation}), controller "
                                           f"{cname}"), part)
     try:
-        with WarningSink() as sink:  # MuJoCo's warning text raised by this run
-            run.run(steps)
+        run.run(steps)
     finally:
         run.done = stepper.done  # also after an exception inside a step
         if ctrl is not None:
@@ -152,8 +150,8 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
         error = error or str(run.exc)
         run.error = ""
     done, status = run.done, run.status
-    traj = run.trajectory(scn, rows, warning_detail(getattr(plant, "warned", {}), sink.text))
-    traj.meta.update(build_time=build_time, mujoco_warning_text=sink.text[:20], controller=cname)
+    traj = run.trajectory(scn, rows, getattr(plant, "warned", None))
+    traj.meta.update(build_time=build_time, controller=cname)
     if own_geo:
         plant.finish(traj, done)
     else:
