@@ -14,7 +14,6 @@ from harness.loop.common import (
     RunModel,
     compile_model,
     noise_table,
-    part_trajectory,
     progress_bar,
 )
 from harness.loop.trajectory import ROW_SLICES, ROW_WIDTH, Trajectory
@@ -41,7 +40,6 @@ def simulate_analytic(scn: Scenario, progress: bool = False, plant: AnalyticPlan
     delay = int(round(scn.plant.actuation_delay / scn.control_dt))
     cmdbuf = np.zeros((delay + 1, 8))  # [T1, T2] per slot of the actuation-delay ring
     data = (state, noise, scale, rows, cmdbuf, delay, scn.control_dt)
-    part = None if on_chunk is None else (lambda k, done: on_chunk(part_trajectory(scn, rows[k:done])))
-    run = ChunkRun(n, CHUNK, progress_bar(progress, n, "analytic plant"), part)
+    run = ChunkRun(scn, rows, CHUNK, progress_bar(progress, n, "analytic plant"), on_chunk)
     run.run(lambda k, k1: A.analytic_chunk(k, k1, a, data, plant_args))
-    return run.trajectory(scn, rows)
+    return run.trajectory()

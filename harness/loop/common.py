@@ -61,16 +61,19 @@ def noise_table(scn: Scenario, n: int) -> tuple[np.ndarray, float]:
 
 
 class ChunkRun:
-    """Drives a run's n control steps in calls of `size` steps, keeping status, done (steps recorded),
-    interrupted, error / exc (an exception) and wall (s); closes the progress bar `bar` at the end."""
+    """Drives a run's control steps (recorded into rows (n, ROW_WIDTH)) in calls of `size` steps, keeping
+    status, done (steps recorded), interrupted, error / exc (an exception) and wall (s); closes the progress
+    bar `bar` at the end.  on_chunk: called with each finished chunk as a `Trajectory` (the time series, +
+    fill(piece, k0, k1))."""
 
-    def __init__(self, n: int, size: int, bar=None, on_part=None):
-        self.n, self.size, self.bar, self.on_part = n, size, bar, on_part
+    def __init__(self, scn: Scenario, rows: np.ndarray, size: int, bar=None, on_chunk=None, fill=None):
+        self.scn, self.rows, self.n, self.size, self.bar = scn, rows, rows.shape[0], size, bar
+        self.on_chunk, self.fill = on_chunk, fill
         self.status, self.done, self.interrupted, self.error, self.exc, self.wall = 0, 0, False, "", None, 0.0
         self.warnings: list[str] = []
 
     def run(self, call) -> None:
-        """call(k, k1) -> (status, steps done) runs steps k..k1-1; then the bar and on_part(k, done).  Stops
+        """call(k, k1) -> (status, steps done) runs steps k..k1-1; then the bar and on_chunk.  Stops
         at a non-zero status, on STOP or a KeyboardInterrupt (interrupted) or an exception (error / exc).
         Keeps MuJoCo's warning text raised meanwhile (`warnings`)."""
         t0 = time.perf_counter()
@@ -83,8 +86,11 @@ class ChunkRun:
                     self.done = k + m
                     if self.bar is not None:
                         self.bar.update(m)
-                    if self.on_part is not None and m:
-                        self.on_part(k, self.done)
+                    if self.on_chunk is not None and m:
+                        piece = Trajectory.from_rows(self.rows[k:self.done], meta=run_meta(self.scn, 0.0))
+                        if self.fill is not None:
+                            self.fill(piece, k, self.done)
+                        self.on_chunk(piece)
                     if self.status != 0:
                         break
                     k = k1
@@ -100,10 +106,10 @@ class ChunkRun:
                 self.bar.close()
             self.wall = time.perf_counter() - t0
 
-    def trajectory(self, scn: Scenario, rows: np.ndarray, warned: dict[str, int] | None = None) -> Trajectory:
+    def trajectory(self, warned: dict[str, int] | None = None) -> Trajectory:
         """The Trajectory of rows[:done]; status / message: an exception, a status code (+ the MuJoCo
         warnings `warned`, counts by name, and their text), an interrupt, or "ok"."""
-        traj = Trajectory.from_rows(rows[:self.done], meta=run_meta(scn, self.wall))
+        traj = Trajectory.from_rows(self.rows[:self.done], meta=run_meta(self.scn, self.wall))
         traj.meta["mujoco_warning_text"] = self.warnings[:20]
         if self.error:
             traj.status, cause = "error", self.error
@@ -117,11 +123,6 @@ class ChunkRun:
             return traj
         traj.message = f"{cause} at t = {float(traj.t[-1]) if len(traj) else 0.0:.4f} s"
         return traj
-
-
-def part_trajectory(scn: Scenario, rows: np.ndarray) -> Trajectory:
-    """A chunk of a run as a Trajectory (time series only), for `on_chunk`."""
-    return Trajectory.from_rows(rows, meta=run_meta(scn, 0.0))
 
 
 def progress_bar(enabled: bool, total: int, desc: str):

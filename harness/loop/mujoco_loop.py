@@ -15,7 +15,7 @@ from controllers import master as master_model
 from controllers.status import Status
 from harness.config.scenario import Scenario
 from harness.loop.aot import A
-from harness.loop.common import ChunkRun, RunModel, compile_model, noise_table, part_trajectory, progress_bar
+from harness.loop.common import ChunkRun, RunModel, compile_model, noise_table, progress_bar
 from harness.loop.force_kernels import FORCE_MODES, filter_alpha
 from harness.loop.mj_warnings import warning_counts
 from harness.loop.native import MJ_FUNCS
@@ -133,15 +133,10 @@ def simulate_mujoco(scn: Scenario, progress: bool = False, cmd_log: np.ndarray |
     chunk(0, 0)  # no step: numba loads the kernel (on-disk cache) with the run's argument types
     load_time = time.perf_counter() - tl
 
-    def part(k: int, done: int) -> None:
-        piece = part_trajectory(scn, rows[k:done])
-        geo.fill(piece, k, done)
-        on_chunk(piece)
-
     bar = progress_bar(progress, n, f"MuJoCo plant (N={cmap.n_segments}, {scn.plant.actuation})")
-    run = ChunkRun(n, MUJOCO_CHUNK, bar, part if on_chunk is not None else None)
+    run = ChunkRun(scn, rows, MUJOCO_CHUNK, bar, on_chunk, geo.fill)
     run.run(chunk)
-    traj = run.trajectory(scn, rows, warned)
+    traj = run.trajectory(warned)
     cpts = groups[3][2]
     if cpts.shape[0]:
         traj.contact_points = cpts[:run.done].copy()

@@ -17,7 +17,6 @@ from harness.loop.common import (
     RunModel,
     compile_model,
     noise_table,
-    part_trajectory,
     progress_bar,
 )
 from harness.loop.fast import K
@@ -136,9 +135,8 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
                 return status, stepper.done - k0
         return 0, k1 - k0
 
-    part = None if on_chunk is None else (lambda k, done: on_chunk(part_trajectory(scn, rows[k:done])))
-    run = ChunkRun(n, CHUNK, progress_bar(progress, n, f"{plant.kind} plant ({plant.actuation}), controller "
-                                          f"{cname}"), part)
+    run = ChunkRun(scn, rows, CHUNK, progress_bar(progress, n, f"{plant.kind} plant ({plant.actuation}), "
+                                                  f"controller {cname}"), on_chunk)
     try:
         run.run(steps)
     finally:
@@ -150,7 +148,7 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
         error = error or str(run.exc)
         run.error = ""
     done, status = run.done, run.status
-    traj = run.trajectory(scn, rows, getattr(plant, "warned", None))
+    traj = run.trajectory(getattr(plant, "warned", None))
     traj.meta.update(build_time=build_time, controller=cname)
     if own_geo:
         plant.finish(traj, done)
