@@ -167,9 +167,9 @@ _NO_ALLOCATION_MUJOCO_SCRIPT = textwrap.dedent("""
 
 @pytest.mark.slow
 def test_the_mujoco_loop_allocates_nothing_per_step():
-    """The MuJoCo loop's compiled kernel (`mujoco_chunk`, which keeps numba's runtime for its chain-sized
-    arrays) makes the same number of heap allocations in a 10-step run as in a 300-step one, each one
-    compiled call: nothing per step, in the loop body or in the kernels it calls."""
+    """A MuJoCo run makes the same number of heap allocations in 10 steps as in 300, each one compiled
+    call: nothing per step, in the loop body (`mujoco_chunk`, compiled without numba's runtime since its
+    argument groups are built in Python) or in the kernels it calls."""
     out = subprocess.run([sys.executable, "-c", _NO_ALLOCATION_MUJOCO_SCRIPT], capture_output=True, text=True,
                          timeout=900)
     assert out.returncode == 0, out.stderr[-3000:]

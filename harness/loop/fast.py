@@ -35,15 +35,11 @@ def cache_root() -> Path:
 def source_digest() -> str:
     """16 hex digits of a hash of the kernel sources and versions (without importing numba)."""
     import sys
-    from importlib.metadata import PackageNotFoundError, version
+    from importlib.metadata import version
 
     import numpy
 
-    try:
-        nb = version("numba")
-    except PackageNotFoundError:  # pragma: no cover - numba missing: nothing is compiled
-        nb = "none"
-    h = hashlib.sha256(f"{nb} {numpy.__version__} {sys.version} {sys.platform}".encode())
+    h = hashlib.sha256(f"{version('numba')} {numpy.__version__} {sys.version} {sys.platform}".encode())
     for mod in [*MODULES, *_extra_modules(), sys.modules[__name__]]:  # this module: how they are compiled
         h.update(inspect.getsource(mod).encode())
     return h.hexdigest()[:16]

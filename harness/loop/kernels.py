@@ -1,6 +1,5 @@
-"""Per-step loop kernels (numba-compatible; compiled by `harness.loop.fast`): sensing noise, both laws,
-the record row, the checks, the one loop body `loop_chunk`, the analytic plant's RK4 and the Python-stepped
-loop's glue.  Statuses: `controllers.status`."""
+"""Per-step loop kernels (numba-compatible): sensing, the record row, the checks, the loop body
+`loop_chunk`, the analytic plant's RK4 and the Python-stepped loop's glue.  Statuses: `controllers.status`."""
 
 from __future__ import annotations
 
@@ -158,9 +157,8 @@ def record_row(t, state, model, law, row, info):
 
 def sense_state(state, noise, k, noise_scale, sensed):
     """The sensed state (16,) at step k: the true state plus AWGN (noise (n, 32): `add_noise_channel`;
-    (n, 16): `add_noise`), or the true state when noise_scale == 0.  With DQ2_FILTER more columns (row 0:
-    gain alpha, filtered dq2 y; `common.noise_table`): sensed dq2 <- y += alpha (sensed dq2 - y), y = the
-    sensed dq2 at k = 0."""
+    (n, 16): `add_noise`; none when noise_scale == 0).  With DQ2_FILTER more columns (row 0: gain alpha,
+    filtered dq2 y): sensed dq2 <- y += alpha (sensed dq2 - y), y = the sensed dq2 at k = 0."""
     if noise_scale > 0.0 and noise.shape[1] >= 32:
         add_noise_channel(state, noise, k, noise_scale, sensed)
     elif noise_scale > 0.0:
@@ -335,10 +333,9 @@ def stepped_state_check(loop):
 
 
 def stepped_after_control(st, loop, law, ext_ref, row, cmd):
-    """After the controller's step (status st): the row's F_true, F_sensed (N) and contact columns; status 1
-    if T1, T2 or u2 is not finite, 4 on a runaway row.  If still 0: the servo reference ref <- ext_ref (12,)
-    if given, else (servo) `servo_reference_step`, and cmd (26,) <- [T1, T2, ref, sensed q2].  Returns the
-    status."""
+    """After the controller's step (status st): the row's force and contact columns; status 1 if T1, T2 or
+    u2 is not finite, 4 on a runaway row.  If still 0: ref <- ext_ref (12,) if given, else (servo)
+    `servo_reference_step`, and cmd (26,) <- [T1, T2, ref, sensed q2].  Returns the status."""
     _x, _n, _s, Ftrue, Fsens, cinfo, _i, ref, dt, servo = loop
     T1, T2, u2, sensed = law[0], law[1], law[2], law[9]
     for i in range(4):

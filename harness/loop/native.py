@@ -127,9 +127,8 @@ def scratch_intrinsics() -> dict:
 
 def copy_geometry(geo_in, row, geo_out):
     """Row `row` of the recording geometry from MuJoCo's kinematics: geo_in = (xpos, xquat, site_xpos,
-    xanchor (MjData views), bodies (nb,), gids = [elbow body, shoulder joint, master tip site, slave tip
-    site]); geo_out = (body_pos (n, nb, 3), body_quat (n, nb, 4) wxyz, master_pos (n, 3, 3) shoulder,
-    elbow, master tip; tip (n, 3))."""
+    xanchor, bodies (nb,), gids = [elbow body, shoulder joint, master tip site, slave tip site]); geo_out =
+    (body_pos (n, nb, 3), body_quat (n, nb, 4) wxyz, master_pos (n, 3, 3) shoulder/elbow/tip, tip (n, 3))."""
     xpos, xquat, site_xpos, xanchor, bodies, gids = geo_in
     body_pos, body_quat, master_pos, tip = geo_out
     for b in range(bodies.shape[0]):
