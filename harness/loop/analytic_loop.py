@@ -8,14 +8,7 @@ import numpy as np
 from controllers import master as master_model
 from harness.config.scenario import Scenario
 from harness.loop.aot import A
-from harness.loop.common import (
-    CHUNK,
-    ChunkRun,
-    RunModel,
-    compile_model,
-    noise_table,
-    progress_bar,
-)
+from harness.loop.common import CHUNK, ChunkRun, RunModel, compile_model, noise_table, progress_bar
 from harness.loop.trajectory import ROW_SLICES, ROW_WIDTH, Trajectory
 from harness.plant.analytic import AnalyticPlant
 

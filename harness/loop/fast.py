@@ -13,6 +13,7 @@ from pathlib import Path
 
 from controllers import cc, control, master, moments, slave, subtasks, tip
 from harness.config.runtime import options
+from harness.loop import trajectory
 
 MODULES = [cc, tip, moments, slave, master, subtasks, control]
 
@@ -40,7 +41,8 @@ def source_digest() -> str:
     import numpy
 
     h = hashlib.sha256(f"{version('numba')} {numpy.__version__} {sys.version} {sys.platform}".encode())
-    for mod in [*MODULES, *_extra_modules(), sys.modules[__name__]]:  # this module: how they are compiled
+    # + the record row's layout (compiled into the kernels) and this module (how they are compiled)
+    for mod in [*MODULES, *_extra_modules(), trajectory, sys.modules[__name__]]:
         h.update(inspect.getsource(mod).encode())
     return h.hexdigest()[:16]
 

@@ -208,14 +208,12 @@ def body_half_sizes(m: mujoco.MjModel, bodies: np.ndarray) -> np.ndarray:
     """(nb, 3) half extents (body frame, m) of a box for each body's first capsule (r, r, half length); a
     body without one gets a cube of the smallest capsule radius."""
     out = np.zeros((len(bodies), 3))
-    radii = []
     for k, b in enumerate(bodies):
         gids = [g for g in range(int(m.body_geomadr[b]), int(m.body_geomadr[b] + m.body_geomnum[b]))
                 if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE]
         if gids:
             r, h = (float(v) for v in m.geom_size[gids[0], :2])
             out[k] = (r, r, h)
-            radii.append(r)
-    r0 = min(radii) if radii else 0.01
-    out[~out.any(axis=1)] = r0
+    found = out.any(axis=1)
+    out[~found] = out[found, 0].min() if found.any() else 0.01
     return out

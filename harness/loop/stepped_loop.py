@@ -10,15 +10,7 @@ import numpy as np
 
 from controllers.control import MASTER_INFO, SLAVE_INFO
 from harness.config.scenario import Scenario
-from harness.loop.common import (
-    CHUNK,
-    STOP,
-    ChunkRun,
-    RunModel,
-    compile_model,
-    noise_table,
-    progress_bar,
-)
+from harness.loop.common import CHUNK, STOP, ChunkRun, RunModel, compile_model, noise_table, progress_bar
 from harness.loop.fast import K
 from harness.loop.interface_adapter import ControllerFailure, InterfaceController, is_compiled
 from harness.loop.trajectory import ROW_WIDTH, Trajectory
