@@ -9,9 +9,9 @@ from typing import Any
 
 def releases_gil(scn) -> bool:
     """Whether `simulate(scn)` runs in a compiled loop releasing the GIL (scales over a sweep's threads)."""
-    from harness.loop.fast import jit_wanted
+    from harness.config.runtime import options
 
-    return scn.controller.name == "paper" and scn.plant.kind in ("mujoco", "analytic") and jit_wanted()
+    return scn.controller.name == "paper" and scn.plant.kind in ("mujoco", "analytic") and options().jit
 
 
 def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None):

@@ -47,11 +47,6 @@ def source_digest() -> str:
     return h.hexdigest()[:16]
 
 
-def jit_wanted() -> bool:
-    """Whether the kernels are compiled: False when TELEOP_NO_JIT=1 (the interpreted kernels)."""
-    return options().jit
-
-
 _BUILDING = threading.Lock()
 _NAMESPACES: dict[bool, types.SimpleNamespace] = {}  # jit -> namespace
 
@@ -59,7 +54,7 @@ _NAMESPACES: dict[bool, types.SimpleNamespace] = {}  # jit -> namespace
 def kernels(jit: bool | None = None) -> types.SimpleNamespace:
     """Namespace of kernels, compiled unless jit is False (None: as TELEOP_NO_JIT says).  One per process and
     kind, built under a lock (threads asking at once get the same one)."""
-    kind = jit_wanted() if jit is None else jit
+    kind = options().jit if jit is None else jit
     with _BUILDING:
         if kind not in _NAMESPACES:
             _NAMESPACES[kind] = _build(kind)

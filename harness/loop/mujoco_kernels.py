@@ -102,14 +102,6 @@ def master_grip(master, operator):
         operator_force(op, hand, xm, vm, F1op)
 
 
-def master_handle_force(master, operator, Fconst, qfrc):
-    """qfrc at the master's dofs <- J1^T (F1 + grip F1op), the constant and the operator's force on the
-    handle (J1 of the last `master_grip`)."""
-    m_dadr, J1, F1op = master[3], master[9], operator[5]
-    for j in range(2):
-        qfrc[m_dadr[j]] = J1[0, j] * (Fconst[0] + F1op[0]) + J1[1, j] * (Fconst[1] + F1op[1])
-
-
 def mujoco_sense(k, state, r, p):
     """The true state from MuJoCo's joints (status 6, 5), the contact and operator forces, the sensed F
     into the row, the qpos history."""
@@ -158,7 +150,7 @@ def mujoco_advance(k, st, use, state, law, p):
     c_qadr, c_dadr, R, C, L0, eargs, qc, vc, corr = chain
     op_on, op, targets, hand, target, F1op = operator
     qpos_hist, cmd_log, geo_in, geo_out = rec
-    qpos, Fconst = master[0], sensing[4]
+    qpos, m_dadr, J1, Fconst = master[0], master[3], master[9], sensing[4]
     live = geo_out[0].shape[0] > 0
     if st != 0:
         if live:
@@ -180,7 +172,8 @@ def mujoco_advance(k, st, use, state, law, p):
             if op_on:
                 operator_target(targets, k * dt + s * hphys, target)
                 operator_advance(op, hand, target, F1op, hphys)
-            master_handle_force(master, operator, Fconst, qfrc)
+            for j in range(2):  # J1^T (F1 + F1op), J1 of the last `master_grip`
+                qfrc[m_dadr[j]] = J1[0, j] * (Fconst[0] + F1op[0]) + J1[1, j] * (Fconst[1] + F1op[1])
         for c in range(n):
             qc[c] = qpos[c_qadr[c]]
         chain_elastic_correction(qc, *eargs, corr)
@@ -220,9 +213,9 @@ def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):
 
 # the kernels that allocate on the heap (run-time sizes), compiled with numba's runtime (harness.loop.fast)
 HEAP_KERNELS = ("backbone_world",)
-KERNELS = ("sense_mujoco", "mujoco_state_status", "chain_commands", "master_grip", "master_handle_force",
-           "mujoco_sense", "mujoco_command", "mujoco_advance", "mujoco_chunk", "replay_commands",
-           "kinematics_replay", "backbone_world")
+KERNELS = ("sense_mujoco", "mujoco_state_status", "chain_commands", "master_grip", "mujoco_sense",
+           "mujoco_command", "mujoco_advance", "mujoco_chunk", "replay_commands", "kinematics_replay",
+           "backbone_world")
 
 
 # --- recording geometry after the loop ---------------------------------------------------------------
