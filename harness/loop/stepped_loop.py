@@ -97,7 +97,7 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
     model = model if model is not None else compile_model(scn)
     ctrl = None if is_compiled(scn) else InterfaceController(scn, model)
     cname = scn.controller.name
-    error, failed = "", False
+    failure = None  # the controller's ControllerFailure
     plant.reset(model.s0)
     if hasattr(plant, "stop"):  # a plant with long inner loops (the rod) checks the stop flag itself
         plant.stop = STOP
@@ -105,7 +105,7 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
         try:
             ctrl.reset(model)
         except ControllerFailure as exc:
-            error, failed, n = str(exc), True, 0
+            failure, n = exc, 0
     build_time = time.perf_counter() - tb
     rows = np.zeros((n, ROW_WIDTH))
     own_geo = hasattr(plant, "finish")
@@ -135,11 +135,9 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
         run.done = stepper.done  # also after an exception inside a step
         if ctrl is not None:
             ctrl.close()
-    failed = failed or isinstance(run.exc, ControllerFailure)
-    if failed:
-        error = error or str(run.exc)
-        run.error = ""
-    done, status = run.done, run.status
+    if failure is None and isinstance(run.exc, ControllerFailure):
+        failure, run.error = run.exc, ""
+    done = run.done
     traj = run.trajectory(getattr(plant, "warned", None))
     traj.meta.update(build_time=build_time, controller=cname)
     if own_geo:
@@ -150,9 +148,9 @@ def simulate_stepped(scn: Scenario, plant: SteppedPlant, progress: bool = False,
             traj.master_pos = geo.pop("master")[:done].copy()
         traj.meta["geometry"] = {name: v[:done].copy() for name, v in geo.items()}
         traj.meta.update(getattr(plant, "meta", lambda: {})())
-    if status == -1:  # a controller gave up (ControllerDiverged without a status code)
+    if run.status == -1:  # a controller gave up (ControllerDiverged without a status code)
         traj.status, traj.message = "diverged", ctrl.diverged or "controller gave up"
-    elif failed:  # one line naming the controller, the step and the time
-        traj.status, traj.message = "error", error
+    elif failure is not None:  # one line naming the controller, the step and the time
+        traj.status, traj.message = "error", str(failure)
         traj.meta["failed_controller"] = cname
     return traj
