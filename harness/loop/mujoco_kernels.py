@@ -8,14 +8,7 @@ import numpy as np
 from controllers.cc import backbone_points
 from controllers.master import master_kernel
 from controllers.status import ST_MUJOCO_STATE, ST_MUJOCO_WARNING, ST_OK, ST_SECTION_LENGTH
-from harness.loop.force_kernels import (
-    CONTACT_INFO,
-    operator_advance,
-    operator_force,
-    operator_target,
-    read_contact,
-    sense_forces,
-)
+from harness.loop.force_kernels import CONTACT_INFO, operator_target, read_contact, sense_forces
 from harness.loop.kernels import (
     R_CI,
     R_FS,
@@ -89,7 +82,8 @@ def chain_commands(act, q2s, T2, cmd):
 
 def master_grip(master, operator):
     """The plant master's tip xm, vm = J1 dq1 (task frame) and J1 from MuJoCo's joints; with the operator,
-    the grip force F1op."""
+    the grip force on the handle F1op = kg (x_h - x_m) + cg (v_h - v_m) (op = [mass, k, c, kg, cg], hand =
+    [x_h (2), v_h (2)])."""
     qpos, qvel, m_qadr, m_dadr, mpk_p, q1, dq1, xm, vm, J1, Jd1, M1, N1 = master
     op_on, op, _targets, hand, _target, F1op = operator
     for i in range(2):
@@ -99,7 +93,8 @@ def master_grip(master, operator):
     for i in range(2):
         vm[i] = J1[i, 0] * dq1[0] + J1[i, 1] * dq1[1]
     if op_on:
-        operator_force(op, hand, xm, vm, F1op)
+        for i in range(2):
+            F1op[i] = op[3] * (hand[i] - xm[i]) + op[4] * (hand[2 + i] - vm[i])
 
 
 def mujoco_sense(k, state, r, p):
@@ -169,9 +164,12 @@ def mujoco_advance(k, st, use, state, law, p):
         if apply1:  # operator's grip (+ constant F1) on the master handle, J1^T F1
             if s > 0 or not op_on:  # at s = 0 with the operator: J1 and F1op are the step's own
                 master_grip(master, operator)
-            if op_on:
+            if op_on:  # the hand: semi-implicit Euler, m a = k (target - x_h) - c v_h - F1op (the reaction)
                 operator_target(targets, k * dt + s * hphys, target)
-                operator_advance(op, hand, target, F1op, hphys)
+                for j in range(2):
+                    acc = (op[1] * (target[j] - hand[j]) - op[2] * hand[2 + j] - F1op[j]) / op[0]
+                    hand[2 + j] += acc * hphys
+                    hand[j] += hand[2 + j] * hphys
             for j in range(2):  # J1^T (F1 + F1op), J1 of the last `master_grip`
                 qfrc[m_dadr[j]] = J1[0, j] * (Fconst[0] + F1op[0]) + J1[1, j] * (Fconst[1] + F1op[1])
         for c in range(n):
