@@ -312,7 +312,7 @@ def test_en_tuple_equals_complex_series():
 
 @pytest.mark.parametrize("kind", ["mujoco", "analytic"])
 def test_noise_free_record_rows_equal_recomputed_rows(kind):
-    """Without noise the record row reuses the control laws' kinematics (record_row_info): the rows
+    """Without noise the record row reuses the control laws' kinematics (record_row's info): the rows
     equal record_row recomputed from the true state, bit for bit."""
     from harness.loop import simulate
     from harness.loop.common import compile_model
@@ -321,14 +321,15 @@ def test_noise_free_record_rows_equal_recomputed_rows(kind):
     scn = Scenario(duration=0.2, snr_db=None, plant=PlantConfig(kind=kind, segments=4))
     tr = simulate(scn)
     assert tr.status == "ok"
-    a = compile_model(scn)._asdict()
+    a = compile_model(scn)
     row = np.zeros(ROW_WIDTH)
     xd, dxd, ddxd = np.empty(2), np.empty(2), np.empty(2)
     for k in range(0, len(tr), 7):
         state = np.concatenate([tr.q1[k], tr.dq1[k], tr.q2[k], tr.dq2[k]])
-        K.desired(a["traj"], tr.t[k], xd, dxd, ddxd)
-        K.record_row(tr.t[k], state, xd, dxd, a["mpk_c"], a["gains"], a["spec"], tr.T1[k].copy(),
-                     tr.T2[k].copy(), tr.u2[k].copy(), tr.deN[k].copy(), row)
+        K.desired(a.traj, tr.t[k], xd, dxd, ddxd)
+        law = (tr.T1[k].copy(), tr.T2[k].copy(), tr.u2[k].copy(), tr.deN[k].copy(), np.empty(0), np.empty(0),
+               xd, dxd, ddxd, np.empty(0))  # `loop_chunk`'s law: the laws' info and sensed unused
+        K.record_row(tr.t[k], state, a, law, row, False)
         for name, sl in ROW_SLICES.items():
             got = np.atleast_1d(getattr(tr, name)[k])
             np.testing.assert_array_equal(got, row[sl], err_msg=f"{name} at step {k}")

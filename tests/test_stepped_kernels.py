@@ -171,3 +171,30 @@ def test_python_stepped_mujoco_plant_refuses_what_it_does_not_simulate():
 
     with pytest.raises(ConfigError, match="operator.enabled"):
         simulate(load_scenario(CONTACT, ["duration=0.1", "transient=0", "controller.name=paper_interface"]))
+
+
+def test_python_stepped_mujoco_plant_reports_mujoco_warnings_as_the_compiled_loop(tmp_path, capfd):
+    """A controller commanding a finite master torque beyond MuJoCo's limit (1e11 > mjMAXVAL) at step 3:
+    MuJoCo raises mjWARN_BADCTRL inside that step's mj_step; the Python-stepped run stops there with status
+    7 and, as the compiled loop, names the warning and MuJoCo's own text in the message and keeps the text
+    in meta["mujoco_warning_text"] instead of printing it."""
+    from harness.loop import simulate
+
+    p = tmp_path / "huge.py"
+    p.write_text("import numpy as np\n"
+                 "from controllers.baselines import PaperNoNullSpace\n"
+                 "class Huge(PaperNoNullSpace):\n"
+                 "    def step(self, obs):\n"
+                 "        act = super().step(obs)\n"
+                 "        if obs.k == 3:\n"
+                 "            act.T1 = np.array([1e11, 0.0])\n"
+                 "        return act\n")
+    tr = simulate(load_scenario(None, ["duration=0.1", f'controller.name="{p}:Huge"']))
+    assert tr.status == "diverged", tr.message
+    assert tr.message.startswith("MuJoCo warning (mjWARN_BADCTRL: 1); MuJoCo says: "), tr.message
+    assert tr.message.endswith(f"at t = {tr.t[-1]:.4f} s") and len(tr) == 4
+    assert tr.meta["mujoco_warnings"] == 1 and tr.meta["mujoco_warning_counts"] == {"mjWARN_BADCTRL": 1}
+    text = tr.meta["mujoco_warning_text"]
+    assert len(text) == 1 and text[0].strip() in tr.message
+    out, err = capfd.readouterr()
+    assert text[0].strip() not in out + err

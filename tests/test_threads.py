@@ -75,12 +75,12 @@ def test_warnings_stay_with_the_run_that_raised_them(traj_arrays):
 def test_a_warning_from_a_thread_running_no_loop_is_not_lost(capfd):
     """While a run captures, a warning raised in another thread (user code) goes to stderr, as MuJoCo's own
     callback would print it, not into the run."""
-    with mj_warnings.WarningSink() as sink:
+    with mj_warnings.warning_sink() as text:
         t = threading.Thread(target=mj_warnings._dispatch, args=("elsewhere",))
         t.start()
         t.join()
         mj_warnings._dispatch("mine")
-    assert sink.text == ["mine"]
+    assert text == ["mine"]
     assert "WARNING: elsewhere" in capfd.readouterr().err
 
 

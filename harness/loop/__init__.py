@@ -1,6 +1,6 @@
-"""The closed loop: a controller (on the nominal analytic models) driving a plant.  `simulate(scn)` runs
-the paper's law on the analytic and MuJoCo plants in compiled loops (`analytic_loop`, `mujoco_loop`),
-anything else in the Python-level loop (`stepped_loop`).  It knows nothing of files or sweeps."""
+"""The closed loop: a controller (on the nominal analytic models) driving a plant.  `simulate(scn)` runs the
+paper's law on the analytic and MuJoCo plants in compiled loops, anything else in the Python-level loop
+(`stepped_loop`)."""
 
 from __future__ import annotations
 
@@ -8,13 +8,10 @@ from typing import Any
 
 
 def releases_gil(scn) -> bool:
-    """Whether `simulate(scn)` runs in a compiled loop that releases the GIL (the paper's law on the MuJoCo or
-    analytic plant, compiled kernels): such runs scale over a sweep's threads."""
-    if scn.controller.name != "paper" or scn.plant.kind not in ("mujoco", "analytic"):
-        return False
-    from harness.loop.fast import jit_wanted
+    """Whether `simulate(scn)` runs in a compiled loop releasing the GIL (scales over a sweep's threads)."""
+    from harness.config.runtime import options
 
-    return jit_wanted()
+    return scn.controller.name == "paper" and scn.plant.kind in ("mujoco", "analytic") and options().jit
 
 
 def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None):
@@ -22,20 +19,16 @@ def simulate(scn, plant: Any = None, progress: bool = False, on_chunk=None):
     run diverged or was interrupted (`status`, `message`).  on_chunk: optional callable receiving each
     finished chunk of steps as a `Trajectory` (a live viewer)."""
     from harness.loop.common import compile_model
+    from harness.loop.interface_adapter import is_compiled
+    from harness.plant import build_plant
 
     model = compile_model(scn)
-    if plant is None:
-        from harness.plant import build_plant
-
-        plant = build_plant(scn)
-    from harness.loop.interface_adapter import is_compiled
-
+    plant = build_plant(scn) if plant is None else plant
     if not is_compiled(scn) or hasattr(plant, "advance"):  # the Python-level loop, on a SteppedPlant
         from harness.loop.stepped_loop import simulate_stepped
         from harness.loop.stepped_plants import stepped_plant
 
-        plant = stepped_plant(scn, model, plant)
-        return simulate_stepped(scn, plant, progress=progress, on_chunk=on_chunk, model=model)
+        return simulate_stepped(scn, stepped_plant(scn, model, plant), progress, on_chunk, model)
     if plant.kind == "analytic":
         from harness.loop.analytic_loop import simulate_analytic
 

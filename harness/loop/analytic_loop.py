@@ -1,5 +1,5 @@
 """Closed loop on the analytic plant (its own parameters), integrated with RK4 inside one compiled kernel
-(`harness.loop.kernels.analytic_chunk`).  Returns the in-memory `Trajectory`."""
+(`harness.loop.kernels.analytic_chunk`)."""
 
 from __future__ import annotations
 
@@ -8,15 +8,7 @@ import numpy as np
 from controllers import master as master_model
 from harness.config.scenario import Scenario
 from harness.loop.aot import A
-from harness.loop.common import (
-    CHUNK,
-    ChunkRun,
-    RunModel,
-    compile_model,
-    noise_table,
-    part_trajectory,
-    progress_bar,
-)
+from harness.loop.common import CHUNK, ChunkRun, RunModel, compile_model, noise_table, progress_bar
 from harness.loop.trajectory import ROW_SLICES, ROW_WIDTH, Trajectory
 from harness.plant.analytic import AnalyticPlant
 
@@ -36,12 +28,11 @@ def simulate_analytic(scn: Scenario, progress: bool = False, plant: AnalyticPlan
     Fc = np.zeros(4) if scn.sensing.force.mode == "ignored" else a.F  # the plant feels a.F
     rows[:, ROW_SLICES["F_true"]] = a.F
     rows[:, ROW_SLICES["F_sensed"]] = Fc
-    plant_args = (scn.control_dt, max(1, scn.substeps), scn.continuous_control,
-                  master_model.packed(plant.master), plant.slave.packed())
+    plant_args = (a, Fc, scn.control_dt, max(1, scn.substeps), scn.continuous_control,
+                  master_model.packed(plant.master), plant.slave.packed(), np.empty((4, 16)), np.empty(16))
     delay = int(round(scn.plant.actuation_delay / scn.control_dt))
     cmdbuf = np.zeros((delay + 1, 8))  # [T1, T2] per slot of the actuation-delay ring
-    part = None if on_chunk is None else (lambda k, done: on_chunk(part_trajectory(scn, rows[k:done])))
-    run = ChunkRun(n, CHUNK, progress_bar(progress, n, "analytic plant"), part)
-    run.run(lambda k, k1: A.analytic_chunk(k, k1, a, plant_args,
-                                           (state, noise, scale, Fc, rows[k:k1], cmdbuf, delay)))
-    return run.trajectory(scn, rows)
+    data = (state, noise, scale, rows, cmdbuf, delay, scn.control_dt)
+    run = ChunkRun(scn, rows, CHUNK, progress_bar(progress, n, "analytic plant"), on_chunk)
+    run.run(lambda k, k1: A.analytic_chunk(k, k1, a, data, plant_args))
+    return run.trajectory()

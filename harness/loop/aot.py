@@ -1,9 +1,7 @@
-"""Ahead-of-time compiled loop entry kernels (`ENTRIES`): a run that never loads numba (~1.2-1.5 s per
-process, `benchmarks/bench_core.py`).  Each is built with `numba.pycc` from the jitted function, for the
-call's argument types (`type_key`), into `aot_dir()/octarm_<entry>_<types>.so` on first use (20-60 s,
-under a file lock; same numbers, GIL released).  Fallback: when it cannot be built or loaded, the jitted
-kernel runs and the reason goes to `<module>.failed` (delete it to retry).  TELEOP_NO_AOT=1: always the
-jitted kernels; TELEOP_NO_JIT=1: the interpreted ones."""
+"""Ahead-of-time compiled loop entry kernels (`ENTRIES`, a run that never loads numba): built with
+`numba.pycc` for the call's argument types into `aot_dir()/octarm_<entry>_<types>.so` on first use.
+Fallback: the jitted kernel, the reason in `<module>.failed` (delete it to retry).  TELEOP_NO_AOT=1: always
+the jitted kernels."""
 
 from __future__ import annotations
 
@@ -11,8 +9,11 @@ import contextlib
 import functools
 import hashlib
 import importlib.util
+import inspect
 import logging
 import os
+import platform
+import shutil
 import sys
 import sysconfig
 import tempfile
@@ -27,7 +28,6 @@ from harness.loop import fast
 
 log = logging.getLogger(__name__)
 
-# called once per chunk of steps, not per step (finding the module costs ~50 us per call)
 ENTRIES = ("mujoco_chunk", "analytic_chunk", "backbone_world", "kinematics_replay")
 
 
@@ -36,8 +36,8 @@ class Unsupported(TypeError):
 
 
 def type_key(a) -> str:
-    """A string that determines `numba.typeof(a)` for arrays (dtype, ndim, layout, writeable), bool, int,
-    float, numpy scalars and nested tuples; Unsupported for anything else."""
+    """A string that determines `numba.typeof(a)` (arrays, bool, int, float, numpy scalars, nested
+    tuples); Unsupported for anything else."""
     if isinstance(a, np.ndarray):
         if a.dtype.fields is not None or a.dtype.hasobject:  # dtype.str would not tell records apart
             raise Unsupported(f"array of dtype {a.dtype}")
@@ -60,21 +60,17 @@ def type_key(a) -> str:
 
 
 def aot_dir() -> Path:
-    """Folder of the entry modules of the current kernel sources, versions, build recipe and processor."""
+    """Folder of the entry modules of the kernel sources, versions, build recipe and processor."""
     return fast.cache_root() / f"aot-{fast.source_digest()}-{_recipe()}"
 
 
 @functools.cache
 def _recipe() -> str:
-    import inspect
-
     return hashlib.sha256((inspect.getsource(sys.modules[__name__]) + _cpu_id()).encode()).hexdigest()[:8]
 
 
 def _cpu_id() -> str:
-    """The processor's model and flags: a cache shared by machines never hands one's module to another."""
-    import platform
-
+    """The processor's model and flags (a cache shared by machines never hands one's module to another)."""
     lines = []
     try:
         with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
@@ -92,12 +88,9 @@ def _cpu_id() -> str:
 def _locked(path: Path):
     import fcntl
 
-    with open(path, "a+") as fh:
+    with open(path, "a+") as fh:  # closing it releases the lock
         fcntl.flock(fh, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(fh, fcntl.LOCK_UN)
+        yield
 
 
 @contextlib.contextmanager
@@ -121,8 +114,6 @@ def _wrapper_releases_gil():
 
 def toolchain_problem() -> str | None:
     """Why no module can be built here (no C compiler, no Python headers), or None."""
-    import shutil
-
     cc = (os.environ.get("CC") or sysconfig.get_config_var("CC") or "cc").split()[0]
     if shutil.which(cc) is None:
         return f"no C compiler ({cc!r} not found; set CC)"
@@ -154,7 +145,6 @@ def build(entry: str, args: tuple, modname: str, path: Path) -> None:
         os.replace(built, path)
 
 
-# held while an entry resolves its module: importlib fails importing one extension from two threads at once
 _RESOLVING = threading.RLock()
 
 

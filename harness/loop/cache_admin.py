@@ -1,6 +1,5 @@
 """The compiled-kernel cache on disk (`teleop cache`): its folders numba-<digest> (`fast`) and
-aot-<digest>-<recipe> (`aot`), one per kernel-source version (5-60 MB each), and removing those this
-installation no longer uses.  Nothing else in the root is listed or removed."""
+aot-<digest>-<recipe> (`aot`), one per kernel-source version; nothing else in the root is touched."""
 
 from __future__ import annotations
 

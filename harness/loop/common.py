@@ -1,5 +1,5 @@
-"""What every closed loop shares: the run model, the stop flag, the initial state, the desired trajectory,
-the seeded noise table, the chunk driver and the run's outcome and metadata."""
+"""What every closed loop shares: the run model, the stop flag, the desired trajectory, the seeded noise
+table, the chunk driver and the run's outcome and metadata."""
 
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ from harness.config.scenario import Scenario
 from harness.loop.fast import K
 from harness.loop.force_kernels import filter_alpha
 from harness.loop.kernels import DQ2_FILTER
+from harness.loop.mj_warnings import warning_detail, warning_sink
 from harness.loop.trajectory import Trajectory
 from harness.plant.initial import InitialStateError, initial_state
 
@@ -60,33 +61,42 @@ def noise_table(scn: Scenario, n: int) -> tuple[np.ndarray, float]:
 
 
 class ChunkRun:
-    """Drives a run's n control steps in calls of `size` steps, keeping status, done (steps recorded),
-    interrupted, error / exc (an exception) and wall (s); closes the progress bar `bar` at the end."""
+    """Drives a run's control steps (recorded into rows (n, ROW_WIDTH)) in calls of `size` steps, keeping
+    status, done (steps recorded), interrupted, error / exc (an exception) and wall (s); closes the progress
+    bar `bar` at the end.  on_chunk: called with each finished chunk as a `Trajectory` (the time series, +
+    fill(piece, k0, k1))."""
 
-    def __init__(self, n: int, size: int, bar=None, on_part=None):
-        self.n, self.size, self.bar, self.on_part = n, size, bar, on_part
+    def __init__(self, scn: Scenario, rows: np.ndarray, size: int, bar=None, on_chunk=None, fill=None):
+        self.scn, self.rows, self.n, self.size, self.bar = scn, rows, rows.shape[0], size, bar
+        self.on_chunk, self.fill = on_chunk, fill
         self.status, self.done, self.interrupted, self.error, self.exc, self.wall = 0, 0, False, "", None, 0.0
+        self.warnings: list[str] = []
 
     def run(self, call) -> None:
-        """call(k, k1) -> (status, steps done) runs steps k..k1-1; then the bar and on_part(k, done).  Stops
-        at a non-zero status, on STOP or a KeyboardInterrupt (interrupted) or an exception (error / exc)."""
+        """call(k, k1) -> (status, steps done) runs steps k..k1-1; then the bar and on_chunk.  Stops
+        at a non-zero status, on STOP or a KeyboardInterrupt (interrupted) or an exception (error / exc).
+        Keeps MuJoCo's warning text raised meanwhile (`warnings`)."""
         t0 = time.perf_counter()
         try:
-            k = 0
-            while k < self.n:
-                k1 = min(self.n, k + self.size)
-                self.status, m = call(k, k1)
-                self.done = k + m
-                if self.bar is not None:
-                    self.bar.update(m)
-                if self.on_part is not None and m:
-                    self.on_part(k, self.done)
-                if self.status != 0:
-                    break
-                k = k1
-                if STOP.is_set():
-                    self.interrupted = True
-                    break
+            with warning_sink() as self.warnings:
+                k = 0
+                while k < self.n:
+                    k1 = min(self.n, k + self.size)
+                    self.status, m = call(k, k1)
+                    self.done = k + m
+                    if self.bar is not None:
+                        self.bar.update(m)
+                    if self.on_chunk is not None and m:
+                        piece = Trajectory.from_rows(self.rows[k:self.done], meta=run_meta(self.scn, 0.0))
+                        if self.fill is not None:
+                            self.fill(piece, k, self.done)
+                        self.on_chunk(piece)
+                    if self.status != 0:
+                        break
+                    k = k1
+                    if STOP.is_set():
+                        self.interrupted = True
+                        break
         except KeyboardInterrupt:
             self.interrupted = True
         except Exception as exc:  # keep what was computed; report the cause
@@ -96,15 +106,16 @@ class ChunkRun:
                 self.bar.close()
             self.wall = time.perf_counter() - t0
 
-    def trajectory(self, scn: Scenario, rows: np.ndarray, detail: str = "") -> Trajectory:
-        """The Trajectory of rows[:done]; status / message: an exception, a status code (+ `detail`), an
-        interrupt, or "ok"."""
-        traj = Trajectory.from_rows(rows[:self.done])
-        traj.meta.update(run_meta(scn, self.wall))
+    def trajectory(self, warned: dict[str, int] | None = None) -> Trajectory:
+        """The Trajectory of rows[:done]; status / message: an exception, a status code (+ the MuJoCo
+        warnings `warned`, counts by name, and their text), an interrupt, or "ok"."""
+        traj = Trajectory.from_rows(self.rows[:self.done], meta=run_meta(self.scn, self.wall))
+        traj.meta["mujoco_warning_text"] = self.warnings[:20]
         if self.error:
             traj.status, cause = "error", self.error
         elif self.status != 0:
             known = self.status in {int(s) for s in Status}
+            detail = warning_detail(warned or {}, self.warnings)
             traj.status, cause = "diverged", (Status(self.status).text if known else "unknown") + detail
         elif self.interrupted:
             traj.status, cause = "interrupted", "interrupted"
@@ -114,21 +125,10 @@ class ChunkRun:
         return traj
 
 
-def part_trajectory(scn: Scenario, rows: np.ndarray) -> Trajectory:
-    """A chunk of a run as a Trajectory (time series only), for `on_chunk`."""
-    part = Trajectory.from_rows(rows)
-    part.meta.update(run_meta(scn, 0.0))
-    return part
-
-
 def progress_bar(enabled: bool, total: int, desc: str):
     if not enabled:
         return None
-    try:
-        bar = progress_bar_class()
-    except ImportError:  # pragma: no cover
-        return None
-    return bar(total=total, desc=desc, unit="step", unit_scale=True, leave=False)
+    return progress_bar_class()(total=total, desc=desc, unit="step", unit_scale=True, leave=False)
 
 
 class RunModel(NamedTuple):

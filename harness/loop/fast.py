@@ -1,9 +1,6 @@
-"""Compiled versions of the numba-compatible kernels of `controllers/` and harness' kernel modules (each
-lists them in KERNELS): `from harness.loop.fast import K; K.name(...)`.  Every kernel is cloned into one
-namespace of compiled kernels and wrapped in `numba.njit(cache=True, nogil=True)` (calls stay in machine
-code; only HEAP_KERNELS use numba's runtime).  TELEOP_NO_JIT=1 (or no numba): the interpreted functions.
-Cache: a folder keyed by the kernel sources and numba / numpy / Python versions under $TELEOP_CACHE_DIR,
-else $XDG_CACHE_HOME/octarm-teleop, else ~/.cache/octarm-teleop."""
+"""The kernels (KERNELS of `controllers/` and harness' kernel modules) compiled into one namespace with
+`numba.njit(cache=True, nogil=True)` (only HEAP_KERNELS with numba's runtime): `K.name(...)`.
+TELEOP_NO_JIT=1: the interpreted functions.  Cache: `cache_root()/numba-<source_digest()>`."""
 
 from __future__ import annotations
 
@@ -16,25 +13,22 @@ from pathlib import Path
 
 from controllers import cc, control, master, moments, slave, subtasks, tip
 from harness.config.runtime import options
+from harness.loop import trajectory
 
 MODULES = [cc, tip, moments, slave, master, subtasks, control]
 
 
 def _extra_modules():
     """Kernel modules of harness/ (plant maps, analytic plant, loops)."""
-    from harness.loop import force_kernels, kernels, native
-    from harness.plant import analytic
+    from harness.loop import force_kernels, kernels, mujoco_kernels, native
+    from harness.plant import analytic, chain_map
 
-    try:
-        from harness.loop import mujoco_kernels
-        from harness.plant import chain_map
-    except ImportError:  # pragma: no cover - mujoco missing: its kernels are unavailable
-        return [analytic, kernels, force_kernels, native]
     return [chain_map, analytic, kernels, force_kernels, native, mujoco_kernels]
 
 
 def cache_root() -> Path:
-    """Root folder of the compiled kernels (see the module's docstring)."""
+    """Root folder of the compiled kernels: $TELEOP_CACHE_DIR, else $XDG_CACHE_HOME/octarm-teleop, else
+    ~/.cache/octarm-teleop."""
     return options().cache_dir
 
 
@@ -42,43 +36,29 @@ def cache_root() -> Path:
 def source_digest() -> str:
     """16 hex digits of a hash of the kernel sources and versions (without importing numba)."""
     import sys
-    from importlib.metadata import PackageNotFoundError, version
+    from importlib.metadata import version
 
     import numpy
 
-    try:
-        nb = version("numba")
-    except PackageNotFoundError:  # pragma: no cover - numba missing: nothing is compiled
-        nb = "none"
-    h = hashlib.sha256(f"{nb} {numpy.__version__} {sys.version} {sys.platform}".encode())
-    for mod in [*MODULES, *_extra_modules(), sys.modules[__name__]]:  # this module: how they are compiled
+    h = hashlib.sha256(f"{version('numba')} {numpy.__version__} {sys.version} {sys.platform}".encode())
+    # + the record row's layout (compiled into the kernels) and this module (how they are compiled)
+    for mod in [*MODULES, *_extra_modules(), trajectory, sys.modules[__name__]]:
         h.update(inspect.getsource(mod).encode())
     return h.hexdigest()[:16]
 
 
-def jit_wanted() -> bool:
-    """Whether the kernels are compiled: False when TELEOP_NO_JIT=1 (the interpreted kernels)."""
-    return options().jit
-
-
 _BUILDING = threading.Lock()
-_NAMESPACES: dict[bool | None, types.SimpleNamespace] = {}  # jit (None: as TELEOP_NO_JIT says) -> namespace
+_NAMESPACES: dict[bool, types.SimpleNamespace] = {}  # jit -> namespace
 
 
 def kernels(jit: bool | None = None) -> types.SimpleNamespace:
     """Namespace of kernels, compiled unless jit is False (None: as TELEOP_NO_JIT says).  One per process and
     kind, built under a lock (threads asking at once get the same one)."""
-    ns = _NAMESPACES.get(jit)
-    if ns is None:
-        with _BUILDING:
-            ns = _NAMESPACES.get(jit)
-            if ns is None:
-                kind = jit_wanted() if jit is None else jit
-                ns = _NAMESPACES.get(kind)
-                if ns is None:
-                    ns = _build(kind)
-                _NAMESPACES[kind] = _NAMESPACES[jit] = ns
-    return ns
+    kind = options().jit if jit is None else jit
+    with _BUILDING:
+        if kind not in _NAMESPACES:
+            _NAMESPACES[kind] = _build(kind)
+        return _NAMESPACES[kind]
 
 
 def _build(jit: bool) -> types.SimpleNamespace:

@@ -91,20 +91,4 @@ def operator_target(targets, t, out):
     out[1] = targets[nt - 1, 2]
 
 
-def operator_force(op, hand, xm, vm, F1):
-    """Grip force ON the master handle F1 (2,) = kg (x_h - x_m) + cg (v_h - v_m); op = [mass, k, c, kg,
-    cg], hand = [x_h (2), v_h (2)], xm, vm (2,) master tip position/velocity (master task frame)."""
-    for i in range(2):
-        F1[i] = op[3] * (hand[i] - xm[i]) + op[4] * (hand[2 + i] - vm[i])
-
-
-def operator_advance(op, hand, target, F1, h):
-    """One semi-implicit Euler step h of the hand: m a = k (target - x_h) - c v_h - F1 (the grip's
-    reaction; F1 from operator_force)."""
-    for i in range(2):
-        a = (op[1] * (target[i] - hand[i]) - op[2] * hand[2 + i] - F1[i]) / op[0]
-        hand[2 + i] += a * h
-        hand[i] += hand[2 + i] * h
-
-
-KERNELS = ("read_contact", "sense_forces", "operator_target", "operator_force", "operator_advance")
+KERNELS = ("read_contact", "sense_forces", "operator_target")

@@ -1,8 +1,6 @@
-"""A `controllers.interface.Controller` as the controller of `harness.loop.stepped_loop`: fills the
-`Observation`, checks the `Action` and copies T1 (2,) N m, T2 (6,), u2 (6,), deN (6,) (and, with
-``use_ref`` on a servo plant, q2_ref / dq2_ref) into the loop's buffers.  Anything the controller raises,
-an unusable action or a call past `controller.step_timeout` -> `ControllerFailure` (one line; status
-"error"); Ctrl-C / SIGTERM -> `HarnessInterrupt`; `ControllerDiverged` -> its status code (else -1)."""
+"""A `controllers.interface.Controller` as the controller of `harness.loop.stepped_loop`.  Anything it
+raises, an unusable action or a call past `controller.step_timeout` -> `ControllerFailure` (one line);
+Ctrl-C / SIGTERM -> `HarnessInterrupt`; `ControllerDiverged` -> its status code (else -1)."""
 
 from __future__ import annotations
 
@@ -12,12 +10,7 @@ import time
 
 import numpy as np
 
-from controllers.interface import (
-    ControllerContext,
-    ControllerDiverged,
-    NominalModels,
-    Observation,
-)
+from controllers.interface import ControllerContext, ControllerDiverged, NominalModels, Observation
 from controllers.status import Status
 from harness.config.controller import (
     USER_CODE,
@@ -84,7 +77,9 @@ def check_action(act, name: str, k: int, t: float, servo: bool) -> str:
 
 class InterfaceController:
     """The scenario's controller as the loop's: ``reset(model)``, ``step(t, sensed, xd, dxd, ddxd, T1, T2,
-    u2, deN) -> status``, ``close()``.  A failed construction is raised by `reset`."""
+    u2, deN) -> status`` (fills the `Observation`, checks the `Action`, copies T1 (2,) N m, T2, u2, deN (6,)
+    and, with ``use_ref`` on a servo plant, `ref` = [q2_ref, dq2_ref]), ``close()``.  A failed
+    construction is raised by `reset`."""
 
     def __init__(self, scn: Scenario, model: RunModel) -> None:
         self.name = scn.controller.name
@@ -135,8 +130,7 @@ class InterfaceController:
     def _call(self, where: str, limit: float | None, fn, *args):
         """Call controller code under the time limit (s, None: none; `where` names the phase): anything
         raised but `HarnessInterrupt` / `ControllerDiverged`, or past the limit: `ControllerFailure`."""
-        if self._saved is None:
-            self._install()
+        self._install()
         armed = self.main and limit is not None and _TIMER
         USER_CODE[0] = self.main
         t0 = time.perf_counter()

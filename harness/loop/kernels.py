@@ -1,6 +1,5 @@
-"""Per-step loop kernels (numba-compatible; compiled by `harness.loop.fast`): sensing noise, both laws,
-the record row, the checks, the one loop body `loop_chunk`, the analytic plant's RK4 and the Python-stepped
-loop's glue.  Statuses: `controllers.status`."""
+"""Per-step loop kernels (numba-compatible): sensing, the record row, the checks, the loop body
+`loop_chunk`, the analytic plant's RK4 and the Python-stepped loop's glue.  Statuses: `controllers.status`."""
 
 from __future__ import annotations
 
@@ -28,17 +27,14 @@ from controllers.status import ST_NONFINITE, ST_OK, ST_PLANT_STATE, ST_RUNAWAY, 
 from controllers.subtasks import limits_kernel
 from controllers.tip import tip_kinematics
 from harness.loop.force_kernels import CONTACT_INFO
+from harness.loop.trajectory import ROW_SLICES
 from harness.plant.analytic import plant_accel
 
-# record row layout (must match harness.loop.trajectory.ROW_FIELDS)
-R_T, R_Q1, R_DQ1, R_Q2, R_DQ2, R_XD, R_X1, R_X2 = 0, 1, 3, 5, 11, 17, 19, 21
-R_E1, R_E2, R_DE1, R_DE2, R_BETA, R_YA, R_DEN, R_T1, R_T2, R_U2 = 23, 25, 27, 29, 31, 32, 33, 39, 41, 47
-ROW_W = 53
-R_FT = ROW_W  # the interaction columns after them: F_true, F_sensed (4 each), contact, hand
-R_FS = R_FT + 4
-R_CI = R_FS + 4
-R_HAND = R_CI + CONTACT_INFO
+# the record row's columns, in the order of `trajectory.ROW_FIELDS`
+(R_T, R_Q1, R_DQ1, R_Q2, R_DQ2, R_XD, R_X1, R_X2, R_E1, R_E2, R_DE1, R_DE2, R_BETA, R_YA, R_DEN, R_T1, R_T2,
+ R_U2, R_FT, R_FS, R_CI, R_HAND) = (s.start for s in ROW_SLICES.values())
 RUNAWAY = 1.0  # m: |e1| or |e2| beyond this is a runaway (the workspace is ~1 m)
+EXPLODING = 1e6  # |state| of a Python-stepped plant above this is a diverged plant (status 8)
 DQ2_FILTER = 7  # noise-table columns of the sensed-dq2 filter: gain, filtered dq2 (6)
 
 
@@ -91,17 +87,38 @@ def add_noise_channel(state, noise, k, scale, out):
         out[i] = state[i] + std * noise[k, i]
 
 
-def record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row):
-    """Fill one record row from the noise-free state (16,) and the commands."""
+def record_row(t, state, model, law, row, info):
+    """Fill one record row from the noise-free state (16,), `model` (a `RunModel`) and law (`loop_chunk`).
+    info: both laws ran on this state with status 0: the kinematics from their minfo / sinfo (the same
+    row without a second master_kernel / tip_kinematics)."""
+    T1, T2, u2, deN, minfo, sinfo, xd, dxd, _dd, _s = law
     row[R_T] = t
     for i in range(16):
         row[R_Q1 + i] = state[i]
+    for i in range(2):
+        row[R_XD + i] = xd[i]
+        row[R_T1 + i] = T1[i]
+    for a in range(6):
+        row[R_DEN + a] = deN[a]
+        row[R_T2 + a] = T2[a]
+        row[R_U2 + a] = u2[a]
+    if info:
+        for i in range(2):
+            row[R_X1 + i] = minfo[MI_X1 + i]
+            row[R_X2 + i] = sinfo[SI_X2 + i]
+            row[R_E1 + i] = minfo[MI_E1 + i]
+            row[R_E2 + i] = sinfo[SI_E2 + i]
+            row[R_DE1 + i] = minfo[MI_DE1 + i]
+            row[R_DE2 + i] = sinfo[SI_DE2 + i]
+        row[R_BETA] = sinfo[SI_BM]
+        row[R_YA] = sinfo[SI_YA]
+        return
     x1 = scratch(2)
     J1 = scratch((2, 2))
     Jd1 = scratch((2, 2))
     M1 = scratch((2, 2))
     N1 = scratch(2)
-    master_kernel(mpk, state[0:2], state[2:4], x1, J1, Jd1, M1, N1)
+    master_kernel(model.mpk_c, state[0:2], state[2:4], x1, J1, Jd1, M1, N1)
     x2 = scratch(2)
     J2 = scratch((2, 6))
     H = scratch((2, 6, 6))
@@ -113,7 +130,6 @@ def record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row):
         dx2 = 0.0
         for a in range(6):
             dx2 += J2[i, a] * dq2[a]
-        row[R_XD + i] = xd[i]
         row[R_X1 + i] = x1[i]
         row[R_X2 + i] = x2[i]
         row[R_E1 + i] = xd[i] - x1[i]
@@ -129,50 +145,20 @@ def record_row(t, state, xd, dxd, mpk, gains, spec, T1, T2, u2, deN, row):
         A11 += J2[1, a] * J2[1, a]
     det = A00 * A11 - A01 * A01
     bm = np.sqrt(det) if det > 0.0 else 0.0
+    spec = model.spec
     beta = spec[0] * bm
     if spec[1] != 0.0:
         g = scratch(6)
         gd = scratch(6)
         beta += spec[1] * limits_kernel(spec, q2, scratch_zeros(6), g, gd)
     row[R_BETA] = bm
-    row[R_YA] = np.exp(-gains[4] * beta)
-    record_commands(T1, T2, u2, deN, row)
-
-
-def record_row_info(t, state, xd, dxd, minfo, sinfo, T1, T2, u2, deN, row):
-    """record_row when both laws ran on the noise-free state with status 0, from their master / slave
-    info (identical rows, without a second master_kernel / tip_kinematics)."""
-    row[R_T] = t
-    for i in range(16):
-        row[R_Q1 + i] = state[i]
-    for i in range(2):
-        row[R_XD + i] = xd[i]
-        row[R_X1 + i] = minfo[MI_X1 + i]
-        row[R_X2 + i] = sinfo[SI_X2 + i]
-        row[R_E1 + i] = minfo[MI_E1 + i]
-        row[R_E2 + i] = sinfo[SI_E2 + i]
-        row[R_DE1 + i] = minfo[MI_DE1 + i]
-        row[R_DE2 + i] = sinfo[SI_DE2 + i]
-    row[R_BETA] = sinfo[SI_BM]
-    row[R_YA] = sinfo[SI_YA]
-    record_commands(T1, T2, u2, deN, row)
-
-
-def record_commands(T1, T2, u2, deN, row):
-    """The record row's command columns T1 (2,), T2, u2, deN (6,)."""
-    for i in range(2):
-        row[R_T1 + i] = T1[i]
-    for a in range(6):
-        row[R_DEN + a] = deN[a]
-        row[R_T2 + a] = T2[a]
-        row[R_U2 + a] = u2[a]
+    row[R_YA] = np.exp(-model.gains[4] * beta)
 
 
 def sense_state(state, noise, k, noise_scale, sensed):
     """The sensed state (16,) at step k: the true state plus AWGN (noise (n, 32): `add_noise_channel`;
-    (n, 16): `add_noise`), or the true state when noise_scale == 0.  With DQ2_FILTER more columns (row 0:
-    gain alpha, filtered dq2 y; `common.noise_table`): sensed dq2 <- y += alpha (sensed dq2 - y), y = the
-    sensed dq2 at k = 0."""
+    (n, 16): `add_noise`; none when noise_scale == 0).  With DQ2_FILTER more columns (row 0: gain alpha,
+    filtered dq2 y): sensed dq2 <- y += alpha (sensed dq2 - y), y = the sensed dq2 at k = 0."""
     if noise_scale > 0.0 and noise.shape[1] >= 32:
         add_noise_channel(state, noise, k, noise_scale, sensed)
     elif noise_scale > 0.0:
@@ -190,18 +176,17 @@ def sense_state(state, noise, k, noise_scale, sensed):
             sensed[10 + i] = noise[0, f + 1 + i]
 
 
-def control_step(t, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, weights, gains, spec, F,
-                 xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, row):
-    """One control step at time t on the true state (16,): x_d(t) into xd, dxd, ddxd, the sensed state,
-    both laws (`control_laws`), the record row of the true state.  Returns control_laws' status."""
-    desired(traj, t, xd, dxd, ddxd)
+def control_step(k, t, model, state, noise, noise_scale, F, law, row):
+    """Control step k at time t on the true state (16,): x_d(t), the sensed state, both laws
+    (`control_laws`, forces F (4,) N) into law (`loop_chunk`), the record row of the true state.  Returns
+    control_laws' status."""
+    T1, T2, u2, deN, minfo, sinfo, xd, dxd, ddxd, sensed = law
+    m = model
+    desired(m.traj, t, xd, dxd, ddxd)
     sense_state(state, noise, k, noise_scale, sensed)
-    st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, sensed, xd, dxd, ddxd, F,
+    st = control_laws(m.mpk_c, m.spk_c, m.nodes, m.weights, m.gains, m.spec, sensed, xd, dxd, ddxd, F,
                       T1, T2, u2, deN, minfo, sinfo)
-    if noise_scale == 0.0 and st == 0:  # laws ran on the true state: reuse their kinematics
-        record_row_info(t, state, xd, dxd, minfo, sinfo, T1, T2, u2, deN, row)
-    else:
-        record_row(t, state, xd, dxd, mpk_c, gains, spec, T1, T2, u2, deN, row)
+    record_row(t, state, model, law, row, noise_scale == 0.0 and st == 0)  # laws on the true state
     return st
 
 
@@ -221,17 +206,17 @@ def desired(traj, t, xd, dxd, ddxd):
 RK4_T = (0.0, 0.5, 0.5, 1.0)  # the classical RK4's stage times (fractions of the step)
 
 
-def plant_sense(k, i, state, row, plant):
+def plant_sense(k, state, row, plant):
     """Bound per plant: the true state (16,) of step k and the row's interaction columns; a status."""
     raise NotImplementedError
 
 
-def plant_command(slot, T1, T2, u2, sensed, plant):
+def plant_command(slot, law, plant):
     """Bound per plant: the step's commands into its ring slot."""
     raise NotImplementedError
 
 
-def plant_advance(k, i, st, use, state, law, plant):
+def plant_advance(k, st, use, state, law, plant):
     """Bound per plant: the step with the ring slot `use` of step k - delay (not when st != 0); a status."""
     raise NotImplementedError
 
@@ -240,37 +225,25 @@ def loop_chunk(k0, k1, model, data, plant):
     """Control steps k0..k1-1 of a compiled loop: `plant_sense` -> `control_step` -> status 4 on a runaway
     row -> `plant_command` into the ring slot of step k -> `plant_advance` with the slot of step k - delay.
     The plant kernels are bound per plant (`bind`); plant: their constants and buffers.  data: (state (16,),
-    noise, noise_scale, this chunk's rows, cmdbuf (delay + 1, w), delay, dt (s)).  Returns (status,
+    noise, noise_scale, rows (n, ROW_WIDTH), cmdbuf (delay + 1, w), delay, dt (s)).  Returns (status,
     completed steps)."""
-    mpk_c, spk_c, nodes, weights, gains, spec, _F, traj, _s0 = model
     state, noise, noise_scale, rows, cmdbuf, delay, dt = data
     # the step's arrays are made here, not by a helper: a scratch array lives in the frame that makes it
-    T1 = scratch_zeros(2)
-    T2 = scratch_zeros(6)
-    u2 = scratch_zeros(6)
-    deN = scratch_zeros(6)
-    minfo = scratch(MASTER_INFO)
-    sinfo = scratch(SLAVE_INFO)
-    sensed = scratch(16)
-    xd = scratch(2)
-    dxd = scratch(2)
-    ddxd = scratch(2)
-    law = (T1, T2, u2, deN, minfo, sinfo, xd, dxd, ddxd)
+    law = (scratch_zeros(2), scratch_zeros(6), scratch_zeros(6), scratch_zeros(6), scratch(MASTER_INFO),
+           scratch(SLAVE_INFO), scratch(2), scratch(2), scratch(2), scratch(16))
     for k in range(k0, k1):
-        i = k - k0
-        r = rows[i]
-        st = plant_sense(k, i, state, r, plant)
+        r = rows[k]
+        st = plant_sense(k, state, r, plant)
         if st != ST_OK:
-            return st, i
-        st = control_step(k * dt, state, traj, noise, k, noise_scale, mpk_c, spk_c, nodes, weights, gains,
-                          spec, r[R_FS:R_FS + 4], xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, r)
+            return st, k - k0
+        st = control_step(k, k * dt, model, state, noise, noise_scale, r[R_FS:R_FS + 4], law, r)
         if st == 0 and runaway(r):
             st = ST_RUNAWAY
         if st == 0:
-            plant_command(cmdbuf[k % (delay + 1)], T1, T2, u2, sensed, plant)
-        st = plant_advance(k, i, st, cmdbuf[ring_index(k, delay)], state, law, plant)
+            plant_command(cmdbuf[k % (delay + 1)], law, plant)
+        st = plant_advance(k, st, cmdbuf[ring_index(k, delay)], state, law, plant)
         if st != ST_OK:
-            return st, i + 1
+            return st, k + 1 - k0
     return ST_OK, k1 - k0
 
 
@@ -283,29 +256,30 @@ def bind(fn, name, **kernels):
     return out
 
 
-def analytic_sense(k, i, state, row, plant):
+def analytic_sense(k, state, row, plant):
     """The analytic plant's state is the loop's; its force columns are constant (set by the driver)."""
     return ST_OK
 
 
-def analytic_command(slot, T1, T2, u2, sensed, plant):
+def analytic_command(slot, law, plant):
     """slot (8,) <- [T1, T2]."""
+    T1, T2 = law[0], law[1]
     for i in range(2):
         slot[i] = T1[i]
     for i in range(6):
         slot[2 + i] = T2[i]
 
 
-def analytic_advance(k, i, st, use, state, law, plant):
+def analytic_advance(k, st, use, state, law, plant):
     """nsub classical RK4 steps h = dt / nsub of the analytic plant (`plant_accel`, its packed params
     mpk_p, spk_p, the forces model.F (1)) with the commands use = [T1, T2] held, or, `continuous`, both laws
-    (F (4,) the forces they get) on every stage's state without noise.  ks (4, 16), tmp (16,): work.
-    Status: the laws', 1 on a non-finite state, 5 on a section length <= 0."""
+    (F (4,) the forces they get) on every stage's state without noise.  plant: (model, F, dt (s), nsub,
+    continuous, mpk_p, spk_p, ks (4, 16), tmp (16,) work).  Status: the laws', 1 on a non-finite state, 5
+    on a section length <= 0."""
     if st != 0:
         return st
-    model, F, dt, nsub, continuous, mpk_p, spk_p, ks, tmp = plant
-    _T1, _T2, u2, deN, minfo, sinfo, xd, dxd, ddxd = law
-    mpk_c, spk_c, nodes, weights, gains, spec, Fp, traj, _s0 = model
+    m, F, dt, nsub, continuous, mpk_p, spk_p, ks, tmp = plant
+    _T1, _T2, u2, deN, minfo, sinfo, xd, dxd, ddxd, _s = law
     T1 = use[0:2]
     T2 = use[2:8]
     t = k * dt
@@ -315,12 +289,12 @@ def analytic_advance(k, i, st, use, state, law, plant):
         for s in range(4):
             x = state if s == 0 else tmp
             if continuous:
-                desired(traj, ts + RK4_T[s] * h, xd, dxd, ddxd)
-                st = control_laws(mpk_c, spk_c, nodes, weights, gains, spec, x, xd, dxd, ddxd, F, T1, T2, u2,
-                                  deN, minfo, sinfo)
+                desired(m.traj, ts + RK4_T[s] * h, xd, dxd, ddxd)
+                st = control_laws(m.mpk_c, m.spk_c, m.nodes, m.weights, m.gains, m.spec, x, xd, dxd, ddxd, F,
+                                  T1, T2, u2, deN, minfo, sinfo)
                 if s == 0 and st != 0:
                     return st
-            if not plant_accel(mpk_p, spk_p, nodes, weights, x, T1, T2, Fp, ks[s]):
+            if not plant_accel(mpk_p, spk_p, m.nodes, m.weights, x, T1, T2, m.F, ks[s]):
                 return ST_NONFINITE
             if s < 3:
                 c = RK4_T[s + 1]
@@ -334,30 +308,22 @@ def analytic_advance(k, i, st, use, state, law, plant):
     return ST_SECTION_LENGTH if section_collapsed(state) else ST_OK
 
 
-def analytic_chunk(k0, k1, model, plant, data):
-    """Control steps k0..k1-1 on the analytic plant (`analytic_loop`), in place on the state.  plant: (dt
-    (s), nsub, continuous, the plant's packed params mpk_p, spk_p); data: (state (16,), noise, noise_scale,
-    F (4,) the laws get, this chunk's rows, cmdbuf (delay + 1, 8) of [T1, T2], delay)."""
-    dt, nsub, continuous, mpk_p, spk_p = plant
-    state, noise, noise_scale, F, rows, cmdbuf, delay = data
-    ks = scratch((4, 16))
-    tmp = scratch(16)
-    return analytic_loop(k0, k1, model, (state, noise, noise_scale, rows, cmdbuf, delay, dt),
-                         (model, F, dt, nsub, continuous, mpk_p, spk_p, ks, tmp))
-
-
-analytic_loop = bind(loop_chunk, "analytic_loop", plant_sense=analytic_sense, plant_command=analytic_command,
-                     plant_advance=analytic_advance)
+# the analytic plant's loop (`analytic_loop`); plant: `analytic_advance`'s
+analytic_chunk = bind(loop_chunk, "analytic_chunk", plant_sense=analytic_sense,
+                      plant_command=analytic_command, plant_advance=analytic_advance)
 
 
 # --- the Python-stepped loop's glue (`harness.loop.stepped_loop.Stepper`) ----------------------------
-def stepped_state_check(state, exploding, Ftrue, Fctl, ignored):
-    """Status of the true state (16,): 8 if non-finite or |state| > exploding, 5 if a section length
-    <= 0, else 0; then Fctl (4,) N <- 0 if ignored else Ftrue (4,)."""
+# loop: (state (16,), noise, noise_scale, F_true (4,) N, F the controller gets (4,), contact (5,), forces
+# ignored, servo reference ref (12,), dt (s), servo)
+def stepped_state_check(loop):
+    """Status of the true state: 8 if non-finite or |state| > EXPLODING, 5 if a section length <= 0, else
+    0; then the controller's F <- 0 if ignored else F_true."""
+    state, _n, _s, Ftrue, Fctl, _c, ignored, _r, _dt, _servo = loop
     total = 0.0
     for i in range(state.shape[0]):
         total += state[i] * state[i]
-    if not math.isfinite(total) or total > exploding * exploding:
+    if not math.isfinite(total) or total > EXPLODING * EXPLODING:
         return ST_PLANT_STATE
     if section_collapsed(state):
         return ST_SECTION_LENGTH
@@ -366,17 +332,17 @@ def stepped_state_check(state, exploding, Ftrue, Fctl, ignored):
     return 0
 
 
-def stepped_after_control(st, T1, T2, u2, row, Ftrue, Fsens, cinfo, i_F, i_Fs, i_C, ref_mode, ext_ref, ref,
-                          dt, sensed, cmd):
-    """After the controller's step (status st): the row's F_true, F_sensed (N) and contact columns; status 1
-    if T1, T2 or u2 is not finite, 4 on a runaway row.  If still 0: the servo reference ref (12,) steps
-    (ref_mode 1: `servo_reference_step`; 2: ref <- ext_ref; 0: unchanged) and cmd (26,) <- [T1, T2, ref,
-    sensed q2].  Returns the status."""
+def stepped_after_control(st, loop, law, ext_ref, row, cmd):
+    """After the controller's step (status st): the row's force and contact columns; status 1 if T1, T2 or
+    u2 is not finite, 4 on a runaway row.  If still 0: ref <- ext_ref (12,) if given, else (servo)
+    `servo_reference_step`, and cmd (26,) <- [T1, T2, ref, sensed q2].  Returns the status."""
+    _x, _n, _s, Ftrue, Fsens, cinfo, _i, ref, dt, servo = loop
+    T1, T2, u2, sensed = law[0], law[1], law[2], law[9]
     for i in range(4):
-        row[i_F + i] = Ftrue[i]
-        row[i_Fs + i] = Fsens[i]
-    for i in range(5):
-        row[i_C + i] = cinfo[i]
+        row[R_FT + i] = Ftrue[i]
+        row[R_FS + i] = Fsens[i]
+    for i in range(CONTACT_INFO):
+        row[R_CI + i] = cinfo[i]
     for v in (T1, T2, u2):
         for i in range(v.shape[0]):
             if st == 0 and not math.isfinite(v[i]):
@@ -385,11 +351,11 @@ def stepped_after_control(st, T1, T2, u2, row, Ftrue, Fsens, cinfo, i_F, i_Fs, i
         st = ST_RUNAWAY
     if st != 0:
         return st
-    if ref_mode == 1:
-        servo_reference_step(ref, u2, dt)
-    elif ref_mode == 2:
+    if ext_ref.shape[0] > 0:
         for i in range(12):
             ref[i] = ext_ref[i]
+    elif servo:
+        servo_reference_step(ref, u2, dt)
     cmd[0] = T1[0]
     cmd[1] = T1[1]
     for i in range(6):
@@ -401,22 +367,18 @@ def stepped_after_control(st, T1, T2, u2, row, Ftrue, Fsens, cinfo, i_F, i_Fs, i
     return 0
 
 
-def stepped_paper_step(state, exploding, Ftrue, ignored, t, traj, noise, k, scale, mpk_c, spk_c, nodes,
-                       weights, gains, spec, F, xd, dxd, ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, row,
-                       cinfo, i_F, i_Fs, i_C, ref_mode, ref, dt, cmd):
+def stepped_paper_step(k, model, loop, law, row, cmd):
     """`stepped_state_check`, `control_step`, `stepped_after_control` in one call: (state status, step
     status); a non-zero state status: nothing recorded."""
-    s0 = stepped_state_check(state, exploding, Ftrue, F, ignored)
+    s0 = stepped_state_check(loop)
     if s0 != 0:
         return s0, 0
-    st = control_step(t, state, traj, noise, k, scale, mpk_c, spk_c, nodes, weights, gains, spec, F, xd, dxd,
-                      ddxd, sensed, T1, T2, u2, deN, minfo, sinfo, row)
-    return 0, stepped_after_control(st, T1, T2, u2, row, Ftrue, F, cinfo, i_F, i_Fs, i_C, ref_mode, ref, ref,
-                                    dt, sensed, cmd)
+    state, noise, scale, _Ft, F, _c, _i, ref, dt, _servo = loop
+    st = control_step(k, k * dt, model, state, noise, scale, F, law, row)
+    return 0, stepped_after_control(st, loop, law, ref[0:0], row, cmd)
 
 
 KERNELS = ("runaway", "section_collapsed", "servo_reference_step", "ring_index", "add_noise",
-           "add_noise_channel", "sense_state", "record_row", "record_row_info", "record_commands",
-           "control_step", "desired", "analytic_loop", "analytic_sense", "analytic_command",
-           "analytic_advance", "analytic_chunk", "stepped_state_check", "stepped_after_control",
-           "stepped_paper_step")
+           "add_noise_channel", "sense_state", "record_row", "control_step", "desired", "analytic_sense",
+           "analytic_command", "analytic_advance", "analytic_chunk", "stepped_state_check",
+           "stepped_after_control", "stepped_paper_step")

@@ -1,5 +1,5 @@
-"""MuJoCo-plant loop kernels (numba-compatible; compiled by `harness.loop.fast`): the whole control loop in
-one kernel, its sensing and command maps, and the recording-geometry helpers."""
+"""MuJoCo-plant loop kernels (numba-compatible): the control loop `mujoco_chunk`, its sensing and command
+maps, the recording geometry.  Arguments: the groups of `mujoco_loop.plant_groups`."""
 
 from __future__ import annotations
 
@@ -7,16 +7,8 @@ import numpy as np
 
 from controllers.cc import backbone_points
 from controllers.master import master_kernel
-from controllers.scratch import scratch, scratch_zeros
 from controllers.status import ST_MUJOCO_STATE, ST_MUJOCO_WARNING, ST_OK, ST_SECTION_LENGTH
-from harness.loop.force_kernels import (
-    CONTACT_INFO,
-    operator_advance,
-    operator_force,
-    operator_target,
-    read_contact,
-    sense_forces,
-)
+from harness.loop.force_kernels import CONTACT_INFO, operator_target, read_contact, sense_forces
 from harness.loop.kernels import (
     R_CI,
     R_FS,
@@ -38,8 +30,10 @@ from harness.plant.chain_map import (
 )
 
 
-def sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state):
-    """True (noise-free) state (16,) [q1, dq1, q2, dq2] from MuJoCo joints; qc, vc (n_chain,) work."""
+def sense_mujoco(master, chain, state):
+    """True (noise-free) state (16,) [q1, dq1, q2, dq2] from MuJoCo's joints."""
+    qpos, qvel, m_qadr, m_dadr = master[0], master[1], master[2], master[3]
+    c_qadr, c_dadr, R, _C, L0, _e, qc, vc, _corr = chain
     for i in range(2):
         state[i] = qpos[m_qadr[i]]
         state[2 + i] = qvel[m_dadr[i]]
@@ -60,19 +54,19 @@ def mujoco_state_status(state):
     return ST_OK
 
 
-def chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, muscle, cmd):
-    """The chain's part of cmd = [master torque (2), chain ctrl (n), chain feed-forward force (n)]; returns
-    the number of muscle groups commanded outside [0, F_max].  Torque: ctrl = virtual-work map of T2 at the
-    sensed q2s.  Servo: ctrl = joints(q_ref) + (kv/kp) A(q_ref) dq_ref, feed-forward = the map of T2 at
-    q_ref (if enabled).  Muscle (muscle = (radius (3,), max_force (3,)), else empty arrays): ctrl[0:6] =
-    the group forces realizing T2 at q2s (`chain_map.muscle_commands`); no feed-forward."""
+def chain_commands(act, q2s, T2, cmd):
+    """The chain's part of cmd = [master torque (2), chain ctrl (n), feed-forward force (n)] for T2 at the
+    sensed q2s.  Torque: ctrl = virtual-work map of T2 at q2s.  Servo: ctrl = joints(q_ref) + (kv/kp)
+    A(q_ref) dq_ref, feed-forward = the map of T2 at q_ref (if enabled).  Muscle: ctrl[0:6] =
+    `chain_map.muscle_commands` (nsat[0] += the groups outside [0, F_max])."""
+    servo, feedforward, _dt, C, R, L0, kv_over_kp, muscle, ref, nsat = act
     n = C.shape[0]
     radius, max_force = muscle
     if radius.shape[0] > 0:
         for c in range(n):
             cmd[2 + n + c] = 0.0
-        return muscle_commands(q2s, T2, radius, max_force, cmd[2:8])
-    if servo:
+        nsat[0] += muscle_commands(q2s, T2, radius, max_force, cmd[2:8])
+    elif servo:
         chain_joints_from_q2(ref[0:6], C, L0, cmd[2:2 + n])
         chain_joints_rate_add(ref[0:6], ref[6:12], C, kv_over_kp, cmd[2:2 + n])
         if feedforward:
@@ -84,14 +78,14 @@ def chain_commands(servo, feedforward, q2s, T2, ref, C, R, L0, kv_over_kp, muscl
         chain_force_from_T2(q2s, T2, R, cmd[2:2 + n])
         for c in range(n):
             cmd[2 + n + c] = 0.0
-    return 0
 
 
 def master_grip(master, operator):
-    """The plant master's tip xm, vm = J1 dq1 (task frame; J1 kept for J1^T F1) from MuJoCo's joints and,
-    with the operator, the grip force F1op."""
+    """The plant master's tip xm, vm = J1 dq1 (task frame) and J1 from MuJoCo's joints; with the operator,
+    the grip force on the handle F1op = kg (x_h - x_m) + cg (v_h - v_m) (op = [mass, k, c, kg, cg], hand =
+    [x_h (2), v_h (2)])."""
     qpos, qvel, m_qadr, m_dadr, mpk_p, q1, dq1, xm, vm, J1, Jd1, M1, N1 = master
-    op_on, op, targets, hand, target, F1op = operator
+    op_on, op, _targets, hand, _target, F1op = operator
     for i in range(2):
         q1[i] = qpos[m_qadr[i]]
         dq1[i] = qvel[m_dadr[i]]
@@ -99,31 +93,22 @@ def master_grip(master, operator):
     for i in range(2):
         vm[i] = J1[i, 0] * dq1[0] + J1[i, 1] * dq1[1]
     if op_on:
-        operator_force(op, hand, xm, vm, F1op)
+        for i in range(2):
+            F1op[i] = op[3] * (hand[i] - xm[i]) + op[4] * (hand[2 + i] - vm[i])
 
 
-def master_handle_force(master, operator, Fconst, qfrc):
-    """qfrc at the master's dofs <- J1^T (F1 + grip F1op), the constant and the operator's force on the
-    handle (J1 of the last `master_grip`)."""
-    m_dadr, J1, F1op = master[3], master[9], operator[5]
-    for j in range(2):
-        qfrc[m_dadr[j]] = J1[0, j] * (Fconst[0] + F1op[0]) + J1[1, j] * (Fconst[1] + F1op[1])
-
-
-def mujoco_sense(k, i, state, r, p):
+def mujoco_sense(k, state, r, p):
     """The true state from MuJoCo's joints (status 6, 5), the contact and operator forces, the sensed F
     into the row, the qpos history."""
-    mj, master, chain, sensing, operator, rec, act = p
-    qpos, qvel, m_qadr, m_dadr = master[0], master[1], master[2], master[3]
-    c_qadr, c_dadr, R, C, L0, eargs, qc, vc, corr = chain
+    _mj, master, chain, sensing, operator, rec, _act = p
     (sensordata, cadr, cpts, nopts, Fconst, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, F2c,
      Ftrue) = sensing
-    F1op, hand, qpos_hist = operator[5], operator[3], rec[0]
-    sense_mujoco(qpos, qvel, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, state)
+    qpos, F1op, hand, qpos_hist = master[0], operator[5], operator[3], rec[0]
+    sense_mujoco(master, chain, state)
     st = mujoco_state_status(state)
     if st != ST_OK:
         return st
-    read_contact(sensordata, cadr, F2c, r[R_CI:R_CI + CONTACT_INFO], cpts[i] if cpts.shape[0] > 0 else nopts)
+    read_contact(sensordata, cadr, F2c, r[R_CI:R_CI + CONTACT_INFO], cpts[k] if cpts.shape[0] > 0 else nopts)
     if operator[0]:
         master_grip(master, operator)
     for j in range(2):
@@ -136,35 +121,36 @@ def mujoco_sense(k, i, state, r, p):
     r[R_HAND + 1] = hand[1]
     if qpos_hist.shape[0] > 0:
         for j in range(qpos.shape[0]):
-            qpos_hist[i, j] = qpos[j]
+            qpos_hist[k, j] = qpos[j]
     return ST_OK
 
 
-def mujoco_command(slot, T1, T2, u2, sensed, p):
+def mujoco_command(slot, law, p):
     """The step's command vector into its ring slot (`chain_commands` at the sensed q2, after the servo
     reference's step)."""
-    servo, feedforward, dt, C, R, L0, kv_over_kp, muscle, ref, nsat = p[6]
+    act = p[6]
+    T1, u2, sensed = law[0], law[2], law[9]
     slot[0] = T1[0]
     slot[1] = T1[1]
-    if servo:
-        servo_reference_step(ref, u2, dt)
-    nsat[0] += chain_commands(servo, feedforward, sensed[4:10], T2, ref, C, R, L0, kv_over_kp, muscle, slot)
+    if act[0]:
+        servo_reference_step(act[8], u2, act[2])
+    chain_commands(act, sensed[4:10], law[1], slot)
 
 
-def mujoco_advance(k, i, st, use, state, law, p):
+def mujoco_advance(k, st, use, state, law, p):
     """`substeps` x (operator and F1 forces, elastic correction, mj_step) with the commands `use`; a failed
     step (st != 0) is not stepped (its geometry row from its kinematics).  Status 7 on a MuJoCo warning."""
-    mj, master, chain, sensing, operator, rec, act = p
+    mj, master, chain, sensing, operator, rec, _act = p
     mptr, dptr, mjfn, substeps, dt, ctrl, qfrc, m_act, c_act, wnum = mj
     c_qadr, c_dadr, R, C, L0, eargs, qc, vc, corr = chain
     op_on, op, targets, hand, target, F1op = operator
     qpos_hist, cmd_log, geo_in, geo_out = rec
-    qpos, Fconst = master[0], sensing[4]
+    qpos, m_dadr, J1, Fconst = master[0], master[3], master[9], sensing[4]
     live = geo_out[0].shape[0] > 0
     if st != 0:
         if live:
             mj_call(mjfn[MJ_KINEMATICS_FN], mptr, dptr)
-            copy_geometry(geo_in, i, geo_out)
+            copy_geometry(geo_in, k, geo_out)
         return st
     n = C.shape[0]
     nu = ctrl.shape[0]
@@ -178,59 +164,37 @@ def mujoco_advance(k, i, st, use, state, law, p):
         if apply1:  # operator's grip (+ constant F1) on the master handle, J1^T F1
             if s > 0 or not op_on:  # at s = 0 with the operator: J1 and F1op are the step's own
                 master_grip(master, operator)
-            if op_on:
+            if op_on:  # the hand: semi-implicit Euler, m a = k (target - x_h) - c v_h - F1op (the reaction)
                 operator_target(targets, k * dt + s * hphys, target)
-                operator_advance(op, hand, target, F1op, hphys)
-            master_handle_force(master, operator, Fconst, qfrc)
+                for j in range(2):
+                    acc = (op[1] * (target[j] - hand[j]) - op[2] * hand[2 + j] - F1op[j]) / op[0]
+                    hand[2 + j] += acc * hphys
+                    hand[j] += hand[2 + j] * hphys
+            for j in range(2):  # J1^T (F1 + F1op), J1 of the last `master_grip`
+                qfrc[m_dadr[j]] = J1[0, j] * (Fconst[0] + F1op[0]) + J1[1, j] * (Fconst[1] + F1op[1])
         for c in range(n):
             qc[c] = qpos[c_qadr[c]]
         chain_elastic_correction(qc, *eargs, corr)
         for c in range(n):
             qfrc[c_dadr[c]] = use[2 + n + c] + corr[c]
         if cmd_log.shape[0] > 0:
-            lr = cmd_log[i * substeps + s]
+            lr = cmd_log[k * substeps + s]
             for j in range(nu):
                 lr[j] = ctrl[j]
             for j in range(qfrc.shape[0]):
                 lr[nu + j] = qfrc[j]
         mj_call(mjfn[MJ_STEP_FN], mptr, dptr)
         if live and s == 0:
-            copy_geometry(geo_in, i, geo_out)
+            copy_geometry(geo_in, k, geo_out)
         for w in range(wnum.shape[0]):
             if wnum[w] != 0:  # any MuJoCo warning stops the run: it must never pass silently
                 return ST_MUJOCO_WARNING
     return ST_OK
 
 
-def mujoco_chunk(k0, k1, model, plant, data, fargs):
-    """Control steps k0..k1-1 on the MuJoCo plant (`mujoco_loop`).  plant: the constants (mjModel*,
-    mjData*, MJ_FUNCS, substeps, dt (s), `ChainMap` addresses and maps, actuation); data: the run's buffers
-    (MjData views, noise, servo ref (12,), delay ring, this chunk's rows; qpos_hist, cmd_log (rows:
-    [ctrl, qfrc] before each mj_step) and geo_out off with 0 rows; nsat (1,) saturated muscle
-    group-steps); fargs: `force_args.ForceArgs.args`.  Returns (status, completed steps)."""
-    (mptr, dptr, mjfn, substeps, dt, m_qadr, m_dadr, m_act, c_qadr, c_dadr, c_act, R, C, L0, eargs, servo,
-     feedforward, kv_over_kp, muscle) = plant
-    (qpos, qvel, ctrl, qfrc, noise, noise_scale, ref, cmdbuf, delay, rows, qpos_hist, cmd_log, geo_in,
-     geo_out, wnum, nsat) = data
-    (sensordata, cadr, Fconst, fmode, fnoise, fstd, falpha, fdelay, fbuf, ffilt, op_on, op, targets, hand,
-     target, mpk_p, cpts) = fargs
-    n = C.shape[0]
-    mj = (mptr, dptr, mjfn, substeps, dt, ctrl, qfrc, m_act, c_act, wnum)
-    # + the master tip's work: q1, dq1, xm, vm, J1, Jd1, M1, N1
-    master = (qpos, qvel, m_qadr, m_dadr, mpk_p, scratch(2), scratch(2), scratch(2), scratch(2),
-              scratch((2, 2)), scratch((2, 2)), scratch((2, 2)), scratch(2))
-    chain = (c_qadr, c_dadr, R, C, L0, eargs, np.empty(n), np.empty(n), np.empty(n))  # + qc, vc, corr
-    # + no contact points, then the contact force F2c and the true forces Ftrue
-    sensing = (sensordata, cadr, cpts, scratch_zeros((0, 6)), Fconst, fmode, fnoise, fstd, falpha, fdelay,
-               fbuf, ffilt, scratch_zeros(2), scratch_zeros(4))
-    operator = (op_on, op, targets, hand, target, scratch_zeros(2))  # + the grip force F1op
-    act = (servo, feedforward, dt, C, R, L0, kv_over_kp, muscle, ref, nsat)
-    return mujoco_loop(k0, k1, model, (scratch(16), noise, noise_scale, rows, cmdbuf, delay, dt),
-                       (mj, master, chain, sensing, operator, (qpos_hist, cmd_log, geo_in, geo_out), act))
-
-
-mujoco_loop = bind(loop_chunk, "mujoco_loop", plant_sense=mujoco_sense, plant_command=mujoco_command,
-                   plant_advance=mujoco_advance)
+# the MuJoCo plant's loop (`mujoco_loop`); plant: `plant_groups`'
+mujoco_chunk = bind(loop_chunk, "mujoco_chunk", plant_sense=mujoco_sense, plant_command=mujoco_command,
+                    plant_advance=mujoco_advance)
 
 
 def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):
@@ -246,10 +210,10 @@ def replay_commands(mptr, dptr, mjfn, ctrl, qfrc, cmd_log):
 
 
 # the kernels that allocate on the heap (run-time sizes), compiled with numba's runtime (harness.loop.fast)
-HEAP_KERNELS = ("mujoco_chunk", "backbone_world")
-KERNELS = ("sense_mujoco", "mujoco_state_status", "chain_commands", "master_grip", "master_handle_force",
-           "mujoco_sense", "mujoco_command", "mujoco_advance", "mujoco_loop", "mujoco_chunk",
-           "replay_commands", "kinematics_replay", "backbone_world")
+HEAP_KERNELS = ("backbone_world",)
+KERNELS = ("sense_mujoco", "mujoco_state_status", "chain_commands", "master_grip", "mujoco_sense",
+           "mujoco_command", "mujoco_advance", "mujoco_chunk", "replay_commands", "kinematics_replay",
+           "backbone_world")
 
 
 # --- recording geometry after the loop ---------------------------------------------------------------

@@ -1,11 +1,5 @@
-"""Native calls of the compiled kernels: MuJoCo's C functions by address (`mj_call`) and the kernels'
-working arrays on their stack frames (`scratch_intrinsics`, the compiled `controllers.scratch`).  Each
-has a plain-Python form (TELEOP_NO_JIT=1); the compiled forms are registered by `harness.loop.fast`
-(importing this module does not import numba).
-
-The addresses MJ_FUNCS = [mj_step, mj_kinematics] are passed as an argument, never used as a global in a
-kernel: a ctypes global would bake this process' addresses into the code and make it uncacheable.
-"""
+"""Native calls of the compiled kernels: MuJoCo's C functions by address (`mj_call`) and working arrays
+on the kernels' stack frames (`scratch_intrinsics`); plain-Python forms for TELEOP_NO_JIT=1."""
 
 from __future__ import annotations
 
@@ -31,7 +25,8 @@ def _mj_addresses():
     return np.array([ctypes.cast(getattr(lib, f), ctypes.c_void_p).value for f in names], dtype=np.int64)
 
 
-MJ_FUNCS = _mj_addresses()  # pass to the kernels below; never use as a global inside them
+# [mj_step, mj_kinematics]: an argument of the kernels, never a global (it would make them uncacheable)
+MJ_FUNCS = _mj_addresses()
 
 
 def mj_call(fn, mptr, dptr):
@@ -86,9 +81,8 @@ def _literal_dims(shape):
 
 @functools.cache
 def scratch_intrinsics() -> dict:
-    """The compiled `controllers.scratch` functions by name (for `harness.loop.fast`'s namespace): an array
-    over an `alloca` block of the calling kernel's entry frame (a call in a loop reuses it), no meminfo,
-    zero-filled for the `_zeros` / `_cz` forms.  A shape not made of literals is a typing error."""
+    """The compiled `controllers.scratch` functions by name: an array over an `alloca` block of the calling
+    kernel's entry frame (no meminfo; zero-filled for the `_zeros` / `_cz` forms); shapes are literals."""
     from numba import types as _nbt
     from numba.core import cgutils as _cgutils
     from numba.extending import intrinsic as _intrinsic
@@ -133,9 +127,8 @@ def scratch_intrinsics() -> dict:
 
 def copy_geometry(geo_in, row, geo_out):
     """Row `row` of the recording geometry from MuJoCo's kinematics: geo_in = (xpos, xquat, site_xpos,
-    xanchor (MjData views), bodies (nb,), gids = [elbow body, shoulder joint, master tip site, slave tip
-    site]); geo_out = (body_pos (n, nb, 3), body_quat (n, nb, 4) wxyz, master_pos (n, 3, 3) shoulder,
-    elbow, master tip; tip (n, 3))."""
+    xanchor, bodies (nb,), gids = [elbow body, shoulder joint, master tip site, slave tip site]); geo_out =
+    (body_pos (n, nb, 3), body_quat (n, nb, 4) wxyz, master_pos (n, 3, 3) shoulder/elbow/tip, tip (n, 3))."""
     xpos, xquat, site_xpos, xanchor, bodies, gids = geo_in
     body_pos, body_quat, master_pos, tip = geo_out
     for b in range(bodies.shape[0]):

@@ -14,8 +14,8 @@ from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
 from harness.loop.common import RunModel
 from harness.loop.fast import K
-from harness.loop.force_args import ForceArgs
-from harness.loop.mujoco_loop import Geometry, actuation_args, make_plant, warning_counts
+from harness.loop.mj_warnings import warning_counts
+from harness.loop.mujoco_loop import Geometry, make_plant, plant_groups
 from harness.plant.mujoco_model import MujocoPlant
 
 FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -23,7 +23,7 @@ Q2_NAMES = ("d1", "d2", "d3", "k1", "k2", "k3")
 
 
 class MujocoStepped:
-    """The MuJoCo plant of `harness.loop.mujoco_loop`, stepped from Python."""
+    """The MuJoCo plant of `harness.loop.mujoco_loop`, stepped from Python with its kernels."""
 
     kind = "mujoco"
 
@@ -34,30 +34,16 @@ class MujocoStepped:
                 raise ConfigError(f"{key}: needs the compiled MuJoCo loop (controller.name = 'paper'); the "
                                   "Python-stepped MuJoCo plant does not simulate it", path=key)
         plant = plant if plant is not None else MujocoPlant.build(scn)
-        self.m, self.d, self.cmap = make_plant(scn, plant, model.s0)  # at the initial state
-        d, c = self.d, self.cmap
-        self.fa = ForceArgs(scn, self.m, d, c, plant.contact, 0, model.s0, model.F)
-        # `mujoco_kernels.master_grip`'s groups: + q1, dq1, xm, vm, J1, Jd1, M1, N1; the operator off
-        self.master = (d.qpos, d.qvel, c.master_qpos_adr, c.master_dof_adr, self.fa.mpk_p, np.zeros(2),
-                       np.zeros(2), np.zeros(2), np.zeros(2), np.zeros((2, 2)), np.zeros((2, 2)),
-                       np.zeros((2, 2)), np.zeros(2))
-        self.operator = (False, self.fa.op, self.fa.targets, self.fa.hand, self.fa.target, np.zeros(2))
-        self.apply1 = model.F[0] != 0.0 or model.F[1] != 0.0
-        self.F2c, self.nopts = np.zeros(2), np.zeros((0, 6))
-        if self.fa.cadr.shape[0] == 0:  # no contact sensors: the loop's constant forces, no call per step
+        m, d, cmap = self.m, self.d, self.cmap = make_plant(scn, plant, model.s0)  # at the initial state
+        self.geo = Geometry(m, d, cmap, scn.n_steps, live=False)
+        rec = (np.zeros((0, m.nq)), np.zeros((0, m.nu + m.nv)), self.geo.inputs, self.geo.rec)
+        self.p = plant_groups(scn, m, d, cmap, plant.contact, model, 0, rec)
+        _mj, self.master, self.chain, self.sensing, _op, _rec, self.act = self.p
+        if plant.contact is None:  # no contact sensors: the loop's constant forces, no call per step
             self.forces = None
-        self.n = n = self.cmap.n_chain
         self.actuation = scn.plant.actuation
-        self.servo = self.actuation == "servo"
-        self.ff = bool(scn.plant.servo_feedforward)
-        self.sub = scn.substeps
-        self.physics_dt = scn.control_dt / max(1, self.sub)
-        self.ctrl_ids, self.kv_over_kp, self.muscle = actuation_args(self.cmap, self.servo)
-        self.cmd = np.zeros(2 + 2 * n)  # [master torque, chain ctrl (n), chain feed-forward (n)]
-        self.saturated = 0  # muscle group-steps outside [0, F_max]
-        self.ref = np.zeros(12)  # [q2_ref, dq2_ref] of the command being mapped
-        self.qc, self.vc, self.corr = np.empty(n), np.empty(n), np.empty(n)
-        self.geo = Geometry(self.m, self.d, self.cmap, scn.n_steps, live=False)
+        self.physics_dt = scn.control_dt / max(1, scn.substeps)
+        self.cmd = np.zeros(2 + 2 * cmap.n_chain)  # [master torque, chain ctrl (n), chain feed-forward (n)]
         self.warned: dict[str, int] = {}
         self.full = None  # the physics state kept by get_state(keep=True)
 
@@ -65,50 +51,35 @@ class MujocoStepped:
         pass
 
     def true_state(self, state: np.ndarray) -> int:
-        d, c = self.d, self.cmap
-        K.sense_mujoco(d.qpos, d.qvel, c.master_qpos_adr, c.master_dof_adr, c.chain_qpos_adr, c.chain_dof_adr,
-                       c.R, c.L0, self.qc, self.vc, state)
+        K.sense_mujoco(self.master, self.chain, state)
         return Status(K.mujoco_state_status(state))
 
     def command(self, T1, T2, q2_ref, dq2_ref, q2_sensed) -> None:
-        c, cmd, ref = self.cmap, self.cmd, self.ref
-        cmd[0:2] = T1
+        ref = self.act[8]
+        self.cmd[0:2] = T1
         ref[0:6] = q2_ref
         ref[6:12] = dq2_ref
-        self.saturated += K.chain_commands(self.servo, self.ff, q2_sensed, T2, ref, c.C, c.R, c.L0,
-                                           self.kv_over_kp, self.muscle, cmd)
+        K.chain_commands(self.act, q2_sensed, T2, self.cmd)
 
-    def advance(self, dt: float) -> int:
-        d, c, n, use = self.d, self.cmap, self.n, self.cmd
-        d.ctrl[c.master_actuator_ids] = use[0:2]
-        d.ctrl[self.ctrl_ids] = use[2:2 + self.ctrl_ids.shape[0]]
-        wnum = d.warning.number
-        for _ in range(self.sub):
-            if self.apply1:  # the constant F1 on the master handle, J1^T F1
-                K.master_grip(self.master, self.operator)
-                K.master_handle_force(self.master, self.operator, self.fa.Fconst, d.qfrc_applied)
-            self.qc[:] = d.qpos[c.chain_qpos_adr]
-            K.chain_elastic_correction(self.qc, *c.elastic_args, self.corr)
-            d.qfrc_applied[c.chain_dof_adr] = use[2 + n:2 + 2 * n] + self.corr
-            mujoco.mj_step(self.m, d)
-            if wnum.any():
-                self.warned = warning_counts(wnum)
-                return Status.MUJOCO_WARNING
-        return 0
+    def advance(self, dt: float) -> int:  # noqa: ARG002 - the scenario's substeps of mj_step
+        st = K.mujoco_advance(0, 0, self.cmd, None, None, self.p)
+        if st:
+            self.warned = warning_counts(self.d.warning.number)
+        return Status(st)
 
     def forces(self, F: np.ndarray, contact: np.ndarray) -> None:
         """The true forces (4,) ON the robots (constant + contact on the tip body), contact summary (5,)."""
-        Fc = self.fa.Fconst
-        K.read_contact(self.fa.sensordata, self.fa.cadr, self.F2c, contact, self.nopts)
-        for i in range(2):
-            F[i] = Fc[i] + 0.0
-            F[2 + i] = Fc[2 + i] + self.F2c[i]
+        sensordata, cadr, _cpts, nopts, Fc = self.sensing[:5]
+        F2c = self.sensing[12]
+        K.read_contact(sensordata, cadr, F2c, contact, nopts)
+        F[0:2] = Fc[0:2] + 0.0  # as `mujoco_kernels.mujoco_sense`: + the operator's force, none here
+        F[2:4] = Fc[2:4] + F2c
 
     def record(self, k: int) -> None:
         self.geo.qpos_hist[k] = self.d.qpos
 
     def finish(self, traj, done: int) -> None:
-        self.geo.finish(traj, done, self.warned, self.saturated)
+        self.geo.finish(traj, done, self.warned, int(self.act[9][0]))
 
     @property
     def state_names(self) -> list[str]:
@@ -151,16 +122,14 @@ class AnalyticStepped:
 
         if plant is None:
             plant = AnalyticPlant(scn.plant_master, scn.plant_slave)
-        self.model = model
-        self.mpk = master_model.packed(plant.master)
-        self.spk = plant.slave.packed()
         self.physics_dt = scn.control_dt / max(1, scn.substeps)
         self.state = model.s0.copy()
         self.cmd = np.zeros(8)  # [T1, T2], held over the step
-        # `analytic_advance`'s law buffers (unused: the commands are held) and RK4 work arrays
+        # `analytic_advance`'s law buffers (unused: the commands are held) and plant arguments
         self.law = (np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6), np.zeros(MASTER_INFO),
-                    np.zeros(SLAVE_INFO), np.zeros(2), np.zeros(2), np.zeros(2))
-        self.work = (np.zeros(4), np.empty((4, 16)), np.empty(16))
+                    np.zeros(SLAVE_INFO), np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(16))
+        self.args = (model, np.zeros(4), scn.control_dt, max(1, scn.substeps), False,
+                     master_model.packed(plant.master), plant.slave.packed(), np.empty((4, 16)), np.empty(16))
 
     def reset(self, state0: np.ndarray) -> None:
         self.state[:] = state0
@@ -179,11 +148,8 @@ class AnalyticStepped:
         self.cmd[0:2] = T1
         self.cmd[2:8] = T2
 
-    def advance(self, dt: float) -> int:
-        nsub = max(1, round(dt / self.physics_dt))
-        F, ks, tmp = self.work
-        plant = (self.model, F, dt, nsub, False, self.mpk, self.spk, ks, tmp)
-        return Status(K.analytic_advance(0, 0, 0, self.cmd, self.state, self.law, plant))
+    def advance(self, dt: float) -> int:  # noqa: ARG002 - the scenario's control_dt
+        return Status(K.analytic_advance(0, 0, self.cmd, self.state, self.law, self.args))
 
     def record(self, k: int) -> None:
         """No plant geometry beyond the state."""

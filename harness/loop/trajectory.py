@@ -5,6 +5,7 @@ Task-space vectors are [X, Z] in metres, each relative to its own robot base."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from itertools import accumulate
 
 import numpy as np
 
@@ -19,12 +20,10 @@ ROW_FIELDS: dict[str, int] = {
     # contact summary (CONTACT_INFO) and the operator's hand position
     "F_true": 4, "F_sensed": 4, "contact": 5, "hand": 2,
 }
-ROW_SLICES: dict[str, slice] = {}
-_c = 0
-for _k, _w in ROW_FIELDS.items():
-    ROW_SLICES[_k] = slice(_c, _c + _w)
-    _c += _w
-ROW_WIDTH = _c
+_ENDS = list(accumulate(ROW_FIELDS.values()))
+ROW_SLICES: dict[str, slice] = {k: slice(e - w, e)
+                                 for (k, w), e in zip(ROW_FIELDS.items(), _ENDS, strict=True)}
+ROW_WIDTH = _ENDS[-1]
 
 
 @dataclass
