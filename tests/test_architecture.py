@@ -219,7 +219,8 @@ def test_warm_modules_keep_the_layer_rules():
 # whose consolidation is under way elsewhere (the slave and master models, the Cosserat rod, outputs).
 TEST_ONLY = {
     "to_file", "slave_control",
-    "read_series",  # users' reader of a run.rrd series (docs/guide/outputs.md); the harness writes, never reads
+    "read_series",  # the users' reader of a run.rrd series (docs/guide/outputs.md)
+    "forget",  # aot: the test hook that makes a process resolve its entry modules anew (TELEOP_NO_AOT, cache)
 }
 
 
