@@ -10,8 +10,10 @@ traj.meta["wall_time"] / steps, i.e. the control loop without the model build an
   paper_interface             the same law through the interface: Python loop, compiled law per step
   paper_no_null / dls_ik      built-in numpy baselines (NominalModels with compiled model kernels)
   JacobianTransposePD         examples/controllers/jacobian_transpose.py (torque plant)
-The "overhead" column is (per-step - compiled per-step) on the same actuation.  A benchmark: it
-asserts nothing; the numbers depend on the machine (2 shared cores here).
+Torque rows run on the CC chain (plant.enforce_cc = true: the free chain diverges in torque mode and the
+Jacobian-transpose example requires it), servo rows on the default plant.  The "overhead" column is
+(per-step - compiled per-step) on the same actuation.  A benchmark: it asserts nothing; the numbers
+depend on the machine (2 shared cores here).
 """
 
 from __future__ import annotations
@@ -38,10 +40,13 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=2.0)
     ap.add_argument("--reps", type=int, default=3)
     args = ap.parse_args()
-    scns = [load_scenario(None, [f"duration={args.duration}", f'plant.actuation="{act}"',
-                                 f'controller.name="{name}"']) for _, name, act in CASES]
+    def plant(act: str) -> list[str]:
+        return [f'plant.actuation="{act}"'] + (["plant.enforce_cc=true"] if act == "torque" else [])
+
+    scns = [load_scenario(None, [f"duration={args.duration}", *plant(act), f'controller.name="{name}"'])
+            for _, name, act in CASES]
     for s in scns[:1] + scns[4:5]:  # warm-up: kernel load from numba's cache
-        simulate(load_scenario(None, ["duration=0.01", f'plant.actuation="{s.plant.actuation}"']))
+        simulate(load_scenario(None, ["duration=0.01", *plant(s.plant.actuation)]))
     best = [float("inf")] * len(CASES)
     for _ in range(args.reps):
         for i, s in enumerate(scns):

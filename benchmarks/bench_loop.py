@@ -41,16 +41,22 @@ import mujoco
 import numba
 import numpy as np
 
-from controllers.control import MASTER_INFO, SLAVE_INFO
+from controllers.control import DET_MIN, MASTER_INFO, SLAVE_INFO
 from harness.config.scenario import PlantConfig, Scenario
 from harness.loop.analytic_loop import simulate_analytic
 from harness.loop.common import compile_model, noise_table
 from harness.loop.fast import K
-from harness.loop.mujoco_loop import make_plant, simulate_mujoco
+from harness.loop.mujoco_loop import (
+    LIVE_GEOMETRY_INTEGRATORS,
+    Geometry,
+    make_plant,
+    plant_groups,
+    simulate_mujoco,
+)
 from harness.loop.native import MJ_FUNCS
 from harness.loop.trajectory import ROW_WIDTH
 from harness.output.record import write_recording
-from harness.plant.initial import initial_state
+from harness.plant.mujoco_model import MujocoPlant
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -155,18 +161,18 @@ def raw_hold_s(scn: Scenario, steps: int) -> float:
 # controller parts, timed in compiled loops over recorded states
 # ---------------------------------------------------------------------------------------------
 def _part_timers() -> dict:
-    sense, add_noise, desired = K.sense_mujoco, K.add_noise, K.desired
-    mlaw, slaw, rec, cmds = K.master_control_kernel, K.slave_control_kernel, K.record_row, K.mujoco_commands
+    """The loop's pieces, each the production kernel called as `mujoco_chunk` calls it (plant groups of
+    `mujoco_loop.plant_groups`, the law tuple of `kernels.loop_chunk`), in a compiled loop over the
+    recorded states."""
+    sense, sense_state, desired = K.sense_mujoco, K.sense_state, K.desired
+    mlaw, slaw, rec, cmds = K.master_control_kernel, K.slave_control_kernel, K.record_row, K.mujoco_command
     elastic, tipk, massnle = K.chain_elastic_correction, K.tip_kinematics, K.mass_nle_kernel
     sub = K.subtask_kernel
 
     @numba.njit
-    def t_sense(QP, QV, m_qadr, m_dadr, c_qadr, c_dadr, R, L0, S):
-        n = c_qadr.shape[0]
-        qc = np.empty(n)
-        vc = np.empty(n)
+    def t_sense(QP, QV, master, chain, S):  # as `mujoco_sense`, with MuJoCo's qpos, qvel of step k
         for k in range(QP.shape[0]):
-            sense(QP[k], QV[k], m_qadr, m_dadr, c_qadr, c_dadr, R, L0, qc, vc, S[k])
+            sense((QP[k], QV[k]) + master[2:], chain, S[k])
 
     @numba.njit
     def t_desired(traj, dt, XD):
@@ -174,23 +180,25 @@ def _part_timers() -> dict:
             desired(traj, k * dt, XD[k, 0], XD[k, 1], XD[k, 2])
 
     @numba.njit
-    def t_noise(S, noise, scale, SN):
+    def t_noise(S, noise, row0, scale, SN):  # as `control_step`; row0: the table's row 0 at the start
+        noise[0] = row0  # a fresh table (running powers, dq2 filter) per run
         for k in range(S.shape[0]):
-            add_noise(S[k], noise[k], scale, SN[k])
+            sense_state(S[k], noise, k, scale, SN[k])
 
     @numba.njit
-    def t_master(mpk, gains, SN, XD, F, MI, T1s):
+    def t_master(mpk, gains, SN, XD, F, MI, T1s, D1):  # as `control_laws`
         for k in range(SN.shape[0]):
-            mlaw(mpk, gains, SN[k, 0:2], SN[k, 2:4], XD[k, 0], XD[k, 1], XD[k, 2], F[0:2], T1s[k], MI[k])
+            D1[k] = mlaw(mpk, gains, SN[k, 0:2], SN[k, 2:4], XD[k, 0], XD[k, 1], XD[k, 2], F[0:2], T1s[k],
+                         MI[k])
 
     @numba.njit
-    def t_slave(spk, nodes, weights, gains, spec, SN, MI, F, T2s, U2s, DEN, SI):
+    def t_slave(spk, nodes, weights, gains, spec, SN, MI, F, T2s, U2s, DEN, SI, D2):  # as `control_laws`
         for k in range(SN.shape[0]):
-            slaw(spk, nodes, weights, gains, spec, SN[k, 4:10], SN[k, 10:16], MI[k, 0:2], MI[k, 8:10],
-                 MI[k, 6:8], F[2:4], T2s[k], U2s[k], DEN[k], SI[k])
+            D2[k] = slaw(spk, nodes, weights, gains, spec, SN[k, 4:10], SN[k, 10:16], MI[k, 0:2], MI[k, 8:10],
+                         MI[k, 6:8], F[2:4], T2s[k], U2s[k], DEN[k], SI[k])
 
     @numba.njit
-    def t_tip(SN, order):
+    def t_tip(SN, order):  # as `slave_control_kernel`
         x = np.empty(2)
         J = np.empty((2, 6))
         H = np.empty((2, 6, 6))
@@ -199,47 +207,56 @@ def _part_timers() -> dict:
             tipk(SN[k, 4:10], SN[k, 10:16], order, x, J, H, Hd)
 
     @numba.njit
-    def t_mass(spk, nodes, weights, SN):
+    def t_mass(spk, nodes, weights, SN):  # as `slave_control_kernel`
         M = np.empty((6, 6))
         N = np.empty(6)
         for k in range(SN.shape[0]):
             massnle(spk, SN[k, 4:10], SN[k, 10:16], nodes, weights, M, N)
 
     @numba.njit
-    def t_sub(spec, SN):
+    def tip_terms(SN, TJ, TH, TJd, THd):  # not timed: J2, H, dJ2 = H dq2, dH/dt of each step's state
         x = np.empty(2)
-        J = np.empty((2, 6))
-        H = np.empty((2, 6, 6))
-        Hd = np.empty((2, 6, 6))
-        Jd = np.zeros((2, 6))
+        for k in range(SN.shape[0]):
+            tipk(SN[k, 4:10], SN[k, 10:16], 3, x, TJ[k], TH[k], THd[k])
+            for i in range(2):
+                for a in range(6):
+                    acc = 0.0
+                    for b in range(6):
+                        acc += TH[k, i, a, b] * SN[k, 10 + b]
+                    TJd[k, i, a] = acc
+
+    @numba.njit
+    def t_sub(spec, SN, TJ, TH, TJd, THd):  # as `slave_control_kernel`, on each step's tip terms
         g = np.empty(6)
         gd = np.empty(6)
         parts = np.empty(3)
-        tipk(SN[0, 4:10], SN[0, 10:16], 3, x, J, H, Hd)
         for k in range(SN.shape[0]):
-            sub(spec, J, H, Jd, Hd, SN[k, 4:10], SN[k, 10:16], g, gd, parts)
+            sub(spec, TJ[k], TH[k], TJd[k], THd[k], SN[k, 4:10], SN[k, 10:16], g, gd, parts)
 
     @numba.njit
-    def t_record(dt, S, XD, mpk, gains, spec, T1s, T2s, U2s, DEN, rows):
+    def t_record(dt, S, SN, XD, model, T1s, T2s, U2s, DEN, MI, SI, info, rows):  # as `control_step`
         for k in range(S.shape[0]):
-            rec(k * dt, S[k], XD[k, 0], XD[k, 1], mpk, gains, spec, T1s[k], T2s[k], U2s[k], DEN[k], rows[k])
+            law = (T1s[k], T2s[k], U2s[k], DEN[k], MI[k], SI[k], XD[k, 0], XD[k, 1], XD[k, 2], SN[k])
+            rec(k * dt, S[k], model, law, rows[k], info[k])
 
     @numba.njit
-    def t_cmds(servo, ff, dt, SN, T2s, U2s, ref, C, R, L0, kvkp, CMD):
+    def t_cmds(SN, XD, T1s, T2s, U2s, DEN, MI, SI, groups, ref0, CMD):  # as `loop_chunk`
+        ref = groups[6][8]
+        ref[:] = ref0  # the servo reference of step 0
         for k in range(SN.shape[0]):
-            cmds(servo, ff, dt, SN[k, 4:10], T2s[k], U2s[k], ref, C, R, L0, kvkp, CMD[k])
+            law = (T1s[k], T2s[k], U2s[k], DEN[k], MI[k], SI[k], XD[k, 0], XD[k, 1], XD[k, 2], SN[k])
+            cmds(CMD[k], law, groups)
 
     @numba.njit
-    def t_elastic(QP, c_qadr, R, C, L0, section, is_hinge, seg_kb, ke, kj, ks, OUT):
-        n = c_qadr.shape[0]
-        qc = np.empty(n)
+    def t_elastic(QP, chain):  # as `mujoco_advance`, per substep
+        c_qadr, eargs, qc, corr = chain[0], chain[5], chain[6], chain[8]
         for k in range(QP.shape[0]):
-            for c in range(n):
+            for c in range(c_qadr.shape[0]):
                 qc[c] = QP[k, c_qadr[c]]
-            elastic(qc, R, C, L0, section, is_hinge, seg_kb, ke, kj, ks, OUT[k])
+            elastic(qc, *eargs, corr)
 
     return dict(sense=t_sense, desired=t_desired, noise=t_noise, master=t_master, slave=t_slave, tip=t_tip,
-                mass=t_mass, sub=t_sub, record=t_record, cmds=t_cmds, elastic=t_elastic)
+                mass=t_mass, tip_terms=tip_terms, sub=t_sub, record=t_record, cmds=t_cmds, elastic=t_elastic)
 
 
 def _best(reps: int, f, *args) -> float:
@@ -254,7 +271,8 @@ def _best(reps: int, f, *args) -> float:
 
 def parts_us(scn: Scenario, log: np.ndarray, reps: int) -> dict[str, float]:
     """us per control step of each piece of the harness loop, on the states of a logged run."""
-    m, d, cmap = make_plant(scn)
+    plant = MujocoPlant.build(scn)
+    m, d, cmap = make_plant(scn, plant)
     n, sub = len(log) // scn.substeps, scn.substeps
     QP, QV = np.zeros((n, m.nq)), np.zeros((n, m.nv))
     for k in range(n):  # states at the start of each control step (replayed)
@@ -262,41 +280,37 @@ def parts_us(scn: Scenario, log: np.ndarray, reps: int) -> dict[str, float]:
         K.replay_commands(m._address, d._address, MJ_FUNCS, d.ctrl, d.qfrc_applied,
                           log[k * sub:(k + 1) * sub])
     T = _part_timers()
-    a = compile_model(scn)._asdict()
+    a = compile_model(scn)
+    geo = Geometry(m, d, cmap, n, live=scn.plant.integrator in LIVE_GEOMETRY_INTEGRATORS)
+    groups = plant_groups(scn, m, d, cmap, plant.contact, a, n,
+                          (geo.qpos_hist, np.zeros((0, m.nu + m.nv)), geo.inputs, geo.rec))
+    master, chain, act = groups[1], groups[2], groups[6]
     noise, scale = noise_table(scn, n)
-    if scale == 0.0:
-        noise = np.zeros((n, 16))
     S, SN, XD = np.zeros((n, 16)), np.zeros((n, 16)), np.zeros((n, 3, 2))
     MI, SI = np.zeros((n, MASTER_INFO)), np.zeros((n, SLAVE_INFO))
     T1s, T2s, U2s, DEN = np.zeros((n, 2)), np.zeros((n, 6)), np.zeros((n, 6)), np.zeros((n, 6))
+    D1, D2 = np.zeros(n), np.zeros(n)
     rows = np.zeros((n, ROW_WIDTH))
-    nc = cmap.n_chain
-    CMD, OUT = np.zeros((n, 2 + 2 * nc)), np.zeros((n, nc))
-    s0 = initial_state(scn)
-    ref = np.concatenate([s0[4:10], s0[10:16]])
-    servo = scn.plant.actuation == "servo"
-    kvkp = (np.divide(cmap.servo_kv, cmap.servo_kp, out=np.zeros(nc), where=cmap.servo_kp > 0)
-            if servo else np.zeros(nc))
+    CMD = np.zeros((n, 2 + 2 * cmap.n_chain))
+    TJ, TJd = np.zeros((n, 2, 6)), np.zeros((n, 2, 6))
+    TH, THd = np.zeros((n, 2, 6, 6)), np.zeros((n, 2, 6, 6))
     r: dict[str, float] = {}
-    r["sense (joints -> q2, dq2)"] = _best(reps, T["sense"], QP, QV, cmap.master_qpos_adr,
-                                           cmap.master_dof_adr, cmap.chain_qpos_adr, cmap.chain_dof_adr,
-                                           cmap.R, cmap.L0, S)
-    r["desired x_d(t)"] = _best(reps, T["desired"], a["traj"], scn.control_dt, XD)
-    r["noise (AWGN)"] = _best(reps, T["noise"], S, noise, scale, SN)
-    r["master law (12)-(13)"] = _best(reps, T["master"], a["mpk_c"], a["gains"], SN, XD, a["F"], MI, T1s)
-    r["slave law (17)-(18) + null space"] = _best(reps, T["slave"], a["spk_c"], a["nodes"], a["weights"],
-                                                  a["gains"], a["spec"], SN, MI, a["F"], T2s, U2s, DEN, SI)
+    r["sense (joints -> q2, dq2)"] = _best(reps, T["sense"], QP, QV, master, chain, S)
+    r["desired x_d(t)"] = _best(reps, T["desired"], a.traj, scn.control_dt, XD)
+    r["noise (AWGN)"] = _best(reps, T["noise"], S, noise, noise[0].copy(), scale, SN)
+    r["master law (12)-(13)"] = _best(reps, T["master"], a.mpk_c, a.gains, SN, XD, a.F, MI, T1s, D1)
+    r["slave law (17)-(18) + null space"] = _best(reps, T["slave"], a.spk_c, a.nodes, a.weights, a.gains,
+                                                  a.spec, SN, MI, a.F, T2s, U2s, DEN, SI, D2)
     r["  of which tip x2, J2, H, dH/dt"] = _best(reps, T["tip"], SN, 3)
-    r["  of which M2, N2 (8 GL points/section)"] = _best(reps, T["mass"], a["spk_c"], a["nodes"],
-                                                         a["weights"], SN)
-    r["  of which sub-task beta, grad, rate"] = _best(reps, T["sub"], a["spec"], SN)
-    r["record row (true state)"] = _best(reps, T["record"], scn.control_dt, S, XD, a["mpk_c"], a["gains"],
-                                         a["spec"], T1s, T2s, U2s, DEN, rows)
-    r["commands (servo ref / torque map)"] = _best(reps, T["cmds"], servo, scn.plant.servo_feedforward,
-                                                   scn.control_dt, SN, T2s, U2s, ref, cmap.C, cmap.R, cmap.L0,
-                                                   kvkp, CMD)
-    r[f"elastic correction (x{sub} substeps)"] = sub * _best(reps, T["elastic"], QP, cmap.chain_qpos_adr,
-                                                            *cmap.elastic_args, OUT)
+    r["  of which M2, N2 (8 GL points/section)"] = _best(reps, T["mass"], a.spk_c, a.nodes, a.weights, SN)
+    T["tip_terms"](SN, TJ, TH, TJd, THd)
+    r["  of which sub-task beta, grad, rate"] = _best(reps, T["sub"], a.spec, SN, TJ, TH, TJd, THd)
+    info = (scale == 0.0) & (D1 != 0.0) & (D2 > DET_MIN)  # the laws ran on the true state with status 0
+    r["record row (true state)"] = _best(reps, T["record"], scn.control_dt, S, SN, XD, a, T1s, T2s, U2s, DEN,
+                                         MI, SI, info, rows)
+    r["commands (servo ref / torque map)"] = _best(reps, T["cmds"], SN, XD, T1s, T2s, U2s, DEN, MI, SI,
+                                                   groups, act[8].copy(), CMD)
+    r[f"elastic correction (x{sub} substeps)"] = sub * _best(reps, T["elastic"], QP, chain)
     return {k: v / n * 1e6 for k, v in r.items()}
 
 
