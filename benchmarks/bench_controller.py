@@ -12,8 +12,8 @@ traj.meta["wall_time"] / steps, i.e. the control loop without the model build an
   JacobianTransposePD         examples/controllers/jacobian_transpose.py (torque plant)
 Torque rows run on the CC chain (plant.enforce_cc = true: the free chain diverges in torque mode and the
 Jacobian-transpose example requires it), servo rows on the default plant.  The "overhead" column is
-(per-step - compiled per-step) on the same actuation.  A benchmark: it asserts nothing; the numbers
-depend on the machine (2 shared cores here).
+(per-step - compiled per-step) on the same actuation.  A benchmark: it asserts only that each run
+finishes (status ok); the numbers depend on the machine (2 shared cores here).
 """
 
 from __future__ import annotations

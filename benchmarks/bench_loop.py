@@ -1,4 +1,4 @@
-"""Per-step cost of the harness against raw MuJoCo, in one run on one machine (issue: speed).
+"""Per-step cost of the harness against raw MuJoCo, in one run on one machine.
 
     .venv/bin/python benchmarks/bench_loop.py            # paper scenario (20 s), N in 4..32 (2 s runs)
     .venv/bin/python benchmarks/bench_loop.py --quick    # 2 s runs
@@ -460,8 +460,8 @@ def main() -> None:
         "mj_step computed) + analytic backbone + Trajectory, i.e. simulate_mujoco's wall time without the "
         "model build; '.rrd written' adds write_recording (every step logged, file flushed).\n")
     r = results["servo"]
-    text = (f"One-time costs (fresh process): imports {cold['imports']:.2f} s; first simulate call (numba "
-            f"loads every kernel from its on-disk cache) {cold['first_call_cached']:.2f} s")
+    text = (f"One-time costs (fresh process): imports {cold['imports']:.2f} s; first simulate call (the "
+            f"ahead-of-time kernels, or numba's on-disk cache) {cold['first_call_cached']:.2f} s")
     if "first_call_cold" in cold:
         text += f"; with an empty cache (compiles everything once) {cold['first_call_cold']:.1f} s"
     text += (f"; model build {np.min(r['build']) * 1e3:.0f} ms per run; recording geometry after the loop "
