@@ -310,15 +310,19 @@ def test_en_tuple_equals_complex_series():
         np.testing.assert_allclose(np.array(en_tuple(t)), ref, rtol=1e-14, atol=1e-16)
 
 
-@pytest.mark.parametrize("kind", ["mujoco", "analytic"])
-def test_noise_free_record_rows_equal_recomputed_rows(kind):
+@pytest.mark.parametrize("kind, cutoff", [("mujoco", None), ("analytic", None), ("analytic", 50.0)])
+def test_noise_free_record_rows_equal_recomputed_rows(kind, cutoff):
     """Without noise the record row reuses the control laws' kinematics (record_row's info): the rows
-    equal record_row recomputed from the true state, bit for bit."""
+    equal record_row recomputed from the true state, bit for bit; with the sensed-dq2 filter the laws see
+    a filtered dq2, so the row is computed from the true state (de2 of the true dq2)."""
+    import dataclasses
+
     from harness.loop import simulate
     from harness.loop.common import compile_model
     from harness.loop.trajectory import ROW_SLICES, ROW_WIDTH
 
     scn = Scenario(duration=0.2, snr_db=None, plant=PlantConfig(kind=kind, segments=4))
+    scn = dataclasses.replace(scn, sensing=dataclasses.replace(scn.sensing, dq2_cutoff=cutoff))
     tr = simulate(scn)
     assert tr.status == "ok"
     a = compile_model(scn)

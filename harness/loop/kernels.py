@@ -158,7 +158,8 @@ def record_row(t, state, model, law, row, info):
 def sense_state(state, noise, k, noise_scale, sensed):
     """The sensed state (16,) at step k: the true state plus AWGN (noise (n, 32): `add_noise_channel`;
     (n, 16): `add_noise`; none when noise_scale == 0).  With DQ2_FILTER more columns (row 0: gain alpha,
-    filtered dq2 y): sensed dq2 <- y += alpha (sensed dq2 - y), y = the sensed dq2 at k = 0."""
+    filtered dq2 y): sensed dq2 <- y += alpha (sensed dq2 - y), y = the sensed dq2 at k = 0.  Returns
+    whether the sensed state is the true state (no noise, no filter)."""
     if noise_scale > 0.0 and noise.shape[1] >= 32:
         add_noise_channel(state, noise, k, noise_scale, sensed)
     elif noise_scale > 0.0:
@@ -174,6 +175,8 @@ def sense_state(state, noise, k, noise_scale, sensed):
             else:
                 noise[0, f + 1 + i] = sensed[10 + i]
             sensed[10 + i] = noise[0, f + 1 + i]
+        return False
+    return noise_scale == 0.0
 
 
 def control_step(k, t, model, state, noise, noise_scale, F, law, row):
@@ -183,10 +186,10 @@ def control_step(k, t, model, state, noise, noise_scale, F, law, row):
     T1, T2, u2, deN, minfo, sinfo, xd, dxd, ddxd, sensed = law
     m = model
     desired(m.traj, t, xd, dxd, ddxd)
-    sense_state(state, noise, k, noise_scale, sensed)
+    exact = sense_state(state, noise, k, noise_scale, sensed)
     st = control_laws(m.mpk_c, m.spk_c, m.nodes, m.weights, m.gains, m.spec, sensed, xd, dxd, ddxd, F,
                       T1, T2, u2, deN, minfo, sinfo)
-    record_row(t, state, model, law, row, noise_scale == 0.0 and st == 0)  # laws on the true state
+    record_row(t, state, model, law, row, exact and st == 0)  # laws on the true state
     return st
 
 
