@@ -10,7 +10,6 @@
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import json
 import math
 import os
@@ -61,12 +60,9 @@ def _scenario_of(scenario: Source, overrides: Iterable[str], allow_code: bool | 
         return load_scenario(scenario, overrides, allow_code=allow_code)
     if overrides:
         raise TypeError("overrides apply to a scenario file or table, not to a Scenario object")
-    from harness.config.controller import resolve_controller
-    from harness.plant import validate_plant
-
-    _load.load_scenario(_load.scenario_to_dict(scenario), allow_code=True)  # a file's checks, every field
-    validate_plant(scenario)
-    return resolve_controller(scenario)
+    if _BUILT and _BUILT[0][0] is scenario:  # from `load_scenario`: checked, its plant kept
+        return scenario
+    return load_scenario(_load.scenario_to_dict(scenario), allow_code=True)  # a file's checks, every field
 
 
 @dataclass
@@ -171,7 +167,6 @@ def run_scenario(scn: Scenario, out: Path | None = None, progress: bool = False,
     with stop_on_signals(common.STOP if handle_signals else None) as received:
         traj = loop.simulate(scn, plant=plant, progress=progress, on_chunk=on_chunk)
     interrupted = bool(received) or traj.status == "interrupted"
-    traj.meta["environment"] = [dataclasses.asdict(o) for o in scn.environment.objects]  # drawn by outputs
 
     metrics = attempt("metrics", lambda: dict(compute_metrics(traj, scn)))
     failed.clear()  # metrics are not a file
@@ -284,7 +279,6 @@ def margins(scenario: Source = None, overrides: Iterable[str] = (), *, bounds,
     (params: default `harness.studies.margin.DEFAULT_PARAMS`).  Returns (rows, edge rows or None).
     Raises `ConfigError` for bad input or a nominal scenario that fails the bounds."""
     from harness.config.bounds import Bounds, load_bounds
-    from harness.config.load import scenario_to_dict
     from harness.studies import margin as mg
     from harness.studies import margin_report as mr
 
@@ -295,7 +289,7 @@ def margins(scenario: Source = None, overrides: Iterable[str] = (), *, bounds,
     out_dir = prepare_out_dir(out) if out is not None else None
     # the cases: this scenario + one override per parameter
     if isinstance(scenario, Scenario):
-        source, base = scenario_to_dict(scenario), []
+        source, base = _load.scenario_to_dict(scn), []
     else:
         source, base = scenario, list(overrides)
     kw = dict(source=source, base_set=base, rtol=rtol, probes=probes, out=out_dir, workers=workers,

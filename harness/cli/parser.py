@@ -38,13 +38,9 @@ class _VersionAction(argparse.Action):
         super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help=help)
 
     def __call__(self, parser, namespace, values, option_string=None):
-        from importlib.metadata import PackageNotFoundError, version
+        from harness.config.runtime import provenance
 
-        try:
-            v = version("octarm-teleop")
-        except PackageNotFoundError:
-            v = "unknown"
-        parser._print_message(f"{parser.prog} {v}\n", sys.stdout)
+        parser._print_message(f"{parser.prog} {provenance().get('version', 'unknown')}\n", sys.stdout)
         parser.exit()
 
 
@@ -302,7 +298,8 @@ def build_parser() -> argparse.ArgumentParser:
                            epilog=epilog)
         group = None
         for flag, kw in options:
+            target = p
             if kw.get("exclusive"):
-                group = group or p.add_mutually_exclusive_group()
-            (group or p).add_argument(flag, **{k: v for k, v in kw.items() if k != "exclusive"})
+                group = target = group or p.add_mutually_exclusive_group()
+            target.add_argument(flag, **{k: v for k, v in kw.items() if k != "exclusive"})
     return parser

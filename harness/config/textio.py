@@ -181,11 +181,9 @@ def write_atomic(path: str | Path, data: bytes | str | Callable[[Path], Any]) ->
     return path
 
 
-def remove_outputs(folder: Path, names: list[str], patterns: tuple[str, ...] = ()) -> None:
-    """Remove the previous run's outputs (`names`, `patterns`) and temporary files from `folder`."""
+def remove_outputs(folder: Path, names: list[str]) -> None:
+    """Remove the previous run's outputs (`names`) and temporary files from `folder`."""
     victims = {folder / n for n in names}
-    for pat in patterns:
-        victims.update(folder.glob(pat))
     victims.update(p for p in folder.glob(f".*{TMP_MARK}*") if p.is_file())
     for p in victims:
         try:

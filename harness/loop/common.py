@@ -3,6 +3,7 @@ table, the chunk driver and the run's outcome and metadata."""
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 from functools import partial
@@ -168,4 +169,5 @@ def run_meta(scn: Scenario, wall: float) -> dict:
         "master_lengths": scn.plant_master.lengths, "length_range": (lo.tolist(), hi.tolist()),
         "max_bend": scn.slave.max_bend, "backbone_fn": partial(slave_model.backbone, scn.slave),  # picklable
         "master_base": (0.0, 0.0, 0.0), "slave_base": (0.0, 0.0, 0.0), "mujoco_warnings": 0,
+        "environment": [dataclasses.asdict(o) for o in scn.environment.objects],  # drawn by the outputs
     }

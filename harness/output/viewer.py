@@ -238,7 +238,6 @@ class LiveView:
         if self.scn is not None:
             from harness.loop.common import desired_at
 
-            part.meta["environment"] = [dataclasses.asdict(o) for o in self.scn.environment.objects]
             period = 2.0 * np.pi / max(abs(float(self.scn.trajectory.omega)), 1e-9)
             t = np.linspace(0.0, min(float(self.scn.duration), period), DESIRED_PATH_POINTS)
             xd = np.array([desired_at(self.scn, ti)[0] for ti in t])

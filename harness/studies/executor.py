@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import atexit
 import concurrent.futures as cf
-import dataclasses
 import importlib
 import logging
 import math
@@ -95,7 +94,6 @@ def run_case(case: dict) -> dict:
         if case.get("record"):
             from harness.output.record import write_recording
 
-            traj.meta["environment"] = [dataclasses.asdict(o) for o in scn.environment.objects]
             with tempfile.TemporaryDirectory(prefix="sweep-rec-") as tmp:
                 path = Path(tmp) / f"{case.get('case_id')}.rrd"
                 write_recording(traj, path)
