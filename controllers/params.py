@@ -11,19 +11,25 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 GRAVITY = 9.81  # m/s^2, standard gravity (magnitude)
+SUBTASKS = ("manipulability", "limits")  # the null-space sub-task kinds (29)-(33) of `controllers.subtasks`
 
 
 class ParameterError(ValueError):
     """Parameters the schema's per-field ranges cannot check (one line naming the field)."""
 
 
-def _as_tuples(obj) -> None:
-    """Store the tuple fields of a parameter dataclass as tuples of floats (lists, arrays accepted)."""
+def _as_tuples(obj, variable: tuple[str, ...] = ()) -> None:
+    """Store the number-tuple fields of a parameter dataclass as tuples of floats (lists, arrays accepted);
+    ParameterError if one not in `variable` has another length than its default (the packed layout)."""
     for f in fields(obj):
         v = getattr(obj, f.name)
-        if isinstance(f.default, tuple) and f.name != "kinds" and not (
-                type(v) is tuple and all(type(x) is float for x in v)):
-            object.__setattr__(obj, f.name, tuple(float(x) for x in np.ravel(v)))
+        if not (isinstance(f.default, tuple) and all(isinstance(x, float) for x in f.default)):
+            continue
+        if not (type(v) is tuple and all(type(x) is float for x in v)):
+            v = tuple(float(x) for x in np.ravel(v))
+            object.__setattr__(obj, f.name, v)
+        if f.name not in variable and len(v) != len(f.default):
+            raise ParameterError(f"{type(obj).__name__}.{f.name} = {v!r}: must have {len(f.default)} entries")
 
 
 def _packed(name: str, default: tuple):
@@ -127,13 +133,13 @@ class SubtaskSpec:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "kinds", tuple(self.kinds))
-        _as_tuples(self)
-        if len(set(self.kinds)) != len(self.kinds):
-            raise ParameterError(f"subtask.kinds = {self.kinds!r}: duplicates are not allowed")
+        _as_tuples(self, variable=("weights",))
+        if len(set(self.kinds)) != len(self.kinds) or not set(self.kinds) <= set(SUBTASKS):
+            raise ParameterError(f"subtask.kinds = {self.kinds!r}: must be distinct kinds of {SUBTASKS}")
         if len(self.weights) != len(self.kinds):
             raise ParameterError(
                 f"subtask.weights = {self.weights!r}: need one weight per kind ({len(self.kinds)})")
 
 
-__all__ = ["GRAVITY", "SLAVE_PACK", "SLAVE_PACK_SIZE", "Gains", "MasterParams", "ParameterError",
+__all__ = ["GRAVITY", "SLAVE_PACK", "SUBTASKS", "SLAVE_PACK_SIZE", "Gains", "MasterParams", "ParameterError",
            "SlaveParams", "SubtaskSpec", "field"]

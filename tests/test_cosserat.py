@@ -151,6 +151,9 @@ def test_same_inputs_same_numbers_and_pyelastica_stepper_agrees():
     (dict(actuation="force"), "plant.cosserat.actuation = 'force'"),
     (dict(material_damping=(-1.0, 0.1)), "plant.cosserat.material_damping"),
     (dict(shear_factor=0.0), "plant.cosserat.shear_factor = 0.0"),
+    (dict(params=SlaveParams(rest_lengths=(-0.3, 0.3, 0.3))), "plant.cosserat.slave.rest_lengths"),
+    (dict(params=SlaveParams(masses=(0.0, 0.7, 0.4))), "plant.cosserat.slave.masses"),
+    (dict(params=SlaveParams(slice_inertia=(-1.0, 0.0, 0.0))), "plant.cosserat.slave.slice_inertia"),
 ])
 def test_bad_settings_one_line_error(kwargs, field):
     kw = dict(params=SlaveParams())

@@ -5,7 +5,7 @@ import pytest
 import reference_models as ref
 
 from controllers import master, slave, subtasks
-from controllers.params import MasterParams, SlaveParams, SubtaskSpec
+from controllers.params import MasterParams, ParameterError, SlaveParams, SubtaskSpec
 from harness.loop.fast import kernels
 
 SP = SlaveParams(slice_inertia=(2e-3, 1e-3, 5e-4), extension_damping=(1.0, 2.0, 3.0),
@@ -277,3 +277,19 @@ def test_controllers_import_numpy_only():
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == "", f"controllers/ pulls in {res.stdout.strip()}"
     assert len(mods) >= 6
+
+
+@pytest.mark.parametrize("make, text", [
+    (lambda: SlaveParams(gravity=(0.0, 0.0, -9.81)), "SlaveParams.gravity = (0.0, 0.0, -9.81): must have 2"),
+    (lambda: SlaveParams(rest_lengths=(0.3, 0.3)), "SlaveParams.rest_lengths = (0.3, 0.3): must have 3"),
+    (lambda: MasterParams(lengths=(0.6, 0.6, 0.6)), "MasterParams.lengths = (0.6, 0.6, 0.6): must have 2"),
+    (lambda: SubtaskSpec(kinds=("manipulabilty",), weights=(1.0,)), "subtask.kinds = ('manipulabilty',)"),
+    (lambda: SubtaskSpec(kinds=("limits", "limits"), weights=(1.0, 1.0)),
+     "subtask.kinds = ('limits', 'limits')"),
+])
+def test_parameters_built_in_python_refuse_a_layout_they_cannot_pack(make, text):
+    """The packed layout of the kernels needs each field's size; an unknown sub-task kind would silently
+    switch the null-space task off: both are one-line ParameterErrors, also outside a scenario file."""
+    with pytest.raises(ParameterError) as e:
+        make()
+    assert str(e.value).startswith(text) and "\n" not in str(e.value)

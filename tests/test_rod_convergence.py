@@ -73,3 +73,10 @@ def test_result_page_names_its_command_and_the_current_defaults():
     assert "`python -m harness.studies.rod_convergence`" in text
     assert f"`plant.cosserat.shear_factor = {DEFAULT_SHEAR_FACTOR:g}`" in text
     assert f"`plant.cosserat.rotary_radius = {DEFAULT_ROTARY_RADIUS:g}` m" in text
+
+
+def test_rod_cost_times_the_default_damped_rod():
+    """`rod_cost` (the study's cost column) runs the rod with the plant's default material damping."""
+    dt, per_control, us = rc.rod_cost(SlaveParams(), 4, DEFAULT_SHEAR_FACTOR, DEFAULT_ROTARY_RADIUS, reps=1,
+                                      steps=2)
+    assert 0.0 < dt <= 1e-3 and per_control == round(1e-3 / dt) and us > 0.0

@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
-from controllers.params import Gains, MasterParams, SlaveParams, SubtaskSpec
+from controllers.params import SUBTASKS, Gains, MasterParams, SlaveParams, SubtaskSpec
 from harness.config.errors import short_repr
 from harness.config.schema import Meta, checked, doc, integer, num, vec
 
@@ -17,7 +17,6 @@ INTEGRATORS = ("implicitfast", "implicit", "euler", "rk4")
 ENV_KINDS = ("plane", "box", "sphere")
 FORCE_MODES = ("exact", "sensed", "ignored")
 NOISE_MODELS = ("per_channel", "per_vector")
-SUBTASKS = ("manipulability", "limits")
 NAME_RE = r"^[A-Za-z0-9_][A-Za-z0-9_.+=,@-]{0,99}$"
 NAME_EXPECT = ("a string of 1-100 letters, digits or _ . + = , @ - (usable as a folder name; no spaces or "
                "slashes, not starting with '.' or '-')")

@@ -18,7 +18,13 @@ from dataclasses import replace
 import numpy as np
 
 from controllers.params import SlaveParams
-from harness.plant.cosserat.limits import DEFAULT_ROTARY_RADIUS, DEFAULT_SHEAR_FACTOR, _material
+from harness.plant.cosserat.limits import (
+    DEFAULT_ETA_A,
+    DEFAULT_ETA_B,
+    DEFAULT_ROTARY_RADIUS,
+    DEFAULT_SHEAR_FACTOR,
+    _material,
+)
 from harness.studies.fidelity_reference import upward_crossings
 from harness.studies.figures import md_table, printer, run_paper, save
 
@@ -129,7 +135,7 @@ def rod_static_tip(slave: SlaveParams, n: int, shear_factor: float, rotary_radiu
 def rod_cost(slave: SlaveParams, n: int, shear_factor: float, rotary_radius: float,
              reps: int = 5, steps: int = 100) -> tuple[float, int, float]:
     """(rod dt (s), rod steps per 1 ms control step, wall time per control step (us, fastest of reps))."""
-    r, q0 = _rod(slave, n, shear_factor, rotary_radius, None)
+    r, q0 = _rod(slave, n, shear_factor, rotary_radius, (DEFAULT_ETA_B, DEFAULT_ETA_A))
     r.step(q0, 1e-3)
     times = []
     for _ in range(reps):

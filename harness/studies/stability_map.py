@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.studies.figures import printer, pyplot, run_paper, save, save_figure
+from harness.studies.figures import md_table, printer, pyplot, run_paper, save, save_figure
 from harness.studies.stability_report import radius_along
 
 MAPS = {
@@ -46,11 +46,8 @@ def grid_lines(rows: list[dict], text) -> list[str]:
     """Markdown table lines of a k_n x eta_b grid: one row per k_n, one column per eta_b, each cell
     `text(row)` of the grid point's row."""
     kns, etas, cell = _grid(rows)
-    lines = ["| k_n \\ eta_b (N m^2 s) | " + " | ".join(f"{e:g}" for e in etas) + " |",
-             "|---:|" + "---:|" * len(etas)]
-    for kn in kns:
-        lines.append(f"| {kn:g} | " + " | ".join(text(cell[kn, e]) for e in etas) + " |")
-    return lines
+    return md_table(["k_n \\ eta_b (N m^2 s)", *(f"{e:g}" for e in etas)],
+                    [[f"{kn:g}", *(text(cell[kn, e]) for e in etas)] for kn in kns])
 
 
 def stability_markdown(rows: list[dict], duration: float) -> str:

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from harness.config.scenario import Scenario
-from harness.studies.figures import pyplot, save_csv, save_figure
+from harness.studies.figures import pyplot, save, save_csv, save_figure
 from harness.studies.stability import ClosedLoopMap, LinearizationError, Stability, linearize
 
 
@@ -71,7 +71,7 @@ def write_stability(res: Stability, out) -> list[Path]:
     stability.json (verdict, radius, least stable mode, t, T, h) and stability.png in folder `out`."""
     import json
 
-    from harness.config.textio import jsonable, write_atomic
+    from harness.config.textio import jsonable
 
     out = Path(out)
     rows = res.spectrum_rows()
@@ -81,7 +81,7 @@ def write_stability(res: Stability, out) -> list[Path]:
                "most_negative": rows[res.most_negative()],
                "plant": res.scenario.plant.kind, "actuation": res.scenario.plant.actuation}
     return [save_csv(out / "spectrum.csv", rows),
-            write_atomic(out / "stability.json", json.dumps(jsonable(summary), indent=2) + "\n"),
+            save(out / "stability.json", json.dumps(jsonable(summary), indent=2) + "\n"),
             plot_stability(res, out / "stability.png")]
 
 

@@ -50,7 +50,10 @@ def stable_dt(params: SlaveParams, elements_per_section: int = DEFAULT_ELEMENTS,
 
 
 def auto_dt(control_dt: float, stable: float) -> float:
-    """The largest control_dt / m (m integer) that is <= stable (s)."""
+    """The largest control_dt / m (m integer) that is <= stable (s); ValueError unless stable is finite
+    and > 0."""
+    if not (math.isfinite(stable) and stable > 0.0):
+        raise ValueError(f"plant.cosserat: stable time step {stable!r} s is not a finite number > 0")
     m = max(1, math.ceil(control_dt / stable))
     while control_dt / m > stable:
         m += 1

@@ -43,9 +43,6 @@ def material_damping_from_slave(params: SlaveParams) -> tuple[np.ndarray, np.nda
     return np.asarray(params.bending_damping) / L0, np.asarray(params.extension_damping) * L0
 
 
-
-
-
 def _rot_y(p: float) -> np.ndarray:
     c, s = math.cos(p), math.sin(p)
     return np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])
@@ -78,10 +75,12 @@ class CosseratSlave:
         for name, v in (("shear_factor", shear_factor), ("rotary_radius", rotary_radius)):
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise _err(name, v, "must be a finite number > 0")
-        for name, v in (("slave.bending_stiffness", params.bending_stiffness),
-                        ("slave.extension_stiffness", params.extension_stiffness)):
-            if min(v) <= 0:
-                raise _err(name, tuple(v), "every entry must be > 0 (moduli of the rod)")
+        for name in ("bending_stiffness", "extension_stiffness", "rest_lengths", "masses", "slice_inertia"):
+            v = np.asarray(getattr(params, name), dtype=float)
+            lo = 0.0 if name == "slice_inertia" else np.nextafter(0.0, 1.0)
+            if not (np.all(np.isfinite(v)) and v.min() >= lo):
+                raise _err(f"slave.{name}", tuple(v.tolist()),
+                           f"every entry must be finite and {'>=' if lo == 0.0 else '>'} 0")
         try:
             eta_b, eta_a = (np.broadcast_to(np.asarray(x, float), (3,)).copy() for x in material_damping)
         except (TypeError, ValueError):
