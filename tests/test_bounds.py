@@ -179,3 +179,31 @@ def test_fuzz_bounds_loader():
         check_bounds(GOOD, b)  # a valid Bounds can always be checked
 
     check()
+
+
+def test_every_bounded_metric_is_the_field_s_own_with_its_unit_from_the_table():
+    """Each numeric bound `<metric>_max`/`_min` names its metric, which has a unit in the one table
+    (harness.config.metrics); its description and violation reports carry that unit."""
+    from harness.config.bounds import FLAGS, limit_of
+    from harness.config.metrics import METRIC_UNITS
+    from harness.config.schema import description, info
+
+    numeric = [f for f in info(Bounds).fields if f.name.endswith(("_max", "_min"))]
+    assert len(numeric) > 10
+    flagged = [m for m in FLAGS.values() if m != "status"]  # status is a row field, not a metric
+    assert [m for m in flagged + [limit_of(f.name)[0] for f in numeric] if m not in METRIC_UNITS] == []
+    for f in numeric:
+        metric, rel, unit = limit_of(f.name)
+        assert f.name == f"{metric}_{rel}"
+        assert unit in (METRIC_UNITS[metric], "")
+        desc = description(f.type)
+        if unit:
+            assert desc.startswith(f"{unit}, ")
+            limit = {f.name: 1.0 if rel == "max" else 10.0}
+            (v,) = check_bounds({metric: 9.0}, Bounds(status_ok=False, **limit))
+            assert str(v).endswith(f" {unit}") and f"9.0000 {unit}" in str(v)
+        else:
+            assert desc.split(",")[0] not in METRIC_UNITS.values()
+    # the units a value is printed with: the symbol, none for a dimensionless number, a count or a mixed unit
+    assert {limit_of(f.name)[0]: limit_of(f.name)[2] for f in numeric if limit_of(f.name)[2] == ""} == {
+        "beta_min": "", "deN_rms": "", "range_violation": ""}

@@ -672,3 +672,16 @@ def test_stability_map_predicted_sits_next_to_the_simulated_map(tmp_path, monkey
     assert "predicted" in text
     cell = text.splitlines()[-1]
     assert "(unstable, flip) / sim: diverged" in cell, cell
+
+
+def test_run_summary_units_come_from_the_metric_table():
+    """The summary prints each metric's unit from harness.config.metrics (none for beta_min and the
+    warning count) and skips what was not measured."""
+    from harness.cli import _SUMMARY_KEYS, _summary_items
+    from harness.config.metrics import METRIC_UNITS
+
+    assert [k for k in _SUMMARY_KEYS if k not in METRIC_UNITS] == []
+    metrics = {"e1_rms": 1.5e-5, "e2_rms": 0.0123, "e2_plant_rms": float("nan"), "e2_plant_max": None,
+               "beta_min": 0.5, "mujoco_warnings": 2}
+    assert _summary_items(metrics) == ["e1_rms = 1.500e-05 m", "e2_rms = 0.0123 m", "beta_min = 0.5",
+                                       "mujoco_warnings = 2"]

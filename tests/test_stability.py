@@ -123,6 +123,7 @@ def test_cli_writes_spectrum_and_verdict(tmp_path, capsys):
     summary = json.loads((tmp_path / "stability.json").read_text())
     rows = (tmp_path / "spectrum.csv").read_text().splitlines()
     assert len(rows) == 1 + summary["n_states"] == 17
+    assert (summary["mujoco_warnings"], summary["mujoco_warning"]) == (0, None)
     assert (tmp_path / "stability.png").stat().st_size > 0
 
 
@@ -195,3 +196,35 @@ def test_loop_state_holds_every_state_of_the_loop(sets):
     lp.run_to(k0 + 10)
     np.testing.assert_array_equal(lp.x(), first)
     assert any(n.endswith(("_filtered", ".force")) for n in lp.names)
+
+
+def test_mujoco_warnings_are_captured_and_reported_not_printed(tmp_path, monkeypatch, capfd):
+    """A 1 kHz servo on the MuJoCo chain makes MuJoCo raise mjWARN_BADQACC at 12 ms.  The linearization's
+    run captures it as a run does (`harness.loop.mj_warnings`): its error gives the counts and MuJoCo's
+    text as the Python-stepped run's message of the same scenario, and nothing reaches stdout, stderr or
+    MuJoCo's log file (its default handler appends to MUJOCO_LOG.TXT in the working folder)."""
+    from harness.cli import main
+    from harness.loop.common import compile_model
+    from harness.loop.stepped_loop import simulate_stepped
+    from harness.loop.stepped_plants import stepped_plant
+    from harness.plant import build_plant
+    from harness.studies.stability import LinearizationError
+
+    monkeypatch.chdir(tmp_path)
+    sets = ["duration=0.05", "snr_db=none", "plant.servo_frequency=1000"]
+    scn = load_scenario(None, sets)
+    with pytest.raises(LinearizationError) as exc:
+        linearize(scn, 0.03)
+    msg = str(exc.value)
+    assert "MuJoCo warning (mjWARN_BADQACC: 1); MuJoCo says: Nan, Inf or huge value in QACC" in msg, msg
+    out, err = capfd.readouterr()
+    assert "WARNING" not in out + err
+    assert list(tmp_path.iterdir()) == []
+    model = compile_model(scn)
+    tr = simulate_stepped(scn, stepped_plant(scn, model, build_plant(scn)), model=model)
+    assert msg == f"the run stopped before the point of linearization: {tr.message}"
+    # `teleop stability`: the same one line, exit status 1
+    rc = main(["stability", "--at", "0.03", *(a for s in sets for a in ("--set", s)), "--out", "st"])
+    out, err = capfd.readouterr()
+    assert rc == 1 and err.strip().splitlines() == [f"error: {msg}"], err
+    assert "WARNING" not in out and not (tmp_path / "MUJOCO_LOG.TXT").exists()

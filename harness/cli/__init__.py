@@ -17,6 +17,7 @@ from controllers.params import ParameterError
 from harness.cli.parser import EXIT_FAIL, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, build_parser
 from harness.cli.parser import one_line as _one_line
 from harness.config.errors import ConfigError
+from harness.config.metrics import value_unit
 from harness.config.runtime import RuntimeOptions, fast_exit, set_gc_thresholds, using_options
 from harness.config.textio import jsonable, prepare_out_dir
 
@@ -62,8 +63,14 @@ def _fmt_value(v: Any) -> str:
     return str(v)
 
 
-_SUMMARY_KEYS = (("e1_rms", "m"), ("e1_max", "m"), ("e2_rms", "m"), ("e2_max", "m"),
-                 ("e2_plant_rms", "m"), ("e2_plant_max", "m"), ("beta_min", ""), ("mujoco_warnings", ""))
+_SUMMARY_KEYS = ("e1_rms", "e1_max", "e2_rms", "e2_max", "e2_plant_rms", "e2_plant_max", "beta_min",
+                 "mujoco_warnings")  # metrics printed in the run summary
+
+
+def _summary_items(metrics: dict[str, Any]) -> list[str]:
+    """"name = value unit" of each measured summary metric (None/NaN skipped; unit: `value_unit`)."""
+    return [f"{k} = {_fmt_value(metrics[k])}{' ' + value_unit(k) if value_unit(k) else ''}"
+            for k in _SUMMARY_KEYS if jsonable(metrics.get(k)) is not None]
 
 
 def _simulate_and_write(args: argparse.Namespace, scn, out: Path | None, live=None):
@@ -83,8 +90,7 @@ def _simulate_and_write(args: argparse.Namespace, scn, out: Path | None, live=No
     if traj.message:
         print(f"  message: {_one_line(traj.message)}")
     if metrics:
-        items = [f"{k} = {_fmt_value(metrics[k])}{' ' + u if u else ''}"
-                 for k, u in _SUMMARY_KEYS if jsonable(metrics.get(k)) is not None]  # skip None/NaN
+        items = _summary_items(metrics)
         for i in range(0, len(items), 3):
             print("  " + "   ".join(items[i:i + 3]))
     if out is not None:

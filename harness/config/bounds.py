@@ -12,35 +12,42 @@ from typing import Any
 
 from harness.config.assets import shipped
 from harness.config.errors import ConfigError, short_repr
+from harness.config.metrics import value_unit
 from harness.config.schema import decode, doc, info, num
 from harness.config.textio import read_toml
 
 
-def _limit(unit: str, desc: str) -> Any:
-    """A bound `<metric>_max` (measured <= limit) or `<metric>_min` (measured >= limit)."""
-    return doc(num("", gt=0.0) | None, f"{unit + ', ' if unit else ''}{desc}", unit=unit)
+def _limit(metric: str, desc: str) -> Any:
+    """A bound `<metric>_max` (measured <= limit) or `<metric>_min` (measured >= limit) on the run metric
+    `metric`; its description starts with the metric's unit (`METRIC_UNITS`)."""
+    unit = value_unit(metric)
+    return doc(num("", gt=0.0) | None, f"{unit + ', ' if unit else ''}{desc}", metric=metric)
 
 
 @dataclass(frozen=True)
 class Bounds:
     """Acceptance limits; None = not checked."""
 
-    e1_rms_max: _limit("m", "RMS of the master tracking error |e1| after the transient") = None
-    e1_max_max: _limit("m", "max of |e1| after the transient") = None
-    e2_rms_max: _limit("m", "RMS of the coordination error |e2| after the transient") = None
-    e2_max_max: _limit("m", "max of |e2| after the transient") = None
-    e2_plant_rms_max: _limit("m", "RMS of |x1 - MuJoCo tip site| after the transient") = None
-    e2_plant_max_max: _limit("m", "max of |x1 - MuJoCo tip site| after the transient") = None
-    beta_min_min: _limit("", "minimum manipulability beta (41) must stay above") = None
-    deN_rms_max: _limit("", "RMS of the null-space velocity error |de_N| (23) after the transient") = None
-    range_violation_max: _limit("", "largest excursion of section lengths (m) / bend angles (rad) outside "
-                                "their range") = None
-    contact_force_peak_max: _limit("N", "peak |true F2| (slave tip contact + constant)") = None
-    contact_force_rms_max: _limit("N", "RMS |true F2| after the transient") = None
-    contact_force_rms_min: _limit("N", "RMS |true F2| after the transient (contact held)") = None
-    penetration_max_max: _limit("m", "max penetration of the arm into an object") = None
-    contact_time_min: _limit("s", "time with any arm contact") = None
-    force_tracking_rms_max: _limit("N", "RMS |F2 given to the law - true F2| after the transient") = None
+    e1_rms_max: _limit("e1_rms", "RMS of the master tracking error |e1| after the transient") = None
+    e1_max_max: _limit("e1_max", "max of |e1| after the transient") = None
+    e2_rms_max: _limit("e2_rms", "RMS of the coordination error |e2| after the transient") = None
+    e2_max_max: _limit("e2_max", "max of |e2| after the transient") = None
+    e2_plant_rms_max: _limit("e2_plant_rms", "RMS of |x1 - MuJoCo tip site| after the transient") = None
+    e2_plant_max_max: _limit("e2_plant_max", "max of |x1 - MuJoCo tip site| after the transient") = None
+    beta_min_min: _limit("beta_min", "minimum manipulability beta (41) must stay above") = None
+    deN_rms_max: _limit("deN_rms", "RMS of the null-space velocity error |de_N| (23) after the "
+                        "transient") = None
+    range_violation_max: _limit("range_violation", "largest excursion of section lengths (m) / bend angles "
+                                "(rad) outside their range") = None
+    contact_force_peak_max: _limit("contact_force_peak", "peak |true F2| (slave tip contact + "
+                                   "constant)") = None
+    contact_force_rms_max: _limit("contact_force_rms", "RMS |true F2| after the transient") = None
+    contact_force_rms_min: _limit("contact_force_rms", "RMS |true F2| after the transient (contact "
+                                  "held)") = None
+    penetration_max_max: _limit("penetration_max", "max penetration of the arm into an object") = None
+    contact_time_min: _limit("contact_time", "time with any arm contact") = None
+    force_tracking_rms_max: _limit("force_tracking_rms", "RMS |F2 given to the law - true F2| after the "
+                                   "transient") = None
     no_mujoco_warnings: doc(bool, "mujoco_warnings must be 0") = False
     status_ok: doc(bool, 'status must be "ok"') = True
 
@@ -55,9 +62,9 @@ FLAGS = {"no_mujoco_warnings": "mujoco_warnings", "status_ok": "status"}  # flag
 
 
 def limit_of(name: str) -> tuple[str, str, str]:
-    """(metric, relation "max"/"min", unit) of a numeric bound field."""
-    unit = next(f.type.extra.get("unit", "") for f in info(Bounds).fields if f.name == name)
-    return name[:-4], name[-3:], unit
+    """(metric, relation "max"/"min", unit written after its values) of a numeric bound field."""
+    metric = next(f.type.extra["metric"] for f in info(Bounds).fields if f.name == name)
+    return metric, name[-3:], value_unit(metric)
 
 
 def _fmt(x: Any, unit: str = "") -> str:

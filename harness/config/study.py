@@ -5,17 +5,9 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from harness.config.metrics import METRIC_NAMES
 from harness.config.schema import doc, integer, num
 
-# unit of every metric of harness.loop.metrics.compute_metrics kept in a row (status/message are row fields)
-METRIC_UNITS = {
-    "e1_rms": "m", "e1_max": "m", "e2_rms": "m", "e2_max": "m", "e2_plant_rms": "m", "e2_plant_max": "m",
-    "deN_rms": "mixed: m/s, 1/(m s)", "beta_min": "-", "ya_max": "-", "e1_final": "m", "e2_final": "m",
-    "range_violation": "m or rad", "mujoco_warnings": "count", "sim_time_reached": "s", "wall_time": "s",
-    "realtime_factor": "x real time", "contact_force_peak": "N", "contact_force_rms": "N",
-    "penetration_max": "m", "contact_time": "s", "body_contact_time": "s", "force_tracking_rms": "N",
-}
-METRIC_NAMES = tuple(METRIC_UNITS)
 # the keys of each {random = kind, ...} table with their ranges (low < high, integers: low <= high)
 DISTRIBUTIONS = {
     "uniform": {"low": num(""), "high": num("")},

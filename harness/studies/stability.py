@@ -4,14 +4,17 @@ rho = max |lambda| > 1 + T / SLOW_S, "marginal" if 1 < rho (a slow drift), else 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
 
 from controllers.status import Status
 from harness.config.scenario import Scenario
+from harness.loop.mj_warnings import warning_detail, warning_sink
 
 SLOW_S = 1.0  # s: modes e-folding slower than this are "marginal" (slow drift), not "unstable"
 Q2_NAMES = ("d1", "d2", "d3", "k1", "k2", "k3")
@@ -53,7 +56,8 @@ class ClosedLoopMap:
     """The closed loop of `scn` (paper law, no sensing noise; the stepped loop's `Stepper`) over one control
     period.  Loop state x = [plant state (`get_state`: analytic [q1, dq1, q2, dq2]; mujoco qpos, qvel,
     act; cosserat [q1, dq1], node X, Z without the base, element angles about Y, their rates), servo
-    reference (12, servo only), delay ring (delay x 26), filtered dq2 (6, with sensing.dq2_cutoff)]."""
+    reference (12, servo only), delay ring (delay x 26), filtered dq2 (6, with sensing.dq2_cutoff)].
+    `warnings`: MuJoCo's warning text raised while it stepped (captured as a run's, not printed)."""
 
     def __init__(self, scn: Scenario) -> None:
         if scn.controller.name != "paper":
@@ -75,6 +79,7 @@ class ClosedLoopMap:
         self.filt = table[0, -6:] if scn.sensing.dq2_cutoff is not None else None  # a view: the filter state
         self.row = np.zeros(ROW_WIDTH)
         self.k = 0
+        self.warnings: list[str] = []
         try:
             self.names = list(self.plant.state_names)
         except NotImplementedError as exc:
@@ -106,16 +111,35 @@ class ClosedLoopMap:
             self.k += 1
         return st
 
-    def run_to(self, n: int) -> None:
-        while self.k < n:
+    @contextlib.contextmanager
+    def _capturing(self) -> Iterator[None]:
+        """MuJoCo's warnings raised in the block go to `warnings` (`harness.loop.mj_warnings`)."""
+        with warning_sink() as text:
             try:
-                st = self.step()
-            except Exception as exc:  # a plant that raises instead of returning a status: one line
-                why = f"{type(exc).__name__}: {exc}"
-            else:
-                if not st:
-                    continue
-                why = Status(st).text if st in Status._value2member_map_ else f"status {st}"
+                yield
+            finally:
+                self.warnings += text
+
+    @property
+    def warned(self) -> dict[str, int]:
+        """MuJoCo's warning counters by name when a step stopped on a warning (else {})."""
+        return getattr(self.plant, "warned", None) or {}
+
+    def _why(self, st: int) -> str:
+        """A failed step's cause: the status text, with MuJoCo's warnings as a run's message gives them."""
+        text = Status(st).text if st in Status._value2member_map_ else f"status {st}"
+        return text + warning_detail(self.warned, self.warnings)
+
+    def run_to(self, n: int) -> None:
+        st, why = 0, ""
+        with self._capturing():
+            while self.k < n and not (st or why):
+                try:
+                    st = self.step()
+                except Exception as exc:  # a plant that raises instead of returning a status: one line
+                    why = f"{type(exc).__name__}: {exc}"
+        if st or why:
+            why = why or self._why(st)
             raise LinearizationError(f"the run stopped before the point of linearization: {why} at "
                                      f"t = {self.k * self.dt:.4f} s") from None
 
@@ -123,16 +147,18 @@ class ClosedLoopMap:
         """Phi_k(x): the loop state one control period after state x at step k."""
         self.set_x(x)
         self.k = k
-        st = self.step()
+        with self._capturing():
+            st = self.step()
         if st:
-            raise LinearizationError(f"a perturbed step failed (status {st}); use a smaller step h")
+            raise LinearizationError(f"a perturbed step failed ({self._why(st)}); use a smaller step h")
         return self.x()
 
 
 @dataclass
 class Stability:
     """Result of `linearize`: A (n, n) the one-period Jacobian at t (s), its eigenvalues (n,) sorted by
-    decreasing modulus and eigenvectors (n, n) (columns), the state names (n,), T (s) and what was run."""
+    decreasing modulus and eigenvectors (n, n) (columns), the state names (n,), T (s) and what was run;
+    MuJoCo's warnings up to it (`mujoco_warnings`: count, as a run's metric; their text)."""
 
     scenario: Scenario
     t: float
@@ -147,6 +173,8 @@ class Stability:
     positions_idx: np.ndarray  # indices of the plant state's position components
     shapes: dict  # {"positions": x, slave -> the slave's points (m, 2), "slave": SlaveParams}
     stopped: str = ""  # linearized along a run (`least_stable_along`): why the run ended early, if it did
+    mujoco_warnings: int = 0
+    mujoco_warning_text: list[str] = dataclasses.field(default_factory=list)
 
     @property
     def radius(self) -> float:
@@ -225,7 +253,8 @@ def linearize(scn: Scenario, t: float, h: float | None = None,
     idx, points = _positions(lp.plant)
     return Stability(scenario=scn, t=k * scn.control_dt, T=scn.control_dt, A=A, eigenvalues=ev[order],
                      eigenvectors=V[:, order], names=lp.names, x0=x0, n_plant=lp.n_plant, h=h,
-                     positions_idx=idx, shapes={"positions": points, "slave": scn.plant_slave})
+                     positions_idx=idx, shapes={"positions": points, "slave": scn.plant_slave},
+                     mujoco_warnings=sum(lp.warned.values()), mujoco_warning_text=lp.warnings[:20])
 
 
 __all__ = ["ClosedLoopMap", "LinearizationError", "SLOW_S", "Stability", "linearize"]

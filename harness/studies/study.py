@@ -14,13 +14,13 @@ from typing import Any
 
 from harness.config.assets import shipped
 from harness.config.errors import ConfigError
+from harness.config.metrics import METRIC_UNITS
 from harness.config.scenario import Scenario
 from harness.config.schema import decode, did_you_mean, suggest
 from harness.config.study import (  # noqa: F401 - DEFAULT_MAX_CASES, METRIC_NAMES re-exported
     DEFAULT_MAX_CASES,
     DISTRIBUTIONS,
     METRIC_NAMES,
-    METRIC_UNITS,
     Factor,
     Record,
     SamplingTable,
