@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .cc import backbone_points, term_bases, term_grad_add, term_ydd, y_of_q
+from .moments import gauss_legendre01, section_moments
 from .params import SLAVE_PACK, SlaveParams
 from .scratch import scratch, scratch_c, scratch_cz
 from .tip import tip_kinematics
@@ -29,7 +30,7 @@ def elastic_kernel(pk, q, out):
 def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
     """M2 (6,6) and N2 (6,) (overwritten); nodes, weights: Gauss-Legendre rule on [0, 1].  C dq = sum_s int
     m_s J_p^T (d^2p/dt^2 at ddq = 0) du (+ slice rotation), J_p = V0 + b0 V1 + b1 V2 and d^2p/dt^2 affine
-    in (1, b0, b1, b2), so the quadrature needs only the section's weighted moments Q."""
+    in (1, b0, b1, b2), so the quadrature needs only the moments Q (`moments`)."""
     d, th, ydot = scratch(3), scratch(3), scratch(6)
     y_of_q(q, d, th, ydot, dq)
     # prefix sums over the completed sections: y-gradient and ydot^T H_y ydot of their end terms
@@ -83,21 +84,22 @@ def mass_nle_kernel(pk, q, dq, nodes, weights, M, N):
             A[0] += Y[0, 3 + i] * cen[i]
             A[1] += Y[1, 3 + i] * cen[i]
             A[2] += Y[2, 3 + i] * cen[i]
-        # the section's weighted moments, node by node
-        Q[:] = 0.0
-        for g in range(nodes.shape[0]):
-            w = weights[g]
-            b0, b1, b2, b3 = term_bases(nodes[g], th[s], fs[s])
-            wb0, wb1 = w * b0.conjugate(), w * b1.conjugate()
-            Q[0, 0] += w
-            Q[0, 1] += w * b0
-            Q[0, 2] += w * b1
-            Q[0, 3] += w * b2
-            Q[1, 1] += wb0 * b0
-            Q[1, 2] += wb0 * b1
-            Q[1, 3] += wb0 * b2
-            Q[2, 2] += wb1 * b1
-            Q[2, 3] += wb1 * b2
+        # the section's weighted moments: by their series (controllers.moments), else node by node
+        if not section_moments(th[s], fs[s], nodes, Q):
+            Q[:] = 0.0
+            for g in range(nodes.shape[0]):
+                w = weights[g]
+                b0, b1, b2, b3 = term_bases(nodes[g], th[s], fs[s])
+                wb0, wb1 = w * b0.conjugate(), w * b1.conjugate()
+                Q[0, 0] += w
+                Q[0, 1] += w * b0
+                Q[0, 2] += w * b1
+                Q[0, 3] += w * b2
+                Q[1, 1] += wb0 * b0
+                Q[1, 2] += wb0 * b1
+                Q[1, 3] += wb0 * b2
+                Q[2, 2] += wb1 * b1
+                Q[2, 3] += wb1 * b2
         if Is != 0.0:  # slice rotation: sum_g Is w_g alpha alpha^T, alpha = d theta/dq at u_g
             for g in range(nodes.shape[0]):
                 u = nodes[g]
@@ -193,12 +195,6 @@ def backbone(p: SlaveParams, q, n_per_section: int = 20) -> np.ndarray:
     out = np.empty((3 * n_per_section + 1, 2))
     backbone_points(_q(q), int(n_per_section), out)
     return out
-
-
-def gauss_legendre01(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss-Legendre nodes and weights (n,) each on [0, 1] (the rule `mass_nle_kernel` takes)."""
-    x, w = np.polynomial.legendre.leggauss(n)
-    return 0.5 * (x + 1.0), 0.5 * w
 
 
 def mass_and_nle(p: SlaveParams, q, dq, pk=None) -> tuple[np.ndarray, np.ndarray]:

@@ -191,10 +191,57 @@ def _assert_mass_nle_matches_reference(Kx, pk, nodes, weights, q, dq):
         np.testing.assert_allclose(N, Nr, rtol=1e-12, atol=1e-12 * np.abs(Nr).max())
 
 
+def _node_sums(nodes, weights, th, f):
+    """The moments of controllers.moments summed node by node (the reference)."""
+    from controllers import cc
+
+    R = np.zeros((3, 4), complex)
+    for u, w in zip(nodes, weights, strict=True):
+        b = cc.term_bases(u, th, f)
+        R[0, 0] += w
+        R[0, 1:] += [w * b[m] for m in range(3)]
+        R[1, 1:] += [w * np.conj(b[0]) * b[m] for m in range(3)]
+        R[2, 2:] += [w * np.conj(b[1]) * b[m] for m in (1, 2)]
+    return R
+
+
+@pytest.mark.parametrize("n", [2, 3, 8, 17, 32])
+def test_section_moment_series_equal_the_node_sums(n):
+    """controllers.moments: the power series in Theta give the quadrature's own sums (not the exact
+    integrals: with 2 and 3 points these differ by 2.3e-3 and 3.4e-5 at |Theta| = 1.5), to 1e-15
+    absolute over |Theta| <= MOMENT_RADIUS, compiled and interpreted; outside the radius, and for nodes
+    that are not a tabulated rule, they decline (the kernel then sums node by node)."""
+    from controllers import moments
+    from harness.loop.fast import kernels
+
+    nodes, weights = slave_model.gauss_legendre01(n)
+    r = moments.MOMENT_RADIUS
+    ths = np.concatenate([[0.0, 1e-300, -1e-9, r, -r, np.nextafter(r, 0.0)], np.linspace(-r, r, 61)])
+    f = np.exp(0.7j)
+    for Kx in (kernels(True), kernels(False)):
+        for th in ths:
+            Q = np.full((3, 4), np.nan, complex)
+            assert Kx.section_moments(th, f, nodes, Q)
+            R = _node_sums(nodes, weights, th, f)
+            for k, m in [(0, 0), (0, 1), (0, 2), (0, 3), (1, 1), (1, 2), (1, 3), (2, 2), (2, 3)]:
+                assert abs(Q[k, m] - R[k, m]) <= 1e-15, (n, th, k, m, Q[k, m], R[k, m])
+        Q = np.zeros((3, 4), complex)
+        assert not Kx.section_moments(np.nextafter(r, 2.0), f, nodes, Q)
+        assert not Kx.section_moments(-2.0 * r, f, nodes, Q)
+        assert not Kx.section_moments(0.1, f, nodes[::-1].copy(), Q)  # not the tabulated rule
+        assert not Kx.section_moments(0.1, f, np.array([0.5]), Q)  # 1 point: not tabulated
+        assert not Kx.section_moments(0.1, f, slave_model.gauss_legendre01(33)[0], Q)
+        assert not np.any(Q)
+    if n == 2:  # the series is the 2-point rule's value, which is not the integral
+        exact = _node_sums(*slave_model.gauss_legendre01(32), r, f)
+        assert abs(_node_sums(nodes, weights, r, f) - exact).max() > 1e-4
+
+
 @pytest.mark.parametrize("n_quad", [2, 8])
-def test_fused_mass_nle_equals_reference_small_and_large_bends(n_quad):
-    """mass_nle_kernel (compiled) on states whose sections all bend |Theta| <= 1.5, all 1.5..3 rad, or
-    mix them, against the reference dynamics_kernel / nle_kernel, with 2 and 8 points."""
+def test_fused_mass_nle_series_and_node_paths_agree(n_quad):
+    """mass_nle_kernel on states whose sections all take the series (|Theta| <= 1.5), all take the node
+    loop, or mix them, against the reference dynamics_kernel / nle_kernel (node by node), with 2 and 8
+    points."""
     from controllers.params import SlaveParams
     from harness.loop.fast import kernels
 

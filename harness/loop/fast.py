@@ -11,11 +11,11 @@ import types
 from functools import cache
 from pathlib import Path
 
-from controllers import cc, control, master, slave, subtasks, tip
+from controllers import cc, control, master, moments, slave, subtasks, tip
 from harness.config.runtime import options
 from harness.loop import trajectory
 
-MODULES = [cc, tip, slave, master, subtasks, control]
+MODULES = [cc, tip, moments, slave, master, subtasks, control]
 
 
 def _extra_modules():
