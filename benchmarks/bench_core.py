@@ -115,7 +115,7 @@ def run_and_sweeps(reps: int, cases: int, tmp: Path) -> tuple[list[float], list,
     scales = [round(0.6 + 0.8 * i / max(1, cases - 1), 6) for i in range(cases)]
     study.write_text(STUDY.format(cases=cases, scales=scales))
     one, two = [], []
-    for _ in range(max(2, reps // 3)):
+    for _ in range(reps):
         for workers, out in ((1, one), (2, two)):
             folder = tmp / f"sweep{workers}"
             subprocess.run(["rm", "-rf", str(folder)], check=True)
