@@ -13,6 +13,7 @@ from typing import Any
 from harness.config.assets import asset_dir
 from harness.config.bounds import FLAGS, Bounds, Violation, bounds_from_dict, check_bounds, limit_of
 from harness.config.errors import ConfigError
+from harness.config.metrics import METRIC_UNITS, value_unit
 from harness.config.schema import unknown_keys
 from harness.config.textio import read_toml
 from harness.studies.finding_measures import MEASURE_UNITS, MEASURES
@@ -276,11 +277,9 @@ def fmt(v: Any) -> str:
 
 
 def _unit(quantity: str) -> str:
-    """' <unit>' of a run metric (from the bounds table) or a derived measurement, else ''."""
+    """' <unit>' of a run metric (`METRIC_UNITS`) or a derived measurement (`MEASURE_UNITS`), else ''."""
     key = quantity.rsplit(".", 1)[-1]
-    limits = (limit_of(f.name) for f in fields(Bounds) if f.name.endswith(("_max", "_min")))
-    units = {m: u for m, _, u in limits if u}
-    unit = units.get(key) or MEASURE_UNITS.get(key, "")
+    unit = value_unit(key) if key in METRIC_UNITS else MEASURE_UNITS.get(key, "")
     return f" {unit}" if unit else ""
 
 
