@@ -1,4 +1,4 @@
-"""Contact with the environment, force sensing and the operator (issue 16), on the MuJoCo plant.
+"""Contact with the environment, force sensing and the operator, on the MuJoCo plant.
 
 References are independent of the code under test: Hooke's law for the contact model, MuJoCo's own
 mj_contactForce for the sensed contact forces, the closed form -(J2 M2^-1 J2^T) F / k4 of (17)-(21)

@@ -1,4 +1,4 @@
-"""Environment contact on the Cosserat plant (issue 16): PyElastica's penalty law on every rod node
+"""Environment contact on the Cosserat plant: PyElastica's penalty law on every rod node
 (harness/plant/cosserat/contact.py, compiled in harness/plant/cosserat/kernels.py).  A static tip push
 against a
 plane settles at the penetration the closed form predicts (wall spring k in parallel with the rod's

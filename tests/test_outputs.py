@@ -1,4 +1,4 @@
-"""Outputs never lie (issue 13): atomic writes, full disks, kills, interrupts, reused folders, guarded
+"""Outputs never lie: atomic writes, full disks, kills, interrupts, reused folders, guarded
 writes, input size/depth limits, plant errors as validation, sweep case cap / scheduler check /
 orphaned workers.
 

@@ -1,4 +1,4 @@
-"""Packaging (issue 13): the shipped MJCF, scenarios, bounds and studies are package data, every
+"""Packaging: the shipped MJCF, scenarios, bounds and studies are package data, every
 package is in the wheel, and a NON-editable install runs `teleop run` from any folder.
 
 The wheel test builds a wheel from a copy of the source tree (`pip wheel`, once per session) and
