@@ -34,7 +34,7 @@ from harness.plant.analytic import plant_accel
 (R_T, R_Q1, R_DQ1, R_Q2, R_DQ2, R_XD, R_X1, R_X2, R_E1, R_E2, R_DE1, R_DE2, R_BETA, R_YA, R_DEN, R_T1, R_T2,
  R_U2, R_FT, R_FS, R_CI, R_HAND) = (s.start for s in ROW_SLICES.values())
 RUNAWAY = 1.0  # m: |e1| or |e2| beyond this is a runaway (the workspace is ~1 m)
-EXPLODING = 1e6  # |state| of a Python-stepped plant above this is a diverged plant (status 8)
+EXPLODING = 1e6  # a diverged plant state: stepped |state| (status 8), MuJoCo loop any entry (6)
 DQ2_FILTER = 7  # noise-table columns of the sensed-dq2 filter: gain, filtered dq2 (6)
 
 

@@ -10,6 +10,7 @@ from controllers.master import master_kernel
 from controllers.status import ST_MUJOCO_STATE, ST_MUJOCO_WARNING, ST_OK, ST_SECTION_LENGTH
 from harness.loop.force_kernels import CONTACT_INFO, operator_target, read_contact, sense_forces
 from harness.loop.kernels import (
+    EXPLODING,
     R_CI,
     R_FS,
     R_FT,
@@ -45,9 +46,9 @@ def sense_mujoco(master, chain, state):
 
 def mujoco_state_status(state):
     """Status of the sensed true state (16,) of the MuJoCo plant: ST_MUJOCO_STATE if an entry is not finite
-    or above 1e6 in magnitude, ST_SECTION_LENGTH if a section length is <= 0, else ST_OK."""
+    or above EXPLODING in magnitude, ST_SECTION_LENGTH if a section length is <= 0, else ST_OK."""
     for i in range(16):
-        if not np.isfinite(state[i]) or abs(state[i]) > 1e6:
+        if not np.isfinite(state[i]) or abs(state[i]) > EXPLODING:
             return ST_MUJOCO_STATE
     if section_collapsed(state):
         return ST_SECTION_LENGTH

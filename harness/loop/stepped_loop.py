@@ -12,6 +12,7 @@ from controllers.control import MASTER_INFO, SLAVE_INFO
 from harness.config.scenario import Scenario
 from harness.loop.common import CHUNK, STOP, ChunkRun, RunModel, compile_model, noise_table, progress_bar
 from harness.loop.fast import K
+from harness.loop.force_kernels import CONTACT_INFO
 from harness.loop.interface_adapter import ControllerFailure, InterfaceController, is_compiled
 from harness.loop.trajectory import ROW_WIDTH, Trajectory
 from harness.plant.stepped import SteppedPlant
@@ -35,7 +36,7 @@ class Stepper:
         # true tip forces: a plant with `forces(F, contact)` (the rod's contact) gives them each step, else
         # the constant ones; the controller reads the sensed F (F_true, or zeros when ignored)
         self.forces = getattr(plant, "forces", None)
-        self.Ftrue, self.cinfo = model.F.copy(), np.zeros(5)
+        self.Ftrue, self.cinfo = model.F.copy(), np.zeros(CONTACT_INFO)
         # `kernels.loop_chunk`'s law: T1, T2, u2, deN, minfo, sinfo, xd, dxd, ddxd, sensed
         self.law = (np.zeros(2), np.zeros(6), np.zeros(6), np.zeros(6), np.empty(MASTER_INFO),
                     np.empty(SLAVE_INFO), np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(16))
