@@ -324,7 +324,7 @@ def cmd_findings(args: argparse.Namespace) -> int:
 def cmd_stability_map(args: argparse.Namespace) -> int:
     from harness.studies import stability_map
 
-    return int(stability_map.main(prepare_out_dir(args.out), args.duration, args.predicted))
+    return stability_map.main(prepare_out_dir(args.out), args.duration, args.predicted)
 
 
 def cmd_stability(args: argparse.Namespace) -> int:

@@ -1,8 +1,6 @@
 """Acceptance bounds on run metrics (`teleop check`): a [bounds] table of ``<metric>_max`` / ``<metric>_min``
 limits and flags; a bounded metric not measured (absent, None, NaN) or not finite violates its bound."""
 
-from __future__ import annotations
-
 import contextlib
 import math
 from collections.abc import Mapping
@@ -13,41 +11,46 @@ from typing import Any
 from harness.config.assets import shipped
 from harness.config.errors import ConfigError, short_repr
 from harness.config.metrics import value_unit
-from harness.config.schema import decode, doc, info, num
+from harness.config.schema import decode, doc, num
 from harness.config.textio import read_toml
 
 
-def _limit(metric: str, desc: str) -> Any:
-    """A bound `<metric>_max` (measured <= limit) or `<metric>_min` (measured >= limit) on the run metric
-    `metric`; its description starts with the metric's unit (`METRIC_UNITS`)."""
-    unit = value_unit(metric)
-    return doc(num("", gt=0.0) | None, f"{unit + ', ' if unit else ''}{desc}", metric=metric)
+class _Limit(str):
+    """The description of a bound field `<metric>_max` (measured <= limit) or `<metric>_min` (measured >=
+    limit); `_limits` makes it the field's type."""
+
+
+def _limits(cls: type) -> type:
+    """Each `_Limit` annotation of `cls` as an optional number > 0 whose description starts with the unit
+    of the field's metric (`METRIC_UNITS`)."""
+    for name, desc in cls.__annotations__.items():
+        if isinstance(desc, _Limit):
+            unit = value_unit(name[:-4])
+            cls.__annotations__[name] = doc(num("", gt=0.0) | None, f"{unit + ', ' if unit else ''}{desc}")
+    return cls
 
 
 @dataclass(frozen=True)
+@_limits
 class Bounds:
     """Acceptance limits; None = not checked."""
 
-    e1_rms_max: _limit("e1_rms", "RMS of the master tracking error |e1| after the transient") = None
-    e1_max_max: _limit("e1_max", "max of |e1| after the transient") = None
-    e2_rms_max: _limit("e2_rms", "RMS of the coordination error |e2| after the transient") = None
-    e2_max_max: _limit("e2_max", "max of |e2| after the transient") = None
-    e2_plant_rms_max: _limit("e2_plant_rms", "RMS of |x1 - MuJoCo tip site| after the transient") = None
-    e2_plant_max_max: _limit("e2_plant_max", "max of |x1 - MuJoCo tip site| after the transient") = None
-    beta_min_min: _limit("beta_min", "minimum manipulability beta (41) must stay above") = None
-    deN_rms_max: _limit("deN_rms", "RMS of the null-space velocity error |de_N| (23) after the "
-                        "transient") = None
-    range_violation_max: _limit("range_violation", "largest excursion of section lengths (m) / bend angles "
-                                "(rad) outside their range") = None
-    contact_force_peak_max: _limit("contact_force_peak", "peak |true F2| (slave tip contact + "
-                                   "constant)") = None
-    contact_force_rms_max: _limit("contact_force_rms", "RMS |true F2| after the transient") = None
-    contact_force_rms_min: _limit("contact_force_rms", "RMS |true F2| after the transient (contact "
-                                  "held)") = None
-    penetration_max_max: _limit("penetration_max", "max penetration of the arm into an object") = None
-    contact_time_min: _limit("contact_time", "time with any arm contact") = None
-    force_tracking_rms_max: _limit("force_tracking_rms", "RMS |F2 given to the law - true F2| after the "
-                                   "transient") = None
+    e1_rms_max: _Limit("RMS of the master tracking error |e1| after the transient") = None
+    e1_max_max: _Limit("max of |e1| after the transient") = None
+    e2_rms_max: _Limit("RMS of the coordination error |e2| after the transient") = None
+    e2_max_max: _Limit("max of |e2| after the transient") = None
+    e2_plant_rms_max: _Limit("RMS of |x1 - MuJoCo tip site| after the transient") = None
+    e2_plant_max_max: _Limit("max of |x1 - MuJoCo tip site| after the transient") = None
+    beta_min_min: _Limit("minimum manipulability beta (41) must stay above") = None
+    deN_rms_max: _Limit("RMS of the null-space velocity error |de_N| (23) after the transient") = None
+    range_violation_max: _Limit("largest excursion of section lengths (m) / bend angles (rad) outside "
+                                "their range") = None
+    contact_force_peak_max: _Limit("peak |true F2| (slave tip contact + constant)") = None
+    contact_force_rms_max: _Limit("RMS |true F2| after the transient") = None
+    contact_force_rms_min: _Limit("RMS |true F2| after the transient (contact held)") = None
+    penetration_max_max: _Limit("max penetration of the arm into an object") = None
+    contact_time_min: _Limit("time with any arm contact") = None
+    force_tracking_rms_max: _Limit("RMS |F2 given to the law - true F2| after the transient") = None
     no_mujoco_warnings: doc(bool, "mujoco_warnings must be 0") = False
     status_ok: doc(bool, 'status must be "ok"') = True
 
@@ -63,8 +66,7 @@ FLAGS = {"no_mujoco_warnings": "mujoco_warnings", "status_ok": "status"}  # flag
 
 def limit_of(name: str) -> tuple[str, str, str]:
     """(metric, relation "max"/"min", unit written after its values) of a numeric bound field."""
-    metric = next(f.type.extra["metric"] for f in info(Bounds).fields if f.name == name)
-    return metric, name[-3:], value_unit(metric)
+    return name[:-4], name[-3:], value_unit(name[:-4])
 
 
 def _fmt(x: Any, unit: str = "") -> str:
