@@ -4,10 +4,8 @@ rho = max |lambda| > 1 + T / SLOW_S, "marginal" if 1 < rho (a slow drift), else 
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import math
-from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,7 +55,7 @@ class ClosedLoopMap:
     period.  Loop state x = [plant state (`get_state`: analytic [q1, dq1, q2, dq2]; mujoco qpos, qvel,
     act; cosserat [q1, dq1], node X, Z without the base, element angles about Y, their rates), servo
     reference (12, servo only), delay ring (delay x 26), filtered dq2 (6, with sensing.dq2_cutoff)].
-    `warnings`: MuJoCo's warning text raised while it stepped (captured as a run's, not printed)."""
+    `warnings`: MuJoCo's warning text of the `linearize` in progress (captured as a run's, not printed)."""
 
     def __init__(self, scn: Scenario) -> None:
         if scn.controller.name != "paper":
@@ -111,15 +109,6 @@ class ClosedLoopMap:
             self.k += 1
         return st
 
-    @contextlib.contextmanager
-    def _capturing(self) -> Iterator[None]:
-        """MuJoCo's warnings raised in the block go to `warnings` (`harness.loop.mj_warnings`)."""
-        with warning_sink() as text:
-            try:
-                yield
-            finally:
-                self.warnings += text
-
     @property
     def warned(self) -> dict[str, int]:
         """MuJoCo's warning counters by name when a step stopped on a warning (else {})."""
@@ -132,12 +121,11 @@ class ClosedLoopMap:
 
     def run_to(self, n: int) -> None:
         st, why = 0, ""
-        with self._capturing():
-            while self.k < n and not (st or why):
-                try:
-                    st = self.step()
-                except Exception as exc:  # a plant that raises instead of returning a status: one line
-                    why = f"{type(exc).__name__}: {exc}"
+        while self.k < n and not (st or why):
+            try:
+                st = self.step()
+            except Exception as exc:  # a plant that raises instead of returning a status: one line
+                why = f"{type(exc).__name__}: {exc}"
         if st or why:
             why = why or self._why(st)
             raise LinearizationError(f"the run stopped before the point of linearization: {why} at "
@@ -147,8 +135,7 @@ class ClosedLoopMap:
         """Phi_k(x): the loop state one control period after state x at step k."""
         self.set_x(x)
         self.k = k
-        with self._capturing():
-            st = self.step()
+        st = self.step()
         if st:
             raise LinearizationError(f"a perturbed step failed ({self._why(st)}); use a smaller step h")
         return self.x()
@@ -231,22 +218,22 @@ def linearize(scn: Scenario, t: float, h: float | None = None,
     1e-7 on MuJoCo and the rod; relative to max(1, |x_i|)), its eigen-decomposition and mode shapes.
     Raises LinearizationError if the run stops before t."""
     lp = loop if loop is not None else ClosedLoopMap(scn)
-    n = int(round(t / scn.control_dt))
-    lp.run_to(n)
     if h is None:
         h = 1e-6 if scn.plant.kind == "analytic" else 1e-7
-    lp.plant.get_state(keep=True)
-    x0 = lp.x()
-    k = lp.k
-    N = len(x0)
-    A = np.zeros((N, N))
-    for i in range(N):
-        hi = h * max(1.0, abs(x0[i]))
-        xp, xm = x0.copy(), x0.copy()
-        xp[i] += hi
-        xm[i] -= hi
-        A[:, i] = (lp.phi(xp, k) - lp.phi(xm, k)) / (2 * hi)
-    lp.set_x(x0)
+    with warning_sink() as lp.warnings:  # the run and every perturbed step (`harness.loop.mj_warnings`)
+        lp.run_to(int(round(t / scn.control_dt)))
+        lp.plant.get_state(keep=True)
+        x0 = lp.x()
+        k = lp.k
+        N = len(x0)
+        A = np.zeros((N, N))
+        for i in range(N):
+            hi = h * max(1.0, abs(x0[i]))
+            xp, xm = x0.copy(), x0.copy()
+            xp[i] += hi
+            xm[i] -= hi
+            A[:, i] = (lp.phi(xp, k) - lp.phi(xm, k)) / (2 * hi)
+        lp.set_x(x0)
     lp.k = k
     ev, V = np.linalg.eig(A)
     order = np.lexsort((-ev.imag, -np.round(np.abs(ev), 12)))
