@@ -349,9 +349,6 @@ def _check_clearance(m: mujoco.MjModel, cmap: ChainMap, cm: ContactMap, scn: Sce
             f"{-dist:.4g} m); move the object or the initial state", f"environment.objects.{name}")
 
 
-
-
-
 def export_mjcf(master: MasterParams, slave: SlaveParams, plant: PlantConfig, path) -> Path:
     """Write the generated plant MJCF (``spec.to_xml()``, self-contained, ~6 significant digits: for viewing;
     simulate with ``build_model``) to ``path``, atomically, once it re-loads."""
