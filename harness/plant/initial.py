@@ -16,7 +16,7 @@ class InitialStateError(ValueError):
 
 def initial_state(scn: Scenario) -> np.ndarray:
     """[q1, dq1, q2, dq2] (16,) at t = 0, at rest: master IK of x_d(0) (40) + initial.master_offset;
-    slave initial.slave_q2, or equal sections of initial.slave_curvature , tip at the master tip's Z."""
+    slave initial.slave_q2, or equal sections of initial.slave_curvature, tip at the master tip's Z."""
     tr = scn.trajectory
     xd0 = np.array([tr.center[0], tr.center[1] + tr.amplitude[1]])
     x0 = xd0 + np.asarray(scn.initial.master_offset, dtype=float)

@@ -1,6 +1,12 @@
-"""MuJoCo plant: the master and a discretized Octarm built by editing an MjSpec of ``mjcf/`` (model,
-naming and joint layout: docs/plants.md; maps: `chain_map`; per-joint parameters: `chain_params`).
-SI units; hinges turn about +y; task space [X, Z] relative to each base.
+"""MuJoCo plant: the master and a discretized Octarm built by editing an MjSpec of ``mjcf/`` (model and
+actuations: docs/plants.md; maps: `chain_map`; per-joint parameters: `chain_params`).  SI units; both
+robots move in planes parallel to world x-z, hinges turn about +y; task space [X, Z] relative to each base.
+
+Section i (d_i, k_i, Theta_i = k_i d_i, rest L0_i) is N segments: body ``octarm_s{i}_seg{j}_body`` at the
+segment midpoint has a slide ``..._slide`` along the parent's tangent, then a hinge ``..._hinge``;
+``octarm_tip_body`` (``octarm_tip_slide``, ``octarm_tip_site``) ends the chain.  On the CC manifold, with
+e_i = d_i - L0_i: hinge(i, j) = Theta_i / N, slide(i, j >= 1) = e_i / N, slide(i, 0) = (e_{i-1} + e_i)
+/ (2N) (e_{-1} = 0), tip slide = e_2 / (2N), i.e. joints = C [e, Theta] (n_chain = 6N + 1, MuJoCo order).
 """
 
 from __future__ import annotations
@@ -341,9 +347,6 @@ def _check_clearance(m: mujoco.MjModel, cmap: ChainMap, cm: ContactMap, scn: Sce
         raise PlantModelError(
             f"environment.objects.{name}: intersects the slave at t = 0 ({m.geom(g_arm).name} penetrates "
             f"{-dist:.4g} m); move the object or the initial state", f"environment.objects.{name}")
-
-
-
 
 
 def export_mjcf(master: MasterParams, slave: SlaveParams, plant: PlantConfig, path) -> Path:
