@@ -144,8 +144,7 @@ class ClosedLoopMap:
 @dataclass
 class Stability:
     """Result of `linearize`: A (n, n) the one-period Jacobian at t (s), its eigenvalues (n,) sorted by
-    decreasing modulus and eigenvectors (n, n) (columns), the state names (n,), T (s) and what was run;
-    MuJoCo's warnings up to it (`mujoco_warnings`: count, as a run's metric; their text)."""
+    decreasing modulus and eigenvectors (n, n) (columns), the state names (n,), T (s) and what was run."""
 
     scenario: Scenario
     t: float
@@ -160,8 +159,6 @@ class Stability:
     positions_idx: np.ndarray  # indices of the plant state's position components
     shapes: dict  # {"positions": x, slave -> the slave's points (m, 2), "slave": SlaveParams}
     stopped: str = ""  # linearized along a run (`least_stable_along`): why the run ended early, if it did
-    mujoco_warnings: int = 0
-    mujoco_warning_text: list[str] = dataclasses.field(default_factory=list)
 
     @property
     def radius(self) -> float:
@@ -240,8 +237,7 @@ def linearize(scn: Scenario, t: float, h: float | None = None,
     idx, points = _positions(lp.plant)
     return Stability(scenario=scn, t=k * scn.control_dt, T=scn.control_dt, A=A, eigenvalues=ev[order],
                      eigenvectors=V[:, order], names=lp.names, x0=x0, n_plant=lp.n_plant, h=h,
-                     positions_idx=idx, shapes={"positions": points, "slave": scn.plant_slave},
-                     mujoco_warnings=sum(lp.warned.values()), mujoco_warning_text=lp.warnings[:20])
+                     positions_idx=idx, shapes={"positions": points, "slave": scn.plant_slave})
 
 
 __all__ = ["ClosedLoopMap", "LinearizationError", "SLOW_S", "Stability", "linearize"]

@@ -80,9 +80,7 @@ def write_stability(res: Stability, out) -> list[Path]:
                "t": res.t, "control_dt": res.T, "fd_step": res.h, "n_states": len(res.names),
                "least_stable": rows[0], "dominant": res.dominant(0, 6),
                "most_negative": rows[res.most_negative()],
-               "plant": res.scenario.plant.kind, "actuation": res.scenario.plant.actuation,
-               "mujoco_warnings": res.mujoco_warnings,
-               "mujoco_warning": res.mujoco_warning_text[0] if res.mujoco_warning_text else None}
+               "plant": res.scenario.plant.kind, "actuation": res.scenario.plant.actuation}
     return [save_csv(out / "spectrum.csv", rows),
             save(out / "stability.json", json.dumps(jsonable(summary), indent=2) + "\n"),
             plot_stability(res, out / "stability.png")]
