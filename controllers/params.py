@@ -11,6 +11,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 GRAVITY = 9.81  # m/s^2, standard gravity (magnitude)
+Q2_NAMES = ("d1", "d2", "d3", "k1", "k2", "k3")  # the slave's q2: section lengths (m), curvatures (1/m)
 SUBTASKS = ("manipulability", "limits")  # the null-space sub-task kinds (29)-(33) of `controllers.subtasks`
 
 

@@ -9,6 +9,7 @@ import numpy as np
 
 from controllers import master as master_model
 from controllers.control import MASTER_INFO, SLAVE_INFO
+from controllers.params import Q2_NAMES
 from controllers.status import Status
 from harness.config.errors import ConfigError
 from harness.config.scenario import Scenario
@@ -19,7 +20,6 @@ from harness.loop.mujoco_loop import Geometry, make_plant, plant_groups
 from harness.plant.mujoco_model import MujocoPlant
 
 FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
-Q2_NAMES = ("d1", "d2", "d3", "k1", "k2", "k3")
 
 
 class MujocoStepped:

@@ -27,6 +27,7 @@ import pyarrow as pa
 import rerun as rr
 from rerun.chunk import RrdReader
 
+from controllers.params import Q2_NAMES
 from harness.config.textio import OutputError, atomic_path
 from harness.loop.trajectory import Trajectory
 from harness.output import geometry as geo
@@ -101,7 +102,7 @@ def _series(traj: Trajectory) -> list[tuple[str, np.ndarray, list[str], list[tup
         ("plots/ya", np.asarray(traj.ya).reshape(-1, 1), ["y_a"], [sc.C_MASTER]),
         ("plots/deN_norm", np.linalg.norm(np.asarray(traj.deN, dtype=float), axis=-1), ["|e_N-dot|"],
          [sc.C_X]),
-        ("plots/q2", traj.q2, ["d1", "d2", "d3", "k1", "k2", "k3"], sec + sec),
+        ("plots/q2", traj.q2, list(Q2_NAMES), sec + sec),
         ("plots/T1", traj.T1, ["T1 a", "T1 b"], xz),
         ("plots/T2", traj.T2, ["T2 d1", "T2 d2", "T2 d3", "T2 k1", "T2 k2", "T2 k3"], sec + sec),
     ]

@@ -10,12 +10,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from controllers.params import Q2_NAMES
 from controllers.status import Status
 from harness.config.scenario import Scenario
 from harness.loop.mj_warnings import warning_detail, warning_sink
 
 SLOW_S = 1.0  # s: modes e-folding slower than this are "marginal" (slow drift), not "unstable"
-Q2_NAMES = ("d1", "d2", "d3", "k1", "k2", "k3")
 
 
 class LinearizationError(RuntimeError):
